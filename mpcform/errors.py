@@ -1,0 +1,27 @@
+"""One exception tree for mpcform: every error carries the context a user needs."""
+
+from __future__ import annotations
+
+
+class MPCFormError(Exception):
+    """Base class of every error raised by mpcform."""
+
+
+class ValidationError(MPCFormError, ValueError):
+    """Bad input: names the field, the value received and what was expected."""
+
+    def __init__(self, field: str, message: str) -> None:
+        self.field = field
+        super().__init__(f"{field}: {message}")
+
+
+class ScenarioError(ValidationError):
+    """A scenario file that cannot be read or does not follow the format."""
+
+
+class SolverError(MPCFormError):
+    """A QP backend that is unknown, not installed, or failed outside the planning loop."""
+
+    def __init__(self, solver: str, message: str) -> None:
+        self.solver = solver
+        super().__init__(f"solver {solver!r}: {message}")

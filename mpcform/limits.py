@@ -1,0 +1,76 @@
+"""Physical limits and static obstacles shared by the controllers and the MPC planner."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from mpcform._validate import Array, finite_array, positive
+from mpcform.errors import ValidationError
+
+
+@dataclass(frozen=True, eq=False)
+class Limits:
+    """Speed, separation, acceleration and geofence limits (None = unset).
+
+    ``v_max_mps``: speed bound per drone [m/s]; ``d_min_m``: minimum distance between two drones
+    [m]; ``a_max_mps2``: componentwise bound on command changes, ``|u_j - u_{j-1}| <= a_max dt``
+    [m/s^2]; ``geofence_min_m`` / ``geofence_max_m``: axis-aligned box (d,) the drones stay in
+    (a floor is ``geofence_min_m[2]``; use +-inf for open sides); ``downwash_kappa``: separation
+    is measured as ``||diag(1, 1, 1/kappa) (p_i - p_k)||`` (spatial only, kappa >= 1).
+    """
+
+    v_max_mps: float | None = None
+    d_min_m: float | None = None
+    a_max_mps2: float | None = None
+    geofence_min_m: Array | None = None
+    geofence_max_m: Array | None = None
+    downwash_kappa: float | None = None
+
+    def __post_init__(self) -> None:
+        for name in ("v_max_mps", "d_min_m", "a_max_mps2", "downwash_kappa"):
+            value = getattr(self, name)
+            if value is not None:
+                object.__setattr__(self, name, positive(f"limits.{_key(name)}", value))
+        if self.downwash_kappa is not None and self.downwash_kappa < 1.0:
+            raise ValidationError("limits.downwash", f"expected kappa >= 1, got {self.downwash_kappa}")
+        lo, hi = self.geofence_min_m, self.geofence_max_m
+        if (lo is None) != (hi is None):
+            raise ValidationError("limits.geofence_min", "give both geofence_min and geofence_max, or neither")
+        if lo is not None and hi is not None:
+            lo_a = _bound("limits.geofence_min", lo)
+            hi_a = _bound("limits.geofence_max", hi)
+            if lo_a.shape != hi_a.shape or np.any(lo_a >= hi_a):
+                raise ValidationError(
+                    "limits.geofence_max", f"expected geofence_min < geofence_max per axis, got {lo_a} and {hi_a}"
+                )
+            object.__setattr__(self, "geofence_min_m", lo_a)
+            object.__setattr__(self, "geofence_max_m", hi_a)
+
+
+@dataclass(frozen=True, eq=False)
+class SphereObstacle:
+    """A static sphere (a disc when planar) of ``radius_m`` at ``center_m``; drones keep
+    ``clearance_m`` [m] from its surface (None: half of d_min)."""
+
+    center_m: Array
+    radius_m: float
+    clearance_m: float | None = None
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "center_m", finite_array("obstacles.center", self.center_m, (None,)))
+        object.__setattr__(self, "radius_m", positive("obstacles.radius", self.radius_m))
+        if self.clearance_m is not None:
+            object.__setattr__(self, "clearance_m", positive("obstacles.clearance", self.clearance_m, allow_zero=True))
+
+
+def _key(attr: str) -> str:
+    return attr.rsplit("_", 1)[0].replace("_kappa", "") if attr != "downwash_kappa" else "downwash"
+
+
+def _bound(field: str, value: object) -> Array:
+    arr = np.array(value, dtype=float)
+    if arr.ndim != 1 or arr.shape[0] not in (2, 3) or np.any(np.isnan(arr)):
+        raise ValidationError(field, f"expected 2 or 3 numbers (inf allowed), got {value!r}")
+    return arr
