@@ -19,8 +19,9 @@ class MPCSettings:
     - ``gain_per_s``: k of eq. 14 inside the cost ``sum_j ||u_j - ff_j - k (p*_j - p_j)||^2``.
     - ``feedforward``: ``"jacobian"`` (eq. 14) or ``"secant"``.
     - ``velocity_set``: ``"polytope"`` (``facets`` half-spaces inscribed in the ball; planar:
-      a regular polygon, spatial: ``facets`` directions on a Fibonacci sphere) or ``"box"``
-      (the cube inscribed in the ball).
+      a regular polygon, spatial: ``facets`` directions on a Fibonacci sphere; None picks 16
+      planar, 32 spatial, which keep 98 % and 89 % of v_max in the worst direction) or
+      ``"box"`` (the square or cube inscribed in the ball).
     - ``slack_weight``: exact L1 penalty per metre of separation slack [1/m], plus
       ``slack_quadratic`` [1/m^2] to help the solver's conditioning (keeps exactness).
     - ``margin_m``: separation and obstacle rows are tightened by this much so that the
@@ -35,14 +36,14 @@ class MPCSettings:
     gain_per_s: float = 1.0
     feedforward: str = "jacobian"
     velocity_set: str = "polytope"
-    facets: int = 16
-    slack_weight: float = 1e4
-    slack_quadratic: float = 1e2
+    facets: int | None = None
+    slack_weight: float = 1e3
+    slack_quadratic: float = 10.0
     margin_m: float = 2e-3
     tie_break_rad: float = 0.1
     fast_path: bool = True
-    eps_abs: float = 1e-5
-    eps_rel: float = 1e-5
+    eps_abs: float = 1e-4
+    eps_rel: float = 1e-4
     max_iter: int = 4000
     time_limit_s: float = 0.0
 
@@ -54,7 +55,7 @@ class MPCSettings:
             raise ValidationError("controller.feedforward", f"expected one of {FEEDFORWARDS}, got {self.feedforward!r}")
         if self.velocity_set not in VELOCITY_SETS:
             raise ValidationError("controller.velocity_set", f"expected one of {VELOCITY_SETS}, got {self.velocity_set!r}")
-        if isinstance(self.facets, bool) or not isinstance(self.facets, int) or self.facets < 4:
+        if self.facets is not None and (isinstance(self.facets, bool) or not isinstance(self.facets, int) or self.facets < 4):
             raise ValidationError("controller.facets", f"expected an integer >= 4, got {self.facets!r}")
         positive("controller.slack_weight", self.slack_weight)
         positive("controller.slack_quadratic", self.slack_quadratic, allow_zero=True)

@@ -1,0 +1,173 @@
+"""QP backends behind one interface: set up once, update the data that changes, solve.
+
+Problem form (OSQP's): ``min 0.5 z^T P z + q^T z  s.t.  l <= A z <= u`` with ``P`` upper
+triangular CSC and +-inf for absent bounds. A backend never raises inside the planning loop:
+failures come back as a :class:`QPSolution` with ``success = False`` and the solver's status.
+"""
+
+from __future__ import annotations
+
+import time
+from abc import ABC, abstractmethod
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+
+from mpcform._validate import Array
+from mpcform.errors import SolverError
+
+
+@dataclass(frozen=True)
+class QPSolution:
+    """Primal ``x`` and dual ``y`` (None unless ``success``), status text, iterations, time."""
+
+    x: Array | None
+    y: Array | None
+    success: bool
+    status: str
+    iterations: int
+    solve_time_s: float
+
+
+@dataclass(frozen=True)
+class SolverOptions:
+    eps_abs: float = 1e-5
+    eps_rel: float = 1e-5
+    max_iter: int = 4000
+    time_limit_s: float = 0.0
+
+
+class QPBackend(ABC):
+    """One QP family, solved repeatedly. ``setup`` whenever the sparsity pattern changes."""
+
+    name: str
+
+    def __init__(self, options: SolverOptions) -> None:
+        self.options = options
+
+    @abstractmethod
+    def setup(self, P: sp.csc_matrix, q: Array, A: sp.csc_matrix, lo: Array, hi: Array) -> None:
+        """Take a new problem (copies what it keeps)."""
+
+    @abstractmethod
+    def update(self, q: Array, lo: Array, hi: Array, A_data: Array) -> None:
+        """New cost vector, bounds and values of A (same pattern as at setup)."""
+
+    @abstractmethod
+    def solve(self, x0: Array | None = None) -> QPSolution:
+        """Solve, warm-started from ``x0`` where the backend supports it."""
+
+
+class OSQPBackend(QPBackend):
+    """Persistent ``osqp.OSQP`` object: set up once per pattern, then ``update`` + warm start."""
+
+    name = "osqp"
+
+    def __init__(self, options: SolverOptions) -> None:
+        super().__init__(options)
+        import osqp
+
+        self._osqp = osqp
+        self._solver: object | None = None
+        self._nnz_a = 0
+
+    def setup(self, P: sp.csc_matrix, q: Array, A: sp.csc_matrix, lo: Array, hi: Array) -> None:
+        o = self.options
+        extra = {"time_limit": o.time_limit_s} if o.time_limit_s > 0 else {}
+        solver = self._osqp.OSQP()
+        solver.setup(
+            P.copy(), q, A.copy(), lo, hi,
+            verbose=False, eps_abs=o.eps_abs, eps_rel=o.eps_rel, max_iter=o.max_iter,
+            polishing=True, warm_starting=True, adaptive_rho=True, **extra,
+        )  # fmt: skip
+        self._solver, self._nnz_a = solver, A.nnz
+
+    def update(self, q: Array, lo: Array, hi: Array, A_data: Array) -> None:
+        if A_data.shape[0] != self._nnz_a:  # OSQP would only print an error and keep the old A
+            raise SolverError(self.name, f"A has {A_data.shape[0]} values, the pattern has {self._nnz_a}")
+        self._solver.update(q=q, l=lo, u=hi, Ax=A_data)  # type: ignore[attr-defined]
+
+    def solve(self, x0: Array | None = None) -> QPSolution:
+        solver = self._solver
+        if solver is None:
+            raise SolverError(self.name, "solve() before setup()")
+        if x0 is not None:
+            solver.warm_start(x=x0)  # type: ignore[attr-defined]
+        start = time.perf_counter()
+        res = solver.solve(raise_error=False)  # type: ignore[attr-defined]
+        elapsed = time.perf_counter() - start
+        info = res.info
+        ok = info.status_val in (1, 2) and res.x is not None and bool(np.all(np.isfinite(res.x)))
+        return QPSolution(
+            res.x.copy() if ok else None, res.y.copy() if ok else None, ok, str(info.status),
+            int(info.iter), elapsed,
+        )  # fmt: skip
+
+
+class PIQPBackend(QPBackend):
+    """Persistent ``piqp.SparseSolver`` (proximal interior point); rows with ``l == u`` at setup
+    become its equality block, the others its two-sided inequality block."""
+
+    name = "piqp"
+
+    def __init__(self, options: SolverOptions) -> None:
+        super().__init__(options)
+        import piqp
+
+        self._piqp = piqp
+        self._solver: object | None = None
+
+    def setup(self, P: sp.csc_matrix, q: Array, A: sp.csc_matrix, lo: Array, hi: Array) -> None:
+        self._eq = eq = lo == hi
+        ids = A.copy()
+        ids.data = np.arange(A.nnz, dtype=float)
+        a_eq, g = ids[eq].tocsc(), ids[~eq].tocsc()
+        self._eq_ids, self._g_ids = a_eq.data.astype(np.intp), g.data.astype(np.intp)
+        self._a_eq, self._g = a_eq, g
+        a_eq.data, g.data = A.data[self._eq_ids], A.data[self._g_ids]
+        solver = self._piqp.SparseSolver()
+        st = solver.settings
+        st.verbose, st.eps_abs, st.eps_rel, st.max_iter = False, self.options.eps_abs, self.options.eps_rel, self.options.max_iter
+        solver.setup(P.copy(), q, a_eq.copy(), lo[eq], g.copy(), lo[~eq], hi[~eq])
+        self._solver, self._nnz_a = solver, A.nnz
+
+    def update(self, q: Array, lo: Array, hi: Array, A_data: Array) -> None:
+        if A_data.shape[0] != self._nnz_a:
+            raise SolverError(self.name, f"A has {A_data.shape[0]} values, the pattern has {self._nnz_a}")
+        self._a_eq.data, self._g.data = A_data[self._eq_ids], A_data[self._g_ids]
+        eq = self._eq
+        self._solver.update(c=q, A=self._a_eq, b=lo[eq], G=self._g, h_l=lo[~eq], h_u=hi[~eq])  # type: ignore[attr-defined]
+
+    def solve(self, x0: Array | None = None) -> QPSolution:
+        solver = self._solver
+        if solver is None:
+            raise SolverError(self.name, "solve() before setup()")
+        start = time.perf_counter()
+        status = solver.solve()  # type: ignore[attr-defined]
+        elapsed = time.perf_counter() - start
+        res = solver.result  # type: ignore[attr-defined]
+        ok = status == self._piqp.PIQP_SOLVED and bool(np.all(np.isfinite(res.x)))
+        y = np.zeros(self._eq.shape[0])
+        if ok:
+            y[self._eq] = res.y
+            y[~self._eq] = res.z_u - res.z_l
+        return QPSolution(
+            np.array(res.x) if ok else None, y if ok else None, ok, str(status).split(".")[-1].lower(),
+            int(res.info.iter), elapsed,
+        )  # fmt: skip
+
+
+BACKENDS: dict[str, type[QPBackend]] = {"osqp": OSQPBackend, "piqp": PIQPBackend}
+DEFAULT_SOLVER = "piqp"
+"""Chosen on measurements (see README, "Solvers"): the separation rows make the QP degenerate
+for ADMM (OSQP needs hundreds of iterations on swaps), an interior point needs about 14."""
+
+
+def make_backend(name: str, options: SolverOptions) -> QPBackend:
+    """The backend called ``name`` (see ``mpcform solvers``)."""
+    try:
+        cls = BACKENDS[name]
+    except KeyError:
+        raise SolverError(name, f"unknown solver; available: {', '.join(sorted(BACKENDS))}") from None
+    return cls(options)

@@ -1,0 +1,188 @@
+"""MPCPlanner: eq. 14 when nothing is active, limits held closed-loop, swaps, slack, obstacles."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from mpcform.controllers import ControlStep, TrackingController
+from mpcform.errors import ValidationError
+from mpcform.geometry import closest_on_segments, min_segment_distance
+from mpcform.kinematics import forward_kinematics
+from mpcform.limits import Limits, SphereObstacle
+from mpcform.mpc_settings import MPCSettings
+from mpcform.planner import MPCPlanner
+from mpcform.reference import ConstantReference, ExponentialReference
+from mpcform.simulation import SimulationResult, simulate
+from mpcform.solvers import QPSolution
+from mpcform.state import FormationState
+from mpcform.template import Template
+
+SOLVERS = ["osqp", "piqp"]
+
+
+def _rot(rng: np.random.Generator, dim: int) -> object:
+    return rng.uniform(-1, 1) if dim == 2 else rng.uniform(-1, 1, 3)
+
+
+def swap(n: int, dim: int, d_min: float = 0.5) -> tuple[ConstantReference, np.ndarray]:
+    """Antipodal swap: drone i starts at -r_i and must reach r_i (ring or sphere template)."""
+    radius = max(2.0, 0.8 / np.sin(np.pi / n)) if dim == 2 else max(2.0, 0.5 * np.sqrt(n))
+    tpl = Template.polygon(n, radius) if dim == 2 else Template.sphere(n, radius)
+    return ConstantReference(tpl, FormationState.from_param(np.zeros(dim))), -tpl.offsets.copy()
+
+
+def check_limits(res: SimulationResult, v_max: float, d_min: float) -> None:
+    assert np.all(np.isfinite(res.positions_m)) and np.all(np.isfinite(res.commands_mps))
+    assert np.linalg.norm(res.commands_mps, axis=-1).max() <= v_max * (1 + 1e-12)
+    pos = res.positions_m
+    seg = min(min_segment_distance(a, b) for a, b in zip(pos[:-1], pos[1:], strict=True))
+    assert seg >= d_min - 1e-6
+
+
+@pytest.mark.parametrize("solver", SOLVERS)
+@pytest.mark.parametrize("fast_path", [True, False])
+@pytest.mark.parametrize("dim", [2, 3])
+def test_first_input_is_eq14_when_no_row_is_active(dim: int, fast_path: bool, solver: str) -> None:
+    rng = np.random.default_rng(dim)
+    tol = 1e-9 if fast_path else 1e-6
+    for _ in range(8):
+        tpl = Template.polygon(6, 3.0, dim)
+        start = FormationState.from_param(rng.uniform(-5, 5, dim), _rot(rng, dim), 1.0)
+        goal = FormationState.from_param(rng.uniform(-5, 5, dim), _rot(rng, dim), 1.5)
+        ref = ExponentialReference(tpl, start, goal, 0.5)
+        p = forward_kinematics(tpl, start) + rng.normal(0, 0.1, (6, dim))
+        settings_ = MPCSettings(horizon=8, gain_per_s=2.0, fast_path=fast_path)
+        planner = MPCPlanner(ref, 0.05, Limits(v_max_mps=100.0, d_min_m=0.2), settings_, solver=solver)
+        planner.reset(0.0, p)
+        t = float(rng.uniform(0, 3))
+        out = planner.step(t, p)
+        want = TrackingController(ref, 2.0, 0.05).step(t, p).command_mps
+        assert out.info.mode == ("fast_path" if fast_path else "qp")
+        np.testing.assert_allclose(out.command_mps, want, atol=tol, rtol=0)
+
+
+def test_secant_feedforward_matches_the_secant_law() -> None:
+    tpl = Template.polygon(4, 2.0)
+    ref = ExponentialReference(
+        tpl, FormationState.from_param([0, 0], 0.0, 1.0), FormationState.from_param([3, 1], 1.0, 2.0), 1.0
+    )
+    p = forward_kinematics(tpl, ref.state(0.0)) + 0.05
+    planner = MPCPlanner(ref, 0.1, Limits(v_max_mps=50.0), MPCSettings(gain_per_s=3.0, feedforward="secant"))
+    want = TrackingController(ref, 3.0, 0.1, feedforward="secant").step(0.7, p).command_mps
+    np.testing.assert_allclose(planner.step(0.7, p).command_mps, want, atol=1e-12)
+
+
+@settings(max_examples=6)
+@given(seed=st.integers(0, 10_000), n=st.integers(2, 16), dim=st.sampled_from([2, 3]))
+def test_random_scenarios_hold_speed_and_separation(seed: int, n: int, dim: int) -> None:
+    rng = np.random.default_rng(seed)
+    d_min, v_max = 0.5, 1.5
+    tpl = Template.grid(int(np.ceil(np.sqrt(n))), int(np.ceil(n / np.ceil(np.sqrt(n)))), 0.9, 2)
+    offsets = np.zeros((n, dim))
+    offsets[:, :2] = tpl.offsets[:n]
+    tpl = Template.centred(offsets)[0]
+    goal = FormationState.from_param(rng.uniform(-2, 2, dim), _rot(rng, dim), rng.uniform(1.0, 1.5))
+    start = rng.uniform(-4, 4, (n, dim))
+    while n > 1 and min_segment_distance(start, start) < d_min:  # a separated start
+        start = rng.uniform(-4, 4, (n, dim))
+    planner = MPCPlanner(ConstantReference(tpl, goal), 0.1, Limits(v_max_mps=v_max, d_min_m=d_min),
+                         MPCSettings(horizon=6))  # fmt: skip
+    check_limits(simulate(planner, start, 2.5), v_max, d_min)
+
+
+@pytest.mark.parametrize("n", [4, 8, 12, 16])
+def test_planar_swaps_finish(n: int) -> None:
+    ref, start = swap(n, 2)
+    planner = MPCPlanner(ref, 0.1, Limits(v_max_mps=1.0, d_min_m=0.5), MPCSettings(horizon=10))
+    res = simulate(planner, start, 30.0)
+    check_limits(res, 1.0, 0.5)
+    assert np.linalg.norm(res.positions_m[-1] - res.reference_m[-1], axis=1).max() < 1e-2
+
+
+def test_spatial_swap_of_twelve_finishes() -> None:
+    ref, start = swap(12, 3)
+    planner = MPCPlanner(ref, 0.1, Limits(v_max_mps=1.0, d_min_m=0.5), MPCSettings(horizon=10))
+    res = simulate(planner, start, 15.0)
+    check_limits(res, 1.0, 0.5)
+    assert np.linalg.norm(res.positions_m[-1] - res.reference_m[-1], axis=1).max() < 1e-2
+
+
+def test_infeasible_start_reports_slack_and_separates() -> None:
+    tpl = Template.line(2, 2.0)
+    ref = ConstantReference(tpl, FormationState.from_param([0.0, 0.0]))
+    start = np.array([[0.0, 0.0], [0.1, 0.0]])  # closer than d_min, 4 steps to separate
+    planner = MPCPlanner(ref, 0.1, Limits(v_max_mps=0.5, d_min_m=0.5))
+    res = simulate(planner, start, 4.0)
+    first = res.infos[0]
+    assert first.mode == "qp" and first.max_slack_m > 0.2 and first.slack_pairs == ((0, 1),)
+    dist = np.linalg.norm(res.positions_m[:, 0] - res.positions_m[:, 1], axis=1)
+    assert np.all(np.diff(dist) >= -1e-9)  # never closer than before
+    assert dist[-1] >= 0.5 - 1e-6
+
+
+def test_obstacle_is_avoided_and_geofence_respected() -> None:
+    tpl = Template.polygon(3, 0.6)
+    goal = FormationState.from_param([8.0, 0.2])
+    start = forward_kinematics(tpl, FormationState.from_param([-4.0, 0.0]))
+    ob = SphereObstacle(np.array([2.0, 0.0]), 1.0, clearance_m=0.25)
+    lim = Limits(v_max_mps=1.5, d_min_m=0.4, geofence_min_m=np.array([-5.0, -2.0]), geofence_max_m=np.array([9.0, 2.0]))
+    planner = MPCPlanner(ConstantReference(tpl, goal), 0.1, lim, MPCSettings(horizon=10), obstacles=(ob,))
+    res = simulate(planner, start, 14.0)
+    check_limits(res, 1.5, 0.4)
+    pos = res.positions_m - ob.center_m
+    gap = min(
+        np.linalg.norm(closest_on_segments(a, b), axis=1).min() for a, b in zip(pos[:-1], pos[1:], strict=True)
+    )
+    assert gap >= 1.25 - 1e-6
+    assert np.all(res.positions_m >= lim.geofence_min_m - 1e-6) and np.all(res.positions_m <= lim.geofence_max_m + 1e-6)
+    assert np.linalg.norm(res.positions_m[-1] - res.reference_m[-1], axis=1).max() < 0.05
+
+
+def test_acceleration_limit_and_downwash() -> None:
+    tpl = Template.line(2, 2.0, dim=3)
+    ref = ConstantReference(tpl, FormationState.from_param([0.0, 0.0, 0.0], [0.0, np.pi / 2, 0.0]))  # stacked in z
+    start = np.array([[-1.0, 0.0, 0.0], [1.0, 0.0, 0.0]])
+    lim = Limits(v_max_mps=1.0, d_min_m=0.5, a_max_mps2=2.0, downwash_kappa=3.0)
+    res = simulate(MPCPlanner(ref, 0.1, lim), start, 6.0)
+    du = np.diff(np.concatenate([np.zeros((1, 2, 3)), res.commands_mps]), axis=0)
+    assert np.abs(du).max() <= 2.0 * 0.1 + 1e-9
+    rel = (res.positions_m[:, 0] - res.positions_m[:, 1]) * np.array([1.0, 1.0, 1 / 3.0])
+    assert np.linalg.norm(rel, axis=1).min() >= 0.5 - 1e-6
+    assert abs(rel[-1, 2]) * 3.0 >= 1.5 - 1e-6  # ends stacked 2 m apart in z, metric distance >= d_min
+
+
+def test_solver_failure_falls_back_to_a_certified_command(monkeypatch: pytest.MonkeyPatch) -> None:
+    ref, start = swap(6, 2)
+    planner = MPCPlanner(ref, 0.1, Limits(v_max_mps=1.0, d_min_m=0.5))
+    fail = QPSolution(None, None, False, "forced failure", 7, 0.0)
+    monkeypatch.setattr(planner._backend, "solve", lambda x0=None: fail)
+    res = simulate(planner, start, 2.0)
+    assert {i.mode for i in res.infos} <= {"fallback", "fast_path"}
+    assert any("forced failure" in i.status for i in res.infos)
+    check_limits(res, 1.0, 0.5)
+
+
+def test_plan_is_exposed_and_consistent() -> None:
+    ref, start = swap(4, 2)
+    planner = MPCPlanner(ref, 0.1, Limits(v_max_mps=1.0, d_min_m=0.5), MPCSettings(horizon=5))
+    planner.reset(0.0, start)
+    out: ControlStep = planner.step(0.0, start)
+    plan = planner.plan
+    assert plan is not None and plan.inputs_mps.shape == (5, 4, 2) and plan.positions_m.shape == (6, 4, 2)
+    np.testing.assert_allclose(np.diff(plan.positions_m, axis=0), 0.1 * plan.inputs_mps, atol=1e-6)
+    np.testing.assert_allclose(plan.inputs_mps[0], out.command_mps, atol=1e-6)
+
+
+def test_bad_configuration_is_a_clear_error() -> None:
+    ref, _ = swap(4, 2)
+    with pytest.raises(ValidationError, match="limits.v_max"):
+        MPCPlanner(ref, 0.1, Limits(d_min_m=0.5))
+    with pytest.raises(ValidationError, match="controller.gain"):
+        MPCPlanner(ref, 0.1, Limits(v_max_mps=1.0), MPCSettings(gain_per_s=20.0))
+    with pytest.raises(ValidationError, match="obstacles"):
+        MPCPlanner(ref, 0.1, Limits(v_max_mps=1.0), obstacles=(SphereObstacle(np.zeros(3), 1.0),))
+    with pytest.raises(ValidationError, match="downwash"):
+        MPCPlanner(ref, 0.1, Limits(v_max_mps=1.0, downwash_kappa=2.0))
