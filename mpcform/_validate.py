@@ -9,7 +9,7 @@ from numpy.typing import NDArray
 
 from mpcform.errors import ValidationError
 
-Array = NDArray[np.float64]
+Array = NDArray[Any]  # float arrays mostly; index arrays share the alias
 
 
 def finite_array(field: str, value: Any, shape: tuple[int | None, ...]) -> Array:
@@ -18,7 +18,9 @@ def finite_array(field: str, value: Any, shape: tuple[int | None, ...]) -> Array
         arr = np.array(value, dtype=float)
     except (TypeError, ValueError) as exc:
         raise ValidationError(field, f"expected numbers of shape {_shape(shape)}, got {value!r}") from exc
-    if arr.ndim != len(shape) or any(s is not None and s != a for s, a in zip(shape, arr.shape, strict=False)):
+    if arr.ndim != len(shape) or any(
+        s is not None and s != a for s, a in zip(shape, arr.shape, strict=False)
+    ):
         raise ValidationError(field, f"expected shape {_shape(shape)}, got shape {arr.shape}")
     if not np.all(np.isfinite(arr)):
         raise ValidationError(field, f"expected finite numbers, got {arr.tolist()}")
@@ -33,7 +35,9 @@ def positive(field: str, value: Any, *, allow_zero: bool = False) -> float:
         raise ValidationError(field, f"expected a number, got {value!r}") from exc
     ok = np.isfinite(x) and (x >= 0 if allow_zero else x > 0)
     if not ok:
-        raise ValidationError(field, f"expected a finite number {'>= 0' if allow_zero else '> 0'}, got {value!r}")
+        raise ValidationError(
+            field, f"expected a finite number {'>= 0' if allow_zero else '> 0'}, got {value!r}"
+        )
     return x
 
 

@@ -54,6 +54,7 @@ def formation_jacobian(template: Template, state: FormationState) -> Array:
 
 def drone_velocities(template: Template, state: FormationState, xi_dot: Array) -> Array:
     """``J xi_dot`` as (n, d) drone velocities [m/s] without forming J (eq. 14 feedforward)."""
+    _check(template, state)
     d = template.dim
     xi_dot = finite_array("xi_dot", xi_dot, (velocity_size(d),))
     q = template.offsets @ state.rotation_body_to_world.T

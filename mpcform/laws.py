@@ -46,12 +46,10 @@ def saturate(u_mps: Array, v_max_mps: float | None) -> Array:
     if v_max_mps is None:
         return u_mps
     norms = np.linalg.norm(u_mps, axis=-1, keepdims=True)
-    factor = np.minimum(1.0, v_max_mps / np.maximum(norms, np.finfo(float).tiny))
+    factor = np.divide(v_max_mps, norms, out=np.ones_like(norms), where=norms > v_max_mps)
     return u_mps * factor
 
 
-def tracking_command(
-    positions_m: Array, target_m: Array, feedforward_mps: Array, gain_per_s: float
-) -> Array:
+def tracking_command(positions_m: Array, target_m: Array, feedforward_mps: Array, gain_per_s: float) -> Array:
     """Eq. 14: ``u_i = feedforward_i + k (p*_i - p_i)`` for all drones, (n, d)."""
     return feedforward_mps + gain_per_s * (target_m - positions_m)

@@ -1,0 +1,94 @@
+"""Distances between drones at samples and along straight segments, against brute force."""
+
+import numpy as np
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+from scipy.spatial.distance import pdist
+
+from mpcform.geometry import (
+    closest_on_segments,
+    min_pair_distance,
+    min_segment_distance,
+    pairs_within,
+)
+
+TAU = np.linspace(0.0, 1.0, 2001)
+seeds = st.integers(0, 2**32 - 1)
+
+
+def brute_min_segment_distance(start, end):
+    """Min over a dense grid of tau and all pairs; exceeds the true min by at most L dtau / 2."""
+    path = start + TAU[:, None, None] * (end - start)  # (M, n, d)
+    dist = np.linalg.norm(path[:, :, None] - path[:, None], axis=-1)
+    i, j = np.triu_indices(start.shape[0], 1)
+    return dist[:, i, j].min()
+
+
+def random_motion(seed, n, dim):
+    rng = np.random.default_rng(seed)
+    start = rng.uniform(-3.0, 3.0, (n, dim))
+    return start, start + rng.uniform(-4.0, 4.0, (n, dim))
+
+
+@given(seeds, st.integers(2, 7), st.sampled_from([2, 3]))
+def test_min_segment_distance_matches_dense_sampling(seed, n, dim):
+    start, end = random_motion(seed, n, dim)
+    exact, brute = min_segment_distance(start, end), brute_min_segment_distance(start, end)
+    # each pair distance is Lipschitz in tau with constant |delta_i - delta_j|
+    move = end - start
+    lipschitz = pdist(move).max()
+    assert exact <= brute + 1e-12
+    assert brute - exact <= lipschitz * (TAU[1] - TAU[0]) / 2 + 1e-12
+
+
+def test_min_segment_distance_sees_a_far_pair_cross():
+    """A close static pair must not hide a far pair that passes closer mid-segment."""
+    start = np.array([[0.0, 0.0], [1.0, 0.0], [20.0, 5.0], [30.0, 5.2]])
+    end = np.array([[0.0, 0.0], [1.0, 0.0], [30.0, 5.0], [20.0, 5.2]])
+    assert min_segment_distance(start, end) == pytest.approx(0.2)
+    assert min(min_pair_distance(start), min_pair_distance(end)) == pytest.approx(1.0)
+
+
+def test_min_segment_distance_special_cases():
+    assert min_segment_distance(np.zeros((1, 3)), np.ones((1, 3))) == np.inf
+    start = np.array([[0.0, 0.0, 0.0], [2.0, 0.0, 0.0]])
+    assert min_segment_distance(start, start + [1.0, 2.0, 3.0]) == pytest.approx(2.0)  # parallel
+    assert min_segment_distance(start, start[::-1]) == 0.0  # head-on swap
+
+
+@given(seeds, st.sampled_from([2, 3]))
+def test_closest_on_segments_minimises_the_distance_to_the_origin(seed, dim):
+    start, end = random_motion(seed, 6, dim)
+    closest = closest_on_segments(start, end)
+    samples = start + TAU[:, None, None] * (end - start)
+    sampled = np.linalg.norm(samples, axis=-1).min(axis=0)
+    norms = np.linalg.norm(closest, axis=1)
+    assert np.all(norms <= sampled + 1e-12)
+    assert np.all(sampled - norms <= np.linalg.norm(end - start, axis=1) * TAU[1] / 2 + 1e-12)
+    # on the segment: closest = start + tau (end - start) with tau in [0, 1]
+    delta = end - start
+    tau = np.einsum("ij,ij->i", closest - start, delta) / np.einsum("ij,ij->i", delta, delta)
+    assert np.all((tau >= -1e-12) & (tau <= 1 + 1e-12))
+    np.testing.assert_allclose(closest, start + tau[:, None] * delta, atol=1e-12)
+
+
+def test_closest_on_segments_by_hand():
+    start = np.array([[-1.0, 1.0], [1.0, 1.0], [2.0, 3.0], [-2.0, 0.0]])
+    end = np.array([[1.0, 1.0], [2.0, 1.0], [2.0, 3.0], [2.0, 1.0]])
+    # interior foot, clamped to the start, degenerate segment, and the foot (-2/17, 8/17)
+    expected = [[0.0, 1.0], [1.0, 1.0], [2.0, 3.0], [-2.0 / 17, 8.0 / 17]]
+    np.testing.assert_allclose(closest_on_segments(start, end), expected, atol=1e-15)
+
+
+@given(seeds, st.integers(1, 12), st.sampled_from([2, 3]))
+def test_pair_queries_match_brute_force(seed, n, dim):
+    points = np.random.default_rng(seed).uniform(-2.0, 2.0, (n, dim))
+    dist = np.linalg.norm(points[:, None] - points[None], axis=-1)
+    i, j = np.triu_indices(n, 1)
+    assert min_pair_distance(points) == (dist[i, j].min() if n > 1 else np.inf)
+    radius = 1.5
+    expected = {(a, b) for a, b in zip(i, j, strict=True) if dist[a, b] <= radius}
+    pairs = pairs_within(points, radius)
+    assert pairs.shape == (len(expected), 2) and np.all(pairs[:, 0] < pairs[:, 1])
+    assert {tuple(p) for p in pairs.tolist()} == expected

@@ -1,0 +1,60 @@
+"""Limits and obstacles: accepted values are stored, bad ones name their field."""
+
+import numpy as np
+import pytest
+
+from mpcform.errors import ValidationError
+from mpcform.limits import Limits, SphereObstacle
+
+
+def test_limits_store_validated_values():
+    lim = Limits(v_max_mps=3, d_min_m=0.5, geofence_min_m=[-1, -1, 0], geofence_max_m=[1, 1, np.inf])
+    assert (lim.v_max_mps, lim.d_min_m, lim.a_max_mps2) == (3.0, 0.5, None)
+    assert isinstance(lim.v_max_mps, float)
+    np.testing.assert_array_equal(lim.geofence_max_m, [1.0, 1.0, np.inf])
+    assert Limits(downwash_kappa=1.0).downwash_kappa == 1.0
+    assert Limits().v_max_mps is None
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "match"),
+    [
+        ({"v_max_mps": -1.0}, "limits.v_max"),
+        ({"v_max_mps": 0.0}, "limits.v_max"),
+        ({"v_max_mps": np.nan}, "limits.v_max"),
+        ({"d_min_m": -0.5}, "limits.d_min"),
+        ({"a_max_mps2": "fast"}, "limits.a_max"),
+        ({"downwash_kappa": 0.5}, "limits.downwash"),
+        ({"downwash_kappa": -2.0}, "limits.downwash"),
+        ({"geofence_min_m": [0.0, 0.0]}, "limits.geofence"),
+        ({"geofence_min_m": [0.0, 0.0], "geofence_max_m": [1.0, 0.0]}, "limits.geofence"),
+        ({"geofence_min_m": [2.0, 0.0], "geofence_max_m": [1.0, 1.0]}, "limits.geofence"),
+        ({"geofence_min_m": [0.0, 0.0], "geofence_max_m": [1.0, 1.0, 1.0]}, "limits.geofence"),
+        ({"geofence_min_m": [0.0, np.nan], "geofence_max_m": [1.0, 1.0]}, "limits.geofence_min"),
+        ({"geofence_min_m": [[0.0]], "geofence_max_m": [[1.0]]}, "limits.geofence_min"),
+    ],
+)
+def test_bad_limits_are_rejected(kwargs, match):
+    with pytest.raises(ValidationError, match=match):
+        Limits(**kwargs)
+
+
+def test_sphere_obstacle():
+    obs = SphereObstacle([1.0, 2.0, 3.0], 0.5)
+    np.testing.assert_array_equal(obs.center_m, [1.0, 2.0, 3.0])
+    assert obs.radius_m == 0.5 and obs.clearance_m is None
+    assert SphereObstacle([0.0, 0.0], 1.0, clearance_m=0.0).clearance_m == 0.0
+
+
+@pytest.mark.parametrize(
+    ("args", "match"),
+    [
+        (([0.0, np.nan], 1.0), "obstacles.center"),
+        (([[0.0, 0.0]], 1.0), "obstacles.center"),
+        (([0.0, 0.0], 0.0), "obstacles.radius"),
+        (([0.0, 0.0], 1.0, -0.1), "obstacles.clearance"),
+    ],
+)
+def test_bad_obstacles_are_rejected(args, match):
+    with pytest.raises(ValidationError, match=match):
+        SphereObstacle(*args)

@@ -1,0 +1,91 @@
+"""Run metrics on a hand-built run whose distances, speeds and errors are known by hand."""
+
+import numpy as np
+import pytest
+
+from mpcform.controllers import StepInfo
+from mpcform.metrics import run_metrics
+from mpcform.simulation import SimulationResult
+
+# Three planar drones A, B, C over four samples (dt = 1 s).
+# p0 -> p1: A (0,0) -> (2,1) and B (2,0) -> (0,0) pass each other: their relative position runs
+# from (-2, 0) to (2, 1), closest to the origin at (-2/17, 8/17), 2 / sqrt(17) ~ 0.485 apart.
+# p1 -> p2: C descends to (0, 0.6), 0.6 above B. p3 holds p2.
+POSITIONS = np.array(
+    [
+        [[0.0, 0.0], [2.0, 0.0], [0.0, 3.0]],  # AB 2, AC 3, BC sqrt(13)
+        [[2.0, 1.0], [0.0, 0.0], [0.0, 3.0]],  # AB sqrt(5), AC sqrt(8), BC 3
+        [[2.0, 1.0], [0.0, 0.0], [0.0, 0.6]],  # AB sqrt(5), AC sqrt(4.16), BC 0.6
+        [[2.0, 1.0], [0.0, 0.0], [0.0, 0.6]],
+    ]
+)
+REFERENCE = POSITIONS.copy()
+REFERENCE[0, 0] += [0.3, 0.4]  # A is 0.5 m off at t = 0
+REFERENCE[3, 2] += [0.0, 0.1]  # C is 0.1 m off at the end
+RESULT = SimulationResult(
+    t_s=np.arange(4.0),
+    positions_m=POSITIONS,
+    commands_mps=np.diff(POSITIONS, axis=0),  # speeds (sqrt5, 2, 0), (0, 0, 2.4), 0
+    reference_m=REFERENCE,
+    infos=(
+        StepInfo("qp", max_slack_m=0.01),
+        StepInfo("fast_path"),
+        StepInfo("fallback", max_slack_m=0.2),
+    ),
+    step_times_s=np.array([0.003, 0.001, 0.005]),
+    controller="test",
+)
+
+
+def test_tracking_and_separation_metrics():
+    m = run_metrics(RESULT, None, None)
+    assert m["final_tracking_error"] == pytest.approx(0.1)
+    assert m["max_tracking_error"] == pytest.approx(0.5)
+    assert m["min_separation"] == pytest.approx(0.6)
+    assert m["min_separation_segments"] == pytest.approx(2 / np.sqrt(17))
+    assert m["max_speed"] == pytest.approx(2.4)
+    assert m["separation_violations"] == 0 and m["speed_violations"] == 0
+
+
+@pytest.mark.parametrize(
+    ("d_min", "violations"),
+    [
+        (0.5, 0),
+        (1.0, 2),  # BC at samples 2 and 3
+        (2.0, 2),  # pairs exactly at d_min (AB at sample 0) are not violations
+        (2.1, 5),  # sample 0: AB; 2 and 3: AC, BC
+        (2.3, 8),  # sample 0: AB; 1: AB; 2 and 3: AB, AC, BC
+    ],
+)
+def test_separation_violations_count_sample_pairs(d_min, violations):
+    assert run_metrics(RESULT, None, d_min)["separation_violations"] == violations
+
+
+# speeds above v_max over the (step, drone) pairs; B flies at exactly 2 m/s: no violation
+@pytest.mark.parametrize(("v_max", "violations"), [(3.0, 0), (2.4, 0), (2.0, 2), (1.0, 3)])
+def test_speed_violations_count_step_drones(v_max, violations):
+    assert run_metrics(RESULT, v_max, None)["speed_violations"] == violations
+
+
+def test_solver_and_timing_metrics():
+    m = run_metrics(RESULT, 3.0, 0.5)
+    assert (m["qp_solves"], m["fast_path_steps"], m["solver_failures"]) == (2, 1, 1)
+    assert m["max_slack"] == pytest.approx(0.2)
+    assert set(m["step_time_ms"]) == {"qp", "fast_path", "fallback"}
+    assert m["step_time_ms"]["qp"] == pytest.approx({"median": 3.0, "p90": 3.0, "max": 3.0})
+    assert m["step_time_ms"]["fallback"]["max"] == pytest.approx(5.0)
+
+
+def test_single_drone_has_no_separation():
+    single = SimulationResult(
+        np.arange(2.0),
+        np.zeros((2, 1, 2)),
+        np.zeros((1, 1, 2)),
+        np.zeros((2, 1, 2)),
+        (StepInfo("law"),),
+        np.array([0.001]),
+        "test",
+    )
+    m = run_metrics(single, 1.0, 0.5)
+    assert m["min_separation"] is None and m["min_separation_segments"] is None
+    assert m["separation_violations"] == 0 and m["qp_solves"] == 0

@@ -1,0 +1,36 @@
+"""MPC settings: defaults are valid, each bad field is named in the error."""
+
+import pytest
+
+from mpcform.errors import ValidationError
+from mpcform.mpc_settings import MPCSettings
+
+
+def test_defaults_are_valid():
+    settings = MPCSettings()
+    assert settings.horizon >= 1 and settings.feedforward == "jacobian" and settings.fast_path
+
+
+@pytest.mark.parametrize(
+    ("field", "value", "match"),
+    [
+        ("horizon", 0, "controller.horizon"),
+        ("horizon", 2.0, "controller.horizon"),
+        ("horizon", True, "controller.horizon"),
+        ("gain_per_s", 0.0, "controller.gain"),
+        ("feedforward", "euler", "controller.feedforward"),
+        ("velocity_set", "ball", "controller.velocity_set"),
+        ("facets", 3, "controller.facets"),
+        ("slack_weight", 0.0, "controller.slack_weight"),
+        ("slack_quadratic", -1.0, "controller.slack_quadratic"),
+        ("margin_m", -1e-3, "controller.margin"),
+        ("tie_break_rad", float("nan"), "controller.tie_break"),
+        ("eps_abs", 0.0, "controller.eps_abs"),
+        ("eps_rel", -1.0, "controller.eps_rel"),
+        ("max_iter", 0, "controller.max_iter"),
+        ("time_limit_s", -1.0, "controller.time_limit"),
+    ],
+)
+def test_bad_settings_are_rejected(field, value, match):
+    with pytest.raises(ValidationError, match=match):
+        MPCSettings(**{field: value})

@@ -1,0 +1,112 @@
+"""References: drone targets and their velocities (finite differences), limits, clamping."""
+
+import numpy as np
+import pytest
+from helpers import random_state, random_template
+from hypothesis import given
+from hypothesis import strategies as st
+
+from mpcform.errors import ValidationError
+from mpcform.kinematics import drone_velocities, forward_kinematics
+from mpcform.reference import ConstantReference, ExponentialReference
+from mpcform.state import FormationState
+from mpcform.template import Template
+
+H = 1e-5
+TIMES = np.array([0.05, 0.3, 1.0, 2.5, 6.0])
+
+
+def random_reference(seed, dim, rate=0.8):
+    """An exponential reference changing centroid, rotation and scale at once."""
+    rng = np.random.default_rng(seed)
+    tpl = random_template(rng, 5, dim)
+    return ExponentialReference(tpl, random_state(rng, dim), random_state(rng, dim), rate)
+
+
+def assert_same_state(a, b, atol=1e-12):
+    np.testing.assert_allclose(a.centroid_m, b.centroid_m, atol=atol)
+    np.testing.assert_allclose(a.rotation_body_to_world, b.rotation_body_to_world, atol=atol)
+    assert a.scale == pytest.approx(b.scale, abs=atol)
+
+
+@given(st.integers(0, 2**32 - 1), st.sampled_from([2, 3]))
+def test_target_velocities_are_derivatives_of_target_positions(seed, dim):
+    ref = random_reference(seed, dim)
+    pos, vel = ref.targets(TIMES)
+    assert pos.shape == vel.shape == (TIMES.size, 5, dim)
+    plus, _ = ref.targets(TIMES + H)
+    minus, _ = ref.targets(TIMES - H)
+    np.testing.assert_allclose(vel, (plus - minus) / (2 * H), atol=1e-7)
+
+
+@given(st.integers(0, 2**32 - 1), st.sampled_from([2, 3]))
+def test_targets_are_the_formation_of_the_reference_state(seed, dim):
+    """p* = f(xi_d(t)) (eq. 13) and p_dot* = J(xi_d) xi_dot_d (eq. 14 feedforward)."""
+    ref = random_reference(seed, dim)
+    pos, vel = ref.targets(TIMES)
+    for j, t in enumerate(TIMES):
+        state = ref.state(t)
+        np.testing.assert_allclose(pos[j], forward_kinematics(ref.template, state), atol=1e-12)
+        expected = drone_velocities(ref.template, state, ref.velocity(t))
+        np.testing.assert_allclose(vel[j], expected, atol=1e-12)
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_exponential_reference_starts_at_start_and_tends_to_goal(dim):
+    ref = random_reference(11, dim)
+    assert_same_state(ref.state(0.0), ref.start)
+    assert_same_state(ref.state(60.0), ref.goal, atol=1e-9)
+    np.testing.assert_allclose(ref.velocity(60.0), 0.0, atol=1e-12)
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_negative_times_are_clamped(dim):
+    ref = random_reference(5, dim)
+    assert_same_state(ref.state(-3.0), ref.state(0.0), atol=0.0)
+    for got, expected in zip(ref.targets([-1.0, -0.1]), ref.targets([0.0, 0.0]), strict=True):
+        np.testing.assert_array_equal(got, expected)
+
+
+def test_scale_follows_eq_16():
+    tpl = Template.polygon(3)
+    start = FormationState.from_param([5.0, 5.0], 0.0, 1.0)
+    ref = ExponentialReference(tpl, start, FormationState.from_param([5.0, 5.0], 0.0, 2.0), 1.5)
+    for t in TIMES:
+        s = 2.0 + (1.0 - 2.0) * np.exp(-1.5 * t)
+        assert ref.state(t).scale == pytest.approx(s, rel=1e-14)
+        np.testing.assert_allclose(ref.velocity(t), [0, 0, 0, 1.5 * (2.0 - s)], atol=1e-14)
+
+
+def test_planar_rotation_takes_the_short_way():
+    tpl = Template.polygon(3)
+    start = FormationState.from_param([0.0, 0.0], 3.0)
+    ref = ExponentialReference(tpl, start, FormationState.from_param([0.0, 0.0], -3.0), 1.0)
+    # from 3 rad to -3 rad the short way is +(2 pi - 6) rad, through pi
+    assert ref.velocity(0.0)[2] == pytest.approx(2 * np.pi - 6.0)
+    assert float(ref.state(60.0).rotation_param) == pytest.approx(-3.0)
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_constant_reference_holds_the_goal(dim):
+    tpl = Template.polygon(4, dim=dim)
+    goal = random_state(np.random.default_rng(1), dim)
+    pos, vel = ConstantReference(tpl, goal).targets([0.0, 1.0, 7.5])
+    np.testing.assert_allclose(pos, np.broadcast_to(forward_kinematics(tpl, goal), pos.shape))
+    np.testing.assert_array_equal(vel, 0.0)
+
+
+@pytest.mark.parametrize(
+    ("build", "match"),
+    [
+        (lambda tpl, p, s: ExponentialReference(tpl, p, p, 0.0), "reference.rate"),
+        (lambda tpl, p, s: ExponentialReference(tpl, p, p, -1.0), "reference.rate"),
+        (lambda tpl, p, s: ExponentialReference(tpl, s, p, 1.0), "reference.start"),
+        (lambda tpl, p, s: ExponentialReference(tpl, p, s, 1.0), "reference"),
+        (lambda tpl, p, s: ConstantReference(tpl, s), "reference"),
+        (lambda tpl, p, s: ConstantReference(tpl, [0.0, 0.0]), "reference"),
+    ],
+)
+def test_bad_references_are_rejected(build, match):
+    planar, spatial = FormationState.from_param([0.0, 0.0]), FormationState.from_param([0.0] * 3)
+    with pytest.raises(ValidationError, match=match):
+        build(Template.polygon(3), planar, spatial)

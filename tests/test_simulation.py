@@ -1,0 +1,136 @@
+"""Closed-loop simulation: go-to-goal against eq. 5 and its discrete form, velocity lag, noise."""
+
+import numpy as np
+import pytest
+
+from mpcform.controllers import Controller, ControlStep, ProportionalController, StepInfo
+from mpcform.errors import MPCFormError, ValidationError
+from mpcform.laws import go_to_goal_closed_form, go_to_goal_discrete
+from mpcform.reference import ConstantReference
+from mpcform.simulation import simulate
+from mpcform.state import FormationState
+from mpcform.template import Template
+
+P0, GOAL, GAIN = np.array([1.0, -2.0, 0.5]), np.array([4.0, 2.0, -1.0]), 1.5
+SINGLE = Template(np.zeros((1, 3)))
+GOAL_REFERENCE = ConstantReference(SINGLE, FormationState.from_param(GOAL))
+
+
+class ConstantCommand(Controller):
+    """Applies one fixed command (n, d) forever; optionally a bad one."""
+
+    name = "constant"
+
+    def __init__(self, command, dt_s=0.05):
+        self.command = np.asarray(command, dtype=float)
+        self.reference = ConstantReference(
+            Template(np.zeros(self.command.shape)),
+            FormationState.from_param(np.zeros(self.command.shape[1])),
+        )
+        self.dt_s = dt_s
+
+    def step(self, t_s, positions_m):
+        return ControlStep(self.command.copy(), StepInfo("law"))
+
+
+def go_to_goal(dt, duration=4.0, v_max=None, **kwargs):
+    ctrl = ProportionalController(GOAL_REFERENCE, GAIN, dt, v_max_mps=v_max)
+    return simulate(ctrl, P0[None, :], duration, **kwargs)
+
+
+def closed_form_error(dt):
+    run = go_to_goal(dt)
+    return np.abs(run.positions_m[:, 0] - go_to_goal_closed_form(P0, GOAL, GAIN, run.t_s)).max()
+
+
+def test_go_to_goal_is_exactly_the_discrete_law():
+    run = go_to_goal(0.02)
+    expected = go_to_goal_discrete(P0, GOAL, GAIN, 0.02, run.t_s.size - 1)
+    np.testing.assert_allclose(run.positions_m[:, 0], expected, atol=1e-12)
+    # and (1 - k dt)^j written out
+    factor = (1 - GAIN * 0.02) ** np.arange(run.t_s.size)
+    np.testing.assert_allclose(run.positions_m[:, 0], GOAL + np.outer(factor, P0 - GOAL), atol=1e-12)
+
+
+def test_go_to_goal_converges_to_eq_5_at_first_order():
+    errors = [closed_form_error(dt) for dt in (0.04, 0.02, 0.01)]
+    assert errors[0] < 0.2
+    for coarse, fine in zip(errors, errors[1:], strict=False):
+        assert 1.8 <= coarse / fine <= 2.2
+
+
+def test_saturated_go_to_goal_flies_straight_at_v_max():
+    run = go_to_goal(0.02, duration=10.0, v_max=1.0)
+    speeds = np.linalg.norm(run.commands_mps[:, 0], axis=1)
+    far = GAIN * np.linalg.norm(GOAL - run.positions_m[:-1, 0], axis=1) > 1.0
+    assert far[:100].all() and not far[-1]
+    np.testing.assert_allclose(speeds[far], 1.0, rtol=1e-12)
+    assert speeds.max() <= 1.0 + 1e-12
+    # every position stays on the segment P0 -> GOAL (eq. 7 keeps the direction)
+    rel = run.positions_m[:, 0] - P0
+    along = rel @ (GOAL - P0) / np.linalg.norm(GOAL - P0) ** 2
+    np.testing.assert_allclose(rel, np.outer(along, GOAL - P0), atol=1e-12)
+    assert np.all(np.diff(along) >= 0) and 1 - 1e-3 < along[-1] <= 1.0  # no overshoot
+
+
+def test_result_shapes_and_progress():
+    calls = []
+    run = go_to_goal(0.1, duration=1.0, t0_s=2.0, progress=lambda j, n: calls.append((j, n)))
+    assert run.t_s.shape == (11,) and run.positions_m.shape == (11, 1, 3)
+    assert run.commands_mps.shape == (10, 1, 3) and run.reference_m.shape == (11, 1, 3)
+    assert len(run.infos) == run.step_times_s.size == 10 and run.controller == "proportional"
+    np.testing.assert_allclose(run.t_s, 2.0 + 0.1 * np.arange(11))
+    np.testing.assert_allclose(run.reference_m, np.broadcast_to(GOAL, (11, 1, 3)))
+    assert calls == [(j, 10) for j in range(1, 11)]
+
+
+def test_lag_is_the_exact_first_order_response():
+    """From rest under a constant u: p(t) = p0 + u (t - tau (1 - e^{-t/tau}))."""
+    u, tau = np.array([[1.0, -2.0], [0.5, 0.0]]), 0.3
+    run = simulate(ConstantCommand(u), np.zeros((2, 2)), 2.0, lag_s=tau)
+    t = run.t_s[:, None, None]
+    np.testing.assert_allclose(run.positions_m, u * (t - tau * (1 - np.exp(-t / tau))), atol=1e-12)
+
+
+def test_go_to_goal_with_lag_stays_finite_and_converges():
+    run = go_to_goal(0.02, duration=20.0, lag_s=0.1)
+    assert np.all(np.isfinite(run.positions_m))
+    assert np.linalg.norm(run.positions_m[-1, 0] - GOAL) < 1e-6
+    lagless = go_to_goal(0.02, duration=20.0)
+    assert not np.allclose(run.positions_m, lagless.positions_m)
+
+
+def test_noise_is_seeded():
+    runs = [go_to_goal(0.05, duration=2.0, noise_std_m=0.01, seed=s) for s in (7, 7, 8)]
+    np.testing.assert_array_equal(runs[0].positions_m, runs[1].positions_m)
+    assert not np.allclose(runs[0].positions_m, runs[2].positions_m)
+    assert not np.allclose(runs[0].positions_m, go_to_goal(0.05, duration=2.0).positions_m)
+
+
+def test_noise_has_the_requested_spread():
+    run = simulate(ConstantCommand(np.zeros((2, 3))), np.zeros((2, 3)), 100.0, noise_std_m=0.1)
+    steps = np.diff(run.positions_m, axis=0).ravel()  # 2000 steps x 6 coordinates
+    assert steps.std() == pytest.approx(0.1, rel=0.03)
+    assert abs(steps.mean()) < 5 * 0.1 / np.sqrt(steps.size)
+
+
+@pytest.mark.parametrize("bad", [np.nan, np.inf])
+def test_a_bad_command_stops_the_run(bad):
+    with pytest.raises(MPCFormError, match="constant"):
+        simulate(ConstantCommand([[bad, 0.0]]), np.zeros((1, 2)), 1.0)
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "match"),
+    [
+        ({"initial_positions_m": np.zeros((2, 3))}, "initial.positions"),
+        ({"initial_positions_m": [[0.0, np.nan, 0.0]]}, "initial.positions"),
+        ({"duration_s": 0.0}, "simulation.duration"),
+        ({"lag_s": -0.1}, "simulation.lag"),
+        ({"noise_std_m": -1.0}, "simulation.noise"),
+    ],
+)
+def test_bad_simulation_input_is_rejected(kwargs, match):
+    args = {"initial_positions_m": P0[None, :], "duration_s": 1.0} | kwargs
+    with pytest.raises(ValidationError, match=match):
+        simulate(ProportionalController(GOAL_REFERENCE, GAIN, 0.1), **args)
