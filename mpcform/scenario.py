@@ -1,0 +1,783 @@
+"""Scenario files: a declarative schema of every TOML key, validated loading, and running.
+
+The schema (:data:`SCHEMA`) is the one place that lists each table and key with its type,
+default, unit and meaning: :func:`load_scenario` validates against it and
+:func:`key_reference_markdown` renders it (``mpcform keys``, ``scenarios/README.md``).
+Every problem in a file raises :class:`~mpcform.errors.ScenarioError` naming the key
+(``controller.gain``), the value received and what was expected.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import difflib
+import hashlib
+import math
+import re
+import tomllib
+from collections.abc import Iterator, Mapping
+from contextlib import contextmanager
+from dataclasses import dataclass
+from importlib.util import find_spec
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from mpcform._validate import Array
+from mpcform.controllers import FEEDFORWARDS, Controller, ProportionalController, TrackingController
+from mpcform.errors import ScenarioError, ValidationError
+from mpcform.kinematics import fit_formation, forward_kinematics
+from mpcform.laws import check_gain_dt
+from mpcform.limits import Limits, SphereObstacle
+from mpcform.metrics import run_metrics
+from mpcform.mpc_settings import COUPLINGS, VELOCITY_SETS, MPCSettings
+from mpcform.output import build_summary, write_outputs
+from mpcform.reference import ConstantReference, ExponentialReference, Reference
+from mpcform.rotation import rotation_matrix
+from mpcform.simulation import SimulationResult, simulate
+from mpcform.solvers import DEFAULT_SOLVER
+from mpcform.state import FormationState
+from mpcform.template import Template
+
+FORMAT_VERSION = 1
+SHAPES = ("polygon", "ring", "line", "grid", "sphere", "explicit")
+REFERENCE_KINDS = ("constant", "exponential")
+CONTROLLER_KINDS = ("proportional", "tracking", "mpc")
+CASADI_CONIC_PLUGINS = ("osqp", "qpoases", "proxqp", "daqp", "piqp", "ipqp", "hpipm")
+
+
+# ---- schema -------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class Key:
+    """One scenario key.
+
+    ``type``: ``int``, ``float``, ``bool``, ``string``, ``vector`` (d numbers), ``bounds``
+    (d numbers, +-inf allowed), ``rotation`` (an angle for d = 2, a rotation vector for
+    d = 3) or ``points`` (rows of d numbers). ``when`` lists the values of the table's
+    selector key (``shape`` or ``kind``) the key applies to (empty: always). ``bound`` is a
+    lower bound of numbers (``"> 0"``, ``">= 1"``). ``shown_default`` replaces the default in
+    the docs.
+    """
+
+    name: str
+    type: str
+    doc: str
+    unit: str = ""
+    default: Any = None
+    required: bool = False
+    when: tuple[str, ...] = ()
+    choices: tuple[Any, ...] = ()
+    bound: str = ""
+    shown_default: str | None = None
+
+
+@dataclass(frozen=True)
+class Table:
+    """A scenario table (``""``: the top level); ``selector`` names the key choosing a variant."""
+
+    name: str
+    doc: str
+    keys: tuple[Key, ...]
+    required: bool = True
+    selector: str | None = None
+    array: bool = False
+
+    def key(self, name: str) -> Key:
+        return next(k for k in self.keys if k.name == name)
+
+    @property
+    def title(self) -> str:
+        if not self.name:
+            return "Top level"
+        return f"[[{self.name}]]" if self.array else f"[{self.name}]"
+
+
+_MPC_DEFAULTS = {f.name: f.default for f in dataclasses.fields(MPCSettings)}
+_MPC = ("mpc",)
+# scenario key -> MPCSettings field (the remaining mpc keys share their name with the field)
+MPC_FIELDS = {"gain": "gain_per_s", "margin": "margin_m", "tie_break": "tie_break_rad",
+              "time_limit": "time_limit_s"}  # fmt: skip
+
+
+def _mpc_key(name: str, type_: str, doc: str, unit: str = "", **kw: Any) -> Key:
+    default = _MPC_DEFAULTS[MPC_FIELDS.get(name, name)]
+    return Key(name, type_, doc, unit, default, when=_MPC, **kw)
+
+
+SCHEMA: tuple[Table, ...] = (
+    Table("", "Scenario identity.", (
+        Key("version", "int", "Scenario format version.", required=True, choices=(FORMAT_VERSION,)),
+        Key("name", "string", "Run name; default output directory is `results/<name>/`.",
+            shown_default="file name without .toml"),
+        Key("dim", "int", "Spatial dimension: 2 (planar) or 3 (spatial).", required=True,
+            choices=(2, 3)),
+        Key("seed", "int", "Seed of the initial perturbation and the simulation noise.",
+            default=0, bound=">= 0"),
+    )),
+    Table("template", "Formation shape: centred offsets r_i (seed eq. 10).", (
+        Key("shape", "string", "Template family; `explicit` takes `offsets`.", required=True,
+            choices=SHAPES),
+        Key("n", "int", "Number of drones.", required=True,
+            when=("polygon", "ring", "line", "sphere"), bound=">= 1"),
+        Key("radius", "float", "Circumradius.", "m", 1.0, when=("polygon", "ring", "sphere"),
+            bound="> 0"),
+        Key("phase", "float", "Angle of the first vertex about z.", "rad", 0.0,
+            when=("polygon", "ring")),
+        Key("spacing", "float", "Distance between neighbours.", "m", 1.0, when=("line", "grid"),
+            bound="> 0"),
+        Key("rows", "int", "Grid rows (along x).", required=True, when=("grid",), bound=">= 1"),
+        Key("cols", "int", "Grid columns (along y).", required=True, when=("grid",), bound=">= 1"),
+        Key("layers", "int", "Grid layers (along z, spatial only).", default=1, when=("grid",),
+            bound=">= 1"),
+        Key("offsets", "points", "Offsets r_i, one row per drone; their mean must be zero.", "m",
+            required=True, when=("explicit",)),
+    ), selector="shape"),
+    Table("initial", "Start: a formation state, or explicit `positions` (not both).", (
+        Key("centroid", "vector", "Start centroid c.", "m",
+            shown_default="required unless `positions`"),
+        Key("rotation", "rotation", "Start rotation: angle (d = 2) or rotation vector (d = 3).",
+            "rad", shown_default="0 (identity)"),
+        Key("scale", "float", "Start scale s.", shown_default="1", bound="> 0"),
+        Key("positions", "points", "Explicit start positions, one row per drone (n x d).", "m"),
+        Key("perturbation", "float", "Std of seeded Gaussian offsets added to the start.", "m",
+            0.0, bound=">= 0"),
+    )),
+    Table("reference", "Desired formation trajectory, starting at the initial formation state "
+          "(or the best fit of explicit positions).", (
+        Key("kind", "string", "`constant`: hold the goal; `exponential`: eq. 16 towards it.",
+            required=True, choices=REFERENCE_KINDS),
+        Key("centroid", "vector", "Goal centroid.", "m", shown_default="start centroid"),
+        Key("rotation", "rotation", "Goal rotation: angle (d = 2) or rotation vector (d = 3).",
+            "rad", shown_default="start rotation"),
+        Key("scale", "float", "Goal scale s*.", "", shown_default="start scale", bound="> 0"),
+        Key("rate", "float", "Convergence rate lambda of eq. 16.", "1/s", required=True,
+            when=("exponential",), bound="> 0"),
+    ), selector="kind"),
+    Table("limits", "Physical limits; each unset one is not enforced.", (
+        Key("v_max", "float", "Speed bound per drone.", "m/s", bound="> 0"),
+        Key("d_min", "float", "Minimum distance between two drones.", "m", bound="> 0"),
+        Key("a_max", "float", "Componentwise bound on command changes (mpc).", "m/s^2",
+            bound="> 0"),
+        Key("geofence_min", "bounds", "Lower corner of the allowed box (mpc; -inf: open).", "m"),
+        Key("geofence_max", "bounds", "Upper corner of the allowed box (mpc; inf: open).", "m"),
+        Key("downwash", "float", "Vertical separation factor kappa (spatial, mpc).", "",
+            bound=">= 1"),
+    ), required=False),
+    Table("controller", "Controller and its parameters; `mpcform run --controller` overrides "
+          "`kind`, then keys of other kinds take their defaults.", (
+        Key("kind", "string", "Controller.", required=True, choices=CONTROLLER_KINDS),
+        Key("gain", "float", "Feedback gain k (eq. 4, 14); gain * dt must be <= 1.", "1/s", 1.0,
+            bound="> 0"),
+        Key("feedforward", "string", "`jacobian` (J xi_dot, eq. 14) or `secant` "
+            "((p*(t+dt) - p*(t))/dt, exact in discrete time).", default="jacobian",
+            when=("tracking", "mpc"), choices=FEEDFORWARDS),
+        Key("saturate", "bool", "Saturate commands at limits.v_max (eq. 7) when it is set.",
+            default=True, when=("proportional", "tracking")),
+        _mpc_key("horizon", "int", "Plan length H in steps.", bound=">= 1"),
+        _mpc_key("velocity_set", "string", "Speed constraint set inscribed in the ball.",
+                 choices=VELOCITY_SETS),
+        _mpc_key("facets", "int", "Half-spaces of the velocity polytope (auto: 16 planar, "
+                 "32 spatial).", bound=">= 4", shown_default="auto"),
+        _mpc_key("slack_weight", "float", "Exact L1 penalty on separation slack.", "1/m",
+                 bound="> 0"),
+        _mpc_key("slack_quadratic", "float", "Quadratic slack penalty (conditioning).", "1/m^2",
+                 bound=">= 0"),
+        _mpc_key("margin", "float", "Tightening of separation and obstacle rows.", "m",
+                 bound=">= 0"),
+        _mpc_key("tie_break", "float", "Right turn of conflicted drones' desired velocities, "
+                 "so symmetric swaps circulate (0: off).", "rad", bound=">= 0"),
+        _mpc_key("coupling", "string", "`joint` pair rows, or `decoupled` per-drone rows about "
+                 "the pair midpoint (block-diagonal QP, for large swarms).", choices=COUPLINGS),
+        _mpc_key("fast_path", "bool", "Skip the solver when the eq. 14 rollout meets every row."),
+        _mpc_key("eps_abs", "float", "Solver absolute tolerance.", bound="> 0"),
+        _mpc_key("eps_rel", "float", "Solver relative tolerance.", bound=">= 0"),
+        _mpc_key("max_iter", "int", "Solver iteration limit.", bound=">= 1"),
+        _mpc_key("time_limit", "float", "Solver time limit per QP (0: none).", "s", bound=">= 0"),
+        Key("solver", "string", "QP backend: `osqp`, `piqp`, `qpsolvers:<name>`, "
+            "`casadi:<plugin>` (see `mpcform solvers`); `--solver` overrides it.",
+            default=DEFAULT_SOLVER, when=_MPC),
+    ), selector="kind"),
+    Table("simulation", "Closed-loop simulation (zero-order hold, exact single integrator).", (
+        Key("dt", "float", "Control period.", "s", required=True, bound="> 0"),
+        Key("duration", "float", "Simulated time.", "s", required=True, bound="> 0"),
+        Key("lag", "float", "Time constant of a first-order velocity lag (0: none).", "s", 0.0,
+            bound=">= 0"),
+        Key("noise", "float", "Std of seeded Gaussian position disturbances per step.", "m", 0.0,
+            bound=">= 0"),
+    )),
+    Table("obstacles", "Static spheres (discs when planar); repeat the table for more.", (
+        Key("center", "vector", "Centre.", "m", required=True),
+        Key("radius", "float", "Radius.", "m", required=True, bound="> 0"),
+        Key("clearance", "float", "Distance kept from the surface.", "m",
+            shown_default="d_min / 2", bound=">= 0"),
+    ), required=False, array=True),
+)  # fmt: skip
+TABLES = {t.name: t for t in SCHEMA}
+
+
+# ---- parsed scenario ----------------------------------------------------------------------
+@dataclass(frozen=True)
+class ControllerSpec:
+    """Controller ``kind`` and every parameter (defaults filled, ``mpc`` settings validated)."""
+
+    kind: str
+    gain_per_s: float
+    feedforward: str
+    saturate: bool
+    mpc: MPCSettings
+    solver: str
+
+
+@dataclass(frozen=True)
+class SimulationSpec:
+    """Period ``dt_s`` [s], ``duration_s`` [s], velocity ``lag_s`` [s], ``noise_std_m`` [m]."""
+
+    dt_s: float
+    duration_s: float
+    lag_s: float = 0.0
+    noise_std_m: float = 0.0
+
+
+@dataclass(frozen=True, eq=False)
+class Scenario:
+    """A validated scenario: ready-made library objects plus where it came from.
+
+    ``start`` is the reference's initial formation state; ``initial_positions_m`` (n, d)
+    includes the seeded perturbation.
+    """
+
+    name: str
+    dim: int
+    seed: int
+    template: Template
+    start: FormationState
+    initial_positions_m: Array
+    reference: Reference
+    limits: Limits
+    obstacles: tuple[SphereObstacle, ...]
+    controller: ControllerSpec
+    simulation: SimulationSpec
+    source: Path | None = None
+    source_sha256: str | None = None
+
+    @property
+    def n(self) -> int:
+        """Number of drones."""
+        return self.template.n
+
+    @property
+    def steps(self) -> int:
+        """Number of control steps."""
+        return max(1, round(self.simulation.duration_s / self.simulation.dt_s))
+
+
+@dataclass(frozen=True)
+class RunResult:
+    """Outcome of :func:`run_scenario`: the time series, the summary dict, the output dir."""
+
+    simulation: SimulationResult
+    summary: dict[str, Any]
+    out_dir: Path | None
+
+
+# ---- loading ------------------------------------------------------------------------------
+def load_scenario(path: str | Path) -> Scenario:
+    """Read and validate a scenario TOML file; raises :class:`ScenarioError` on any problem."""
+    path = Path(path)
+    try:
+        raw = path.read_bytes()
+    except FileNotFoundError:
+        raise ScenarioError(str(path), "no such scenario file") from None
+    except OSError as exc:
+        raise ScenarioError(str(path), f"cannot read the file: {exc.strerror}") from None
+    text = raw.decode("utf-8", errors="replace")
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        hint = _line_hint(text, str(exc))
+        raise ScenarioError(str(path), f"TOML syntax error: {exc}{hint}") from None
+    return scenario_from_dict(
+        data, source=path, source_sha256=hashlib.sha256(raw).hexdigest(), default_name=path.stem
+    )
+
+
+def scenario_from_dict(
+    data: Mapping[str, Any],
+    *,
+    source: Path | None = None,
+    source_sha256: str | None = None,
+    default_name: str = "scenario",
+) -> Scenario:
+    """Validate an already parsed scenario (the TOML document as a dict)."""
+    top = _parse_top(data)
+    dim, seed = top["dim"], top["seed"]
+    tpl = _template(_table(data, "template", dim), dim)
+    init = _table(data, "initial", dim, tpl.n)
+    start, positions = _initial(tpl, init)
+    reference = _reference(tpl, start, _table(data, "reference", dim))
+    limits = _limits(_table(data, "limits", dim), dim)
+    sim = SimulationSpec(**_renamed(_table(data, "simulation", dim), "simulation"))
+    controller = _controller(_table(data, "controller", dim), sim.dt_s)
+    if sim.duration_s < sim.dt_s:
+        raise ScenarioError(
+            "simulation.duration", f"expected at least one step, dt = {sim.dt_s:g} s; "
+            f"got {sim.duration_s:g} s",
+        )  # fmt: skip
+    if init["perturbation"] > 0.0:
+        rng = np.random.default_rng([seed, 1])  # independent of the simulation noise (seed)
+        positions = positions + rng.normal(0.0, init["perturbation"], positions.shape)
+    positions.setflags(write=False)
+    return Scenario(
+        name=top["name"] if top["name"] is not None else default_name,
+        dim=dim,
+        seed=seed,
+        template=tpl,
+        start=start,
+        initial_positions_m=positions,
+        reference=reference,
+        limits=limits,
+        obstacles=_obstacles(data.get("obstacles"), dim),
+        controller=controller,
+        simulation=sim,
+        source=source,
+        source_sha256=source_sha256,
+    )
+
+
+def _parse_top(data: Mapping[str, Any]) -> dict[str, Any]:
+    top = TABLES[""]
+    scalars = {k: v for k, v in data.items() if k not in TABLES or not k}
+    for name, value in scalars.items():
+        if not any(k.name == name for k in top.keys):
+            is_table = isinstance(value, dict) or (
+                isinstance(value, list) and value and all(isinstance(v, dict) for v in value)
+            )
+            what = "table" if is_table else "key"
+            choices = [t.name for t in SCHEMA if t.name] if is_table else _names(top)
+            raise ScenarioError(name, f"unknown {what}{_did_you_mean(name, choices)}")
+    for name in TABLES:
+        if name and name in data and name != "obstacles" and not isinstance(data[name], dict):
+            raise ScenarioError(name, f"expected a table [{name}], got {data[name]!r}")
+    values = _parse_keys(top, scalars, "", dim=2, n=None)
+    name = values["name"]
+    if name is not None and (not re.fullmatch(r"[A-Za-z0-9_][A-Za-z0-9_.-]*", name)):
+        raise ScenarioError("name", f"expected letters, digits, '_', '-' or '.' (it names the "
+                            f"output directory), got {name!r}")  # fmt: skip
+    return values
+
+
+def _table(data: Mapping[str, Any], name: str, dim: int, n: int | None = None) -> dict[str, Any]:
+    table = TABLES[name]
+    raw = data.get(name)
+    if raw is None:
+        if table.required:
+            raise ScenarioError(name, f"missing table [{name}] ({table.doc})")
+        raw = {}
+    return _parse_keys(table, raw, name, dim, n)
+
+
+def _parse_keys(table: Table, raw: Mapping[str, Any], prefix: str, dim: int, n: int | None) -> dict[str, Any]:
+    """Check names, types and ranges of one table's keys; fill defaults (None = unset)."""
+    for name in raw:
+        if not any(k.name == name for k in table.keys):
+            where = f" in {table.title}" if table.name else ""
+            raise ScenarioError(
+                _field(prefix, name), f"unknown key{where}{_did_you_mean(name, _names(table))}"
+            )
+    variant = None
+    if table.selector is not None:
+        sel = table.key(table.selector)
+        if table.selector not in raw:
+            raise ScenarioError(_field(prefix, sel.name), f"missing required key ({sel.doc})")
+        variant = _convert(sel, raw[sel.name], _field(prefix, sel.name), dim, n)
+    out: dict[str, Any] = {}
+    for key in table.keys:
+        field = _field(prefix, key.name)
+        applies = not key.when or variant in key.when
+        if key.name not in raw:
+            if key.required and applies:
+                raise ScenarioError(field, f"missing required key ({key.doc})")
+            out[key.name] = key.default if applies else None
+        elif not applies:
+            raise ScenarioError(
+                field,
+                f"does not apply to {table.selector} = {variant!r} "
+                f"(only to {', '.join(repr(w) for w in key.when)})",
+            )
+        else:
+            out[key.name] = _convert(key, raw[key.name], field, dim, n)
+    return out
+
+
+def _convert(key: Key, value: Any, field: str, dim: int, n: int | None) -> Any:
+    """The value of ``key`` as a Python or numpy object, or a ScenarioError naming ``field``."""
+    unit = f" [{key.unit}]" if key.unit else ""
+    if key.type == "bool":
+        if not isinstance(value, bool):
+            raise ScenarioError(field, f"expected true or false, got {value!r}")
+        return value
+    if key.type == "string":
+        if not isinstance(value, str):
+            raise ScenarioError(field, f"expected a string, got {value!r}")
+        if key.choices and value not in key.choices:
+            raise ScenarioError(field, f"expected one of {_listing(key.choices)}, got {value!r}"
+                                f"{_did_you_mean(value, key.choices)}")  # fmt: skip
+        return value
+    if key.type in ("int", "float"):
+        number = _number(value, integer=key.type == "int")
+        allowed = not key.choices or number in key.choices
+        if number is None or not allowed or not _in_range(key, number):
+            what = "an integer" if key.type == "int" else "a finite number"
+            if key.choices:
+                what = f"one of {_listing(key.choices, '')}"
+            raise ScenarioError(field, f"expected {what}{_range(key)}{unit}, got {value!r}")
+        return number
+    if key.type == "rotation" and dim == 2:
+        return _convert(dataclasses.replace(key, type="float"), value, field, dim, n)
+    if key.type == "rotation":
+        return _array(field, value, (3,), "a rotation vector of 3 numbers [rad]")
+    if key.type in ("vector", "bounds"):
+        return _array(field, value, (dim,), f"a list of {dim} numbers{unit}", key.type == "bounds")
+    rows = "rows" if n is None else f"{n} rows"
+    return _array(field, value, (n, dim), f"a list of {rows} of {dim} numbers{unit}")
+
+
+def _number(value: Any, *, integer: bool) -> float | int | None:
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        return None
+    if integer:
+        return value if isinstance(value, int) else None
+    return float(value) if math.isfinite(value) else None
+
+
+def _array(
+    field: str, value: Any, shape: tuple[int | None, ...], expected: str, allow_inf: bool = False
+) -> Array:
+    def fits(v: Any, depth: int) -> bool:
+        if depth == len(shape):
+            return isinstance(v, int | float) and not isinstance(v, bool)
+        size = shape[depth]
+        return (
+            isinstance(v, list)
+            and (len(v) == size if size is not None else len(v) >= 1)
+            and all(fits(x, depth + 1) for x in v)
+        )
+
+    if not fits(value, 0):
+        raise ScenarioError(field, f"expected {expected}, got {value!r}")
+    arr = np.array(value, dtype=float)
+    if np.isnan(arr).any() or (not allow_inf and np.isinf(arr).any()):
+        finite = "numbers (inf allowed)" if allow_inf else "finite numbers"
+        raise ScenarioError(field, f"expected {finite}, got {value!r}")
+    return arr
+
+
+# ---- building library objects --------------------------------------------------------------
+@contextmanager
+def _as_scenario_error(prefix: str) -> Iterator[None]:
+    """Re-raise a core ValidationError as a ScenarioError naming the scenario key."""
+    try:
+        yield
+    except ScenarioError:
+        raise
+    except ValidationError as exc:
+        table = TABLES["obstacles" if prefix.startswith("obstacles") else prefix]
+        last = exc.field.split(" ")[0].rsplit(".", 1)[-1]
+        field = _field(prefix, last) if last in _names(table) else exc.field
+        raise ScenarioError(field, str(exc).removeprefix(f"{exc.field}: ")) from None
+
+
+def _template(t: dict[str, Any], dim: int) -> Template:
+    shape = t["shape"]
+    with _as_scenario_error("template"):
+        if shape in ("polygon", "ring"):
+            return Template.polygon(t["n"], t["radius"], dim, t["phase"])
+        if shape == "line":
+            return Template.line(t["n"], t["spacing"], dim)
+        if shape == "grid":
+            return Template.grid(t["rows"], t["cols"], t["spacing"], dim, t["layers"])
+        if shape == "sphere":
+            if dim != 3:
+                raise ScenarioError("template.shape", f"'sphere' needs dim = 3, got dim = {dim}")
+            return Template.sphere(t["n"], t["radius"])
+        offsets = t["offsets"]
+        centred, shift = Template.centred(offsets)
+        if not np.allclose(shift, 0.0, atol=1e-9 * max(1.0, float(np.abs(offsets).max()))):
+            raise ScenarioError(
+                "template.offsets",
+                f"offsets must be centred (sum r_i = 0) but their mean is {shift.tolist()}, "
+                f"off by {float(np.linalg.norm(shift)):.6g} m; subtract it from every row "
+                f"(centred: {np.round(centred.offsets, 12).tolist()})",
+            )
+        return centred
+
+
+def _initial(tpl: Template, init: dict[str, Any]) -> tuple[FormationState, Array]:
+    """The reference's start state and the (unperturbed) start positions (n, d)."""
+    if init["positions"] is not None:
+        if any(init[k] is not None for k in ("centroid", "rotation", "scale")):
+            raise ScenarioError("initial.positions", "give either positions or a formation state "
+                                "(centroid, rotation, scale), not both")  # fmt: skip
+        with _as_scenario_error("initial"):
+            return fit_formation(tpl, init["positions"]).state, np.array(init["positions"])
+    if init["centroid"] is None:
+        raise ScenarioError("initial.centroid", "missing: give centroid (with optional rotation "
+                            "and scale) or positions")  # fmt: skip
+    with _as_scenario_error("initial"):
+        scale = 1.0 if init["scale"] is None else init["scale"]
+        start = FormationState.from_param(init["centroid"], init["rotation"], scale)
+        return start, forward_kinematics(tpl, start)
+
+
+def _reference(tpl: Template, start: FormationState, ref: dict[str, Any]) -> Reference:
+    with _as_scenario_error("reference"):
+        rotation = (
+            start.rotation_body_to_world
+            if ref["rotation"] is None
+            else rotation_matrix(tpl.dim, ref["rotation"], "reference.rotation")
+        )
+        goal = FormationState(
+            start.centroid_m if ref["centroid"] is None else ref["centroid"],
+            rotation,
+            start.scale if ref["scale"] is None else ref["scale"],
+        )
+        if ref["kind"] == "constant":
+            return ConstantReference(tpl, goal)
+        return ExponentialReference(tpl, start, goal, ref["rate"])
+
+
+def _limits(lim: dict[str, Any], dim: int) -> Limits:
+    if lim["downwash"] is not None and dim != 3:
+        raise ScenarioError("limits.downwash", f"applies only when dim = 3, got dim = {dim}")
+    with _as_scenario_error("limits"):
+        return Limits(**_renamed(lim, "limits"))
+
+
+_MPC_KEYS = {k.name for k in TABLES["controller"].keys if k.when == _MPC and k.name != "solver"}
+
+
+def _controller(c: dict[str, Any], dt_s: float) -> ControllerSpec:
+    with _as_scenario_error("controller"):
+        check_gain_dt(c["gain"], dt_s)
+        given = {MPC_FIELDS.get(k, k): v for k, v in c.items() if k in _MPC_KEYS and v is not None}
+        feedforward = c["feedforward"] or "jacobian"
+        mpc = MPCSettings(**{**given, "gain_per_s": c["gain"], "feedforward": feedforward})
+    solver = check_solver_name(c["solver"] or DEFAULT_SOLVER)
+    saturate = True if c["saturate"] is None else c["saturate"]
+    return ControllerSpec(c["kind"], c["gain"], feedforward, saturate, mpc, solver)
+
+
+def _obstacles(raw: Any, dim: int) -> tuple[SphereObstacle, ...]:
+    if raw is None:
+        return ()
+    if not isinstance(raw, list) or not all(isinstance(o, dict) for o in raw):
+        raise ScenarioError("obstacles", f"expected an array of tables [[obstacles]], got {raw!r}")
+    out = []
+    for i, item in enumerate(raw):
+        prefix = f"obstacles[{i}]"
+        o = _parse_keys(TABLES["obstacles"], item, prefix, dim, None)
+        with _as_scenario_error(prefix):
+            out.append(SphereObstacle(o["center"], o["radius"], o["clearance"]))
+    return tuple(out)
+
+
+_ATTRS = {
+    "limits": {"v_max": "v_max_mps", "d_min": "d_min_m", "a_max": "a_max_mps2",
+               "geofence_min": "geofence_min_m", "geofence_max": "geofence_max_m",
+               "downwash": "downwash_kappa"},
+    "simulation": {"dt": "dt_s", "duration": "duration_s", "lag": "lag_s", "noise": "noise_std_m"},
+}  # fmt: skip
+
+
+def _renamed(values: dict[str, Any], table: str) -> dict[str, Any]:
+    return {_ATTRS[table][k]: v for k, v in values.items()}
+
+
+# ---- controllers, solvers, running ----------------------------------------------------------
+def check_solver_name(name: str, field: str = "controller.solver") -> str:
+    """Validate a solver name: osqp, piqp, qpsolvers:<name>, casadi:<plugin> or casadi:ipopt."""
+    prefix, _, rest = name.partition(":")
+    casadi = (*CASADI_CONIC_PLUGINS, "ipopt")
+    if (
+        name in ("osqp", "piqp")
+        or (prefix == "qpsolvers" and rest)
+        or (prefix == "casadi" and rest in casadi)
+    ):
+        return name
+    known = ["osqp", "piqp", *(f"casadi:{p}" for p in casadi)]
+    raise ScenarioError(
+        field,
+        f"unknown solver {name!r}; expected osqp, piqp, qpsolvers:<name> or casadi:<plugin> "
+        f"(plugins: {', '.join(casadi)}){_did_you_mean(name, known)}",
+    )
+
+
+def solver_backends() -> list[tuple[str, bool]]:
+    """Every solver name this package knows and whether it can be used here (installed)."""
+    rows = [(name, find_spec(name) is not None) for name in ("osqp", "piqp")]
+    if find_spec("qpsolvers") is not None:
+        import qpsolvers
+
+        rows += [(f"qpsolvers:{s}", True) for s in sorted(qpsolvers.available_solvers)]
+    has_casadi = find_spec("casadi") is not None
+    if has_casadi:
+        import casadi
+    for plugin in CASADI_CONIC_PLUGINS:
+        rows.append((f"casadi:{plugin}", has_casadi and bool(casadi.has_conic(plugin))))
+    rows.append(("casadi:ipopt", has_casadi and bool(casadi.has_nlpsol("ipopt"))))
+    return rows
+
+
+def build_controller(scenario: Scenario, kind: str | None = None, solver: str | None = None) -> Controller:
+    """The scenario's controller; ``kind`` and ``solver`` override the file (CLI flags)."""
+    spec = scenario.controller
+    kind = spec.kind if kind is None else kind
+    if kind not in CONTROLLER_KINDS:
+        raise ScenarioError("controller.kind", f"expected one of {_listing(CONTROLLER_KINDS)}, "
+                            f"got {kind!r}{_did_you_mean(kind, CONTROLLER_KINDS)}")  # fmt: skip
+    if solver is not None and kind != "mpc":
+        raise ScenarioError("controller.solver", f"a solver ({solver!r}) applies only to the mpc "
+                            f"controller, this run uses {kind!r}")  # fmt: skip
+    ref, dt, limits = scenario.reference, scenario.simulation.dt_s, scenario.limits
+    v_max = limits.v_max_mps if spec.saturate else None
+    with _as_scenario_error("controller"):
+        if kind == "proportional":
+            return ProportionalController(ref, spec.gain_per_s, dt, v_max)
+        if kind == "tracking":
+            return TrackingController(ref, spec.gain_per_s, dt, v_max, spec.feedforward)
+    from mpcform.planner import MPCPlanner
+
+    name = spec.solver if solver is None else check_solver_name(solver, "solver")
+    with _as_scenario_error("controller"):
+        planner: Controller = MPCPlanner(ref, dt, limits, spec.mpc, obstacles=scenario.obstacles, solver=name)
+    return planner
+
+
+def run_scenario(
+    scenario: Scenario,
+    out_dir: str | Path | None = None,
+    controller: str | None = None,
+    solver: str | None = None,
+) -> RunResult:
+    """Simulate, compute the metrics and, when ``out_dir`` is given, write the output files.
+
+    ``controller`` and ``solver`` override the scenario's controller kind and QP backend.
+    """
+    ctrl = build_controller(scenario, controller, solver)
+    sim = scenario.simulation
+    result = simulate(
+        ctrl, scenario.initial_positions_m, sim.duration_s,
+        lag_s=sim.lag_s, noise_std_m=sim.noise_std_m, seed=scenario.seed,
+    )  # fmt: skip
+    limits = scenario.limits
+    is_mpc = (controller or scenario.controller.kind) == "mpc"
+    summary = build_summary(
+        scenario=scenario.name,
+        n=scenario.n,
+        dim=scenario.dim,
+        dt_s=sim.dt_s,
+        controller=ctrl.name,
+        solver=(solver or scenario.controller.solver) if is_mpc else None,
+        v_max_mps=limits.v_max_mps,
+        d_min_m=limits.d_min_m,
+        seed=scenario.seed,
+        scenario_file=scenario.source,
+        scenario_sha256=scenario.source_sha256,
+        metrics=run_metrics(result, limits.v_max_mps, limits.d_min_m),
+        steps=result.commands_mps.shape[0],
+    )
+    path = None if out_dir is None else write_outputs(Path(out_dir), result, summary)
+    return RunResult(result, summary, path)
+
+
+def describe(scenario: Scenario) -> str:
+    """One line: drones, template, reference, controller, steps."""
+    space = "planar" if scenario.dim == 2 else "spatial"
+    sim = scenario.simulation
+    return (
+        f"{scenario.name}: {scenario.n} drone{'s' * (scenario.n != 1)}, {space} "
+        f"{scenario.template.name} template, {type(scenario.reference).__name__}, "
+        f"{scenario.controller.kind} controller, {scenario.steps} steps of {sim.dt_s:g} s"
+    )
+
+
+# ---- key reference -------------------------------------------------------------------------
+def key_reference_markdown() -> str:
+    """Every scenario key as markdown tables (key, type, default, unit, meaning), per table."""
+    lines = ["All lengths in metres, angles in radians, times in seconds.", ""]
+    for table in SCHEMA:
+        need = "required" if table.required else "optional"
+        lines += [f"### {table.title}", "", f"{table.doc} ({need})", ""]
+        lines += ["| key | type | default | unit | meaning |", "| --- | --- | --- | --- | --- |"]
+        for key in table.keys:
+            doc = key.doc
+            if key.when:
+                doc += f" Only with `{table.selector}` = {_listing(key.when, '`')}."
+            cells = (f"`{key.name}`", _type_text(key), _default_text(key), key.unit, doc)
+            lines.append("| " + " | ".join(c.replace("|", "\\|") for c in cells) + " |")
+        lines.append("")
+    return "\n".join(lines)
+
+
+def _type_text(key: Key) -> str:
+    base = {
+        "int": "integer", "float": "float", "bool": "boolean", "string": "string",
+        "vector": "d numbers", "bounds": "d numbers (+-inf allowed)",
+        "rotation": "float (d = 2) or 3 numbers (d = 3)", "points": "n rows of d numbers",
+    }[key.type]  # fmt: skip
+    if key.choices:
+        quote = '"' if key.type == "string" else ""
+        return f"{base}: {_listing(key.choices, quote)}"
+    return base + _range(key)
+
+
+def _default_text(key: Key) -> str:
+    if key.required:
+        return "required"
+    if key.shown_default is not None:
+        return key.shown_default
+    if key.default is None:
+        return "unset"
+    if isinstance(key.default, bool):
+        return str(key.default).lower()
+    if isinstance(key.default, str):
+        return f'"{key.default}"'
+    return f"{key.default:g}"
+
+
+def _range(key: Key) -> str:
+    return f" {key.bound}" if key.bound else ""
+
+
+def _in_range(key: Key, x: float) -> bool:
+    if not key.bound:
+        return True
+    op, low = key.bound.split()
+    return x > float(low) if op == ">" else x >= float(low)
+
+
+# ---- small helpers -------------------------------------------------------------------------
+def _field(prefix: str, name: str) -> str:
+    return f"{prefix}.{name}" if prefix else name
+
+
+def _names(table: Table) -> list[str]:
+    return [k.name for k in table.keys]
+
+
+def _listing(values: tuple[Any, ...], quote: str = "'") -> str:
+    return ", ".join(f"{quote}{v}{quote}" for v in values)
+
+
+def _did_you_mean(word: str, choices: Any) -> str:
+    close = difflib.get_close_matches(word, [str(c) for c in choices], n=1)
+    return f"; did you mean {close[0]!r}?" if close else ""
+
+
+def _line_hint(text: str, message: str) -> str:
+    match = re.search(r"line (\d+)", message)
+    lines = text.splitlines()
+    if match is None or not 1 <= int(match.group(1)) <= len(lines):
+        return ""
+    return f": {lines[int(match.group(1)) - 1].strip()!r}"

@@ -1,0 +1,121 @@
+"""Output files: exactly the contract's arrays, columns and keys, and they round-trip."""
+
+from __future__ import annotations
+
+import csv
+import dataclasses
+import json
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+from mpcform.output import (
+    DEPENDENCIES,
+    OUTPUT_FILES,
+    SUMMARY_KEYS,
+    csv_header,
+    format_summary,
+    json_safe,
+    write_summary_json,
+)
+from mpcform.scenario import RunResult, load_scenario, run_scenario
+
+ROOT = Path(__file__).resolve().parents[1]
+METRIC_KEYS = {
+    "final_tracking_error", "max_tracking_error", "min_separation", "min_separation_segments",
+    "max_speed", "separation_violations", "speed_violations", "qp_solves", "fast_path_steps",
+    "solver_failures", "max_slack", "step_time_ms",
+}  # fmt: skip
+
+
+def run_short(name: str, out_dir: Path, steps: int = 7) -> RunResult:
+    scenario = load_scenario(ROOT / "scenarios" / f"{name}.toml")
+    sim = dataclasses.replace(scenario.simulation, duration_s=steps * scenario.simulation.dt_s)
+    return run_scenario(dataclasses.replace(scenario, simulation=sim), out_dir)
+
+
+def strict_json(path: Path) -> Any:
+    def reject(token: str) -> None:
+        raise ValueError(f"non-standard JSON constant {token}")
+
+    return json.loads(path.read_text(), parse_constant=reject)
+
+
+@pytest.mark.parametrize("name", ["worked_example", "spatial_scale_rotation"])
+def test_npz_holds_exactly_the_simulation(tmp_path: Path, name: str) -> None:
+    run = run_short(name, tmp_path / "out")
+    assert run.out_dir == tmp_path / "out"
+    assert sorted(p.name for p in run.out_dir.iterdir()) == sorted(OUTPUT_FILES)
+    sim = run.simulation
+    with np.load(run.out_dir / "trajectory.npz") as npz:
+        assert set(npz.files) == {"t", "p", "u", "p_ref"}
+        assert np.array_equal(npz["t"], sim.t_s)
+        assert np.array_equal(npz["p"], sim.positions_m)
+        assert np.array_equal(npz["u"], sim.commands_mps)
+        assert np.array_equal(npz["p_ref"], sim.reference_m)
+        t_len, n, d = npz["p"].shape
+        assert npz["u"].shape == (t_len - 1, n, d) and npz["p_ref"].shape == (t_len, n, d)
+
+
+@pytest.mark.parametrize(
+    ("name", "header"),
+    [
+        ("worked_example", "t,drone,x,y,vx,vy,x_ref,y_ref"),
+        ("go_to_goal", "t,drone,x,y,z,vx,vy,vz,x_ref,y_ref,z_ref"),
+    ],
+)
+def test_csv_columns_and_round_trip(tmp_path: Path, name: str, header: str) -> None:
+    run = run_short(name, tmp_path)
+    sim = run.simulation
+    t_len, n, d = sim.positions_m.shape
+    lines = (tmp_path / "trajectory.csv").read_text().splitlines()
+    assert lines[0] == header == ",".join(csv_header(d))
+    with (tmp_path / "trajectory.csv").open(newline="") as f:
+        rows = list(csv.DictReader(f))
+    assert len(rows) == t_len * n
+    axes = "xyz"[:d]
+    for k, row in enumerate(rows):
+        j, i = divmod(k, n)
+        assert float(row["t"]) == sim.t_s[j] and int(row["drone"]) == i
+        assert [float(row[a]) for a in axes] == sim.positions_m[j, i].tolist()
+        assert [float(row[f"{a}_ref"]) for a in axes] == sim.reference_m[j, i].tolist()
+        commands = [row[f"v{a}"] for a in axes]
+        if j < t_len - 1:
+            assert [float(c) for c in commands] == sim.commands_mps[j, i].tolist()
+        else:
+            assert commands == [""] * d  # no command at the final time
+
+
+def test_summary_keys_and_values(tmp_path: Path) -> None:
+    run = run_short("worked_example", tmp_path)
+    summary = strict_json(tmp_path / "summary.json")
+    assert summary == run.summary
+    assert tuple(summary) == SUMMARY_KEYS
+    assert summary["scenario"] == "worked_example"
+    assert (summary["n"], summary["dim"], summary["dt"], summary["steps"]) == (3, 2, 0.02, 7)
+    assert summary["controller"] == "tracking" and summary["solver"] is None
+    assert summary["limits"] == {"v_max": 3.0, "d_min": 0.5}
+    assert set(summary["metrics"]) == METRIC_KEYS
+    prov = summary["provenance"]
+    assert set(prov["dependencies"]) == set(DEPENDENCIES)
+    assert prov["seed"] == 0 and len(prov["scenario_sha256"]) == 64
+    assert prov["mpcform"] and prov["python"]
+    assert "final tracking error" in format_summary(summary)
+
+
+def test_unset_and_infinite_values_are_null(tmp_path: Path) -> None:
+    run = run_short("go_to_goal", tmp_path)  # one drone: no separation; no d_min
+    summary = strict_json(tmp_path / "summary.json")
+    assert summary["limits"] == {"v_max": 2.0, "d_min": None}
+    assert summary["metrics"]["min_separation"] is None
+    assert run.summary["metrics"]["min_separation_segments"] is None
+    assert "-" in format_summary(summary)
+
+
+def test_json_safe_replaces_nan_and_inf(tmp_path: Path) -> None:
+    value = {"a": float("nan"), "b": [np.float64(np.inf), 1.5, np.int64(3)], "c": (None, "x")}
+    assert json_safe(value) == {"a": None, "b": [None, 1.5, 3], "c": [None, "x"]}
+    write_summary_json(tmp_path / "s.json", value)
+    assert strict_json(tmp_path / "s.json")["b"] == [None, 1.5, 3]
