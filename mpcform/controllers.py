@@ -103,7 +103,9 @@ class TrackingController(Controller):
     ) -> None:
         check_gain_dt(gain_per_s, dt_s)
         if feedforward not in FEEDFORWARDS:
-            raise ValidationError("controller.feedforward", f"expected one of {FEEDFORWARDS}, got {feedforward!r}")
+            raise ValidationError(
+                "controller.feedforward", f"expected one of {FEEDFORWARDS}, got {feedforward!r}"
+            )
         self.reference, self.gain_per_s, self.dt_s = reference, gain_per_s, dt_s
         self.v_max_mps = None if v_max_mps is None else positive("limits.v_max", v_max_mps)
         self.feedforward = feedforward

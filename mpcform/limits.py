@@ -37,13 +37,16 @@ class Limits:
             raise ValidationError("limits.downwash", f"expected kappa >= 1, got {self.downwash_kappa}")
         lo, hi = self.geofence_min_m, self.geofence_max_m
         if (lo is None) != (hi is None):
-            raise ValidationError("limits.geofence_min", "give both geofence_min and geofence_max, or neither")
+            raise ValidationError(
+                "limits.geofence_min", "give both geofence_min and geofence_max, or neither"
+            )
         if lo is not None and hi is not None:
             lo_a = _bound("limits.geofence_min", lo)
             hi_a = _bound("limits.geofence_max", hi)
             if lo_a.shape != hi_a.shape or np.any(lo_a >= hi_a):
                 raise ValidationError(
-                    "limits.geofence_max", f"expected geofence_min < geofence_max per axis, got {lo_a} and {hi_a}"
+                    "limits.geofence_max",
+                    f"expected geofence_min < geofence_max per axis, got {lo_a} and {hi_a}",
                 )
             object.__setattr__(self, "geofence_min_m", lo_a)
             object.__setattr__(self, "geofence_max_m", hi_a)
@@ -62,7 +65,11 @@ class SphereObstacle:
         object.__setattr__(self, "center_m", finite_array("obstacles.center", self.center_m, (None,)))
         object.__setattr__(self, "radius_m", positive("obstacles.radius", self.radius_m))
         if self.clearance_m is not None:
-            object.__setattr__(self, "clearance_m", positive("obstacles.clearance", self.clearance_m, allow_zero=True))
+            object.__setattr__(
+                self,
+                "clearance_m",
+                positive("obstacles.clearance", self.clearance_m, allow_zero=True),
+            )
 
 
 def _key(attr: str) -> str:

@@ -43,7 +43,11 @@ def run_metrics(result: SimulationResult, v_max_mps: float | None, d_min_m: floa
 
 
 def _stats(ms: np.ndarray) -> dict[str, float]:
-    return {"median": float(np.median(ms)), "p90": float(np.percentile(ms, 90)), "max": float(ms.max())}
+    return {
+        "median": float(np.median(ms)),
+        "p90": float(np.percentile(ms, 90)),
+        "max": float(ms.max()),
+    }
 
 
 def _finite_or_none(x: float) -> float | None:

@@ -9,6 +9,7 @@ from mpcform.controllers import FEEDFORWARDS
 from mpcform.errors import ValidationError
 
 VELOCITY_SETS = ("polytope", "box")
+COUPLINGS = ("joint", "decoupled")
 
 
 @dataclass(frozen=True)
@@ -26,8 +27,14 @@ class MPCSettings:
       ``slack_quadratic`` [1/m^2] to help the solver's conditioning (keeps exactness).
     - ``margin_m``: separation and obstacle rows are tightened by this much so that the
       certified distance holds despite solver tolerance [m].
-    - ``tie_break_rad``: the separation normals of non-tight pairs are turned by this angle
-      about the world z axis so symmetric encounters resolve to the right (0 disables).
+    - ``tie_break_rad``: when the eq. 14 rollout breaks a separation row, the desired
+      velocities of the drones involved are turned by this angle about the world z axis (to the
+      right), so symmetric encounters (antipodal swaps) circulate instead of deadlocking. It
+      changes nothing when no row is active (0 disables).
+    - ``coupling``: ``"joint"`` (one row per pair, ``c^T (p_i - p_k) >= d_min``) or
+      ``"decoupled"`` (each pair row split into two per-drone rows about the guess's midpoint,
+      ``c^T (p_i - m) >= d_min / 2``: slightly more conservative, but the QP is block-diagonal
+      per drone, so it scales to large swarms; the same continuous-time guarantee holds).
     - ``fast_path``: return the eq. 14 rollout without a solver call when it meets every row.
     - ``eps_abs`` / ``eps_rel`` / ``max_iter`` / ``time_limit_s``: solver tolerances and limits.
     """
@@ -40,7 +47,8 @@ class MPCSettings:
     slack_weight: float = 1e3
     slack_quadratic: float = 10.0
     margin_m: float = 2e-3
-    tie_break_rad: float = 0.1
+    tie_break_rad: float = 0.5
+    coupling: str = "joint"
     fast_path: bool = True
     eps_abs: float = 1e-4
     eps_rel: float = 1e-4
@@ -52,10 +60,22 @@ class MPCSettings:
             raise ValidationError("controller.horizon", f"expected an integer >= 1, got {self.horizon!r}")
         positive("controller.gain", self.gain_per_s)
         if self.feedforward not in FEEDFORWARDS:
-            raise ValidationError("controller.feedforward", f"expected one of {FEEDFORWARDS}, got {self.feedforward!r}")
+            raise ValidationError(
+                "controller.feedforward",
+                f"expected one of {FEEDFORWARDS}, got {self.feedforward!r}",
+            )
+        if self.coupling not in COUPLINGS:
+            raise ValidationError(
+                "controller.coupling", f"expected one of {COUPLINGS}, got {self.coupling!r}"
+            )
         if self.velocity_set not in VELOCITY_SETS:
-            raise ValidationError("controller.velocity_set", f"expected one of {VELOCITY_SETS}, got {self.velocity_set!r}")
-        if self.facets is not None and (isinstance(self.facets, bool) or not isinstance(self.facets, int) or self.facets < 4):
+            raise ValidationError(
+                "controller.velocity_set",
+                f"expected one of {VELOCITY_SETS}, got {self.velocity_set!r}",
+            )
+        if self.facets is not None and (
+            isinstance(self.facets, bool) or not isinstance(self.facets, int) or self.facets < 4
+        ):
             raise ValidationError("controller.facets", f"expected an integer >= 4, got {self.facets!r}")
         positive("controller.slack_weight", self.slack_weight)
         positive("controller.slack_quadratic", self.slack_quadratic, allow_zero=True)

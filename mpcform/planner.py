@@ -11,20 +11,20 @@ hold, and is reported; the loop never raises or returns NaN for a solver's failu
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from mpcform._validate import Array, positive
-from mpcform.controllers import ControlStep, Controller, StepInfo, feedforward_targets
+from mpcform.controllers import Controller, ControlStep, StepInfo, feedforward_targets
 from mpcform.errors import ValidationError
 from mpcform.geometry import closest_on_segments, pairs_within
 from mpcform.laws import check_gain_dt, saturate
 from mpcform.limits import Limits, SphereObstacle
-from mpcform.mpc_qp import MPCQP, row_segments
+from mpcform.mpc_qp import MPCQP, row_ends, row_segments
 from mpcform.mpc_settings import MPCSettings
 from mpcform.reference import Reference
-from mpcform.solvers import DEFAULT_SOLVER, SolverOptions, make_backend
+from mpcform.solvers import DEFAULT_SOLVER, QPSolution, SolverOptions, make_backend
 
 CERTIFY_TOL_M = 1e-7  # separation certification tolerance [m]
 SLACK_REPORT_M = 1e-6  # slack above this is reported
@@ -39,12 +39,33 @@ class Plan:
 
 
 @dataclass(frozen=True)
-class _Items:
-    """Separation items of one step: pairs and (drone, obstacle) with their row data."""
+class _Candidates:
+    """Items kept in the QP (fixed pattern) and which of them are within reach this step."""
 
-    coeffs: Array  # (m, R, d) row normals (metric applied)
-    lower: Array  # (m, R) row lower bounds on c^T (x_i - x_k) (+ slack)
-    active: Array  # (m,) bool
+    pairs: Array  # (P, 2) drone pairs i < k
+    pair_on: Array  # (P,) bool
+    obstacles: Array  # (O, 2) (drone, obstacle index)
+    obstacle_on: Array  # (O,) bool
+    rebuilt: bool
+
+
+@dataclass(frozen=True)
+class _Rows:
+    """Linearised separation rows of one step, in QP order (R rows per item).
+
+    Two-drone items (joint pairs) first, then one-drone items (decoupled pair sides, obstacles);
+    ``labels`` (S, 2) names what a one-drone item reports: ``(i, k)`` or ``(i, -1 - obstacle)``.
+    """
+
+    pairs: Array  # (P, 2)
+    pair_coeffs: Array  # (P, R, d)
+    pair_lower: Array  # (P, R)
+    pair_on: Array  # (P,)
+    singles: Array  # (S,) drone index
+    labels: Array  # (S, 2)
+    single_coeffs: Array  # (S, R, d)
+    single_lower: Array  # (S, R)
+    single_on: Array  # (S,)
 
 
 class MPCPlanner(Controller):
@@ -74,23 +95,35 @@ class MPCPlanner(Controller):
         self.obstacles = tuple(obstacles)
         for idx, ob in enumerate(self.obstacles):
             if ob.center_m.shape != (self.dim,):
-                raise ValidationError(f"obstacles[{idx}].center", f"expected {self.dim} numbers, got {ob.center_m.tolist()}")
+                raise ValidationError(
+                    f"obstacles[{idx}].center",
+                    f"expected {self.dim} numbers, got {ob.center_m.tolist()}",
+                )
         needs_reach = limits.d_min_m is not None or self.obstacles
         if needs_reach and limits.v_max_mps is None:
-            raise ValidationError("limits.v_max", "the MPC needs v_max when d_min or obstacles are set (it bounds how far drones can reach)")
+            raise ValidationError(
+                "limits.v_max",
+                "the MPC needs v_max when d_min or obstacles are set (it bounds how far drones can reach)",
+            )
         if limits.downwash_kappa is not None and self.dim != 3:
-            raise ValidationError("limits.downwash", "downwash separation needs a spatial (dim = 3) formation")
+            raise ValidationError(
+                "limits.downwash", "downwash separation needs a spatial (dim = 3) formation"
+            )
         if limits.geofence_min_m is not None and limits.geofence_min_m.shape != (self.dim,):
-            raise ValidationError("limits.geofence_min", f"expected {self.dim} numbers, got {limits.geofence_min_m.tolist()}")
+            raise ValidationError(
+                "limits.geofence_min",
+                f"expected {self.dim} numbers, got {limits.geofence_min_m.tolist()}",
+            )
         self.solver_name = solver
         self._backend = make_backend(
-            solver, SolverOptions(settings.eps_abs, settings.eps_rel, settings.max_iter, settings.time_limit_s)
+            solver,
+            SolverOptions(settings.eps_abs, settings.eps_rel, settings.max_iter, settings.time_limit_s),
         )
         metric = np.ones(self.dim)
         if limits.downwash_kappa is not None:
             metric[2] = 1.0 / limits.downwash_kappa
         self._metric = metric
-        self._segs = row_segments(settings.horizon)
+        self._segs, self._ends = row_segments(settings.horizon), row_ends(settings.horizon)
         if self.obstacles:
             self._ob_center = np.array([o.center_m for o in self.obstacles])
             half = 0.5 * (limits.d_min_m or 0.0)
@@ -106,7 +139,6 @@ class MPCPlanner(Controller):
         self._pair_codes = np.empty(0, dtype=np.intp)
         self._ob_codes = np.empty(0, dtype=np.intp)
         self._plan: Plan | None = None
-        self._z: Array | None = None
         self._u_prev = np.zeros((self.n, self.dim))
 
     @property
@@ -117,54 +149,41 @@ class MPCPlanner(Controller):
     # ---- one step -------------------------------------------------------------------------
     def step(self, t_s: float, positions_m: Array) -> ControlStep:
         p0 = self._check_positions(positions_m)
-        st, lim = self.settings, self.limits
+        st = self.settings
         k, dt, horizon = st.gain_per_s, self.dt_s, st.horizon
         targets, ff = feedforward_targets(self.reference, t_s, dt, horizon, st.feedforward)
         c = ff + k * (targets[:-1] - p0)  # u_j = c_j - k x_j is the eq. 14 rollout
         u_nom, x_nom = _rollout(c, k, dt)
-        guess = self._guess(p0)
-        pairs, obs, rebuilt = self._candidates(p0)
+        cand = self._candidates(p0)
+        rows = self._separation_rows(p0, self._guess(p0), cand)
         qp = self._qp
-        if qp is None or rebuilt:
-            qp = self._qp = MPCQP(self.n, self.dim, dt, lim, st, pairs, obs)
-        pair_rows = self._pair_rows(p0, guess, pairs)
-        ob_rows = self._obstacle_rows(p0, guess, obs)
-        if st.fast_path and self._meets_rows(qp, p0, u_nom, x_nom, pairs, obs, pair_rows, ob_rows):
-            self._accept(p0, u_nom, x_nom, z=None)
+        if qp is None or cand.rebuilt:
+            qp = self._qp = MPCQP(self.n, self.dim, dt, self.limits, st, rows.pairs, rows.singles)
+        if st.fast_path and self._meets_rows(qp, p0, u_nom, x_nom, rows):
+            self._accept(p0, u_nom, x_nom)
             return ControlStep(u_nom[0].copy(), StepInfo("fast_path"))
-        lower = np.concatenate([pair_rows.lower, ob_rows.lower])
-        active = np.concatenate([pair_rows.active, ob_rows.active])
-        q = qp.cost_vector(c)
-        lo, hi = qp.bounds(p0, self._u_prev, lower, active)
-        a_data = qp.separation_values(pair_rows.coeffs, ob_rows.coeffs)
-        if self._backend_qp is not qp:
-            a_matrix = qp.A.copy()
-            a_matrix.data = a_data
-            self._backend.setup(qp.P, q, a_matrix, lo, hi)
-            self._backend_qp = qp
-        else:
-            self._backend.update(q, lo, hi, a_data)
-        sol = self._backend.solve(self._warm(p0, qp, u_nom, x_nom, rebuilt))
+        if st.tie_break_rad > 0:  # a conflict: turn the conflicted drones' wishes to the right
+            conflicted = np.zeros(self.n, dtype=bool)
+            conflicted[[i for pair in self._row_shortfall(qp, x_nom, rows)[1] for i in pair if i >= 0]] = True
+            c = np.where(conflicted[:, None], _turn_about_z(c, -st.tie_break_rad), c)
+        sol = self._solve(qp, p0, c, rows, u_nom, x_nom)
         lay = qp.layout
+        status = sol.status
         if sol.success and sol.x is not None:
             u = sol.x[: lay.nud].reshape(horizon, self.n, self.dim)
             x = sol.x[lay.nud : 2 * lay.nud].reshape(horizon, self.n, self.dim)
-            slack = sol.x[2 * lay.nud :]
-            u0 = saturate(u[0], lim.v_max_mps)
-            if self._certified(p0, u0, pairs, obs, pair_rows.active, ob_rows.active):
-                self._accept(p0, u, x, z=sol.x)
-                n_eq = lay.nud
-                info = StepInfo(
-                    "qp", status=sol.status, iterations=sol.iterations, solve_time_s=sol.solve_time_s,
-                    active_rows=int(np.count_nonzero(np.abs(sol.y[n_eq:]) > 1e-6)) if sol.y is not None else 0,
-                    max_slack_m=float(slack.max(initial=0.0)),
-                    slack_pairs=self._slack_items(slack, pairs, obs),
-                )  # fmt: skip
-                return ControlStep(u0, info)
-            status = f"{sol.status}; command failed certification"
-        else:
-            status = sol.status
-        return self._fallback(p0, pairs, obs, pair_rows.active, ob_rows.active, status, sol.iterations, sol.solve_time_s)
+            u0 = saturate(u[0], self.limits.v_max_mps)
+            if self._certified(p0, u0, cand):
+                self._accept(p0, u, x)
+                shortfall, slack_items = self._row_shortfall(qp, x, rows)
+                active = int(np.count_nonzero(np.abs(sol.y[lay.nud :]) > 1e-6)) if sol.y is not None else 0
+                return ControlStep(u0, StepInfo(
+                    "qp", status=status, iterations=sol.iterations, solve_time_s=sol.solve_time_s,
+                    active_rows=active, max_slack_m=max(shortfall, 0.0), slack_pairs=slack_items,
+                ))  # fmt: skip
+            status += "; command failed certification"
+        return self._fallback(p0, cand, StepInfo("fallback", status=status, iterations=sol.iterations,
+                                                 solve_time_s=sol.solve_time_s))  # fmt: skip
 
     # ---- pieces ---------------------------------------------------------------------------
     def _guess(self, p0: Array) -> Array:
@@ -174,74 +193,87 @@ class MPCPlanner(Controller):
         prev = self._plan.positions_m
         return np.concatenate([p0[None], prev[2:], prev[-1:]])
 
-    def _candidates(self, p0: Array) -> tuple[Array, Array, bool]:
-        """Candidate pairs (P, 2) and (drone, obstacle) items (O, 2); True when the pattern changed.
+    def _candidates(self, p0: Array) -> _Candidates:
+        """Pairs and (drone, obstacle) items within reach over the horizon, from a k-d tree.
 
-        Items within reach this step must be candidates; a new set is chosen with one extra
-        horizon of reach so that it lasts (hysteresis), and the QP is rebuilt only then.
+        The QP keeps a candidate set chosen with one extra horizon of reach, so it lasts
+        (hysteresis); it is rebuilt only when an item within reach is missing from it.
         """
         lim, st = self.limits, self.settings
         travel = (lim.v_max_mps or 0.0) * st.horizon * self.dt_s
         rebuilt = self._qp is None
         pairs = _decode(self._pair_codes, self.n)
+        pair_on = np.zeros(pairs.shape[0], dtype=bool)
         if lim.d_min_m is not None:
             reach = lim.d_min_m * (lim.downwash_kappa or 1.0) + st.margin_m + 2.0 * travel
             need = _codes(pairs_within(p0, reach), self.n)
             if not np.isin(need, self._pair_codes).all():
                 self._pair_codes = _codes(pairs_within(p0, reach + 2.0 * travel), self.n)
                 pairs, rebuilt = _decode(self._pair_codes, self.n), True
-        obs = _decode(self._ob_codes, max(len(self.obstacles), 1))
-        if self.obstacles:
-            gap = np.linalg.norm(p0[:, None, :] - self._ob_center[None], axis=-1) - self._ob_required
-            near = lambda r: np.flatnonzero((gap <= r).ravel())  # noqa: E731 - drone * m + obstacle
-            need = near(st.margin_m + travel)
+            pair_on = np.isin(self._pair_codes, need)
+        m = len(self.obstacles)
+        obs = _decode(self._ob_codes, max(m, 1))
+        ob_on = np.zeros(obs.shape[0], dtype=bool)
+        if m:
+            gap = (
+                np.linalg.norm(p0[:, None, :] - self._ob_center[None], axis=-1) - self._ob_required
+            ).ravel()
+            need = np.flatnonzero(gap <= st.margin_m + travel)  # code: drone * m + obstacle
             if not np.isin(need, self._ob_codes).all():
-                self._ob_codes = near(st.margin_m + 2.0 * travel)
-                obs, rebuilt = _decode(self._ob_codes, len(self.obstacles)), True
-        return pairs, obs, rebuilt
+                self._ob_codes = np.flatnonzero(gap <= st.margin_m + 2.0 * travel)
+                obs, rebuilt = _decode(self._ob_codes, m), True
+            ob_on = np.isin(self._ob_codes, need)
+        return _Candidates(pairs, pair_on, obs, ob_on, rebuilt)
 
-    def _pair_rows(self, p0: Array, guess: Array, pairs: Array) -> _Items:
-        lim = self.limits
-        if pairs.shape[0] == 0 or lim.d_min_m is None:
-            return _empty_items(self._segs.shape[0], self.dim)
-        i, k = pairs[:, 0], pairs[:, 1]
-        rel = (guess[:, i] - guess[:, k]) * self._metric  # (H + 1, P, d) in the metric's space
-        start_rel = (p0[i] - p0[k]) * self._metric
-        travel = lim.v_max_mps * self.settings.horizon * self.dt_s  # type: ignore[operator]
-        active = np.linalg.norm(start_rel, axis=1) <= lim.d_min_m + self.settings.margin_m + 2.0 * travel
-        return self._rows(rel, start_rel, np.full(pairs.shape[0], lim.d_min_m), active, self._metric)
+    def _separation_rows(self, p0: Array, guess: Array, cand: _Candidates) -> _Rows:
+        """Closest-point rows about the guess for every candidate (see :mod:`mpcform.mpc_qp`)."""
+        lim, margin = self.limits, self.settings.margin_m
+        r, d = self._segs.shape[0], self.dim
+        empty = (
+            np.empty((0, 2), dtype=np.intp),
+            np.empty((0, r, d)),
+            np.empty((0, r)),
+            np.empty(0, dtype=bool),
+        )
+        joint, singles = empty, [empty]
+        if cand.pairs.shape[0] and lim.d_min_m is not None:
+            i, k = cand.pairs[:, 0], cand.pairs[:, 1]
+            rel = (guess[:, i] - guess[:, k]) * self._metric  # (H + 1, P, d), metric space
+            coeffs = self._normals(rel) * self._metric  # (P, R, d), world coordinates
+            if self.settings.coupling == "joint":
+                lower = lim.d_min_m + margin - np.einsum("prd,pd->pr", coeffs, p0[i] - p0[k])
+                joint = (cand.pairs, coeffs, lower, cand.pair_on)
+            else:  # two per-drone rows about the guess's midpoint at each row's position step
+                mid = 0.5 * (guess[:, i] + guess[:, k])[self._ends].transpose(1, 0, 2)  # (P, R, d)
+                half = 0.5 * (lim.d_min_m + margin)
+                for side, sign in ((i, 1.0), (k, -1.0)):
+                    lower = half - np.einsum("prd,prd->pr", sign * coeffs, p0[side][:, None] - mid)
+                    labels = np.column_stack([side, i + k - side])
+                    singles.append((labels, sign * coeffs, lower, cand.pair_on))
+        if cand.obstacles.shape[0]:
+            drone, ob = cand.obstacles[:, 0], cand.obstacles[:, 1]
+            center, required = self._ob_center[ob], self._ob_required[ob]
+            coeffs = self._normals(guess[:, drone] - center)
+            lower = required[:, None] + margin - np.einsum("ord,od->or", coeffs, p0[drone] - center)
+            singles.append((np.column_stack([drone, -1 - ob]), coeffs, lower, cand.obstacle_on))
+        labels, s_coeffs, s_lower, s_on = (np.concatenate(parts) for parts in zip(*singles, strict=True))
+        return _Rows(*joint, labels[:, 0], labels, s_coeffs, s_lower, s_on)
 
-    def _obstacle_rows(self, p0: Array, guess: Array, obs: Array) -> _Items:
-        if obs.shape[0] == 0:
-            return _empty_items(self._segs.shape[0], self.dim)
-        i, m = obs[:, 0], obs[:, 1]
-        center = self._ob_center[m]
-        rel = guess[:, i] - center
-        start_rel = p0[i] - center
-        travel = self.limits.v_max_mps * self.settings.horizon * self.dt_s  # type: ignore[operator]
-        required = self._ob_required[m]
-        active = np.linalg.norm(start_rel, axis=1) - required <= self.settings.margin_m + travel
-        return self._rows(rel, start_rel, required, active, np.ones(self.dim))
-
-    def _rows(self, rel: Array, start_rel: Array, required: Array, active: Array, metric: Array) -> _Items:
-        """Closest-point normals per guess segment, applied at both segment ends."""
-        st = self.settings
-        closest = closest_on_segments(rel[:-1].reshape(-1, self.dim), rel[1:].reshape(-1, self.dim))
+    def _normals(self, rel: Array) -> Array:
+        """Unit normals (m, R, d) per row: the direction to each guess segment's point closest to
+        the origin (``rel`` (H + 1, m, d) are the guess's relative positions)."""
+        d = self.dim
+        closest = closest_on_segments(rel[:-1].reshape(-1, d), rel[1:].reshape(-1, d))
         dist = np.linalg.norm(closest, axis=1)
-        fallback = np.zeros_like(closest)
-        fallback[:, 0] = 1.0  # coincident guess: any fixed unit vector is a valid normal
-        normal = np.where(dist[:, None] > 1e-9, closest / np.maximum(dist, 1e-300)[:, None], fallback)
-        normal = normal.reshape(rel.shape[0] - 1, rel.shape[1], self.dim)  # (H, m, d)
-        if st.tie_break_rad > 0:
-            slack_ok = dist.reshape(normal.shape[:2]) * np.cos(st.tie_break_rad) >= required + st.margin_m
-            normal = np.where(slack_ok[..., None], _turn_about_z(normal, st.tie_break_rad), normal)
-        coeffs = normal.transpose(1, 0, 2)[:, self._segs] * metric  # (m, R, d) on world coordinates
-        lower = required[:, None] + st.margin_m - np.einsum("mrd,md->mr", coeffs, start_rel / metric)
-        return _Items(coeffs, lower, active)
+        normal = np.zeros_like(closest)
+        normal[:, 0] = 1.0  # a coincident guess: any fixed unit vector is a valid normal
+        ok = dist > 1e-9
+        normal[ok] = closest[ok] / dist[ok, None]
+        normal = normal.reshape(rel.shape[0] - 1, rel.shape[1], d)  # (H, m, d)
+        return normal.transpose(1, 0, 2)[:, self._segs]
 
-    def _meets_rows(
-        self, qp: MPCQP, p0: Array, u: Array, x: Array, pairs: Array, obs: Array, pr: _Items, orows: _Items
-    ) -> bool:
+    def _meets_rows(self, qp: MPCQP, p0: Array, u: Array, x: Array, rows: _Rows) -> bool:
+        """Whether the rollout ``(u, x)`` satisfies every row of the QP (then it is the optimum)."""
         lim = self.limits
         if lim.v_max_mps is not None and (u @ qp.vel_normals.T).max() > qp.vel_h:
             return False
@@ -250,64 +282,86 @@ class MPCPlanner(Controller):
             if np.abs(du).max() > lim.a_max_mps2 * self.dt_s:
                 return False
         if lim.geofence_min_m is not None and lim.geofence_max_m is not None:
-            p = p0 + x
             m = self.settings.margin_m
-            lo = np.minimum(lim.geofence_min_m + m, p0)
-            hi = np.maximum(lim.geofence_max_m - m, p0)
-            if np.any(p < lo) or np.any(p > hi):
+            lo = np.minimum(lim.geofence_min_m + m - p0, 0.0)
+            hi = np.maximum(lim.geofence_max_m - m - p0, 0.0)
+            if np.any(x < lo) or np.any(x > hi):
                 return False
-        ends = qp.ends - 1
-        if pr.active.any():
-            rel = x[ends][:, pairs[:, 0]] - x[ends][:, pairs[:, 1]]  # (R, P, d)
-            val = np.einsum("mrd,rmd->mr", pr.coeffs, rel)
-            if np.any(val[pr.active] < pr.lower[pr.active]):
-                return False
-        if orows.active.any():
-            val = np.einsum("mrd,rmd->mr", orows.coeffs, x[ends][:, obs[:, 0]])
-            if np.any(val[orows.active] < orows.lower[orows.active]):
-                return False
-        return True
+        return self._row_shortfall(qp, x, rows)[0] <= 0.0
 
-    def _certified(self, p0: Array, u0: Array, pairs: Array, obs: Array, pair_on: Array, ob_on: Array) -> bool:
-        """Along ``p0 -> p0 + dt u0`` no active pair gets closer than min(d_min, its start distance)."""
+    def _row_shortfall(self, qp: MPCQP, x: Array, rows: _Rows) -> tuple[float, tuple[tuple[int, int], ...]]:
+        """Largest amount [m] by which positions ``x`` (H, n, d) miss an active separation row,
+        and the items that miss by more than ``SLACK_REPORT_M``."""
+        xe = x[self._ends - 1]  # (R, n, d)
+        worst, items = -np.inf, list[tuple[int, int]]()
+        pair_rel = xe[:, rows.pairs[:, 0]] - xe[:, rows.pairs[:, 1]]
+        parts = [
+            (rows.pair_coeffs, rows.pair_lower, rows.pair_on, rows.pairs, pair_rel),
+            (rows.single_coeffs, rows.single_lower, rows.single_on, rows.labels, xe[:, rows.singles]),
+        ]
+        for coeffs, lower, on, labels, rel in parts:
+            if not on.any():
+                continue
+            short = np.where(on, (lower - np.einsum("mrd,rmd->mr", coeffs, rel)).max(axis=1), -np.inf)
+            worst = max(worst, float(short.max()))
+            items.extend((int(a), int(b)) for a, b in labels[short > SLACK_REPORT_M])
+        return worst, tuple(dict.fromkeys(items))
+
+    def _solve(self, qp: MPCQP, p0: Array, c: Array, rows: _Rows, u_nom: Array, x_nom: Array) -> QPSolution:
+        q = qp.cost_vector(c)
+        lo, hi = qp.bounds(p0, self._u_prev, np.concatenate([rows.pair_lower, rows.single_lower]),
+                           np.concatenate([rows.pair_on, rows.single_on]))  # fmt: skip
+        a_data = qp.separation_values(rows.pair_coeffs, rows.single_coeffs)
+        if self._backend_qp is not qp:
+            a_matrix = qp.A.copy()
+            a_matrix.data = a_data
+            self._backend.setup(qp.P, q, a_matrix, lo, hi)
+            self._backend_qp = qp
+        else:
+            self._backend.update(q, lo, hi, a_data)
+        return self._backend.solve(self._warm(p0, qp, u_nom, x_nom))
+
+    def _certified(self, p0: Array, u0: Array, cand: _Candidates) -> bool:
+        """Along ``p0 -> p0 + dt u0`` no pair (or obstacle) within reach gets closer than
+        ``d_min`` (or its required clearance), or than it already was."""
         p1 = p0 + self.dt_s * u0
-        if pair_on.any() and self.limits.d_min_m is not None:
-            i, k = pairs[pair_on, 0], pairs[pair_on, 1]
-            a, b = (p0[i] - p0[k]) * self._metric, (p1[i] - p1[k]) * self._metric
+        checks = []
+        if cand.pair_on.any() and self.limits.d_min_m is not None:
+            i, k = cand.pairs[cand.pair_on].T
+            checks.append(
+                (
+                    (p0[i] - p0[k]) * self._metric,
+                    (p1[i] - p1[k]) * self._metric,
+                    self.limits.d_min_m,
+                )
+            )
+        if cand.obstacle_on.any():
+            i, m = cand.obstacles[cand.obstacle_on].T
+            checks.append((p0[i] - self._ob_center[m], p1[i] - self._ob_center[m], self._ob_required[m]))
+        for a, b, required in checks:
             d_seg = np.linalg.norm(closest_on_segments(a, b), axis=1)
-            if np.any(d_seg < np.minimum(self.limits.d_min_m, np.linalg.norm(a, axis=1)) - CERTIFY_TOL_M):
-                return False
-        if ob_on.any():
-            i, m = obs[ob_on, 0], obs[ob_on, 1]
-            center = self._ob_center[m]
-            a, b = p0[i] - center, p1[i] - center
-            d_seg = np.linalg.norm(closest_on_segments(a, b), axis=1)
-            if np.any(d_seg < np.minimum(self._ob_required[m], np.linalg.norm(a, axis=1)) - CERTIFY_TOL_M):
+            if np.any(d_seg < np.minimum(required, np.linalg.norm(a, axis=1)) - CERTIFY_TOL_M):
                 return False
         return True
 
-    def _fallback(
-        self, p0: Array, pairs: Array, obs: Array, pair_on: Array, ob_on: Array, status: str, iters: int, time_s: float
-    ) -> ControlStep:
+    def _fallback(self, p0: Array, cand: _Candidates, info: StepInfo) -> ControlStep:
         """Previous plan's next input (scaled into the velocity set) if it certifies, else hold."""
+        zero = np.zeros((1, self.n, self.dim))
         if self._plan is not None:
-            prev = self._plan
-            u_next = saturate(prev.inputs_mps[min(1, prev.inputs_mps.shape[0] - 1)], self.limits.v_max_mps)
-            if self._certified(p0, u_next, pairs, obs, pair_on, ob_on):
-                u_plan = np.concatenate([prev.inputs_mps[1:], np.zeros((1, self.n, self.dim))])
-                u_plan[0] = u_next
-                self._accept(p0, u_plan, self.dt_s * np.cumsum(u_plan, axis=0), z=None)
-                return ControlStep(u_next, StepInfo("fallback", status=f"{status}; previous plan", iterations=iters, solve_time_s=time_s))
+            u_plan = np.concatenate([self._plan.inputs_mps[1:], zero])
+            u_plan[0] = saturate(u_plan[0], self.limits.v_max_mps)
+            if self._certified(p0, u_plan[0], cand):
+                self._accept(p0, u_plan, self.dt_s * np.cumsum(u_plan, axis=0))
+                return ControlStep(u_plan[0].copy(), replace(info, status=info.status + "; previous plan"))
         hold = np.zeros((self.settings.horizon, self.n, self.dim))
-        self._accept(p0, hold, hold, z=None)
-        return ControlStep(hold[0], StepInfo("fallback", status=f"{status}; hold", iterations=iters, solve_time_s=time_s))
+        self._accept(p0, hold, hold)
+        return ControlStep(hold[0], replace(info, status=info.status + "; hold"))
 
-    def _accept(self, p0: Array, u: Array, x: Array, z: Array | None) -> None:
+    def _accept(self, p0: Array, u: Array, x: Array) -> None:
         self._plan = Plan(u, np.concatenate([p0[None], p0 + x]))
         self._u_prev = u[0].copy()
-        self._z = z
 
-    def _warm(self, p0: Array, qp: MPCQP, u_nom: Array, x_nom: Array, rebuilt: bool) -> Array:
+    def _warm(self, p0: Array, qp: MPCQP, u_nom: Array, x_nom: Array) -> Array:
         """Primal warm start: the previous plan shifted one step (or the rollout), zero slack."""
         lay = qp.layout
         z = np.zeros(lay.n_var)
@@ -316,22 +370,10 @@ class MPCPlanner(Controller):
         else:
             prev = self._plan
             u = np.concatenate([prev.inputs_mps[1:], np.zeros((1, self.n, self.dim))])
-            pos = np.concatenate([prev.positions_m[2:], prev.positions_m[-1:]])
-            x = pos - p0
+            x = np.concatenate([prev.positions_m[2:], prev.positions_m[-1:]]) - p0
         z[: lay.nud] = u.ravel()
         z[lay.nud : 2 * lay.nud] = x.ravel()
         return z
-
-    def _slack_items(self, slack: Array, pairs: Array, obs: Array) -> tuple[tuple[int, int], ...]:
-        big = np.flatnonzero(slack > SLACK_REPORT_M)
-        out = []
-        for s in big:
-            if s < pairs.shape[0]:
-                out.append((int(pairs[s, 0]), int(pairs[s, 1])))
-            else:
-                drone, ob = obs[s - pairs.shape[0]]
-                out.append((int(drone), -1 - int(ob)))
-        return tuple(out)
 
 
 def _rollout(c: Array, k: float, dt: float) -> tuple[Array, Array]:
@@ -361,7 +403,3 @@ def _codes(pairs: Array, n: int) -> Array:
 
 def _decode(codes: Array, n: int) -> Array:
     return np.column_stack([codes // n, codes % n]).astype(np.intp)
-
-
-def _empty_items(rows: int, dim: int) -> _Items:
-    return _Items(np.empty((0, rows, dim)), np.empty((0, rows)), np.empty(0, dtype=bool))

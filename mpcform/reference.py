@@ -63,9 +63,7 @@ class Reference(ABC):
     def velocity(self, t_s: float) -> Array:
         """The desired formation velocity ``xi_dot_d`` (4 or 7) at ``t_s``."""
         pr = self.profile(np.array([t_s], dtype=float))
-        return np.concatenate(
-            [pr.centroid_velocity_mps[0], pr.omega_world_radps[0], pr.scale_rate_per_s[:1]]
-        )
+        return np.concatenate([pr.centroid_velocity_mps[0], pr.omega_world_radps[0], pr.scale_rate_per_s[:1]])
 
 
 class ConstantReference(Reference):
@@ -133,4 +131,3 @@ def _same_dim(template: Template, state: FormationState, field: str) -> None:
         raise ValidationError(field, f"expected a FormationState, got {type(state).__name__}")
     if state.dim != template.dim:
         raise ValidationError(field, f"state has dimension {state.dim}, template has {template.dim}")
-

@@ -10,6 +10,7 @@ from __future__ import annotations
 import time
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import scipy.sparse as sp
@@ -69,7 +70,7 @@ class OSQPBackend(QPBackend):
         import osqp
 
         self._osqp = osqp
-        self._solver: object | None = None
+        self._solver: Any = None
         self._nnz_a = 0
 
     def setup(self, P: sp.csc_matrix, q: Array, A: sp.csc_matrix, lo: Array, hi: Array) -> None:
@@ -86,16 +87,16 @@ class OSQPBackend(QPBackend):
     def update(self, q: Array, lo: Array, hi: Array, A_data: Array) -> None:
         if A_data.shape[0] != self._nnz_a:  # OSQP would only print an error and keep the old A
             raise SolverError(self.name, f"A has {A_data.shape[0]} values, the pattern has {self._nnz_a}")
-        self._solver.update(q=q, l=lo, u=hi, Ax=A_data)  # type: ignore[attr-defined]
+        self._solver.update(q=q, l=lo, u=hi, Ax=A_data)
 
     def solve(self, x0: Array | None = None) -> QPSolution:
         solver = self._solver
         if solver is None:
             raise SolverError(self.name, "solve() before setup()")
         if x0 is not None:
-            solver.warm_start(x=x0)  # type: ignore[attr-defined]
+            solver.warm_start(x=x0)
         start = time.perf_counter()
-        res = solver.solve(raise_error=False)  # type: ignore[attr-defined]
+        res = solver.solve(raise_error=False)
         elapsed = time.perf_counter() - start
         info = res.info
         ok = info.status_val in (1, 2) and res.x is not None and bool(np.all(np.isfinite(res.x)))
@@ -116,7 +117,7 @@ class PIQPBackend(QPBackend):
         import piqp
 
         self._piqp = piqp
-        self._solver: object | None = None
+        self._solver: Any = None
 
     def setup(self, P: sp.csc_matrix, q: Array, A: sp.csc_matrix, lo: Array, hi: Array) -> None:
         self._eq = eq = lo == hi
@@ -128,7 +129,12 @@ class PIQPBackend(QPBackend):
         a_eq.data, g.data = A.data[self._eq_ids], A.data[self._g_ids]
         solver = self._piqp.SparseSolver()
         st = solver.settings
-        st.verbose, st.eps_abs, st.eps_rel, st.max_iter = False, self.options.eps_abs, self.options.eps_rel, self.options.max_iter
+        st.verbose, st.eps_abs, st.eps_rel, st.max_iter = (
+            False,
+            self.options.eps_abs,
+            self.options.eps_rel,
+            self.options.max_iter,
+        )
         solver.setup(P.copy(), q, a_eq.copy(), lo[eq], g.copy(), lo[~eq], hi[~eq])
         self._solver, self._nnz_a = solver, A.nnz
 
@@ -137,24 +143,24 @@ class PIQPBackend(QPBackend):
             raise SolverError(self.name, f"A has {A_data.shape[0]} values, the pattern has {self._nnz_a}")
         self._a_eq.data, self._g.data = A_data[self._eq_ids], A_data[self._g_ids]
         eq = self._eq
-        self._solver.update(c=q, A=self._a_eq, b=lo[eq], G=self._g, h_l=lo[~eq], h_u=hi[~eq])  # type: ignore[attr-defined]
+        self._solver.update(c=q, A=self._a_eq, b=lo[eq], G=self._g, h_l=lo[~eq], h_u=hi[~eq])
 
     def solve(self, x0: Array | None = None) -> QPSolution:
         solver = self._solver
         if solver is None:
             raise SolverError(self.name, "solve() before setup()")
         start = time.perf_counter()
-        status = solver.solve()  # type: ignore[attr-defined]
+        status = solver.solve()
         elapsed = time.perf_counter() - start
-        res = solver.result  # type: ignore[attr-defined]
+        res = solver.result
         ok = status == self._piqp.PIQP_SOLVED and bool(np.all(np.isfinite(res.x)))
         y = np.zeros(self._eq.shape[0])
         if ok:
             y[self._eq] = res.y
             y[~self._eq] = res.z_u - res.z_l
         return QPSolution(
-            np.array(res.x) if ok else None, y if ok else None, ok, str(status).split(".")[-1].lower(),
-            int(res.info.iter), elapsed,
+            np.array(res.x) if ok else None, y if ok else None, ok,
+            str(status).split(".")[-1].lower(), int(res.info.iter), elapsed,
         )  # fmt: skip
 
 

@@ -67,7 +67,10 @@ def test_first_input_is_eq14_when_no_row_is_active(dim: int, fast_path: bool, so
 def test_secant_feedforward_matches_the_secant_law() -> None:
     tpl = Template.polygon(4, 2.0)
     ref = ExponentialReference(
-        tpl, FormationState.from_param([0, 0], 0.0, 1.0), FormationState.from_param([3, 1], 1.0, 2.0), 1.0
+        tpl,
+        FormationState.from_param([0, 0], 0.0, 1.0),
+        FormationState.from_param([3, 1], 1.0, 2.0),
+        1.0,
     )
     p = forward_kinematics(tpl, ref.state(0.0)) + 0.05
     planner = MPCPlanner(ref, 0.1, Limits(v_max_mps=50.0), MPCSettings(gain_per_s=3.0, feedforward="secant"))
@@ -75,9 +78,12 @@ def test_secant_feedforward_matches_the_secant_law() -> None:
     np.testing.assert_allclose(planner.step(0.7, p).command_mps, want, atol=1e-12)
 
 
-@settings(max_examples=6)
-@given(seed=st.integers(0, 10_000), n=st.integers(2, 16), dim=st.sampled_from([2, 3]))
-def test_random_scenarios_hold_speed_and_separation(seed: int, n: int, dim: int) -> None:
+@settings(max_examples=8)
+@given(
+    seed=st.integers(0, 10_000), n=st.integers(2, 16), dim=st.sampled_from([2, 3]),
+    coupling=st.sampled_from(["joint", "decoupled"]),
+)  # fmt: skip
+def test_random_scenarios_hold_speed_and_separation(seed: int, n: int, dim: int, coupling: str) -> None:
     rng = np.random.default_rng(seed)
     d_min, v_max = 0.5, 1.5
     tpl = Template.grid(int(np.ceil(np.sqrt(n))), int(np.ceil(n / np.ceil(np.sqrt(n)))), 0.9, 2)
@@ -89,14 +95,17 @@ def test_random_scenarios_hold_speed_and_separation(seed: int, n: int, dim: int)
     while n > 1 and min_segment_distance(start, start) < d_min:  # a separated start
         start = rng.uniform(-4, 4, (n, dim))
     planner = MPCPlanner(ConstantReference(tpl, goal), 0.1, Limits(v_max_mps=v_max, d_min_m=d_min),
-                         MPCSettings(horizon=6))  # fmt: skip
+                         MPCSettings(horizon=6, coupling=coupling))  # fmt: skip
     check_limits(simulate(planner, start, 2.5), v_max, d_min)
 
 
-@pytest.mark.parametrize("n", [4, 8, 12, 16])
-def test_planar_swaps_finish(n: int) -> None:
+@pytest.mark.parametrize(
+    ("n", "coupling"),
+    [(4, "joint"), (8, "joint"), (12, "joint"), (16, "joint"), (4, "decoupled"), (12, "decoupled")],
+)
+def test_planar_swaps_finish(n: int, coupling: str) -> None:
     ref, start = swap(n, 2)
-    planner = MPCPlanner(ref, 0.1, Limits(v_max_mps=1.0, d_min_m=0.5), MPCSettings(horizon=10))
+    planner = MPCPlanner(ref, 0.1, Limits(v_max_mps=1.0, d_min_m=0.5), MPCSettings(coupling=coupling))
     res = simulate(planner, start, 30.0)
     check_limits(res, 1.0, 0.5)
     assert np.linalg.norm(res.positions_m[-1] - res.reference_m[-1], axis=1).max() < 1e-2
@@ -128,22 +137,32 @@ def test_obstacle_is_avoided_and_geofence_respected() -> None:
     goal = FormationState.from_param([8.0, 0.2])
     start = forward_kinematics(tpl, FormationState.from_param([-4.0, 0.0]))
     ob = SphereObstacle(np.array([2.0, 0.0]), 1.0, clearance_m=0.25)
-    lim = Limits(v_max_mps=1.5, d_min_m=0.4, geofence_min_m=np.array([-5.0, -2.0]), geofence_max_m=np.array([9.0, 2.0]))
+    lim = Limits(
+        v_max_mps=1.5,
+        d_min_m=0.4,
+        geofence_min_m=np.array([-5.0, -2.0]),
+        geofence_max_m=np.array([9.0, 2.0]),
+    )
     planner = MPCPlanner(ConstantReference(tpl, goal), 0.1, lim, MPCSettings(horizon=10), obstacles=(ob,))
     res = simulate(planner, start, 14.0)
     check_limits(res, 1.5, 0.4)
     pos = res.positions_m - ob.center_m
     gap = min(
-        np.linalg.norm(closest_on_segments(a, b), axis=1).min() for a, b in zip(pos[:-1], pos[1:], strict=True)
+        np.linalg.norm(closest_on_segments(a, b), axis=1).min()
+        for a, b in zip(pos[:-1], pos[1:], strict=True)
     )
     assert gap >= 1.25 - 1e-6
-    assert np.all(res.positions_m >= lim.geofence_min_m - 1e-6) and np.all(res.positions_m <= lim.geofence_max_m + 1e-6)
+    assert np.all(res.positions_m >= lim.geofence_min_m - 1e-6) and np.all(
+        res.positions_m <= lim.geofence_max_m + 1e-6
+    )
     assert np.linalg.norm(res.positions_m[-1] - res.reference_m[-1], axis=1).max() < 0.05
 
 
 def test_acceleration_limit_and_downwash() -> None:
     tpl = Template.line(2, 2.0, dim=3)
-    ref = ConstantReference(tpl, FormationState.from_param([0.0, 0.0, 0.0], [0.0, np.pi / 2, 0.0]))  # stacked in z
+    ref = ConstantReference(
+        tpl, FormationState.from_param([0.0, 0.0, 0.0], [0.0, np.pi / 2, 0.0])
+    )  # stacked in z
     start = np.array([[-1.0, 0.0, 0.0], [1.0, 0.0, 0.0]])
     lim = Limits(v_max_mps=1.0, d_min_m=0.5, a_max_mps2=2.0, downwash_kappa=3.0)
     res = simulate(MPCPlanner(ref, 0.1, lim), start, 6.0)
