@@ -7,12 +7,14 @@ status 2 (argparse usage errors too); no traceback.
 from __future__ import annotations
 
 import argparse
+import json
 import sys
 from collections.abc import Callable
 from pathlib import Path
 from typing import NoReturn
 
 from mpcform.errors import MPCFormError
+from mpcform.mpc_settings import COUPLINGS
 from mpcform.output import OUTPUT_FILES, format_summary
 from mpcform.scenario import (
     build_controller,
@@ -22,6 +24,7 @@ from mpcform.scenario import (
     run_scenario,
     solver_backends,
 )
+from mpcform.solvers import BACKENDS, DEFAULT_SOLVER
 
 EXIT_USAGE = 2
 
@@ -66,6 +69,34 @@ def _keys(args: argparse.Namespace) -> int:
     return 0
 
 
+def _bench_mpc(args: argparse.Namespace) -> int:
+    from mpcform import bench_mpc  # benchmarks are imported only when asked for
+
+    rows = bench_mpc.run(args.n, args.spatial_n, args.steps, args.solver, args.coupling, args.cvxpy_max_n)
+    _print_bench(bench_mpc.markdown_table(rows), rows, args.json)
+    return 0
+
+
+def _print_bench(table: str, rows: list[dict[str, object]], json_path: str | None) -> None:
+    print(table)
+    if json_path:
+        Path(json_path).write_text(json.dumps(rows, indent=2, default=float) + "\n")
+
+
+def _add_bench(sub: argparse._SubParsersAction) -> None:
+    bench = sub.add_parser("bench", help="benchmarks (markdown table; --json PATH for records)")
+    kinds = bench.add_subparsers(dest="bench", required=True, metavar="BENCH")
+    mpc = kinds.add_parser("mpc", help="planner step times vs raw solver, numpy rollout and cvxpy")
+    mpc.set_defaults(func=_bench_mpc)
+    mpc.add_argument("--n", type=int, nargs="*", default=[8, 16, 32, 64], help="planar swap sizes")
+    mpc.add_argument("--spatial-n", type=int, nargs="*", default=[20], help="spatial swap sizes")
+    mpc.add_argument("--steps", type=int, default=60, help="closed-loop steps per swap (dt 0.1 s)")
+    mpc.add_argument("--solver", default=DEFAULT_SOLVER, choices=sorted(BACKENDS), help="QP backend")
+    mpc.add_argument("--coupling", default="joint", choices=COUPLINGS)
+    mpc.add_argument("--cvxpy-max-n", type=int, default=16, help="largest n also run through cvxpy")
+    mpc.add_argument("--json", metavar="PATH", help="also write the rows as a JSON list of records")
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``mpcform`` (each subcommand sets ``func``)."""
     parser = _Parser(prog="mpcform", description="Velocity planning for drone formations.")
@@ -85,6 +116,7 @@ def build_parser() -> argparse.ArgumentParser:
             cmd.add_argument("--out", metavar="DIR", help="output dir (default: results/<name>/)")
             cmd.add_argument("--controller", metavar="NAME", help="override controller.kind")
             cmd.add_argument("--solver", metavar="NAME", help="override controller.solver (mpc)")
+    _add_bench(sub)
     return parser
 
 

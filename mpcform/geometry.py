@@ -2,10 +2,14 @@
 
 from __future__ import annotations
 
+from functools import lru_cache
+
 import numpy as np
 from scipy.spatial import cKDTree
 
 from mpcform._validate import Array
+
+BRUTE_FORCE_MAX_N = 48
 
 
 def closest_on_segments(start: Array, end: Array) -> Array:
@@ -25,10 +29,22 @@ def min_pair_distance(points: Array) -> float:
 
 
 def pairs_within(points: Array, radius: float) -> Array:
-    """Index pairs (m, 2), i < j, of rows of ``points`` closer than ``radius``."""
-    if points.shape[0] < 2:
+    """Index pairs (m, 2), i < j, sorted, of rows of ``points`` closer than ``radius``."""
+    n = points.shape[0]
+    if n < 2:
         return np.empty((0, 2), dtype=np.intp)
-    return cKDTree(points).query_pairs(radius, output_type="ndarray").astype(np.intp)
+    if n <= BRUTE_FORCE_MAX_N:  # cheaper than building a tree
+        i, k = _upper_pairs(n)
+        diff = points[i] - points[k]
+        close = np.einsum("ij,ij->i", diff, diff) < radius * radius
+        return np.column_stack([i[close], k[close]]).astype(np.intp)
+    pairs = cKDTree(points).query_pairs(radius, output_type="ndarray").astype(np.intp)
+    return pairs[np.lexsort((pairs[:, 1], pairs[:, 0]))]
+
+
+@lru_cache(maxsize=32)
+def _upper_pairs(n: int) -> tuple[Array, Array]:
+    return np.triu_indices(n, 1)
 
 
 def min_segment_distance(start: Array, end: Array) -> float:

@@ -63,6 +63,15 @@ def velocity_polytope(dim: int, facets: int | None) -> tuple[Array, float]:
     return normals, float(1.0 / np.linalg.norm(verts, axis=1).max())
 
 
+def velocity_set(dim: int, settings: MPCSettings, v_max_mps: float) -> tuple[Array, float]:
+    """Rows ``D u <= h`` [m/s] of the velocity set: the inscribed polytope, or for ``box`` the
+    cube ``|u_a| <= v_max / sqrt(d)`` (rows ``+-e_a``)."""
+    if settings.velocity_set == "box":
+        return np.vstack([np.eye(dim), -np.eye(dim)]), v_max_mps / np.sqrt(dim)
+    normals, h_rel = velocity_polytope(dim, settings.facets)
+    return normals, h_rel * v_max_mps
+
+
 @dataclass(frozen=True)
 class Layout:
     """Sizes and offsets of the QP's variables and rows."""
@@ -144,18 +153,12 @@ class MPCQP:
         # velocity set
         vmax = limits.v_max_mps
         if vmax is not None:
-            if settings.velocity_set == "box":
-                b = vmax / np.sqrt(dim)
-                self.vel_normals, self.vel_h = np.eye(dim), b
-                add(np.arange(nud), u_col, np.ones(nud), np.full(nud, -b), np.full(nud, b))
-            else:
-                normals, hrel = velocity_polytope(dim, settings.facets)
-                self.vel_normals, self.vel_h = normals, hrel * vmax
-                m = normals.shape[0]
-                rr = np.arange(h * n * m).reshape(h, n, m, 1).repeat(dim, axis=3)
-                cc = np.broadcast_to(u_col[:, :, None, :], (h, n, m, dim))
-                vv = np.broadcast_to(normals, (h, n, m, dim))
-                add(rr, cc, vv, np.full(h * n * m, -INF), np.full(h * n * m, self.vel_h))
+            normals, self.vel_h = velocity_set(dim, settings, vmax)
+            m = normals.shape[0]
+            rr = np.arange(h * n * m).reshape(h, n, m, 1).repeat(dim, axis=3)
+            cc = np.broadcast_to(u_col[:, :, None, :], (h, n, m, dim))
+            vv = np.broadcast_to(normals, (h, n, m, dim))
+            add(rr, cc, vv, np.full(h * n * m, -INF), np.full(h * n * m, self.vel_h))
         # acceleration: |u_j - u_{j-1}| <= a_max dt (u_{-1} is the last applied command)
         self.acc_rows: slice | None = None
         if limits.a_max_mps2 is not None:

@@ -21,10 +21,10 @@ from mpcform.errors import ValidationError
 from mpcform.geometry import closest_on_segments, pairs_within
 from mpcform.laws import check_gain_dt, saturate
 from mpcform.limits import Limits, SphereObstacle
-from mpcform.mpc_qp import MPCQP, row_ends, row_segments
+from mpcform.mpc_qp import MPCQP, row_ends, row_segments, velocity_set
 from mpcform.mpc_settings import MPCSettings
 from mpcform.reference import Reference
-from mpcform.solvers import DEFAULT_SOLVER, QPSolution, SolverOptions, make_backend
+from mpcform.solvers import DEFAULT_SOLVER, QPBackend, QPSolution, SolverOptions, make_backend
 
 CERTIFY_TOL_M = 1e-7  # separation certification tolerance [m]
 SLACK_REPORT_M = 1e-6  # slack above this is reported
@@ -72,7 +72,8 @@ class MPCPlanner(Controller):
     """Receding-horizon QP tracking a formation reference under velocity and separation limits.
 
     With none of its rows active the first input is exactly eq. 14 (``feedforward + k (p* - p)``).
-    ``solver`` names a backend (``mpcform solvers``); the default is a persistent PIQP object.
+    ``solver`` names a backend (``mpcform solvers``; the default is a persistent PIQP object) or is
+    a :class:`~mpcform.solvers.QPBackend` instance (e.g. a recording wrapper).
     """
 
     name = "mpc"
@@ -84,7 +85,7 @@ class MPCPlanner(Controller):
         limits: Limits | None = None,
         settings: MPCSettings | None = None,
         obstacles: tuple[SphereObstacle, ...] = (),
-        solver: str = DEFAULT_SOLVER,
+        solver: str | QPBackend = DEFAULT_SOLVER,
     ) -> None:
         self.reference, self.dt_s = reference, positive("simulation.dt", dt_s)
         self.limits = limits = limits or Limits()
@@ -114,16 +115,16 @@ class MPCPlanner(Controller):
                 "limits.geofence_min",
                 f"expected {self.dim} numbers, got {limits.geofence_min_m.tolist()}",
             )
-        self.solver_name = solver
-        self._backend = make_backend(
-            solver,
-            SolverOptions(settings.eps_abs, settings.eps_rel, settings.max_iter, settings.time_limit_s),
-        )
+        options = SolverOptions(settings.eps_abs, settings.eps_rel, settings.max_iter, settings.time_limit_s)
+        self._backend = solver if isinstance(solver, QPBackend) else make_backend(solver, options)
+        self.solver_name = self._backend.name
         metric = np.ones(self.dim)
         if limits.downwash_kappa is not None:
             metric[2] = 1.0 / limits.downwash_kappa
         self._metric = metric
         self._segs, self._ends = row_segments(settings.horizon), row_ends(settings.horizon)
+        if limits.v_max_mps is not None:
+            self._vel_normals, self._vel_h = velocity_set(self.dim, settings, limits.v_max_mps)
         if self.obstacles:
             self._ob_center = np.array([o.center_m for o in self.obstacles])
             half = 0.5 * (limits.d_min_m or 0.0)
@@ -136,8 +137,10 @@ class MPCPlanner(Controller):
     def reset(self, t_s: float, positions_m: Array) -> None:
         self._qp: MPCQP | None = None
         self._backend_qp: MPCQP | None = None
-        self._pair_codes = np.empty(0, dtype=np.intp)
-        self._ob_codes = np.empty(0, dtype=np.intp)
+        self._pairs = np.empty((0, 2), dtype=np.intp)  # candidate pairs (i < k), sorted by code
+        self._pair_codes = np.empty(0, dtype=np.intp)  # i * n + k
+        self._obstacle_items = np.empty((0, 2), dtype=np.intp)  # (drone, obstacle)
+        self._ob_codes = np.empty(0, dtype=np.intp)  # drone * m + obstacle
         self._plan: Plan | None = None
         self._u_prev = np.zeros((self.n, self.dim))
 
@@ -154,17 +157,25 @@ class MPCPlanner(Controller):
         targets, ff = feedforward_targets(self.reference, t_s, dt, horizon, st.feedforward)
         c = ff + k * (targets[:-1] - p0)  # u_j = c_j - k x_j is the eq. 14 rollout
         u_nom, x_nom = _rollout(c, k, dt)
-        cand = self._candidates(p0)
-        rows = self._separation_rows(p0, self._guess(p0), cand)
+        cand, guess = self._candidates(p0), self._guess(p0)
+        if (
+            st.fast_path
+            and self._clear_of_rows(p0, guess, x_nom, cand)
+            and self._limits_met(p0, u_nom, x_nom)
+        ):
+            self._accept(p0, u_nom, x_nom)
+            return ControlStep(u_nom[0].copy(), StepInfo("fast_path"))
+        rows = self._separation_rows(p0, guess, cand)
         qp = self._qp
         if qp is None or cand.rebuilt:
             qp = self._qp = MPCQP(self.n, self.dim, dt, self.limits, st, rows.pairs, rows.singles)
-        if st.fast_path and self._meets_rows(qp, p0, u_nom, x_nom, rows):
+        shortfall, conflicts = self._row_shortfall(x_nom, rows)
+        if st.fast_path and shortfall <= 0.0 and self._limits_met(p0, u_nom, x_nom):
             self._accept(p0, u_nom, x_nom)
             return ControlStep(u_nom[0].copy(), StepInfo("fast_path"))
-        if st.tie_break_rad > 0:  # a conflict: turn the conflicted drones' wishes to the right
+        if conflicts and st.tie_break_rad > 0:  # turn the conflicted drones' wishes to the right
             conflicted = np.zeros(self.n, dtype=bool)
-            conflicted[[i for pair in self._row_shortfall(qp, x_nom, rows)[1] for i in pair if i >= 0]] = True
+            conflicted[[i for pair in conflicts for i in pair if i >= 0]] = True
             c = np.where(conflicted[:, None], _turn_about_z(c, -st.tie_break_rad), c)
         sol = self._solve(qp, p0, c, rows, u_nom, x_nom)
         lay = qp.layout
@@ -175,7 +186,10 @@ class MPCPlanner(Controller):
             u0 = saturate(u[0], self.limits.v_max_mps)
             if self._certified(p0, u0, cand):
                 self._accept(p0, u, x)
-                shortfall, slack_items = self._row_shortfall(qp, x, rows)
+                slack = sol.x[2 * lay.nud :]
+                shortfall, slack_items = (
+                    self._row_shortfall(x, rows) if slack.max(initial=0.0) > SLACK_REPORT_M / 2 else (0.0, ())
+                )
                 active = int(np.count_nonzero(np.abs(sol.y[lay.nud :]) > 1e-6)) if sol.y is not None else 0
                 return ControlStep(u0, StepInfo(
                     "qp", status=status, iterations=sol.iterations, solve_time_s=sol.solve_time_s,
@@ -194,7 +208,7 @@ class MPCPlanner(Controller):
         return np.concatenate([p0[None], prev[2:], prev[-1:]])
 
     def _candidates(self, p0: Array) -> _Candidates:
-        """Pairs and (drone, obstacle) items within reach over the horizon, from a k-d tree.
+        """Pairs and (drone, obstacle) items within reach over the horizon.
 
         The QP keeps a candidate set chosen with one extra horizon of reach, so it lasts
         (hysteresis); it is rebuilt only when an item within reach is missing from it.
@@ -202,28 +216,28 @@ class MPCPlanner(Controller):
         lim, st = self.limits, self.settings
         travel = (lim.v_max_mps or 0.0) * st.horizon * self.dt_s
         rebuilt = self._qp is None
-        pairs = _decode(self._pair_codes, self.n)
-        pair_on = np.zeros(pairs.shape[0], dtype=bool)
+        pair_on: Array | None = np.zeros(self._pairs.shape[0], dtype=bool)
         if lim.d_min_m is not None:
             reach = lim.d_min_m * (lim.downwash_kappa or 1.0) + st.margin_m + 2.0 * travel
-            need = _codes(pairs_within(p0, reach), self.n)
-            if not np.isin(need, self._pair_codes).all():
-                self._pair_codes = _codes(pairs_within(p0, reach + 2.0 * travel), self.n)
-                pairs, rebuilt = _decode(self._pair_codes, self.n), True
-            pair_on = np.isin(self._pair_codes, need)
+            need = pairs_within(p0, reach)
+            need_codes = need[:, 0] * self.n + need[:, 1]
+            pair_on = _mask_of(self._pair_codes, need_codes)
+            if pair_on is None:
+                self._pairs = pairs_within(p0, reach + 2.0 * travel)
+                self._pair_codes, rebuilt = self._pairs[:, 0] * self.n + self._pairs[:, 1], True
+                pair_on = _mask_of(self._pair_codes, need_codes)
         m = len(self.obstacles)
-        obs = _decode(self._ob_codes, max(m, 1))
-        ob_on = np.zeros(obs.shape[0], dtype=bool)
+        ob_on: Array | None = np.zeros(self._obstacle_items.shape[0], dtype=bool)
         if m:
-            gap = (
-                np.linalg.norm(p0[:, None, :] - self._ob_center[None], axis=-1) - self._ob_required
-            ).ravel()
-            need = np.flatnonzero(gap <= st.margin_m + travel)  # code: drone * m + obstacle
-            if not np.isin(need, self._ob_codes).all():
-                self._ob_codes = np.flatnonzero(gap <= st.margin_m + 2.0 * travel)
-                obs, rebuilt = _decode(self._ob_codes, m), True
-            ob_on = np.isin(self._ob_codes, need)
-        return _Candidates(pairs, pair_on, obs, ob_on, rebuilt)
+            dist = np.linalg.norm(p0[:, None, :] - self._ob_center[None], axis=-1)
+            gap = (dist - self._ob_required).ravel()  # item code: drone * m + obstacle
+            need_codes = np.flatnonzero(gap <= st.margin_m + travel)
+            ob_on = _mask_of(self._ob_codes, need_codes)
+            if ob_on is None:
+                self._ob_codes, rebuilt = np.flatnonzero(gap <= st.margin_m + 2.0 * travel), True
+                self._obstacle_items = np.column_stack(np.divmod(self._ob_codes, m))
+                ob_on = _mask_of(self._ob_codes, need_codes)
+        return _Candidates(self._pairs, pair_on, self._obstacle_items, ob_on, rebuilt)  # type: ignore[arg-type]
 
     def _separation_rows(self, p0: Array, guess: Array, cand: _Candidates) -> _Rows:
         """Closest-point rows about the guess for every candidate (see :mod:`mpcform.mpc_qp`)."""
@@ -272,10 +286,37 @@ class MPCPlanner(Controller):
         normal = normal.reshape(rel.shape[0] - 1, rel.shape[1], d)  # (H, m, d)
         return normal.transpose(1, 0, 2)[:, self._segs]
 
-    def _meets_rows(self, qp: MPCQP, p0: Array, u: Array, x: Array, rows: _Rows) -> bool:
-        """Whether the rollout ``(u, x)`` satisfies every row of the QP (then it is the optimum)."""
+    def _clear_of_rows(self, p0: Array, guess: Array, x: Array, cand: _Candidates) -> bool:
+        """A cheap sufficient test that positions ``x`` (H, n, d) meet every separation row.
+
+        A row's normal c is a unit vector with ``c^T g >= |closest point of its guess segment|
+        >= max(|g_j|, |g_j+1|) - |g_j+1 - g_j|``, so ``c^T delta_e >= that - |delta_e - g_e|``:
+        if this bound clears the requirement for every item, no row needs to be built.
+        """
+        margin, lim = self.settings.margin_m, self.limits
+        tests = []
+        if cand.pair_on.any() and lim.d_min_m is not None:
+            i, k = cand.pairs[cand.pair_on].T
+            pos = np.concatenate([p0[None], p0 + x])
+            tests.append(((guess[:, i] - guess[:, k]) * self._metric, (pos[:, i] - pos[:, k]) * self._metric,
+                          lim.d_min_m))  # fmt: skip
+        if cand.obstacle_on.any():
+            i, m = cand.obstacles[cand.obstacle_on].T
+            pos = np.concatenate([p0[None], p0 + x])
+            center = self._ob_center[m]
+            tests.append((guess[:, i] - center, pos[:, i] - center, self._ob_required[m]))
+        for g, delta, required in tests:
+            g_norm = np.linalg.norm(g, axis=-1)
+            seg = np.maximum(g_norm[:-1], g_norm[1:]) - np.linalg.norm(np.diff(g, axis=0), axis=-1)
+            bound = seg.min(axis=0) - np.linalg.norm(delta - g, axis=-1).max(axis=0)
+            if np.any(bound < required + margin):
+                return False
+        return True
+
+    def _limits_met(self, p0: Array, u: Array, x: Array) -> bool:
+        """Whether ``(u, x)`` meets the QP's velocity, acceleration and geofence rows."""
         lim = self.limits
-        if lim.v_max_mps is not None and (u @ qp.vel_normals.T).max() > qp.vel_h:
+        if lim.v_max_mps is not None and (u @ self._vel_normals.T).max() > self._vel_h:
             return False
         if lim.a_max_mps2 is not None:
             du = np.diff(np.concatenate([self._u_prev[None], u]), axis=0)
@@ -287,9 +328,9 @@ class MPCPlanner(Controller):
             hi = np.maximum(lim.geofence_max_m - m - p0, 0.0)
             if np.any(x < lo) or np.any(x > hi):
                 return False
-        return self._row_shortfall(qp, x, rows)[0] <= 0.0
+        return True
 
-    def _row_shortfall(self, qp: MPCQP, x: Array, rows: _Rows) -> tuple[float, tuple[tuple[int, int], ...]]:
+    def _row_shortfall(self, x: Array, rows: _Rows) -> tuple[float, tuple[tuple[int, int], ...]]:
         """Largest amount [m] by which positions ``x`` (H, n, d) miss an active separation row,
         and the items that miss by more than ``SLACK_REPORT_M``."""
         xe = x[self._ends - 1]  # (R, n, d)
@@ -319,7 +360,7 @@ class MPCPlanner(Controller):
             self._backend_qp = qp
         else:
             self._backend.update(q, lo, hi, a_data)
-        return self._backend.solve(self._warm(p0, qp, u_nom, x_nom))
+        return self._backend.solve(self._warm(p0, qp, u_nom, x_nom) if self._backend.warm_starts else None)
 
     def _certified(self, p0: Array, u0: Array, cand: _Candidates) -> bool:
         """Along ``p0 -> p0 + dt u0`` no pair (or obstacle) within reach gets closer than
@@ -397,9 +438,11 @@ def _turn_about_z(v: Array, angle: float) -> Array:
     return out
 
 
-def _codes(pairs: Array, n: int) -> Array:
-    return np.sort(pairs[:, 0] * n + pairs[:, 1])
-
-
-def _decode(codes: Array, n: int) -> Array:
-    return np.column_stack([codes // n, codes % n]).astype(np.intp)
+def _mask_of(codes: Array, need: Array) -> Array | None:
+    """Mask of the sorted ``codes`` that occur in ``need`` (sorted); None if one is missing."""
+    idx = np.searchsorted(codes, need)
+    if idx.size and (idx[-1] >= codes.shape[0] or np.any(codes[idx] != need)):
+        return None
+    mask = np.zeros(codes.shape[0], dtype=bool)
+    mask[idx] = True
+    return mask

@@ -1,0 +1,283 @@
+"""``mpcform bench mpc``: per-step cost of the planner against the references of DESIGN.md section 6.
+
+For each antipodal swap (planar rings of n drones, and spatial spheres) the planner runs closed
+loop while a recording backend keeps every QP it sends. Side by side, in the same process:
+
+- **raw**: the recorded QPs replayed on a bare persistent solver object (``osqp.OSQP`` or
+  ``piqp.SparseSolver``), update + solve only: the framework overhead is our QP-step time over
+  this;
+- **rollout**: eq. 14 rolled out over the horizon in plain numpy (reference targets included):
+  the yardstick of fast-path steps;
+- **cvxpy**: the same QP written in cvxpy with parameters (cost vector, bounds, and the values
+  of A, ``A(v) z = R (v * (C z))`` with constant selections R and C), solved by the same
+  solver through cvxpy for every step of the scenario (a cvxpy user has no fast path).
+
+Times are wall-clock medians and 90th percentiles; set ``OPENBLAS_NUM_THREADS=1`` for runs.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import scipy.sparse as sp
+
+from mpcform._validate import Array
+from mpcform.controllers import feedforward_targets
+from mpcform.limits import Limits
+from mpcform.mpc_settings import MPCSettings
+from mpcform.planner import MPCPlanner
+from mpcform.reference import ConstantReference
+from mpcform.solvers import QPBackend, QPSolution, SolverOptions, make_backend
+from mpcform.state import FormationState
+from mpcform.template import Template
+
+
+@dataclass
+class RecordingBackend(QPBackend):
+    """Delegates to ``inner`` and keeps a copy of every problem it is asked to solve."""
+
+    inner: QPBackend
+    problems: list[dict[str, Any]] = field(default_factory=list)
+
+    def __post_init__(self) -> None:
+        self.name, self.options = self.inner.name, self.inner.options
+        self._current: dict[str, Any] = {}
+
+    def setup(self, P: sp.csc_matrix, q: Array, A: sp.csc_matrix, lo: Array, hi: Array) -> None:
+        self._current = {"P": P.copy(), "A": A.copy(), "setup": True}
+        self._record(q, lo, hi, A.data)
+        self.inner.setup(P, q, A, lo, hi)
+
+    def update(self, q: Array, lo: Array, hi: Array, A_data: Array) -> None:
+        self._current = {**self._current, "setup": False}
+        self._record(q, lo, hi, A_data)
+        self.inner.update(q, lo, hi, A_data)
+
+    def solve(self, x0: Array | None = None) -> QPSolution:
+        return self.inner.solve(x0)
+
+    def _record(self, q: Array, lo: Array, hi: Array, a_data: Array) -> None:
+        self.problems.append(
+            {**self._current, "q": q.copy(), "l": lo.copy(), "u": hi.copy(), "Ax": a_data.copy()}
+        )
+
+
+def swap_case(n: int, dim: int) -> tuple[ConstantReference, Array]:
+    """Antipodal swap: drone i starts at -r_i and must reach r_i (ring or Fibonacci sphere)."""
+    radius = max(2.0, 0.8 / np.sin(np.pi / n)) if dim == 2 else max(2.0, 0.5 * np.sqrt(n))
+    tpl = Template.polygon(n, radius) if dim == 2 else Template.sphere(n, radius)
+    return ConstantReference(tpl, FormationState.from_param(np.zeros(dim))), -tpl.offsets.copy()
+
+
+def _stats(ms: list[float]) -> tuple[float, float]:
+    if not ms:
+        return float("nan"), float("nan")
+    return float(np.median(ms)), float(np.percentile(ms, 90))
+
+
+def _raw_replay(problems: list[dict[str, Any]], solver: str, options: SolverOptions) -> list[float]:
+    """Update + solve time [ms] of each recorded QP on a bare persistent solver object."""
+    times = []
+    if solver == "osqp":
+        import osqp
+
+        for pb in problems:
+            if pb["setup"]:
+                raw = osqp.OSQP()
+                raw.setup(pb["P"], pb["q"], pb["A"], pb["l"], pb["u"], verbose=False, eps_abs=options.eps_abs,
+                          eps_rel=options.eps_rel, max_iter=options.max_iter, polishing=True)  # fmt: skip
+                raw.solve(raise_error=False)
+                continue
+            start = time.perf_counter()
+            raw.update(q=pb["q"], l=pb["l"], u=pb["u"], Ax=pb["Ax"])
+            raw.solve(raise_error=False)
+            times.append(1e3 * (time.perf_counter() - start))
+        return times
+    import piqp
+
+    for pb in problems:
+        eq = pb["l"] == pb["u"]
+        if pb["setup"]:
+            ids = pb["A"].copy()
+            ids.data = np.arange(ids.nnz, dtype=float)
+            a_eq, g = ids[eq].tocsc(), ids[~eq].tocsc()
+            eq_ids, g_ids = a_eq.data.astype(np.intp), g.data.astype(np.intp)
+            a_eq.data, g.data = pb["Ax"][eq_ids], pb["Ax"][g_ids]
+            raw = piqp.SparseSolver()
+            raw.settings.verbose, raw.settings.eps_abs, raw.settings.eps_rel = (
+                False,
+                options.eps_abs,
+                options.eps_rel,
+            )
+            raw.setup(pb["P"], pb["q"], a_eq, pb["l"][eq], g, pb["l"][~eq], pb["u"][~eq])
+            raw.solve()
+            continue
+        start = time.perf_counter()
+        a_eq.data, g.data = pb["Ax"][eq_ids], pb["Ax"][g_ids]
+        raw.update(c=pb["q"], A=a_eq, b=pb["l"][eq], G=g, h_l=pb["l"][~eq], h_u=pb["u"][~eq])
+        raw.solve()
+        times.append(1e3 * (time.perf_counter() - start))
+    return times
+
+
+def _cvxpy_replay(problems: list[dict[str, Any]], solver: str) -> tuple[list[float], float]:
+    """Per-step times [ms] of the same QPs in cvxpy with parameters, and the total [s] including
+    problem construction and compilation (the first solve)."""
+    import cvxpy as cp
+
+    total_start = time.perf_counter()
+    times: list[float] = []
+    model: dict[str, Any] = {}
+    for pb in problems:
+        if pb["setup"] or not model:
+            a = pb["A"].tocoo()
+            nnz, (m, nv) = a.nnz, a.shape
+            z = cp.Variable(nv)
+            v, q = cp.Parameter(nnz), cp.Parameter(nv)
+            lo, hi = cp.Parameter(m), cp.Parameter(m)
+            pick = sp.csr_matrix((np.ones(nnz), (np.arange(nnz), a.col)), shape=(nnz, nv))
+            rows = sp.csr_matrix((np.ones(nnz), (a.row, np.arange(nnz))), shape=(m, nnz))
+            pfull = (pb["P"] + sp.triu(pb["P"], 1).T).tocsc()
+            az = rows @ cp.multiply(v, pick @ z)
+            finite_lo, finite_hi = np.isfinite(pb["l"]), np.isfinite(pb["u"])
+            cons = [cp.multiply(finite_lo, az) >= lo, cp.multiply(finite_hi, az) <= hi]
+            problem = cp.Problem(cp.Minimize(0.5 * cp.quad_form(z, cp.psd_wrap(pfull)) + q @ z), cons)
+            model = {"problem": problem, "v": v, "q": q, "lo": lo, "hi": hi, "coo_order": _coo_order(pb["A"])}
+            model["finite"] = finite_lo, finite_hi
+        start = time.perf_counter()
+        finite_lo, finite_hi = model["finite"]
+        model["v"].value = pb["Ax"][model["coo_order"]]
+        model["q"].value = pb["q"]
+        model["lo"].value = np.where(finite_lo, pb["l"], 0.0)
+        model["hi"].value = np.where(finite_hi, pb["u"], 0.0)
+        model["problem"].solve(solver=solver.upper(), warm_start=True)
+        times.append(1e3 * (time.perf_counter() - start))
+    return times, time.perf_counter() - total_start
+
+
+def _coo_order(a: sp.csc_matrix) -> Array:
+    """Indices taking CSC data to the entry order of ``a.tocoo()``."""
+    ids = a.copy()
+    ids.data = np.arange(a.nnz, dtype=float)
+    return ids.tocoo().data.astype(np.intp)
+
+
+def _rollout_ms(planner: MPCPlanner, t: float, p0: Array) -> float:
+    st = planner.settings
+    start = time.perf_counter()
+    targets, ff = feedforward_targets(planner.reference, t, planner.dt_s, st.horizon, st.feedforward)
+    x = p0
+    for j in range(st.horizon):
+        x = x + planner.dt_s * (ff[j] + st.gain_per_s * (targets[j] - x))
+    return 1e3 * (time.perf_counter() - start)
+
+
+def bench_case(
+    n: int, dim: int, steps: int, solver: str, coupling: str, cvxpy_solver: str | None
+) -> dict[str, Any]:
+    """One swap: our step times by mode, the raw-solver, rollout and (optionally) cvxpy references."""
+    ref, p = swap_case(n, dim)
+    settings = MPCSettings(horizon=10, coupling=coupling)
+    limits = Limits(v_max_mps=1.0, d_min_m=0.5)
+    options = SolverOptions(settings.eps_abs, settings.eps_rel, settings.max_iter, settings.time_limit_s)
+    rec = RecordingBackend(make_backend(solver, options))
+    planner = MPCPlanner(ref, 0.1, limits, settings, solver=rec)
+    planner.reset(0.0, p)
+    ours: dict[str, list[float]] = {"qp": [], "fast_path": [], "fallback": []}
+    rollout: list[float] = []
+    qp_steady: list[float] = []  # QP steps that updated the solver (no new pattern)
+    whole = 0.0
+    for j in range(steps):
+        t, recorded = 0.1 * j, len(rec.problems)
+        start = time.perf_counter()
+        out = planner.step(t, p)
+        elapsed = 1e3 * (time.perf_counter() - start)
+        whole += elapsed / 1e3
+        ours[out.info.mode].append(elapsed)
+        if out.info.mode == "fast_path":
+            rollout.append(_rollout_ms(planner, t, p))
+        elif out.info.mode == "qp" and len(rec.problems) > recorded and not rec.problems[-1]["setup"]:
+            qp_steady.append(elapsed)
+        p = p + 0.1 * out.command_mps
+    setup_steps = [i for i, pb in enumerate(rec.problems) if pb["setup"]]
+    raw = _raw_replay(rec.problems, solver, options)
+    row: dict[str, Any] = {
+        "case": f"swap {'planar' if dim == 2 else 'spatial'}", "n": n, "dim": dim, "steps": steps,
+        "solver": solver, "coupling": coupling, "qp_steps": len(ours["qp"]),
+        "fast_path_steps": len(ours["fast_path"]), "fallback_steps": len(ours["fallback"]),
+        "rebuilds": len(setup_steps),
+    }  # fmt: skip
+    row["qp_ms_median"], row["qp_ms_p90"] = _stats(ours["qp"])
+    row["raw_ms_median"], row["raw_ms_p90"] = _stats(raw)
+    row["overhead"] = _stats(qp_steady)[0] / row["raw_ms_median"] if raw else float("nan")
+    row["fast_ms_median"], row["fast_ms_p90"] = _stats(ours["fast_path"])
+    row["rollout_ms_median"] = _stats(rollout)[0]
+    row["fast_ratio"] = row["fast_ms_median"] / row["rollout_ms_median"] if rollout else float("nan")
+    row["whole_s"] = whole
+    if cvxpy_solver is not None:
+        full = RecordingBackend(make_backend(solver, options))  # every step as a QP, as cvxpy users solve
+        no_fast = MPCPlanner(
+            ref, 0.1, limits, MPCSettings(horizon=10, coupling=coupling, fast_path=False), solver=full
+        )
+        q = swap_case(n, dim)[1]
+        no_fast.reset(0.0, q)
+        for j in range(steps):
+            q = q + 0.1 * no_fast.step(0.1 * j, q).command_mps
+        cv_times, cv_total = _cvxpy_replay(full.problems, cvxpy_solver)
+        row["cvxpy_ms_median"], row["cvxpy_ms_p90"] = _stats(cv_times[1:])
+        row["cvxpy_speedup_qp"] = row["cvxpy_ms_median"] / row["qp_ms_median"]
+        row["cvxpy_whole_s"] = cv_total
+        row["cvxpy_speedup_whole"] = cv_total / whole
+    return row
+
+
+COLUMNS = [
+    ("case", "case", "{}"), ("n", "n", "{}"), ("steps", "steps", "{}"), ("qp_steps", "QP", "{}"),
+    ("fast_path_steps", "fast", "{}"), ("qp_ms_median", "QP med [ms]", "{:.2f}"),
+    ("qp_ms_p90", "QP p90", "{:.2f}"),
+    ("raw_ms_median", "raw med", "{:.2f}"), ("overhead", "ours/raw", "{:.2f}x"),
+    ("fast_ms_median", "fast med [ms]", "{:.3f}"), ("fast_ms_p90", "fast p90", "{:.3f}"),
+    ("rollout_ms_median", "numpy rollout", "{:.3f}"), ("fast_ratio", "fast/rollout", "{:.1f}x"),
+    ("cvxpy_ms_median", "cvxpy QP med", "{:.1f}"), ("cvxpy_speedup_qp", "vs cvxpy (QP)", "{:.1f}x"),
+    ("whole_s", "whole [s]", "{:.2f}"), ("cvxpy_whole_s", "cvxpy whole", "{:.2f}"),
+    ("cvxpy_speedup_whole", "vs cvxpy (whole)", "{:.1f}x"),
+]  # fmt: skip
+
+
+def markdown_table(rows: list[dict[str, Any]]) -> str:
+    """The rows as a markdown table (missing or NaN entries shown as ``-``)."""
+
+    def cell(row: dict[str, Any], key: str, fmt: str) -> str:
+        value = row.get(key)
+        if value is None or (isinstance(value, float) and not np.isfinite(value)):
+            return "-"
+        return fmt.format(value)
+
+    lines = ["| " + " | ".join(title for _, title, _ in COLUMNS) + " |", "|" + " --- |" * len(COLUMNS)]
+    lines += ["| " + " | ".join(cell(r, k, f) for k, _, f in COLUMNS) + " |" for r in rows]
+    return "\n".join(lines)
+
+
+def run(
+    planar_n: list[int], spatial_n: list[int], steps: int, solver: str, coupling: str, cvxpy_max_n: int
+) -> list[dict[str, Any]]:
+    """All cases; cvxpy only up to ``cvxpy_max_n`` drones (its compilation grows quickly)."""
+    cvxpy_solver = solver if _have_cvxpy() else None
+    rows = []
+    for dim, sizes in ((2, planar_n), (3, spatial_n)):
+        for n in sizes:
+            rows.append(
+                bench_case(n, dim, steps, solver, coupling, cvxpy_solver if n <= cvxpy_max_n else None)
+            )
+    return rows
+
+
+def _have_cvxpy() -> bool:
+    try:
+        import cvxpy  # noqa: F401
+    except ImportError:
+        return False
+    return True
