@@ -43,6 +43,8 @@ class QPBackend(ABC):
     """One QP family, solved repeatedly. ``setup`` whenever the sparsity pattern changes."""
 
     name: str
+    warm_starts: bool = False
+    """Whether :meth:`solve` uses ``x0`` (callers skip building it otherwise)."""
 
     def __init__(self, options: SolverOptions) -> None:
         self.options = options
@@ -64,6 +66,7 @@ class OSQPBackend(QPBackend):
     """Persistent ``osqp.OSQP`` object: set up once per pattern, then ``update`` + warm start."""
 
     name = "osqp"
+    warm_starts = True
 
     def __init__(self, options: SolverOptions) -> None:
         super().__init__(options)
