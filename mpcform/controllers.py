@@ -25,7 +25,8 @@ class StepInfo:
 
     ``mode``: ``law`` (closed form), ``fast_path`` (eq. 14 rollout met every QP row), ``qp``
     (solved), or ``fallback`` (solver failed; certified safe command). ``slack_pairs`` lists the
-    drone pairs (or ``(drone, -1 - obstacle)``) whose separation rows needed slack.
+    drone pairs (or ``(drone, -1 - obstacle)``) whose separation rows needed slack; ``qp_drones``
+    how many drones the QP was solved for (the others' groups took the fast path).
     """
 
     mode: str
@@ -36,6 +37,7 @@ class StepInfo:
     active_rows: int = 0
     max_slack_m: float = 0.0
     slack_pairs: tuple[tuple[int, int], ...] = ()
+    qp_drones: int = 0
 
 
 @dataclass(frozen=True)

@@ -35,6 +35,9 @@ class MPCSettings:
       ``"decoupled"`` (each pair row split into two per-drone rows about the guess's midpoint,
       ``c^T (p_i - m) >= d_min / 2``: slightly more conservative, but the QP is block-diagonal
       per drone, so it scales to large swarms; the same continuous-time guarantee holds).
+    - ``grouping``: solve only the groups of drones (connected by pair rows within reach) that
+      hold a conflict; the other groups' optimum is their eq. 14 rollout (needs ``fast_path``).
+      Equal to the monolithic QP up to solver tolerance.
     - ``fast_path``: return the eq. 14 rollout without a solver call when it meets every row.
     - ``eps_abs`` / ``eps_rel`` / ``max_iter`` / ``time_limit_s``: solver tolerances and limits.
     """
@@ -49,6 +52,7 @@ class MPCSettings:
     margin_m: float = 2e-3
     tie_break_rad: float = 0.5
     coupling: str = "joint"
+    grouping: bool = True
     fast_path: bool = True
     eps_abs: float = 1e-4
     eps_rel: float = 1e-4

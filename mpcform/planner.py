@@ -14,6 +14,8 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 
 import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.csgraph import connected_components
 
 from mpcform._validate import Array, positive
 from mpcform.controllers import Controller, ControlStep, StepInfo, feedforward_targets
@@ -24,7 +26,7 @@ from mpcform.limits import Limits, SphereObstacle
 from mpcform.mpc_qp import MPCQP, row_ends, row_segments, velocity_set
 from mpcform.mpc_settings import MPCSettings
 from mpcform.reference import Reference
-from mpcform.solvers import DEFAULT_SOLVER, QPBackend, QPSolution, SolverOptions, make_backend
+from mpcform.solvers import DEFAULT_SOLVER, QPBackend, QPContext, QPSolution, SolverOptions, make_backend
 
 CERTIFY_TOL_M = 1e-7  # separation certification tolerance [m]
 SLACK_REPORT_M = 1e-6  # slack above this is reported
@@ -136,6 +138,7 @@ class MPCPlanner(Controller):
     # ---- state ----------------------------------------------------------------------------
     def reset(self, t_s: float, positions_m: Array) -> None:
         self._qp: MPCQP | None = None
+        self._qp_key = b""
         self._backend_qp: MPCQP | None = None
         self._pairs = np.empty((0, 2), dtype=np.intp)  # candidate pairs (i < k), sorted by code
         self._pair_codes = np.empty(0, dtype=np.intp)  # i * n + k
@@ -161,43 +164,71 @@ class MPCPlanner(Controller):
         if (
             st.fast_path
             and self._clear_of_rows(p0, guess, x_nom, cand)
-            and self._limits_met(p0, u_nom, x_nom)
+            and not self._limit_violators(p0, u_nom, x_nom).any()
         ):
             self._accept(p0, u_nom, x_nom)
             return ControlStep(u_nom[0].copy(), StepInfo("fast_path"))
         rows = self._separation_rows(p0, guess, cand)
-        qp = self._qp
-        if qp is None or cand.rebuilt:
-            qp = self._qp = MPCQP(self.n, self.dim, dt, self.limits, st, rows.pairs, rows.singles)
-        shortfall, conflicts = self._row_shortfall(x_nom, rows)
-        if st.fast_path and shortfall <= 0.0 and self._limits_met(p0, u_nom, x_nom):
+        shortfall, conflicts = self._row_shortfall(x_nom, rows, 0.0)
+        bad = self._limit_violators(p0, u_nom, x_nom)
+        bad[[i for pair in conflicts for i in pair if i >= 0]] = True
+        if st.fast_path and not bad.any():
             self._accept(p0, u_nom, x_nom)
             return ControlStep(u_nom[0].copy(), StepInfo("fast_path"))
         if conflicts and st.tie_break_rad > 0:  # turn the conflicted drones' wishes to the right
-            conflicted = np.zeros(self.n, dtype=bool)
-            conflicted[[i for pair in conflicts for i in pair if i >= 0]] = True
-            c = np.where(conflicted[:, None], _turn_about_z(c, -st.tie_break_rad), c)
-        sol = self._solve(qp, p0, c, rows, u_nom, x_nom)
+            turned = np.zeros(self.n, dtype=bool)
+            turned[[i for pair in conflicts for i in pair if i >= 0]] = True
+            c = np.where(turned[:, None], _turn_about_z(c, -st.tie_break_rad), c)
+        drones = self._qp_drones(bad, rows) if st.fast_path and st.grouping else np.arange(self.n)
+        sub = _subset_rows(rows, drones, self.n)
+        qp = self._sub_qp(drones, sub, cand.rebuilt)
+        sol = self._solve(qp, drones, p0, c, sub, u_nom, x_nom)
         lay = qp.layout
         status = sol.status
         if sol.success and sol.x is not None:
-            u = sol.x[: lay.nud].reshape(horizon, self.n, self.dim)
-            x = sol.x[lay.nud : 2 * lay.nud].reshape(horizon, self.n, self.dim)
+            u, x = u_nom.copy(), x_nom.copy()
+            u[:, drones] = sol.x[: lay.nud].reshape(horizon, drones.shape[0], self.dim)
+            x[:, drones] = sol.x[lay.nud : 2 * lay.nud].reshape(horizon, drones.shape[0], self.dim)
             u0 = saturate(u[0], self.limits.v_max_mps)
             if self._certified(p0, u0, cand):
                 self._accept(p0, u, x)
                 slack = sol.x[2 * lay.nud :]
                 shortfall, slack_items = (
-                    self._row_shortfall(x, rows) if slack.max(initial=0.0) > SLACK_REPORT_M / 2 else (0.0, ())
+                    self._row_shortfall(x, rows, SLACK_REPORT_M)
+                    if slack.max(initial=0.0) > SLACK_REPORT_M / 2
+                    else (0.0, ())
                 )
                 active = int(np.count_nonzero(np.abs(sol.y[lay.nud :]) > 1e-6)) if sol.y is not None else 0
                 return ControlStep(u0, StepInfo(
                     "qp", status=status, iterations=sol.iterations, solve_time_s=sol.solve_time_s,
                     active_rows=active, max_slack_m=max(shortfall, 0.0), slack_pairs=slack_items,
+                    qp_drones=int(drones.shape[0]),
                 ))  # fmt: skip
             status += "; command failed certification"
         return self._fallback(p0, cand, StepInfo("fallback", status=status, iterations=sol.iterations,
                                                  solve_time_s=sol.solve_time_s))  # fmt: skip
+
+    def _qp_drones(self, bad: Array, rows: _Rows) -> Array:
+        """Drones whose group (connected by pair rows within reach) holds a conflicted drone.
+
+        Groups are independent blocks of the QP, so every other group's optimum is its rollout.
+        """
+        on = rows.pairs[rows.pair_on]
+        if on.shape[0] == 0:
+            return np.flatnonzero(bad)
+        graph = sp.coo_matrix((np.ones(on.shape[0]), (on[:, 0], on[:, 1])), shape=(self.n, self.n))
+        _, label = connected_components(graph, directed=False)
+        return np.flatnonzero(np.isin(label, label[bad]))
+
+    def _sub_qp(self, drones: Array, sub: _Rows, rebuilt: bool) -> MPCQP:
+        """The QP over ``drones``, kept while the drone set and the candidate set stay the same."""
+        key = drones.tobytes()
+        if rebuilt or self._qp is None or key != self._qp_key:
+            self._qp = MPCQP(
+                drones.shape[0], self.dim, self.dt_s, self.limits, self.settings, sub.pairs, sub.singles
+            )
+            self._qp_key = key
+        return self._qp
 
     # ---- pieces ---------------------------------------------------------------------------
     def _guess(self, p0: Array) -> Array:
@@ -313,26 +344,25 @@ class MPCPlanner(Controller):
                 return False
         return True
 
-    def _limits_met(self, p0: Array, u: Array, x: Array) -> bool:
-        """Whether ``(u, x)`` meets the QP's velocity, acceleration and geofence rows."""
+    def _limit_violators(self, p0: Array, u: Array, x: Array) -> Array:
+        """Drones (n,) whose ``(u, x)`` miss a velocity, acceleration or geofence row of the QP."""
         lim = self.limits
-        if lim.v_max_mps is not None and (u @ self._vel_normals.T).max() > self._vel_h:
-            return False
+        bad = np.zeros(self.n, dtype=bool)
+        if lim.v_max_mps is not None:
+            bad |= (u @ self._vel_normals.T > self._vel_h).any(axis=(0, 2))
         if lim.a_max_mps2 is not None:
             du = np.diff(np.concatenate([self._u_prev[None], u]), axis=0)
-            if np.abs(du).max() > lim.a_max_mps2 * self.dt_s:
-                return False
+            bad |= (np.abs(du) > lim.a_max_mps2 * self.dt_s).any(axis=(0, 2))
         if lim.geofence_min_m is not None and lim.geofence_max_m is not None:
             m = self.settings.margin_m
             lo = np.minimum(lim.geofence_min_m + m - p0, 0.0)
             hi = np.maximum(lim.geofence_max_m - m - p0, 0.0)
-            if np.any(x < lo) or np.any(x > hi):
-                return False
-        return True
+            bad |= ((x < lo) | (x > hi)).any(axis=(0, 2))
+        return bad
 
-    def _row_shortfall(self, x: Array, rows: _Rows) -> tuple[float, tuple[tuple[int, int], ...]]:
+    def _row_shortfall(self, x: Array, rows: _Rows, tol: float) -> tuple[float, tuple[tuple[int, int], ...]]:
         """Largest amount [m] by which positions ``x`` (H, n, d) miss an active separation row,
-        and the items that miss by more than ``SLACK_REPORT_M``."""
+        and the items that miss by more than ``tol``."""
         xe = x[self._ends - 1]  # (R, n, d)
         worst, items = -np.inf, list[tuple[int, int]]()
         pair_rel = xe[:, rows.pairs[:, 0]] - xe[:, rows.pairs[:, 1]]
@@ -345,13 +375,17 @@ class MPCPlanner(Controller):
                 continue
             short = np.where(on, (lower - np.einsum("mrd,rmd->mr", coeffs, rel)).max(axis=1), -np.inf)
             worst = max(worst, float(short.max()))
-            items.extend((int(a), int(b)) for a, b in labels[short > SLACK_REPORT_M])
+            items.extend((int(a), int(b)) for a, b in labels[short > tol])
         return worst, tuple(dict.fromkeys(items))
 
-    def _solve(self, qp: MPCQP, p0: Array, c: Array, rows: _Rows, u_nom: Array, x_nom: Array) -> QPSolution:
-        q = qp.cost_vector(c)
-        lo, hi = qp.bounds(p0, self._u_prev, np.concatenate([rows.pair_lower, rows.single_lower]),
-                           np.concatenate([rows.pair_on, rows.single_on]))  # fmt: skip
+    def _solve(
+        self, qp: MPCQP, drones: Array, p0: Array, c: Array, rows: _Rows, u_nom: Array, x_nom: Array
+    ) -> QPSolution:
+        """Set up (new pattern) or update the backend with the QP over ``drones`` and solve it."""
+        q = qp.cost_vector(c[:, drones])
+        lower = np.concatenate([rows.pair_lower, rows.single_lower])
+        on = np.concatenate([rows.pair_on, rows.single_on])
+        lo, hi = qp.bounds(p0[drones], self._u_prev[drones], lower, on)
         a_data = qp.separation_values(rows.pair_coeffs, rows.single_coeffs)
         if self._backend_qp is not qp:
             a_matrix = qp.A.copy()
@@ -360,7 +394,30 @@ class MPCPlanner(Controller):
             self._backend_qp = qp
         else:
             self._backend.update(q, lo, hi, a_data)
-        return self._backend.solve(self._warm(p0, qp, u_nom, x_nom) if self._backend.warm_starts else None)
+        if self._backend.needs_context:
+            self._backend.set_context(self._context(qp, drones, p0, rows))
+        warm = self._warm(p0, u_nom, x_nom)[:, :, drones] if self._backend.warm_starts else None
+        return self._backend.solve(
+            None if warm is None else np.concatenate([warm.ravel(), np.zeros(qp.layout.n_slack)])
+        )
+
+    def _context(self, qp: MPCQP, drones: Array, p0: Array, rows: _Rows) -> QPContext:
+        """What the QP over ``drones`` means, numbered locally (for ``casadi:ipopt``'s exact
+        separation and ``casadi:hpipm``'s stages): the pairs and obstacle items within reach."""
+        local = np.full(self.n, -1)
+        local[drones] = np.arange(drones.shape[0])
+        sides = rows.labels[:, 1] >= 0  # decoupled pair sides, global drone indices
+        pairs = np.concatenate([rows.pairs[rows.pair_on], local[rows.labels[sides & rows.single_on]]])
+        pairs = np.unique(np.sort(pairs[(pairs >= 0).all(axis=1)], axis=1), axis=0).reshape(-1, 2)
+        ob = ~sides & rows.single_on
+        obstacle = -1 - rows.labels[ob, 1]
+        margin, none = self.settings.margin_m, not ob.any()
+        return QPContext(
+            drones.shape[0], self.dim, self.settings.horizon, (qp.sep_rows.start, qp.sep_rows.stop),
+            p0[drones], pairs, (self.limits.d_min_m or 0.0) + margin, self._metric, rows.singles[ob],
+            np.empty((0, self.dim)) if none else self._ob_center[obstacle],
+            np.empty(0) if none else self._ob_required[obstacle] + margin,
+        )  # fmt: skip
 
     def _certified(self, p0: Array, u0: Array, cand: _Candidates) -> bool:
         """Along ``p0 -> p0 + dt u0`` no pair (or obstacle) within reach gets closer than
@@ -402,19 +459,30 @@ class MPCPlanner(Controller):
         self._plan = Plan(u, np.concatenate([p0[None], p0 + x]))
         self._u_prev = u[0].copy()
 
-    def _warm(self, p0: Array, qp: MPCQP, u_nom: Array, x_nom: Array) -> Array:
-        """Primal warm start: the previous plan shifted one step (or the rollout), zero slack."""
-        lay = qp.layout
-        z = np.zeros(lay.n_var)
+    def _warm(self, p0: Array, u_nom: Array, x_nom: Array) -> Array:
+        """Primal warm start (2, H, n, d): inputs and relative positions of the previous plan
+        shifted one step (or of the rollout at the first step)."""
         if self._plan is None:
-            u, x = u_nom, x_nom
-        else:
-            prev = self._plan
-            u = np.concatenate([prev.inputs_mps[1:], np.zeros((1, self.n, self.dim))])
-            x = np.concatenate([prev.positions_m[2:], prev.positions_m[-1:]]) - p0
-        z[: lay.nud] = u.ravel()
-        z[lay.nud : 2 * lay.nud] = x.ravel()
-        return z
+            return np.stack([u_nom, x_nom])
+        prev = self._plan
+        u = np.concatenate([prev.inputs_mps[1:], np.zeros((1, self.n, self.dim))])
+        x = np.concatenate([prev.positions_m[2:], prev.positions_m[-1:]]) - p0
+        return np.stack([u, x])
+
+
+def _subset_rows(rows: _Rows, drones: Array, n: int) -> _Rows:
+    """The rows of the items within ``drones``, with drone indices renumbered 0..len(drones)-1."""
+    if drones.shape[0] == n:
+        return rows
+    local = np.full(n, -1)
+    local[drones] = np.arange(drones.shape[0])
+    keep_p = (local[rows.pairs] >= 0).all(axis=1)
+    keep_s = local[rows.singles] >= 0
+    return _Rows(
+        local[rows.pairs[keep_p]], rows.pair_coeffs[keep_p], rows.pair_lower[keep_p], rows.pair_on[keep_p],
+        local[rows.singles[keep_s]], rows.labels[keep_s], rows.single_coeffs[keep_s],
+        rows.single_lower[keep_s], rows.single_on[keep_s],
+    )  # fmt: skip
 
 
 def _rollout(c: Array, k: float, dt: float) -> tuple[Array, Array]:

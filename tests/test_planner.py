@@ -205,3 +205,23 @@ def test_bad_configuration_is_a_clear_error() -> None:
         MPCPlanner(ref, 0.1, Limits(v_max_mps=1.0), obstacles=(SphereObstacle(np.zeros(3), 1.0),))
     with pytest.raises(ValidationError, match="downwash"):
         MPCPlanner(ref, 0.1, Limits(v_max_mps=1.0, downwash_kappa=2.0))
+
+
+@settings(max_examples=6)
+@given(seed=st.integers(0, 10_000), coupling=st.sampled_from(["joint", "decoupled"]))
+def test_grouping_equals_the_monolithic_qp(seed: int, coupling: str) -> None:
+    """Two clusters 40 m apart, one swapping (in conflict): its group alone gives the monolithic answer."""
+    rng = np.random.default_rng(seed)
+    square = Template.polygon(4, 1.5).offsets
+    tpl = Template(np.concatenate([square - [20.0, 0.0], square + [20.0, 0.0]]))
+    ref = ConstantReference(tpl, FormationState.from_param([20.0, 0.0]))
+    start = np.concatenate([-square, square + [40.0, 0.0]]) + rng.normal(0, 0.05, (8, 2))
+    firsts = []
+    for grouping in (True, False):
+        settings_ = MPCSettings(coupling=coupling, grouping=grouping)
+        planner = MPCPlanner(ref, 0.1, Limits(v_max_mps=1.0, d_min_m=0.5), settings_)
+        planner.reset(0.0, start)
+        out = planner.step(0.0, start)
+        assert out.info.mode == "qp" and out.info.qp_drones == (4 if grouping else 8)
+        firsts.append(out.command_mps)
+    np.testing.assert_allclose(firsts[0], firsts[1], atol=1e-5)
