@@ -161,24 +161,17 @@ class MPCPlanner(Controller):
         c = ff + k * (targets[:-1] - p0)  # u_j = c_j - k x_j is the eq. 14 rollout
         u_nom, x_nom = _rollout(c, k, dt)
         cand, guess = self._candidates(p0), self._guess(p0)
-        if (
-            st.fast_path
-            and self._clear_of_rows(p0, guess, x_nom, cand)
-            and not self._limit_violators(p0, u_nom, x_nom).any()
-        ):
-            self._accept(p0, u_nom, x_nom)
-            return ControlStep(u_nom[0].copy(), StepInfo("fast_path"))
+        off_limits = self._limit_violators(p0, u_nom, x_nom)
+        if st.fast_path and not off_limits.any() and self._clear_of_rows(p0, guess, x_nom, cand):
+            return self._fast_path(p0, u_nom, x_nom)
         rows = self._separation_rows(p0, guess, cand)
-        shortfall, conflicts = self._row_shortfall(x_nom, rows, 0.0)
-        bad = self._limit_violators(p0, u_nom, x_nom)
-        bad[[i for pair in conflicts for i in pair if i >= 0]] = True
-        if st.fast_path and not bad.any():
-            self._accept(p0, u_nom, x_nom)
-            return ControlStep(u_nom[0].copy(), StepInfo("fast_path"))
-        if conflicts and st.tie_break_rad > 0:  # turn the conflicted drones' wishes to the right
-            turned = np.zeros(self.n, dtype=bool)
-            turned[[i for pair in conflicts for i in pair if i >= 0]] = True
-            c = np.where(turned[:, None], _turn_about_z(c, -st.tie_break_rad), c)
+        conflicted = np.zeros(self.n, dtype=bool)
+        conflicted[[i for item in self._row_shortfall(x_nom, rows, 0.0)[1] for i in item if i >= 0]] = True
+        if st.fast_path and not (off_limits | conflicted).any():
+            return self._fast_path(p0, u_nom, x_nom)
+        if st.tie_break_rad > 0:  # turn the conflicted drones' wishes to the right
+            c = np.where(conflicted[:, None], _turn_about_z(c, -st.tie_break_rad), c)
+        bad = off_limits | conflicted
         drones = self._qp_drones(bad, rows) if st.fast_path and st.grouping else np.arange(self.n)
         sub = _subset_rows(rows, drones, self.n)
         qp = self._sub_qp(drones, sub, cand.rebuilt)
@@ -207,6 +200,10 @@ class MPCPlanner(Controller):
             status += "; command failed certification"
         return self._fallback(p0, cand, StepInfo("fallback", status=status, iterations=sol.iterations,
                                                  solve_time_s=sol.solve_time_s))  # fmt: skip
+
+    def _fast_path(self, p0: Array, u_nom: Array, x_nom: Array) -> ControlStep:
+        self._accept(p0, u_nom, x_nom)
+        return ControlStep(u_nom[0].copy(), StepInfo("fast_path"))
 
     def _qp_drones(self, bad: Array, rows: _Rows) -> Array:
         """Drones whose group (connected by pair rows within reach) holds a conflicted drone.
