@@ -8,8 +8,10 @@ from __future__ import annotations
 from importlib import metadata
 from typing import Any
 
+from mpcform.consensus import ConsensusController, ConsensusSettings, Network
 from mpcform.controllers import ProportionalController, TrackingController
 from mpcform.errors import MPCFormError, ScenarioError, ValidationError
+from mpcform.graph import Graph
 from mpcform.kinematics import (
     fit_formation,
     formation_jacobian,
@@ -19,7 +21,9 @@ from mpcform.kinematics import (
 )
 from mpcform.limits import Limits, SphereObstacle
 from mpcform.metrics import run_metrics
+from mpcform.mission import Keyframe, MissionLimits, MissionReference, SpeedBudget
 from mpcform.mpc_settings import MPCSettings
+from mpcform.nullspace import NullSpaceController, NullSpaceSettings
 from mpcform.reference import ConstantReference, ExponentialReference
 from mpcform.scenario import load_scenario, run_scenario
 from mpcform.simulation import simulate
@@ -32,15 +36,25 @@ except metadata.PackageNotFoundError:
     __version__ = "0+unknown"
 
 __all__ = [
+    "ConsensusController",
+    "ConsensusSettings",
     "ConstantReference",
     "ExponentialReference",
     "FormationState",
+    "Graph",
+    "Keyframe",
     "Limits",
     "MPCFormError",
     "MPCPlanner",
     "MPCSettings",
+    "MissionLimits",
+    "MissionReference",
+    "Network",
+    "NullSpaceController",
+    "NullSpaceSettings",
     "ProportionalController",
     "ScenarioError",
+    "SpeedBudget",
     "SphereObstacle",
     "Template",
     "TrackingController",

@@ -25,13 +25,23 @@ from typing import Any
 import numpy as np
 
 from mpcform._validate import Array
+from mpcform.consensus import (
+    CONSENSUS_LAWS,
+    RELATIVE_POSITIONS,
+    ConsensusController,
+    ConsensusSettings,
+    Network,
+)
 from mpcform.controllers import FEEDFORWARDS, Controller, ProportionalController, TrackingController
 from mpcform.errors import ScenarioError, ValidationError
+from mpcform.graph import GRAPH_KINDS, Graph
 from mpcform.kinematics import fit_formation, forward_kinematics
 from mpcform.laws import check_gain_dt
 from mpcform.limits import Limits, SphereObstacle
 from mpcform.metrics import run_metrics
+from mpcform.mission import DEFAULT_SPEED_FRACTION, MissionLimits, MissionReference, SpeedBudget
 from mpcform.mpc_settings import COUPLINGS, VELOCITY_SETS, MPCSettings
+from mpcform.nullspace import OBJECTIVES, NullSpaceController, NullSpaceSettings
 from mpcform.output import build_summary, write_outputs
 from mpcform.reference import ConstantReference, ExponentialReference, Reference
 from mpcform.rotation import rotation_matrix
@@ -42,8 +52,9 @@ from mpcform.template import Template
 
 FORMAT_VERSION = 1
 SHAPES = ("polygon", "ring", "line", "grid", "sphere", "explicit")
-REFERENCE_KINDS = ("constant", "exponential")
-CONTROLLER_KINDS = ("proportional", "tracking", "mpc")
+REFERENCE_KINDS = ("constant", "exponential", "mission")
+CONTROLLER_KINDS = ("proportional", "tracking", "mpc", "consensus", "nullspace")
+GRAPH_POINTS = ("template", "initial")
 CASADI_CONIC_PLUGINS = ("osqp", "qpoases", "proxqp", "daqp", "piqp", "ipqp", "hpipm")
 
 
@@ -54,7 +65,9 @@ class Key:
 
     ``type``: ``int``, ``float``, ``bool``, ``string``, ``vector`` (d numbers), ``bounds``
     (d numbers, +-inf allowed), ``rotation`` (an angle for d = 2, a rotation vector for
-    d = 3) or ``points`` (rows of d numbers). ``when`` lists the values of the table's
+    d = 3), ``points`` (rows of d numbers), ``indices`` (drone indices) or ``pairs`` (pairs
+    of drone indices), ``table`` (an inline table, checked by its user) or ``tables`` (an
+    array of tables). ``when`` lists the values of the table's
     selector key (``shape`` or ``kind``) the key applies to (empty: always). ``bound`` is a
     lower bound of numbers (``"> 0"``, ``">= 1"``). ``shown_default`` replaces the default in
     the docs.
@@ -95,6 +108,8 @@ class Table:
 
 _MPC_DEFAULTS = {f.name: f.default for f in dataclasses.fields(MPCSettings)}
 _MPC = ("mpc",)
+_GOAL = ("constant", "exponential")
+_MISSION = ("mission",)
 # scenario key -> MPCSettings field (the remaining mpc keys share their name with the field)
 MPC_FIELDS = {"gain": "gain_per_s", "margin": "margin_m", "tie_break": "tie_break_rad",
               "time_limit": "time_limit_s"}  # fmt: skip
@@ -105,6 +120,23 @@ def _mpc_key(name: str, type_: str, doc: str, unit: str = "", **kw: Any) -> Key:
     return Key(name, type_, doc, unit, default, when=_MPC, **kw)
 
 
+# scenario key -> ConsensusSettings / NullSpaceSettings field (others share the field's name)
+CONSENSUS_FIELDS = {"gamma": "gamma_per_s", "leader_gain": "leader_gain_per_s"}
+NULLSPACE_FIELDS = {"repulsion_radius": "repulsion_radius_m", "repulsion_gain": "repulsion_gain_per_s"}
+_CONSENSUS_DEFAULTS = {f.name: f.default for f in dataclasses.fields(ConsensusSettings)}
+_NULLSPACE_DEFAULTS = {f.name: f.default for f in dataclasses.fields(NullSpaceSettings)}
+
+
+def _consensus_key(name: str, type_: str, doc: str, unit: str = "", **kw: Any) -> Key:
+    default = _CONSENSUS_DEFAULTS[CONSENSUS_FIELDS.get(name, name)]
+    return Key(name, type_, doc, unit, default, when=("consensus",), **kw)
+
+
+def _nullspace_key(name: str, type_: str, doc: str, unit: str = "", **kw: Any) -> Key:
+    default = _NULLSPACE_DEFAULTS[NULLSPACE_FIELDS.get(name, name)]
+    return Key(name, type_, doc, unit, default, when=("nullspace",), **kw)
+
+
 SCHEMA: tuple[Table, ...] = (
     Table("", "Scenario identity.", (
         Key("version", "int", "Scenario format version.", required=True, choices=(FORMAT_VERSION,)),
@@ -112,7 +144,8 @@ SCHEMA: tuple[Table, ...] = (
             shown_default="file name without .toml"),
         Key("dim", "int", "Spatial dimension: 2 (planar) or 3 (spatial).", required=True,
             choices=(2, 3)),
-        Key("seed", "int", "Seed of the initial perturbation and the simulation noise.",
+        Key("seed", "int", "Seed of the initial perturbation, the simulation noise and the "
+            "packet losses of [graph].",
             default=0, bound=">= 0"),
     )),
     Table("template", "Formation shape: centred offsets r_i (seed eq. 10).", (
@@ -145,15 +178,51 @@ SCHEMA: tuple[Table, ...] = (
     )),
     Table("reference", "Desired formation trajectory, starting at the initial formation state "
           "(or the best fit of explicit positions).", (
-        Key("kind", "string", "`constant`: hold the goal; `exponential`: eq. 16 towards it.",
+        Key("kind", "string", "`constant`: hold the goal; `exponential`: eq. 16 towards it; "
+            "`mission`: keyframes smoothed by ruckig (jerk-limited, time-optimal per move).",
             required=True, choices=REFERENCE_KINDS),
-        Key("centroid", "vector", "Goal centroid.", "m", shown_default="start centroid"),
+        Key("centroid", "vector", "Goal centroid.", "m", shown_default="start centroid",
+            when=_GOAL),
         Key("rotation", "rotation", "Goal rotation: angle (d = 2) or rotation vector (d = 3).",
-            "rad", shown_default="start rotation"),
-        Key("scale", "float", "Goal scale s*.", "", shown_default="start scale", bound="> 0"),
+            "rad", shown_default="start rotation", when=_GOAL),
+        Key("scale", "float", "Goal scale s*.", "", shown_default="start scale", bound="> 0",
+            when=_GOAL),
         Key("rate", "float", "Convergence rate lambda of eq. 16.", "1/s", required=True,
             when=("exponential",), bound="> 0"),
+        Key("keyframes", "tables", "The mission's keyframes in order: `[[reference.keyframes]]` "
+            "tables (keys below).", required=True, when=_MISSION),
+        Key("speed_fraction", "float", "With `limits.v_max`: limits derived so that every "
+            "drone's reference speed stays below speed_fraction * v_max (at most 1).",
+            shown_default=f"{DEFAULT_SPEED_FRACTION:g} (with v_max)", when=_MISSION, bound="> 0"),
+        Key("drone_acceleration", "float", "With `limits.v_max`: budget of the drones' "
+            "along-path reference acceleration.", "m/s^2",
+            shown_default="speed_fraction * limits.a_max, else speed budget per 1 s",
+            when=_MISSION, bound="> 0"),
+        Key("drone_jerk", "float", "With `limits.v_max`: budget of the drones' along-path "
+            "reference jerk.", "m/s^3", shown_default="drone_acceleration per 0.5 s",
+            when=_MISSION, bound="> 0"),
+        Key("max_velocity", "table", "Explicit bounds per DOF group, e.g. `{ centroid = 2.0, "
+            "scale = 0.5 }`: `centroid` [m/s] (on the norm), `rotation` [rad/s], `scale` and "
+            "`blend` [1/s]; the smaller of these and the derived limits applies.",
+            "per group", when=_MISSION),
+        Key("max_acceleration", "table", "Explicit bounds per DOF group, as `max_velocity` "
+            "(units per s^2).", "per group", when=_MISSION),
+        Key("max_jerk", "table", "Explicit bounds per DOF group, as `max_velocity` (units "
+            "per s^3).", "per group", when=_MISSION),
     ), selector="kind"),
+    Table("reference.keyframes", "Mission keyframes (`kind = \"mission\"`), reached one after "
+          "the other at rest; unset keys keep the previous keyframe's value.", (
+        Key("centroid", "vector", "Centroid c.", "m", shown_default="previous"),
+        Key("rotation", "rotation", "Orientation: angle (d = 2) or rotation vector (d = 3); "
+            "the turn takes the shortest way (at most half a turn per keyframe).", "rad",
+            shown_default="previous"),
+        Key("scale", "float", "Scale s.", shown_default="previous", bound="> 0"),
+        Key("hold", "float", "Time to stay at the keyframe after reaching it.", "s", 0.0,
+            bound=">= 0"),
+        Key("template", "table", "Switch to this template (same n; keys of [template], e.g. "
+            "`{ shape = \"line\", n = 6 }`): drones are assigned optimally and blended during "
+            "the move; warns when the ends are closer than sqrt(2) * d_min (CAPT)."),
+    ), required=False, array=True),
     Table("limits", "Physical limits; each unset one is not enforced.", (
         Key("v_max", "float", "Speed bound per drone.", "m/s", bound="> 0"),
         Key("d_min", "float", "Minimum distance between two drones.", "m", bound="> 0"),
@@ -167,13 +236,34 @@ SCHEMA: tuple[Table, ...] = (
     Table("controller", "Controller and its parameters; `mpcform run --controller` overrides "
           "`kind`, then keys of other kinds take their defaults.", (
         Key("kind", "string", "Controller.", required=True, choices=CONTROLLER_KINDS),
-        Key("gain", "float", "Feedback gain k (eq. 4, 14); gain * dt must be <= 1.", "1/s", 1.0,
+        Key("gain", "float", "Feedback gain k (eq. 4, 14; the formation gain of eq. 20 for "
+            "consensus); gain * dt must be <= 1.", "1/s", 1.0,
             bound="> 0"),
         Key("feedforward", "string", "`jacobian` (J xi_dot, eq. 14) or `secant` "
             "((p*(t+dt) - p*(t))/dt, exact in discrete time).", default="jacobian",
-            when=("tracking", "mpc"), choices=FEEDFORWARDS),
+            when=("tracking", "mpc", "nullspace"), choices=FEEDFORWARDS),
         Key("saturate", "bool", "Saturate commands at limits.v_max (eq. 7) when it is set.",
-            default=True, when=("proportional", "tracking")),
+            default=True, when=("proportional", "tracking", "consensus", "nullspace")),
+        _consensus_key("law", "string", "`eq20`: seed eq. 20 as printed (the centroid drifts "
+                       "during scale transients); `centroid_preserving`: u_i = -k sum_j [(p_i - "
+                       "p_j) - R (s_i r_i - s_j r_j)] (sum_i u_i = 0).", choices=CONSENSUS_LAWS),
+        _consensus_key("gamma", "float", "Scale-estimate consensus gain gamma (eq. 20).", "1/s",
+                       bound="> 0"),
+        _consensus_key("leader_gain", "float", "Leader input lambda (s*(t) - s_hat_L), s*(t) "
+                       "the reference's scale.", "1/s", bound="> 0"),
+        _consensus_key("leaders", "indices", "Drones whose estimate follows the commanded scale.",
+                       shown_default="[0]"),
+        _consensus_key("initial_scale", "float", "Every scale estimate's start value.",
+                       shown_default="best-fit scale of the start positions", bound="> 0"),
+        _nullspace_key("objective", "string", "Secondary objective projected by N = I - J J^+ "
+                       "(corrected eq. 15): `repulsion`, `energy` (smallest command with the "
+                       "same formation velocity) or `none`.", choices=OBJECTIVES),
+        _nullspace_key("repulsion_radius", "float", "Pairs closer than this repel.", "m",
+                       shown_default="1.5 * limits.d_min", bound="> 0"),
+        _nullspace_key("repulsion_gain", "float", "Repulsion gain c: push c (radius - d).", "1/s",
+                       bound="> 0"),
+        _nullspace_key("energy_weight", "float", "Weight w in [0, 1] of the energy objective "
+                       "(1: minimum norm; shape errors are then not corrected).", bound=">= 0"),
         _mpc_key("horizon", "int", "Plan length H in steps.", bound=">= 1"),
         _mpc_key("velocity_set", "string", "Speed constraint set inscribed in the ball.",
                  choices=VELOCITY_SETS),
@@ -189,6 +279,8 @@ SCHEMA: tuple[Table, ...] = (
                  "so symmetric swaps circulate (0: off).", "rad", bound=">= 0"),
         _mpc_key("coupling", "string", "`joint` pair rows, or `decoupled` per-drone rows about "
                  "the pair midpoint (block-diagonal QP, for large swarms).", choices=COUPLINGS),
+        _mpc_key("grouping", "bool", "Solve only the groups of drones that hold a conflict; the others "
+                 "take their eq. 14 rollout (exact)."),
         _mpc_key("fast_path", "bool", "Skip the solver when the eq. 14 rollout meets every row."),
         _mpc_key("eps_abs", "float", "Solver absolute tolerance.", bound="> 0"),
         _mpc_key("eps_rel", "float", "Solver relative tolerance.", bound=">= 0"),
@@ -198,6 +290,31 @@ SCHEMA: tuple[Table, ...] = (
             "`casadi:<plugin>` (see `mpcform solvers`); `--solver` overrides it.",
             default=DEFAULT_SOLVER, when=_MPC),
     ), selector="kind"),
+    Table("graph", "Communication graph of the consensus controller, undirected, and its link "
+          "effects; other controllers ignore it.", (
+        Key("kind", "string", "`complete`, `ring` (i talks to i +- 1), `path`, `k_nearest`, "
+            "`disk` (within `radius`) or `explicit` (`edges`).", required=True,
+            choices=GRAPH_KINDS),
+        Key("k", "int", "Neighbours per drone (the graph is symmetrised).", required=True,
+            when=("k_nearest",), bound=">= 1"),
+        Key("radius", "float", "Communication range.", "m", required=True, when=("disk",),
+            bound="> 0"),
+        Key("on", "string", "Positions the geometric graph is built on: template offsets r_i or "
+            "the initial positions.", default="template", when=("k_nearest", "disk"),
+            choices=GRAPH_POINTS),
+        Key("edges", "pairs", "Undirected edges [i, j] (drone indices from 0).", required=True,
+            when=("explicit",)),
+        Key("allow_disconnected", "bool", "Run on a disconnected graph with a warning instead "
+            "of an error (consensus cannot be reached).", default=False),
+        Key("delay_steps", "int", "Whole control steps between a broadcast and its delivery.",
+            default=0, bound=">= 0"),
+        Key("loss_probability", "float", "Chance that one message on one directed link is lost "
+            "(seeded by `seed`; a drone keeps the last value it received); below 1.",
+            default=0.0, bound=">= 0"),
+        Key("relative_positions", "string", "`communicated`: neighbours' positions are delayed "
+            "and lost like the scale estimates; `sensed`: measured on board, always current.",
+            default="communicated", choices=RELATIVE_POSITIONS),
+    ), required=False, selector="kind"),
     Table("simulation", "Closed-loop simulation (zero-order hold, exact single integrator).", (
         Key("dt", "float", "Control period.", "s", required=True, bound="> 0"),
         Key("duration", "float", "Simulated time.", "s", required=True, bound="> 0"),
@@ -227,6 +344,8 @@ class ControllerSpec:
     saturate: bool
     mpc: MPCSettings
     solver: str
+    consensus: ConsensusSettings | None = None
+    nullspace: NullSpaceSettings | None = None
 
 
 @dataclass(frozen=True)
@@ -260,6 +379,9 @@ class Scenario:
     simulation: SimulationSpec
     source: Path | None = None
     source_sha256: str | None = None
+    graph: Graph | None = None  # [graph] of the consensus controller (None: absent)
+    network: Network = dataclasses.field(default_factory=Network)
+    allow_disconnected: bool = False
 
     @property
     def n(self) -> int:
@@ -315,10 +437,11 @@ def scenario_from_dict(
     tpl = _template(_table(data, "template", dim), dim)
     init = _table(data, "initial", dim, tpl.n)
     start, positions = _initial(tpl, init)
-    reference = _reference(tpl, start, _table(data, "reference", dim))
     limits = _limits(_table(data, "limits", dim), dim)
+    reference = _reference(tpl, start, _table(data, "reference", dim), limits)
     sim = SimulationSpec(**_renamed(_table(data, "simulation", dim), "simulation"))
     controller = _controller(_table(data, "controller", dim), sim.dt_s)
+    controller = _decentralised_settings(controller, _table(data, "controller", dim), limits)
     if sim.duration_s < sim.dt_s:
         raise ScenarioError(
             "simulation.duration", f"expected at least one step, dt = {sim.dt_s:g} s; "
@@ -338,6 +461,7 @@ def scenario_from_dict(
         reference=reference,
         limits=limits,
         obstacles=_obstacles(data.get("obstacles"), dim),
+        **_graph(data, tpl, positions, seed),
         controller=controller,
         simulation=sim,
         source=source,
@@ -433,14 +557,37 @@ def _convert(key: Key, value: Any, field: str, dim: int, n: int | None) -> Any:
                 what = f"one of {_listing(key.choices, '')}"
             raise ScenarioError(field, f"expected {what}{_range(key)}{unit}, got {value!r}")
         return number
+    if key.type == "table":
+        if not isinstance(value, dict):
+            raise ScenarioError(field, f"expected a table {{ key = value, ... }}, got {value!r}")
+        return value
+    if key.type == "tables":
+        if not isinstance(value, list) or not value or not all(isinstance(v, dict) for v in value):
+            raise ScenarioError(field, f"expected a non-empty array of tables [[{field}]], got {value!r}")
+        return value
     if key.type == "rotation" and dim == 2:
         return _convert(dataclasses.replace(key, type="float"), value, field, dim, n)
     if key.type == "rotation":
         return _array(field, value, (3,), "a rotation vector of 3 numbers [rad]")
     if key.type in ("vector", "bounds"):
         return _array(field, value, (dim,), f"a list of {dim} numbers{unit}", key.type == "bounds")
+    if key.type in ("indices", "pairs"):
+        return _indices(field, value, pairs=key.type == "pairs")
     rows = "rows" if n is None else f"{n} rows"
     return _array(field, value, (n, dim), f"a list of {rows} of {dim} numbers{unit}")
+
+
+def _indices(field: str, value: Any, *, pairs: bool) -> tuple[Any, ...]:
+    def index(v: Any) -> bool:
+        return isinstance(v, int) and not isinstance(v, bool) and v >= 0
+
+    def item(v: Any) -> bool:
+        return isinstance(v, list) and len(v) == 2 and all(index(x) for x in v) if pairs else index(v)
+
+    if not isinstance(value, list) or not all(item(v) for v in value):
+        what = "a list of [i, j] pairs of drone indices" if pairs else "a list of drone indices"
+        raise ScenarioError(field, f"expected {what} (integers >= 0), got {value!r}")
+    return tuple(tuple(v) for v in value) if pairs else tuple(value)
 
 
 def _number(value: Any, *, integer: bool) -> float | int | None:
@@ -530,7 +677,9 @@ def _initial(tpl: Template, init: dict[str, Any]) -> tuple[FormationState, Array
         return start, forward_kinematics(tpl, start)
 
 
-def _reference(tpl: Template, start: FormationState, ref: dict[str, Any]) -> Reference:
+def _reference(tpl: Template, start: FormationState, ref: dict[str, Any], limits: Limits) -> Reference:
+    if ref["kind"] == "mission":
+        return _mission(tpl, start, ref, limits)
     with _as_scenario_error("reference"):
         rotation = (
             start.rotation_body_to_world
@@ -545,6 +694,43 @@ def _reference(tpl: Template, start: FormationState, ref: dict[str, Any]) -> Ref
         if ref["kind"] == "constant":
             return ConstantReference(tpl, goal)
         return ExponentialReference(tpl, start, goal, ref["rate"])
+
+
+def _mission(tpl: Template, start: FormationState, ref: dict[str, Any], limits: Limits) -> Reference:
+    """A ruckig mission: keyframe tables, explicit DOF-group limits and a budget from v_max."""
+    keyframes = []
+    for i, raw in enumerate(ref["keyframes"]):
+        prefix = f"reference.keyframes[{i}]"
+        k = _parse_keys(TABLES["reference.keyframes"], raw, prefix, tpl.dim, None)
+        switch = None
+        if k["template"] is not None:
+            shape = _parse_keys(TABLES["template"], k["template"], f"{prefix}.template", tpl.dim, None)
+            try:
+                switch = _template(shape, tpl.dim)
+            except ScenarioError as exc:
+                raise ScenarioError(
+                    f"{prefix}.{exc.field}", str(exc).removeprefix(f"{exc.field}: ")
+                ) from None
+        keyframes.append({"centroid_m": k["centroid"], "rotation": k["rotation"], "scale": k["scale"],
+                          "hold_s": k["hold"], "template": switch})  # fmt: skip
+    derived = [key for key in ("speed_fraction", "drone_acceleration", "drone_jerk") if ref[key] is not None]
+    if limits.v_max_mps is None and derived:
+        raise ScenarioError(f"reference.{derived[0]}", "applies only with limits.v_max (the limits "
+                            "are derived from the drones' speed bound), which is unset")  # fmt: skip
+    try:
+        budget = None
+        if limits.v_max_mps is not None:
+            fraction = DEFAULT_SPEED_FRACTION if ref["speed_fraction"] is None else ref["speed_fraction"]
+            accel = ref["drone_acceleration"]
+            if accel is None and limits.a_max_mps2 is not None:
+                accel = fraction * limits.a_max_mps2
+            budget = SpeedBudget(limits.v_max_mps, fraction, accel, ref["drone_jerk"])
+        bounds = MissionLimits(*(ref[key] or {} for key in ("max_velocity", "max_acceleration", "max_jerk")))
+        return MissionReference(tpl, start, keyframes, limits=bounds, budget=budget, d_min_m=limits.d_min_m)
+    except ScenarioError:
+        raise
+    except ValidationError as exc:
+        raise ScenarioError(exc.field, str(exc).removeprefix(f"{exc.field}: ")) from None
 
 
 def _limits(lim: dict[str, Any], dim: int) -> Limits:
@@ -566,6 +752,48 @@ def _controller(c: dict[str, Any], dt_s: float) -> ControllerSpec:
     solver = check_solver_name(c["solver"] or DEFAULT_SOLVER)
     saturate = True if c["saturate"] is None else c["saturate"]
     return ControllerSpec(c["kind"], c["gain"], feedforward, saturate, mpc, solver)
+
+
+def _decentralised_settings(spec: ControllerSpec, c: dict[str, Any], limits: Limits) -> ControllerSpec:
+    """Fill the consensus and null-space settings (defaults for keys of other kinds)."""
+
+    def given(fields: dict[str, str], when: str) -> dict[str, Any]:
+        keys = {k.name for k in TABLES["controller"].keys if k.when == (when,)}
+        return {fields.get(k, k): v for k, v in c.items() if k in keys and v is not None}
+
+    nullspace = given(NULLSPACE_FIELDS, "nullspace")
+    if nullspace.get("objective") == "repulsion" and "repulsion_radius_m" not in nullspace:
+        if limits.d_min_m is None:
+            raise ScenarioError("controller.repulsion_radius", "missing: set it, or limits.d_min "
+                                "(the default radius is 1.5 * d_min)")  # fmt: skip
+        nullspace["repulsion_radius_m"] = 1.5 * limits.d_min_m
+    with _as_scenario_error("controller"):
+        return dataclasses.replace(
+            spec,
+            consensus=ConsensusSettings(spec.gain_per_s, **given(CONSENSUS_FIELDS, "consensus")),
+            nullspace=NullSpaceSettings(spec.gain_per_s, spec.feedforward, **nullspace),
+        )
+
+
+def _graph(data: Mapping[str, Any], tpl: Template, positions: Array, seed: int) -> dict[str, Any]:
+    """The Scenario fields of an optional [graph] table: graph, network, allow_disconnected."""
+    if data.get("graph") is None:
+        return {}
+    g = _table(data, "graph", tpl.dim, tpl.n)
+    with _as_scenario_error("graph"):
+        kind = g["kind"]
+        if kind in ("complete", "ring", "path"):
+            graph = getattr(Graph, kind)(tpl.n)
+        elif kind == "explicit":
+            graph = Graph.from_edges(tpl.n, g["edges"])
+        else:
+            points = tpl.offsets if g["on"] == "template" else positions
+            if kind == "k_nearest":
+                graph = Graph.k_nearest(points, g["k"])
+            else:
+                graph = Graph.disk(points, g["radius"])
+        network = Network(g["delay_steps"], g["loss_probability"], seed, g["relative_positions"])
+    return {"graph": graph, "network": network, "allow_disconnected": g["allow_disconnected"]}
 
 
 def _obstacles(raw: Any, dim: int) -> tuple[SphereObstacle, ...]:
@@ -646,6 +874,16 @@ def build_controller(scenario: Scenario, kind: str | None = None, solver: str | 
             return ProportionalController(ref, spec.gain_per_s, dt, v_max)
         if kind == "tracking":
             return TrackingController(ref, spec.gain_per_s, dt, v_max, spec.feedforward)
+        if kind == "nullspace":
+            settings = spec.nullspace or NullSpaceSettings(spec.gain_per_s, spec.feedforward)
+            return NullSpaceController(ref, dt, settings, v_max)
+        if kind == "consensus":
+            if scenario.graph is None:
+                raise ScenarioError("graph", "missing table [graph]: the consensus controller needs a "
+                                    f"communication graph (kind = {_listing(GRAPH_KINDS)})")  # fmt: skip
+            consensus = spec.consensus or ConsensusSettings(spec.gain_per_s)
+            return ConsensusController(ref, scenario.graph, dt, consensus, v_max, scenario.network,
+                                       scenario.allow_disconnected)  # fmt: skip
     from mpcform.planner import MPCPlanner
 
     name = spec.solver if solver is None else check_solver_name(solver, "solver")
@@ -725,6 +963,8 @@ def _type_text(key: Key) -> str:
         "int": "integer", "float": "float", "bool": "boolean", "string": "string",
         "vector": "d numbers", "bounds": "d numbers (+-inf allowed)",
         "rotation": "float (d = 2) or 3 numbers (d = 3)", "points": "n rows of d numbers",
+        "table": "inline table", "tables": "array of tables",
+        "indices": "list of integers >= 0", "pairs": "list of [i, j] integer pairs",
     }[key.type]  # fmt: skip
     if key.choices:
         quote = '"' if key.type == "string" else ""
