@@ -160,10 +160,11 @@ class MPCPlanner(Controller):
         targets, ff = feedforward_targets(self.reference, t_s, dt, horizon, st.feedforward)
         c = ff + k * (targets[:-1] - p0)  # u_j = c_j - k x_j is the eq. 14 rollout
         u_nom, x_nom = _rollout(c, k, dt)
-        cand, guess = self._candidates(p0), self._guess(p0)
+        guess = self._guess(p0)
         off_limits = self._limit_violators(p0, u_nom, x_nom)
-        if st.fast_path and not off_limits.any() and self._clear_of_rows(p0, guess, x_nom, cand):
+        if st.fast_path and not off_limits.any() and self._clear_of_rows(p0, guess, x_nom):
             return self._fast_path(p0, u_nom, x_nom)
+        cand = self._candidates(p0)
         rows = self._separation_rows(p0, guess, cand)
         conflicted = np.zeros(self.n, dtype=bool)
         conflicted[[i for item in self._row_shortfall(x_nom, rows, 0.0)[1] for i in item if i >= 0]] = True
@@ -314,30 +315,37 @@ class MPCPlanner(Controller):
         normal = normal.reshape(rel.shape[0] - 1, rel.shape[1], d)  # (H, m, d)
         return normal.transpose(1, 0, 2)[:, self._segs]
 
-    def _clear_of_rows(self, p0: Array, guess: Array, x: Array, cand: _Candidates) -> bool:
+    def _clear_of_rows(self, p0: Array, guess: Array, x: Array) -> bool:
         """A cheap sufficient test that positions ``x`` (H, n, d) meet every separation row.
 
         A row's normal c is a unit vector with ``c^T g >= |closest point of its guess segment|
-        >= max(|g_j|, |g_j+1|) - |g_j+1 - g_j|``, so ``c^T delta_e >= that - |delta_e - g_e|``:
-        if this bound clears the requirement for every item, no row needs to be built.
+        >= max(|g_j|, |g_j+1|) - |g_j+1 - g_j|``, so ``c^T delta_e >= that - |delta_e - g_e|``.
+        Before that per-segment bound, a per-drone one: drone i's guess stays within ``spread_i``
+        of its start and its positions within ``spread_i`` of the guess, so an item whose start
+        distance clears the requirement by the spreads of its drones is clear. No row is built.
         """
         margin, lim = self.settings.margin_m, self.limits
+        pos = np.concatenate([p0[None], p0 + x])
+        spread = _max_norm(guess - p0) + _max_norm(pos - guess)  # (n,) [m]
         tests = []
-        if cand.pair_on.any() and lim.d_min_m is not None:
-            i, k = cand.pairs[cand.pair_on].T
-            pos = np.concatenate([p0[None], p0 + x])
-            tests.append(((guess[:, i] - guess[:, k]) * self._metric, (pos[:, i] - pos[:, k]) * self._metric,
-                          lim.d_min_m))  # fmt: skip
-        if cand.obstacle_on.any():
-            i, m = cand.obstacles[cand.obstacle_on].T
-            pos = np.concatenate([p0[None], p0 + x])
+        if lim.d_min_m is not None and self.n > 1:
+            scaled = p0 * self._metric  # the metric only shrinks lengths: world spreads bound it
+            i, k = pairs_within(scaled, lim.d_min_m + margin + 2.0 * spread.max()).T
+            clearance = np.linalg.norm(scaled[i] - scaled[k], axis=1) - spread[i] - spread[k]
+            near = clearance < lim.d_min_m + margin
+            i, k = i[near], k[near]
+            rel_g, rel_p = (guess[:, i] - guess[:, k]) * self._metric, (pos[:, i] - pos[:, k]) * self._metric
+            tests.append((rel_g, rel_p, lim.d_min_m))
+        if self.obstacles:
+            gap = np.linalg.norm(p0[:, None] - self._ob_center, axis=-1) - self._ob_required - spread[:, None]
+            i, m = np.nonzero(gap < margin)
             center = self._ob_center[m]
             tests.append((guess[:, i] - center, pos[:, i] - center, self._ob_required[m]))
         for g, delta, required in tests:
             g_norm = np.linalg.norm(g, axis=-1)
             seg = np.maximum(g_norm[:-1], g_norm[1:]) - np.linalg.norm(np.diff(g, axis=0), axis=-1)
-            bound = seg.min(axis=0) - np.linalg.norm(delta - g, axis=-1).max(axis=0)
-            if np.any(bound < required + margin):
+            dev = np.linalg.norm(delta - g, axis=-1).max(axis=0, initial=0.0)
+            if np.any(seg.min(axis=0, initial=np.inf) - dev < required + margin):
                 return False
         return True
 
@@ -465,6 +473,11 @@ class MPCPlanner(Controller):
         u = np.concatenate([prev.inputs_mps[1:], np.zeros((1, self.n, self.dim))])
         x = np.concatenate([prev.positions_m[2:], prev.positions_m[-1:]]) - p0
         return np.stack([u, x])
+
+
+def _max_norm(v: Array) -> Array:
+    """``max_e |v_e,i|`` over the first axis of ``v`` (T, n, d) -> (n,)."""
+    return np.sqrt(np.einsum("tnd,tnd->tn", v, v).max(axis=0))
 
 
 def _subset_rows(rows: _Rows, drones: Array, n: int) -> _Rows:
