@@ -327,7 +327,7 @@ class MPCPlanner(Controller):
         margin, lim = self.settings.margin_m, self.limits
         pos = np.concatenate([p0[None], p0 + x])
         spread = _max_norm(guess - p0) + _max_norm(pos - guess)  # (n,) [m]
-        tests = []
+        tests: list[tuple[Array, Array, Array | float]] = []
         if lim.d_min_m is not None and self.n > 1:
             scaled = p0 * self._metric  # the metric only shrinks lengths: world spreads bound it
             i, k = pairs_within(scaled, lim.d_min_m + margin + 2.0 * spread.max()).T
