@@ -167,7 +167,8 @@ class MPCPlanner(Controller):
         cand = self._candidates(p0)
         rows = self._separation_rows(p0, guess, cand)
         conflicted = np.zeros(self.n, dtype=bool)
-        conflicted[[i for item in self._row_shortfall(x_nom, rows, 0.0)[1] for i in item if i >= 0]] = True
+        labels = self._row_shortfall(x_nom, rows, 0.0)[1]
+        conflicted[labels[labels >= 0]] = True  # drones of missed items (not obstacles: < 0)
         if st.fast_path and not (off_limits | conflicted).any():
             return self._fast_path(p0, u_nom, x_nom)
         if st.tie_break_rad > 0:  # turn the conflicted drones' wishes to the right
@@ -187,11 +188,10 @@ class MPCPlanner(Controller):
             if self._certified(p0, u0, cand):
                 self._accept(p0, u, x)
                 slack = sol.x[2 * lay.nud :]
-                shortfall, slack_items = (
-                    self._row_shortfall(x, rows, SLACK_REPORT_M)
-                    if slack.max(initial=0.0) > SLACK_REPORT_M / 2
-                    else (0.0, ())
-                )
+                shortfall, slack_items = 0.0, tuple[tuple[int, int], ...]()
+                if slack.max(initial=0.0) > SLACK_REPORT_M / 2:
+                    shortfall, missed = self._row_shortfall(x, rows, SLACK_REPORT_M)
+                    slack_items = tuple((int(a), int(b)) for a, b in missed)
                 active = int(np.count_nonzero(np.abs(sol.y[lay.nud :]) > 1e-6)) if sol.y is not None else 0
                 return ControlStep(u0, StepInfo(
                     "qp", status=status, iterations=sol.iterations, solve_time_s=sol.solve_time_s,
@@ -365,11 +365,11 @@ class MPCPlanner(Controller):
             bad |= ((x < lo) | (x > hi)).any(axis=(0, 2))
         return bad
 
-    def _row_shortfall(self, x: Array, rows: _Rows, tol: float) -> tuple[float, tuple[tuple[int, int], ...]]:
+    def _row_shortfall(self, x: Array, rows: _Rows, tol: float) -> tuple[float, Array]:
         """Largest amount [m] by which positions ``x`` (H, n, d) miss an active separation row,
-        and the items that miss by more than ``tol``."""
+        and the labels (m, 2) of the items that miss by more than ``tol``."""
         xe = x[self._ends - 1]  # (R, n, d)
-        worst, items = -np.inf, list[tuple[int, int]]()
+        worst, missed = -np.inf, [np.empty((0, 2), dtype=np.intp)]
         pair_rel = xe[:, rows.pairs[:, 0]] - xe[:, rows.pairs[:, 1]]
         parts = [
             (rows.pair_coeffs, rows.pair_lower, rows.pair_on, rows.pairs, pair_rel),
@@ -380,8 +380,8 @@ class MPCPlanner(Controller):
                 continue
             short = np.where(on, (lower - np.einsum("mrd,rmd->mr", coeffs, rel)).max(axis=1), -np.inf)
             worst = max(worst, float(short.max()))
-            items.extend((int(a), int(b)) for a, b in labels[short > tol])
-        return worst, tuple(dict.fromkeys(items))
+            missed.append(labels[short > tol])
+        return worst, np.unique(np.concatenate(missed), axis=0)
 
     def _solve(
         self, qp: MPCQP, drones: Array, p0: Array, c: Array, rows: _Rows, u_nom: Array, x_nom: Array
