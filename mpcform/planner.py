@@ -175,7 +175,8 @@ class MPCPlanner(Controller):
             c = np.where(conflicted[:, None], _turn_about_z(c, -st.tie_break_rad), c)
         bad = off_limits | conflicted
         drones = self._qp_drones(bad, rows) if st.fast_path and st.grouping else np.arange(self.n)
-        sub = _subset_rows(rows, drones, self.n)
+        grouped = st.fast_path and st.grouping
+        sub = _subset_rows(rows, drones, self.n, on_only=grouped)  # grouped: the pattern follows the groups
         qp = self._sub_qp(drones, sub, cand.rebuilt)
         sol = self._solve(qp, drones, p0, c, sub, u_nom, x_nom)
         lay = qp.layout
@@ -219,8 +220,8 @@ class MPCPlanner(Controller):
         return np.flatnonzero(np.isin(label, label[bad]))
 
     def _sub_qp(self, drones: Array, sub: _Rows, rebuilt: bool) -> MPCQP:
-        """The QP over ``drones``, kept while the drone set and the candidate set stay the same."""
-        key = drones.tobytes()
+        """The QP over ``drones`` and the items of ``sub``, kept while both stay the same."""
+        key = drones.tobytes() + sub.pairs.tobytes() + sub.labels.tobytes()
         if rebuilt or self._qp is None or key != self._qp_key:
             self._qp = MPCQP(
                 drones.shape[0], self.dim, self.dt_s, self.limits, self.settings, sub.pairs, sub.singles
@@ -480,14 +481,15 @@ def _max_norm(v: Array) -> Array:
     return np.sqrt(np.einsum("tnd,tnd->tn", v, v).max(axis=0))
 
 
-def _subset_rows(rows: _Rows, drones: Array, n: int) -> _Rows:
-    """The rows of the items within ``drones``, with drone indices renumbered 0..len(drones)-1."""
-    if drones.shape[0] == n:
+def _subset_rows(rows: _Rows, drones: Array, n: int, on_only: bool) -> _Rows:
+    """The rows of the items within ``drones`` (only those within reach with ``on_only``), with
+    drone indices renumbered 0..len(drones)-1."""
+    if drones.shape[0] == n and not on_only:
         return rows
     local = np.full(n, -1)
     local[drones] = np.arange(drones.shape[0])
-    keep_p = (local[rows.pairs] >= 0).all(axis=1)
-    keep_s = local[rows.singles] >= 0
+    keep_p = (local[rows.pairs] >= 0).all(axis=1) & (rows.pair_on | (not on_only))
+    keep_s = (local[rows.singles] >= 0) & (rows.single_on | (not on_only))
     return _Rows(
         local[rows.pairs[keep_p]], rows.pair_coeffs[keep_p], rows.pair_lower[keep_p], rows.pair_on[keep_p],
         local[rows.singles[keep_s]], rows.labels[keep_s], rows.single_coeffs[keep_s],
