@@ -15,10 +15,9 @@ import hashlib
 import math
 import re
 import tomllib
-from collections.abc import Iterator, Mapping
+from collections.abc import Callable, Iterator, Mapping
 from contextlib import contextmanager
 from dataclasses import dataclass
-from importlib.util import find_spec
 from pathlib import Path
 from typing import Any
 
@@ -33,7 +32,7 @@ from mpcform.consensus import (
     Network,
 )
 from mpcform.controllers import FEEDFORWARDS, Controller, ProportionalController, TrackingController
-from mpcform.errors import ScenarioError, ValidationError
+from mpcform.errors import ScenarioError, SolverError, ValidationError
 from mpcform.graph import GRAPH_KINDS, Graph
 from mpcform.kinematics import fit_formation, forward_kinematics
 from mpcform.laws import check_gain_dt
@@ -47,6 +46,7 @@ from mpcform.reference import ConstantReference, ExponentialReference, Reference
 from mpcform.rotation import rotation_matrix
 from mpcform.simulation import SimulationResult, simulate
 from mpcform.solvers import DEFAULT_SOLVER
+from mpcform.solvers import check_solver_name as check_backend_name
 from mpcform.state import FormationState
 from mpcform.template import Template
 
@@ -55,7 +55,6 @@ SHAPES = ("polygon", "ring", "line", "grid", "sphere", "explicit")
 REFERENCE_KINDS = ("constant", "exponential", "mission")
 CONTROLLER_KINDS = ("proportional", "tracking", "mpc", "consensus", "nullspace")
 GRAPH_POINTS = ("template", "initial")
-CASADI_CONIC_PLUGINS = ("osqp", "qpoases", "proxqp", "daqp", "piqp", "ipqp", "hpipm")
 
 
 # ---- schema -------------------------------------------------------------------------------
@@ -824,37 +823,11 @@ def _renamed(values: dict[str, Any], table: str) -> dict[str, Any]:
 
 # ---- controllers, solvers, running ----------------------------------------------------------
 def check_solver_name(name: str, field: str = "controller.solver") -> str:
-    """Validate a solver name: osqp, piqp, qpsolvers:<name>, casadi:<plugin> or casadi:ipopt."""
-    prefix, _, rest = name.partition(":")
-    casadi = (*CASADI_CONIC_PLUGINS, "ipopt")
-    if (
-        name in ("osqp", "piqp")
-        or (prefix == "qpsolvers" and rest)
-        or (prefix == "casadi" and rest in casadi)
-    ):
-        return name
-    known = ["osqp", "piqp", *(f"casadi:{p}" for p in casadi)]
-    raise ScenarioError(
-        field,
-        f"unknown solver {name!r}; expected osqp, piqp, qpsolvers:<name> or casadi:<plugin> "
-        f"(plugins: {', '.join(casadi)}){_did_you_mean(name, known)}",
-    )
-
-
-def solver_backends() -> list[tuple[str, bool]]:
-    """Every solver name this package knows and whether it can be used here (installed)."""
-    rows = [(name, find_spec(name) is not None) for name in ("osqp", "piqp")]
-    if find_spec("qpsolvers") is not None:
-        import qpsolvers
-
-        rows += [(f"qpsolvers:{s}", True) for s in sorted(qpsolvers.available_solvers)]
-    has_casadi = find_spec("casadi") is not None
-    if has_casadi:
-        import casadi
-    for plugin in CASADI_CONIC_PLUGINS:
-        rows.append((f"casadi:{plugin}", has_casadi and bool(casadi.has_conic(plugin))))
-    rows.append(("casadi:ipopt", has_casadi and bool(casadi.has_nlpsol("ipopt"))))
-    return rows
+    """A solver name as a scenario key (see :func:`mpcform.solvers.check_solver_name`)."""
+    try:
+        return check_backend_name(name)
+    except SolverError as exc:
+        raise ScenarioError(field, str(exc)) from None
 
 
 def build_controller(scenario: Scenario, kind: str | None = None, solver: str | None = None) -> Controller:
@@ -897,16 +870,18 @@ def run_scenario(
     out_dir: str | Path | None = None,
     controller: str | None = None,
     solver: str | None = None,
+    progress: Callable[[int, int], None] | None = None,
 ) -> RunResult:
     """Simulate, compute the metrics and, when ``out_dir`` is given, write the output files.
 
-    ``controller`` and ``solver`` override the scenario's controller kind and QP backend.
+    ``controller`` and ``solver`` override the scenario's controller kind and QP backend;
+    ``progress(step, steps)`` is called after every step (e.g. :class:`mpcform.progress.ProgressBar`).
     """
     ctrl = build_controller(scenario, controller, solver)
     sim = scenario.simulation
     result = simulate(
         ctrl, scenario.initial_positions_m, sim.duration_s,
-        lag_s=sim.lag_s, noise_std_m=sim.noise_std_m, seed=scenario.seed,
+        lag_s=sim.lag_s, noise_std_m=sim.noise_std_m, seed=scenario.seed, progress=progress,
     )  # fmt: skip
     limits = scenario.limits
     is_mpc = (controller or scenario.controller.kind) == "mpc"

@@ -1,0 +1,135 @@
+"""`mpcform validate`'s checker: every problem of a file at once, each with its key and line."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from mpcform.check import check_scenario_file, locate
+
+ROOT = Path(__file__).resolve().parents[1]
+
+MESSY = """\
+version = 1
+dim = 2
+sed = 3
+
+[template]
+shape = "polygon"
+n = 3
+radius = -1.0
+
+[initial]
+centroid = [5.0, 5.0, 1.0]
+
+[reference]
+kind = "mission"
+
+[[reference.keyframes]]
+scale = 2.0
+
+[[reference.keyframes]]
+scale = -2.0
+template = { shape = "lime", n = 3 }
+
+[limit]
+v_max = 3.0
+
+[controller]
+kind = "tracking"
+gian = 2.0
+gain = 200.0
+
+[simulation]
+dt = 0.02
+duration = 10.0
+
+[[obstacles]]
+center = [1.0, 2.0]
+radius = 1.0
+
+[[obstacles]]
+center = [1.0, 2.0]
+radius = 0.0
+"""
+
+
+def write(tmp_path: Path, text: str) -> Path:
+    path = tmp_path / "scenario.toml"
+    path.write_text(text)
+    return path
+
+
+def test_valid_file_has_no_problems() -> None:
+    result = check_scenario_file(ROOT / "scenarios" / "worked_example.toml")
+    assert result.ok and result.scenario is not None and result.scenario.n == 3
+
+
+def test_every_problem_at_once_with_its_line(tmp_path: Path) -> None:
+    result = check_scenario_file(write(tmp_path, MESSY))
+    assert not result.ok and result.scenario is None
+    found = {(p.field, p.line) for p in result.problems}
+    assert found == {
+        ("sed", 3),
+        ("template.radius", 8),
+        ("initial.centroid", 11),
+        ("reference.keyframes[1].scale", 20),
+        ("reference.keyframes[1].template.shape", 21),
+        ("limit", 23),
+        ("controller.gian", 28),
+        ("controller.gain", 29),
+        ("obstacles[1].radius", 41),
+    }
+    messages = {p.field: p.message for p in result.problems}
+    assert "did you mean 'seed'" in messages["sed"]
+    assert "did you mean 'limits'" in messages["limit"]
+    assert "did you mean 'gain'" in messages["controller.gian"]
+    assert "gain * dt" in messages["controller.gain"]
+    assert "did you mean 'line'" in messages["reference.keyframes[1].template.shape"]
+    lines = [p.line for p in result.problems]
+    assert lines == sorted(lines)  # in file order
+    assert str(result.problems[0]) == f"line 3: sed: {messages['sed']}"
+
+
+def test_syntax_error_is_one_problem(tmp_path: Path) -> None:
+    result = check_scenario_file(write(tmp_path, "version = 1\ndim = \n"))
+    (problem,) = result.problems
+    assert "TOML syntax error" in problem.message and "line 2" in problem.message
+
+
+def test_missing_file(tmp_path: Path) -> None:
+    (problem,) = check_scenario_file(tmp_path / "nope.toml").problems
+    assert "no such scenario file" in problem.message
+
+
+def test_a_bad_dimension_still_checks_key_names(tmp_path: Path) -> None:
+    text = (ROOT / "scenarios" / "worked_example.toml").read_text()
+    text = text.replace("dim = 2", "dim = 4").replace("gain = 2.0", "gian = 2.0")
+    fields = {p.field for p in check_scenario_file(write(tmp_path, text)).problems}
+    assert {"dim", "controller.gian"} <= fields
+
+
+def test_consequences_are_not_reported(tmp_path: Path) -> None:
+    text = (ROOT / "scenarios" / "worked_example.toml").read_text().replace("[template]", "[templates]")
+    problems = check_scenario_file(write(tmp_path, text)).problems
+    assert [p.field for p in problems] == ["templates"]  # not: missing [template], unknown shape, ...
+
+
+@pytest.mark.parametrize(
+    ("field", "line"),
+    [
+        ("dim", 2),
+        ("template", 5),
+        ("template.radius", 8),
+        ("reference.keyframes[0].scale", 17),
+        ("reference.keyframes[1]", 19),
+        ("reference.keyframes[1].template.n", 21),
+        ("obstacles[1].radius", 41),
+        ("obstacles[0]", 35),
+        ("controller.horizon", None),
+        ("graph.kind", None),
+    ],
+)
+def test_locate(field: str, line: int | None) -> None:
+    assert locate(MESSY, field) == line

@@ -1,0 +1,206 @@
+"""`run --plot/--animate/--export`, `plot`, `compare`, `export`, `validate`: files, exit codes, messages."""
+
+from __future__ import annotations
+
+import json
+from importlib.util import find_spec
+from pathlib import Path
+
+import numpy as np
+import pytest
+from saved_runs import short_run
+
+from mpcform import cli_runner
+from mpcform.cli import main
+
+ROOT = Path(__file__).resolve().parents[1]
+WORKED = ROOT / "scenarios" / "worked_example.toml"
+HAS_PLOT = find_spec("matplotlib") is not None and find_spec("PIL") is not None
+needs_plot = pytest.mark.skipif(not HAS_PLOT, reason="matplotlib is not installed")
+
+
+def short_copy(
+    tmp_path: Path, source: Path = WORKED, steps_text: tuple[str, str] = ("duration = 10.0", "duration = 0.4")
+) -> str:
+    path = tmp_path / source.name
+    path.write_text(source.read_text().replace(*steps_text))
+    return str(path)
+
+
+def error_lines(capsys: pytest.CaptureFixture[str], status: int, *fragments: str) -> list[str]:
+    """Exit status 2, no traceback; every stderr line is an error, the fragments in the first."""
+    err = capsys.readouterr().err
+    assert status == 2 and "Traceback" not in err
+    lines = err.strip().splitlines()
+    assert lines and lines[0].startswith("mpcform: error: ")
+    for fragment in fragments:
+        assert fragment in lines[0], err
+    return lines
+
+
+# ---- run ----------------------------------------------------------------------------------
+@needs_plot
+def test_run_with_plot_animate_export(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "out"
+    assert main(["run", short_copy(tmp_path), "--out", str(out), "--plot", "--animate", "--export",
+                 "--altitude", "1.5"]) == 0  # fmt: skip
+    captured = capsys.readouterr()
+    assert "final tracking error" in captured.out and "wrote 5 figures" in captured.out
+    assert "flight.gif" in captured.out and "exported 3 drones" in captured.out
+    assert captured.err == ""  # not a terminal: no progress bar
+    assert {"trajectory.npz", "trajectory.csv", "summary.json", "formation.npz"} <= {
+        p.name for p in out.iterdir()
+    }
+    plots = {p.name for p in (out / "plots").iterdir()}
+    assert plots == {
+        "top_view.png",
+        "tracking_error.png",
+        "speed.png",
+        "separation.png",
+        "scale.png",
+        "flight.gif",
+    }
+    export = {p.name for p in (out / "export").iterdir()}
+    assert {"drone000_setpoints.csv", "drone002_poly7.csv", "provenance.json"} <= export
+    assert json.loads((out / "export" / "provenance.json").read_text())["altitude_m"] == 1.5
+
+
+def test_run_export_without_plotting(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "out"
+    assert main(["run", short_copy(tmp_path), "--out", str(out), "--export"]) == 0
+    assert (out / "export" / "drone000_poly7.csv").exists() and not (out / "plots").exists()
+
+
+def test_plain_run_writes_only_the_contract_files(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "out"
+    assert main(["run", short_copy(tmp_path), "--out", str(out)]) == 0
+    assert {p.name for p in out.iterdir()} == {"trajectory.npz", "trajectory.csv", "summary.json"}
+
+
+def test_plot_without_matplotlib_fails_before_running(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setattr(cli_runner, "find_spec", lambda name: None)
+    status = main(["run", short_copy(tmp_path), "--out", str(tmp_path / "o"), "--plot"])
+    error_lines(capsys, status, "matplotlib", "pip install 'mpcform[plot]'")
+    assert not (tmp_path / "o").exists()
+    short_run("worked_example", tmp_path / "saved", steps=5)
+    error_lines(capsys, main(["plot", str(tmp_path / "saved")]), "matplotlib")
+
+
+@pytest.mark.parametrize(
+    ("scenario", "argv", "fragments"),
+    [
+        ("worked_example", ["--altitude", "2"], ("--altitude", "only with --export")),
+        ("swap_spatial_12", ["--export", "--altitude", "2"], ("--altitude", "only to planar")),
+        ("worked_example", ["--export", "--altitude", "-1"], ("altitude",)),
+        ("worked_example", ["--export", "--tolerance", "0"], ("tolerance", "> 0")),
+    ],
+)
+def test_bad_run_options(
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+    scenario: str,
+    argv: list[str],
+    fragments: tuple[str, ...],
+) -> None:
+    source = ROOT / "scenarios" / f"{scenario}.toml"
+    path = short_copy(tmp_path, source, ("duration = ", "duration = 0.2 #"))
+    error_lines(capsys, main(["run", path, "--out", str(tmp_path / "o"), *argv]), *fragments)
+
+
+# ---- plot, compare, export ----------------------------------------------------------------
+@needs_plot
+def test_plot_a_saved_run(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    short_run("swap_spatial_12", tmp_path, steps=8)
+    assert main(["plot", str(tmp_path), "--out", str(tmp_path / "figs")]) == 0
+    assert "wrote 6 figures" in capsys.readouterr().out
+    assert (tmp_path / "figs" / "view_3d.png").stat().st_size > 0
+
+
+@pytest.mark.parametrize("command", ["plot", "export"])
+def test_bad_run_directories(tmp_path: Path, capsys: pytest.CaptureFixture[str], command: str) -> None:
+    if command == "plot" and not HAS_PLOT:
+        pytest.skip("matplotlib is not installed")
+    error_lines(capsys, main([command, str(tmp_path / "missing")]), "missing", "no such run directory")
+    error_lines(capsys, main([command, str(tmp_path)]), "trajectory.npz", "missing")
+    short_run("worked_example", tmp_path, steps=5)
+    (tmp_path / "summary.json").write_text("[")
+    error_lines(capsys, main([command, str(tmp_path)]), "summary.json", "cannot read it as JSON")
+    (tmp_path / "trajectory.npz").write_bytes(b"not an archive")
+    error_lines(capsys, main([command, str(tmp_path)]), "trajectory.npz", "cannot read it")
+
+
+@needs_plot
+def test_compare(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    path = short_copy(tmp_path)
+    for kind in ("tracking", "proportional", "mpc"):
+        assert main(["run", path, "--out", str(tmp_path / kind), "--controller", kind]) == 0
+    capsys.readouterr()
+    dirs = [str(tmp_path / k) for k in ("tracking", "proportional", "mpc")]
+    figure, records = tmp_path / "c.png", tmp_path / "c.json"
+    assert main(["compare", *dirs, "--figure", str(figure), "--json", str(records)]) == 0
+    table = capsys.readouterr().out.splitlines()
+    assert table[0].startswith("| run | controller | solver | final error [m]")
+    assert len([line for line in table if line.startswith("| worked_example")]) == 3
+    assert figure.stat().st_size > 5_000
+    rows = json.loads(records.read_text())
+    assert [r["controller"] for r in rows] == ["tracking", "proportional", "mpc"]
+    assert rows[2]["solver"] and rows[0]["solver"] is None
+
+
+def test_compare_table_only_and_bad_directory(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    short_run("worked_example", tmp_path / "a", steps=5)
+    short_run("worked_example", tmp_path / "b", steps=5)
+    assert main(["compare", str(tmp_path / "a"), str(tmp_path / "b"), "--no-figure"]) == 0
+    out = capsys.readouterr().out
+    assert "[a]" in out and "[b]" in out  # same label: the directory tells them apart
+    error_lines(capsys, main(["compare", str(tmp_path / "a"), str(tmp_path / "zz"), "--no-figure"]), "zz")
+
+
+def test_export_command(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    short_run("swap_planar_8", tmp_path, steps=40)
+    assert main(["export", str(tmp_path), "--altitude", "1.2", "--tolerance", "0.01"]) == 0
+    out = capsys.readouterr().out
+    assert "exported 8 drones" in out and "tolerance 0.01 m" in out
+    setpoints = np.loadtxt(tmp_path / "export" / "drone007_setpoints.csv", delimiter=",", skiprows=1)
+    assert setpoints.shape == (41, 11) and np.all(setpoints[:, 3] == 1.2)
+
+
+def test_export_warns_on_stderr(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    short_run("swap_spatial_12", tmp_path, steps=10)
+    assert main(["export", str(tmp_path)]) == 0
+    assert "mpcform: warning: z goes down to" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("argv", [["plot"], ["export"], ["compare"], ["export", "d", "--tolerance", "x"]])
+def test_usage_errors(capsys: pytest.CaptureFixture[str], argv: list[str]) -> None:
+    status = main(argv)
+    err = capsys.readouterr().err
+    assert status == 2 and err.strip().splitlines()[-1].startswith("mpcform: error: ")
+
+
+# ---- validate -----------------------------------------------------------------------------
+def test_validate_lists_every_problem(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    text = WORKED.read_text().replace("gain = 2.0", "gian = 2.0").replace("[limits]", "[limit]")
+    text = text.replace("scale = 2.0", "scale = -2.0").replace("seed = 0", "sed = 0")
+    path = tmp_path / "bad.toml"
+    path.write_text(text)
+    lines = error_lines(capsys, main(["validate", str(path)]))
+    assert len(lines) == 5 and lines[-1] == f"mpcform: 4 problems in {path}"
+    expected = ["sed", "reference.scale", "limit", "controller.gian"]
+    for line, field in zip(lines, expected, strict=False):
+        assert line.startswith(f"mpcform: error: {path}:") and f": {field}: " in line
+    assert "did you mean 'limits'" in lines[2] and "did you mean 'gain'" in lines[3]
+    numbers = [int(line.split(f"{path}:")[1].split(":")[0]) for line in lines[:4]]
+    assert [text.splitlines()[k - 1].split("=")[0].strip(" []") for k in numbers] == [
+        "sed",
+        "scale",
+        "limit",
+        "gian",
+    ]
+
+
+def test_validate_ok(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["validate", str(ROOT / "scenarios" / "formation_flight_100.toml")]) == 0
+    assert capsys.readouterr().out.startswith("OK formation_flight_100: 100 drones")
