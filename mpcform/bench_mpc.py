@@ -24,6 +24,7 @@ from typing import Any
 import numpy as np
 import scipy.sparse as sp
 
+from mpcform import tables
 from mpcform._validate import Array
 from mpcform.controllers import feedforward_targets
 from mpcform.limits import Limits
@@ -249,17 +250,7 @@ COLUMNS = [
 
 def markdown_table(rows: list[dict[str, Any]]) -> str:
     """The rows as a markdown table (missing or NaN entries shown as ``-``)."""
-
-    def cell(row: dict[str, Any], key: str, fmt: str) -> str:
-        value = row.get(key)
-        if value is None or (isinstance(value, float) and not np.isfinite(value)):
-            return "-"
-        return fmt.format(value)
-
-    lines = ["| " + " | ".join(title for _, title, _ in COLUMNS) + " |", "|" + " --- |" * len(COLUMNS)]
-    lines += ["| " + " | ".join(cell(r, k, f) for k, _, f in COLUMNS) + " |" for r in rows]
-    return "\n".join(lines)
-
+    return tables.markdown_table(rows, COLUMNS)
 
 def run(
     planar_n: list[int], spatial_n: list[int], steps: int, solver: str, coupling: str, cvxpy_max_n: int

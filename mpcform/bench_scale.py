@@ -43,6 +43,7 @@ from typing import Any
 
 import numpy as np
 
+from mpcform import tables
 from mpcform._validate import Array
 from mpcform.errors import ValidationError
 from mpcform.geometry import min_segment_distance
@@ -370,18 +371,7 @@ GROWTH_COLUMNS = [
 
 def markdown_table(rows: list[dict[str, Any]], columns: list[tuple[str, str, str]] | None = None) -> str:
     """The rows as a markdown table (missing or NaN entries shown as ``-``)."""
-    cols = COLUMNS if columns is None else columns
-
-    def cell(row: dict[str, Any], key: str, fmt: str) -> str:
-        value = row.get(key)
-        if value is None or value in ("", []) or (isinstance(value, float) and not np.isfinite(value)):
-            return "-"
-        return fmt.format(value)
-
-    lines = ["| " + " | ".join(title for _, title, _ in cols) + " |", "|" + " --- |" * len(cols)]
-    lines += ["| " + " | ".join(cell(r, k, f) for k, _, f in cols) + " |" for r in rows]
-    return "\n".join(lines)
-
+    return tables.markdown_table(rows, COLUMNS if columns is None else columns)
 
 def target_lines(rows: list[dict[str, Any]], growth: list[dict[str, Any]], coupling: str) -> list[str]:
     """The acceptance targets of the scaling issue for the planner mode ``coupling``, each with what

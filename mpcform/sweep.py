@@ -31,6 +31,7 @@ from typing import Any
 
 import numpy as np
 
+from mpcform import tables
 from mpcform.errors import ValidationError
 from mpcform.metrics import REL_TOL
 from mpcform.parallel import process_pool, single_threaded_env
@@ -338,19 +339,7 @@ COLUMNS = [
 
 def markdown_table(groups: Sequence[dict[str, Any]]) -> str:
     """The groups as a markdown table (NaN shown as ``-``)."""
-
-    def cell(row: dict[str, Any], key: str, fmt: str) -> str:
-        value = row.get(key)
-        if key == "params":
-            return params_text(value or {})
-        if value is None or (isinstance(value, float) and not np.isfinite(value)):
-            return "-"
-        return fmt.format(value)
-
-    lines = ["| " + " | ".join(t for _, t, _ in COLUMNS) + " |", "|" + " --- |" * len(COLUMNS)]
-    lines += ["| " + " | ".join(cell(g, k, f) for k, _, f in COLUMNS) + " |" for g in groups]
-    return "\n".join(lines)
-
+    return tables.markdown_table(groups, COLUMNS, {"params": lambda v: params_text(v or {})})
 
 def failures_text(records: Sequence[dict[str, Any]]) -> str:
     """One line per failed run: its parameters, seed and why (its error, or the checks it failed)."""
