@@ -16,7 +16,10 @@ about 10x), and counts failures at the time limit (qpbenchmark's rule); medians 
 successful solves. ``casadi:ipopt`` solves the exact non-convex problem instead (reported apart:
 its objective is below the QP's, and the difference is the price of the linearisation).
 
-**Isolation.** Each solver runs in its own process (``spawn``); the parent waits for each solve
+**Isolation, side by side.** Each solver runs in its own process (``spawn``), all of them alive
+at once and asked one solve at a time, slot by slot: every solver solves problem k (of a mode
+and setting) before any solves problem k + 1, so a change of the shared machine's load affects
+all solvers alike and the ratios are measured side by side. The parent waits for each solve
 with a hard limit (3x the time limit, at least the limit + 5 s). A solver that hangs is killed
 and that solve recorded as a timeout; one that crashes (a segfault) is recorded as crashed; in
 both cases a new process carries on with the next problem. After two consecutive solves over the
@@ -58,6 +61,7 @@ from mpcform.solvers import (
     solver_info,
     solver_names,
 )
+from mpcform.tables import Column, markdown_table
 
 SETTINGS: dict[str, float | None] = {"default": None, "low": 1e-3, "mid": 1e-6, "high": 1e-9}
 """Accuracy settings: eps_abs given to the solver (None: the solver's defaults); eps_rel is 0."""
@@ -189,106 +193,123 @@ class _Runner:
         )
 
 
-def _worker(conn: Connection, tasks: list[Task]) -> None:
-    """Process entry point: import the solver's packages, say ready, then one result per task."""
+def _worker(conn: Connection) -> None:
+    """Process entry point: say ready, then answer each task sent (None ends)."""
     runner = _Runner()
-    try:
-        if tasks:
-            make_backend(tasks[0].solver, SolverOptions())  # import the packages before timing
-    except Exception as exc:  # noqa: BLE001 - reported by the first task
-        conn.send(("ready", str(exc)))
-    else:
-        conn.send(("ready", ""))
-    for task in tasks:
+    conn.send(("ready", ""))
+    while (task := conn.recv()) is not None:
         conn.send(("result", runner.run(task)))
     conn.close()
+
+
+class _Child:
+    """One solver's process, asked one task at a time."""
+
+    def __init__(self, ctx: Any, worker: Callable[[Connection], None], startup_s: float = 120.0) -> None:
+        self.conn, child_end = ctx.Pipe()
+        self.proc = ctx.Process(target=worker, args=(child_end,), daemon=True)
+        self.proc.start()
+        child_end.close()
+        if not self.conn.poll(startup_s):
+            self.close()
+            raise TimeoutError(f"the solver's process did not start within {startup_s:g} s")
+        self.conn.recv()
+
+    def ask(self, task: Task, hard_s: float) -> dict[str, Any] | str:
+        """The task's result, or why there is none (a timeout or a crash)."""
+        try:
+            self.conn.send(task)
+            if not self.conn.poll(hard_s):
+                return f"timeout (killed after {hard_s:g} s)"
+            return self.conn.recv()[1]
+        except (EOFError, OSError):
+            self.proc.join(1.0)
+            return f"crashed (exit code {self.proc.exitcode})"
+
+    def close(self) -> None:
+        if self.proc.is_alive():
+            try:
+                self.conn.send(None)
+            except OSError:
+                pass
+            self.proc.join(0.5)
+        if self.proc.is_alive():
+            self.proc.kill()
+        self.proc.join()
+        self.conn.close()
+
+
+def _slot(task: Task) -> tuple[int, int, int]:
+    modes, settings = list(MODES), list(SETTINGS)
+    return (
+        modes.index(task.mode) if task.mode in modes else 0,
+        settings.index(task.setting) if task.setting in settings else 0,
+        task.index,
+    )
 
 
 def run_isolated(
     tasks: Sequence[Task],
     progress: Callable[[dict[str, Any]], None] | None = None,
     grace_s: float = 5.0,
-    worker: Callable[[Connection, list[Task]], None] = _worker,
+    worker: Callable[[Connection], None] = _worker,
 ) -> list[dict[str, Any]]:
-    """Run ``tasks`` (of one solver) in child processes, in order, with a hard time limit per solve
-    (``max(3 time_limit, time_limit + grace_s)``; ``worker`` is the process's entry point).
+    """Run ``tasks`` in one child process per solver, side by side, with a hard time limit per solve.
 
-    A timeout or crash is recorded for the task it happened in and a fresh process continues with
-    the next one; after :data:`MAX_CONSECUTIVE_TIMEOUTS` solves in a row over the time limit
-    (killed, or answering late), the rest of that task's group is recorded as skipped. Returns
-    one result per task, in order.
+    Tasks are taken slot by slot (mode, setting, problem): every solver solves problem k before
+    any solves problem k + 1 (in a rotating order), so that a change of the machine's load
+    affects all of them alike; each solver's own tasks keep their order (warm sequences). The
+    hard limit is ``max(3 time_limit, time_limit + grace_s)``. A timeout or crash is recorded
+    for the task it happened in and the solver gets a fresh process for its next task; after
+    :data:`MAX_CONSECUTIVE_TIMEOUTS` solves in a row over the time limit (killed, or answering
+    late), the rest of that solver's group (mode, setting) is recorded as skipped. Returns one
+    result per task, in order; ``worker`` is the processes' entry point.
     """
     ctx = mp.get_context("spawn")
+    slots: dict[tuple[int, int, int], list[int]] = {}
+    for i, task in enumerate(tasks):
+        slots.setdefault(_slot(task), []).append(i)
     results: dict[int, dict[str, Any]] = {}
-    pending = list(enumerate(tasks))
-    timeouts: Counter[tuple[str, str, str]] = Counter()
+    late: Counter[tuple[str, str, str]] = Counter()
     abandoned: set[tuple[str, str, str]] = set()
+    children: dict[str, _Child] = {}
     env_before = {k: os.environ.get(k) for k in BENCH_ENV}
     os.environ.update(BENCH_ENV)
     try:
-        while pending:
-            pending = [(i, t) for i, t in pending if not _skip(i, t, abandoned, results)]
-            if not pending:
-                break
-            receiver, sender = ctx.Pipe(duplex=False)
-            proc = ctx.Process(target=worker, args=(sender, [t for _, t in pending]), daemon=True)
-            proc.start()
-            sender.close()
-            try:
-                if not receiver.poll(120.0):
-                    raise TimeoutError("the solver's process did not start")
-                receiver.recv()
-                while pending:
-                    i, task = pending[0]
-                    if task.group in abandoned:
-                        break
-                    hard = max(3.0 * task.time_limit_s, task.time_limit_s + grace_s)
-                    if not receiver.poll(hard):
-                        results[i] = _failure(task, f"timeout (killed after {hard:g} s)", hard)
-                        pending.pop(0)
-                        timeouts[task.group] += 1
-                        if timeouts[task.group] >= MAX_CONSECUTIVE_TIMEOUTS:
-                            abandoned.add(task.group)
-                        break
-                    _, res = receiver.recv()
-                    results[i] = res
-                    pending.pop(0)
-                    if res["runtime_s"] > task.time_limit_s:  # finished, but too late: a slow solver
-                        timeouts[task.group] += 1
-                        if timeouts[task.group] >= MAX_CONSECUTIVE_TIMEOUTS:
-                            abandoned.add(task.group)
-                    else:
-                        timeouts[task.group] = 0
-                    if progress is not None:
-                        progress(res)
-            except (EOFError, OSError, TimeoutError) as exc:
-                proc.join(1.0)
-                i, task = pending.pop(0)
-                why = f"crashed (exit code {proc.exitcode})" if isinstance(exc, EOFError) else str(exc)
-                results[i] = _failure(task, why, 0.0)
-            finally:
-                if proc.is_alive():
-                    proc.kill()
-                proc.join()
-                receiver.close()
+        for n, key in enumerate(sorted(slots)):
+            ids = slots[key]
+            for i in ids[n % len(ids) :] + ids[: n % len(ids)]:
+                task = tasks[i]
+                if task.group in abandoned:
+                    why = f"skipped after {MAX_CONSECUTIVE_TIMEOUTS} solves over the time limit"
+                    results[i] = _failure(task, why, 0.0)
+                    continue
+                hard = max(3.0 * task.time_limit_s, task.time_limit_s + grace_s)
+                try:
+                    child = children.get(task.solver) or children.setdefault(task.solver, _Child(ctx, worker))
+                    out = child.ask(task, hard)
+                except TimeoutError as exc:
+                    out = str(exc)
+                if isinstance(out, str):  # no answer: a fresh process for this solver's next task
+                    results[i] = _failure(task, out, hard if out.startswith("timeout") else 0.0)
+                    if task.solver in children:
+                        children.pop(task.solver).close()
+                else:
+                    results[i] = out
+                late[task.group] = late[task.group] + 1 if results[i]["runtime_s"] > task.time_limit_s else 0
+                if late[task.group] >= MAX_CONSECUTIVE_TIMEOUTS:
+                    abandoned.add(task.group)
+                if progress is not None:
+                    progress(results[i])
     finally:
+        for child in children.values():
+            child.close()
         for k, v in env_before.items():
             if v is None:
                 os.environ.pop(k, None)
             else:
                 os.environ[k] = v
     return [results[i] for i in range(len(tasks))]
-
-
-def _skip(
-    i: int, task: Task, abandoned: set[tuple[str, str, str]], results: dict[int, dict[str, Any]]
-) -> bool:
-    if task.group in abandoned:
-        results[i] = _failure(
-            task, f"skipped after {MAX_CONSECUTIVE_TIMEOUTS} solves over the time limit", 0.0
-        )
-        return True
-    return False
 
 
 # ---- the problem benchmark ------------------------------------------------------------------
@@ -416,7 +437,7 @@ def run_solver_benchmark(
         Task(i, p, REFERENCE_SOLVER, "high", "cold", True, REFERENCE_EPS, 60.0) for i, p in enumerate(paths)
     ]
     references = [r["objective"] if r["found"] else None for r in run_isolated(ref_tasks)]
-    results: list[dict[str, Any]] = []
+    tasks: list[Task] = []
     not_run: list[dict[str, Any]] = []
     for name in names:
         info = solver_info(name)
@@ -432,8 +453,9 @@ def run_solver_benchmark(
             )
             continue
         solver_modes = [m for m in modes if m == "cold" or info.warm_start or info.persistent]
-        say(f"{name}: {len(paths)} problems x {len(settings)} settings x {len(solver_modes)} modes")
-        results += run_isolated(benchmark_tasks(paths, name, settings, solver_modes, time_limit_s))
+        tasks += benchmark_tasks(paths, name, settings, solver_modes, time_limit_s)
+    say(f"{len(tasks)} solves by {len(names) - len(not_run)} solvers, side by side")
+    results = run_isolated(tasks)
     exact_results: list[dict[str, Any]] = []
     if exact and solver_info(EXACT_SOLVER).usable:
         say(f"exact reference: {EXACT_SOLVER}")
@@ -458,16 +480,43 @@ def run_solver_benchmark(
 
 
 # ---- report ---------------------------------------------------------------------------------
-def _md_table(header: Sequence[str], rows: Sequence[Sequence[str]], left: int = 1) -> list[str]:
-    """A markdown table: the first ``left`` columns left-aligned, the others right-aligned."""
-    align = ["---" if i < left else "---:" for i in range(len(header))]
-    return ["| " + " | ".join(line) + " |" for line in (header, align, *rows)]
+SUMMARY_COLUMNS: list[Column] = [
+    ("solver", "solver", "{}"),
+    ("success_rate", "success [%]", "{:.0f}"),
+    ("shgeom_runtime_ms", "shgeom [ms]", "{:.3g}"),
+    ("shgeom_ratio", "ratio", "{:.1f}"),
+    ("median_runtime_ms", "median [ms]", "{:.3g}"),
+    ("p90_runtime_ms", "p90 [ms]", "{:.3g}"),
+    ("primal_residual_max", "max primal residual", "{:.1e}"),
+    ("objective_gap_max", "max objective gap", "{:.1e}"),
+    ("failures", "failures", "{}"),
+]
+EXACT_COLUMNS: list[Column] = [
+    ("scenario", "scenario", "{}"),
+    ("solved", "solved", "{}"),
+    ("median_ms", "median [ms]", "{:.3g}"),
+    ("residual", "exact residual (max)", "{:.1e}"),
+    ("gap_median", "gap median", "{:.2e}"),
+    ("gap_min", "gap min", "{:.2e}"),
+]
+CLOSED_LOOP_COLUMNS: list[Column] = [
+    ("scenario", "scenario", "{}"),
+    ("solver", "solver", "{}"),
+    ("final_tracking_error_m", "final error [m]", "{:.2e}"),
+    ("max_tracking_error_m", "max error [m]", "{:.3f}"),
+    ("min_separation_m", "min separation [m]", "{:.4f}"),
+    ("separation_violations", "violations", "{}"),
+    ("max_slack_m", "max slack [m]", "{:.1e}"),
+    ("qp_solves", "QP steps", "{}"),
+    ("fallbacks", "fallbacks", "{}"),
+    ("qp_step_median_ms", "QP step median [ms]", "{:.3g}"),
+    ("qp_step_p90_ms", "p90 [ms]", "{:.3g}"),
+    ("wall_s", "wall [s]", "{:.1f}"),
+]
 
 
-def _fmt(value: float | None, spec: str = ".3g") -> str:
-    if value is None or (isinstance(value, float) and math.isnan(value)):
-        return "-"
-    return format(value, spec)
+def _failures(counts: dict[str, int]) -> str:
+    return "; ".join(f"{k} ({v})" for k, v in counts.items())[:90] or "-"
 
 
 def _versions() -> str:
@@ -524,21 +573,11 @@ def markdown_report(bench: SolverBenchmark) -> str:
         "planner runs it (set up once, then updated; warm-started from the planner's x0 where the backend "
         "uses one), only for backends that are persistent or warm-start.",
         f"- Machine: {platform.processor() or platform.machine()}, {os.cpu_count()} CPUs, Python "
-        f"{platform.python_version()}, OPENBLAS_NUM_THREADS=1, one solver process at a time; {_versions()}.",
+        f"{platform.python_version()}, OPENBLAS_NUM_THREADS=1; solvers interleaved problem by problem, one "
+        f"solve at a time; {_versions()}.",
         f"- Wall time of the benchmark: {bench.wall_s:.0f} s; load average (1 min) {bench.load[0]:.1f} at "
         f"the start, {bench.load[1]:.1f} at the end (the machine is shared: compare ratios within one run).",
         "",
-    ]
-    head = [
-        "solver",
-        "success [%]",
-        "shgeom [ms]",
-        "ratio",
-        "median [ms]",
-        "p90 [ms]",
-        "max primal residual",
-        "max objective gap",
-        "failures",
     ]
     for mode in bench.modes:
         out += [f"## {'Cold start' if mode == 'cold' else 'Warm-start replay'}", ""]
@@ -547,29 +586,14 @@ def markdown_report(bench: SolverBenchmark) -> str:
             if not rows:
                 continue
             rows.sort(key=lambda r: (-r["success_rate"], r["shgeom_runtime_ms"]))
-            table = [
-                [
-                    r["solver"],
-                    f"{r['success_rate']:.0f}",
-                    _fmt(r["shgeom_runtime_ms"]),
-                    _fmt(r["shgeom_ratio"], ".1f"),
-                    _fmt(r["median_runtime_ms"]),
-                    _fmt(r["p90_runtime_ms"]),
-                    _fmt(r["primal_residual_max"], ".1e"),
-                    _fmt(r["objective_gap_max"], ".1e"),
-                    "; ".join(f"{k} ({v})" for k, v in r["failures"].items())[:90],
-                ]
-                for r in rows
-            ]
-            out += [f"### {setting} (tol {TOLERANCES[setting]:g})", "", *_md_table(head, table), ""]
+            table = markdown_table(rows, SUMMARY_COLUMNS, {"failures": _failures})
+            out += [f"### {setting} (tol {TOLERANCES[setting]:g})", "", table, ""]
     if bench.exact:
         out += _exact_section(bench)
     if bench.not_run:
-        out += ["## Not run", "", "| solver | installed | why |", "|---|---|---|"]
-        out += [
-            f"| {r['solver']} | {'yes' if r['installed'] else 'no'} | {r['note']} |" for r in bench.not_run
-        ]
-        out.append("")
+        rows = [{**r, "installed": "yes" if r["installed"] else "no"} for r in bench.not_run]
+        columns = [("solver", "solver", "{}"), ("installed", "installed", "{}"), ("note", "why", "{}")]
+        out += ["## Not run", "", markdown_table(rows, columns), ""]
     return "\n".join(out)
 
 
@@ -588,22 +612,20 @@ def _exact_section(bench: SolverBenchmark) -> list[str]:
     ]
     table = []
     for name, items in by.items():
-        solved = [(qp, r, ref) for qp, r, ref in items if r["found"]]
-        gaps = [_gap(r["objective"], ref) for _, r, ref in solved if ref is not None]
-        ms = [1e3 * r["runtime_s"] for _, r, _ in solved]
-        residual = max((r["primal_residual"] for _, r, _ in solved), default=None)
+        solved = [(r, ref) for _, r, ref in items if r["found"]]
+        gaps = [_gap(r["objective"], ref) for r, ref in solved if ref is not None]
+        ms = [1e3 * r["runtime_s"] for r, _ in solved]
         table.append(
-            [
-                name,
-                f"{len(solved)}/{len(items)}",
-                _fmt(float(np.median(ms)) if ms else None),
-                _fmt(residual, ".1e"),
-                _fmt(float(np.median(gaps)) if gaps else None, ".2e"),
-                _fmt(min(gaps, default=None), ".2e"),
-            ]
+            {
+                "scenario": name,
+                "solved": f"{len(solved)}/{len(items)}",
+                "median_ms": float(np.median(ms)) if ms else None,
+                "residual": max((r["primal_residual"] for r, _ in solved), default=None),
+                "gap_median": float(np.median(gaps)) if gaps else None,
+                "gap_min": min(gaps, default=None),
+            }
         )
-    head = ["scenario", "solved", "median [ms]", "exact residual (max)", "gap median", "gap min"]
-    out += _md_table(head, table)
+    out.append(markdown_table(table, EXACT_COLUMNS))
     out.append("")
     return out
 
@@ -702,6 +724,10 @@ def _closed_loop_row(scenario: str, solver: str, out: dict[str, Any]) -> dict[st
     }
 
 
+def _error_cell(value: Any) -> str:
+    return value if isinstance(value, str) else "-" if value is None else f"{value:.2e}"
+
+
 def closed_loop_markdown(rows: Sequence[dict[str, Any]]) -> str:
     """The markdown table of a closed-loop benchmark."""
     out = [
@@ -712,40 +738,6 @@ def closed_loop_markdown(rows: Sequence[dict[str, Any]]) -> str:
         "along the straight segments [m]; QP-step times exclude fast-path steps.",
         "",
     ]
-    head = [
-        "scenario",
-        "solver",
-        "final error [m]",
-        "max error [m]",
-        "min separation [m]",
-        "violations",
-        "max slack [m]",
-        "QP steps",
-        "fallbacks",
-        "QP step median [ms]",
-        "p90 [ms]",
-        "wall [s]",
-    ]
-    table = []
-    for r in rows:
-        if not r["ok"]:
-            table.append([r["scenario"], r["solver"], f"failed: {r['status'][:100]}"] + [""] * 9)
-            continue
-        table.append(
-            [
-                r["scenario"],
-                r["solver"],
-                _fmt(r["final_tracking_error_m"], ".2e"),
-                _fmt(r["max_tracking_error_m"], ".3f"),
-                _fmt(r["min_separation_m"], ".4f"),
-                str(r["separation_violations"]),
-                _fmt(r["max_slack_m"], ".1e"),
-                str(r["qp_solves"]),
-                str(r["fallbacks"]),
-                _fmt(r["qp_step_median_ms"]),
-                _fmt(r["qp_step_p90_ms"]),
-                f"{r['wall_s']:.1f}",
-            ]
-        )
-    out += _md_table(head, table, left=2)
+    table = [r if r["ok"] else {**r, "final_tracking_error_m": f"failed: {r['status'][:100]}"} for r in rows]
+    out.append(markdown_table(table, CLOSED_LOOP_COLUMNS, {"final_tracking_error_m": _error_cell}))
     return "\n".join(out) + "\n"

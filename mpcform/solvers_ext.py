@@ -370,7 +370,7 @@ class CasadiConicBackend(_StoredQP):
         except (RuntimeError, SolverError) as exc:
             return failed(f"error: {' '.join(str(exc).split())[:300]}", time.perf_counter() - start)
         elapsed = time.perf_counter() - start
-        iters = int(stats.get("iter_count", 0) or 0)
+        iters = max(0, int(stats.get("iter_count", 0) or 0))
         status = str(stats.get("return_status", "unknown"))
         if not stats.get("success", False) or not np.all(np.isfinite(x)):
             return failed(status, elapsed, iters)
@@ -454,7 +454,7 @@ class CasadiIpoptBackend(_StoredQP):
         except RuntimeError as exc:
             return failed(f"error: {' '.join(str(exc).split())[:300]}", time.perf_counter() - start)
         elapsed = time.perf_counter() - start
-        iters = int(stats.get("iter_count", 0) or 0)
+        iters = max(0, int(stats.get("iter_count", 0) or 0))
         status = str(stats.get("return_status", "unknown"))
         if not stats.get("success", False) or not np.all(np.isfinite(x)):
             return failed(status, elapsed, iters)

@@ -80,10 +80,10 @@ def _send(conn: Connection, task: Task) -> None:
     )
 
 
-def _flaky_worker(conn: Connection, tasks: list[Task]) -> None:
+def _flaky_worker(conn: Connection) -> None:
     """Hangs on problem 1, crashes on problem 2, answers the others."""
     conn.send(("ready", ""))
-    for task in tasks:
+    while (task := conn.recv()) is not None:
         if task.index == 1:
             time.sleep(60)
         if task.index == 2:
@@ -91,10 +91,10 @@ def _flaky_worker(conn: Connection, tasks: list[Task]) -> None:
         _send(conn, task)
 
 
-def _stuck_worker(conn: Connection, tasks: list[Task]) -> None:
+def _stuck_worker(conn: Connection) -> None:
     """Hangs on every problem but the first."""
     conn.send(("ready", ""))
-    for task in tasks:
+    while (task := conn.recv()) is not None:
         if task.index > 0:
             time.sleep(60)
         _send(conn, task)
@@ -115,6 +115,37 @@ def test_repeated_timeouts_skip_the_rest_of_the_group() -> None:
     results = run_isolated(_tasks(5), grace_s=0.5, worker=_stuck_worker)
     assert [r["found"] for r in results] == [True, False, False, False, False]
     assert [r["status"].split()[0] for r in results[1:]] == ["timeout", "timeout", "skipped", "skipped"]
+
+
+def _order_worker(conn: Connection) -> None:
+    """Answers at once, with the time it was asked (to check the interleaving)."""
+    conn.send(("ready", ""))
+    while (task := conn.recv()) is not None:
+        conn.send(
+            (
+                "result",
+                {
+                    "index": task.index,
+                    "solver": task.solver,
+                    "setting": task.setting,
+                    "mode": task.mode,
+                    "found": True,
+                    "status": "ok",
+                    "runtime_s": 1e-3,
+                    "objective": 0.0,
+                    "primal_residual": 0.0,
+                    "at": time.perf_counter(),
+                },
+            )
+        )
+
+
+def test_solvers_run_side_by_side_problem_by_problem() -> None:
+    tasks = _tasks(3, "a") + _tasks(3, "b")
+    results = run_isolated(tasks, worker=_order_worker)
+    order = sorted(results, key=lambda r: r["at"])
+    assert [r["index"] for r in order] == [0, 0, 1, 1, 2, 2]  # both solvers solve k before k + 1
+    assert [r["solver"] for r in results] == ["a"] * 3 + ["b"] * 3  # results in the tasks' order
 
 
 def test_a_missing_solver_is_a_failure_not_an_exception() -> None:
