@@ -669,12 +669,16 @@ def run_closed_loop(
     progress: Callable[[str], None] | None = None,
 ) -> list[dict[str, Any]]:
     """Each solver drives each scenario (controller ``mpc``) in its own process; one record per run."""
-    names = [n for n in (default_solvers() if solvers is None else solvers) if solver_info(n).usable]
+    infos = [solver_info(n) for n in (default_solvers() if solvers is None else solvers)]  # unknown: raises
     ctx = mp.get_context("spawn")
     rows = []
     os.environ.update(BENCH_ENV)
     for scenario in scenarios:
-        for name in names:
+        for info in infos:
+            name = info.name
+            if not info.usable:  # missing or unsupported: reported, not run
+                rows.append(_closed_loop_row(Path(scenario).stem, name, {"ok": False, "status": info.note}))
+                continue
             if progress is not None:
                 progress(f"{Path(scenario).stem}: {name}")
             receiver, sender = ctx.Pipe(duplex=False)

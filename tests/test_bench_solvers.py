@@ -215,6 +215,7 @@ def test_bench_closed_loop_cli(tmp_path: Path, capsys: pytest.CaptureFixture[str
         "--solvers",
         "piqp",
         "osqp",
+        "qpsolvers:quadprog",
         "--duration",
         "0.5",
         "--json",
@@ -223,5 +224,6 @@ def test_bench_closed_loop_cli(tmp_path: Path, capsys: pytest.CaptureFixture[str
     assert main(argv) == 0
     assert "| swap_planar_8 | piqp |" in capsys.readouterr().out
     rows = json.loads(json_path.read_text())
-    assert [r["solver"] for r in rows] == ["piqp", "osqp"]
-    assert all(r["ok"] and r["steps"] == 5 and r["separation_violations"] == 0 for r in rows)
+    assert [r["solver"] for r in rows] == ["piqp", "osqp", "qpsolvers:quadprog"]
+    assert all(r["ok"] and r["steps"] == 5 and r["separation_violations"] == 0 for r in rows[:2])
+    assert not rows[2]["ok"] and "positive-definite" in rows[2]["status"]  # reported, not run
