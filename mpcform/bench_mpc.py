@@ -39,7 +39,10 @@ from mpcform.template import Template
 
 @dataclass
 class RecordingBackend(QPBackend):
-    """Delegates to ``inner`` and keeps a copy of every problem it is asked to solve."""
+    """Delegates to ``inner`` and keeps a copy of every problem it is asked to solve.
+
+    Lighter than :class:`mpcform.problems.RecordingBackend` on purpose: it asks the planner for no
+    warm start and no context, so the timed steps are the planner's own work."""
 
     inner: QPBackend
     problems: list[dict[str, Any]] = field(default_factory=list)

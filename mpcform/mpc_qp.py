@@ -74,13 +74,11 @@ def velocity_set(dim: int, settings: MPCSettings, v_max_mps: float) -> tuple[Arr
 
 @dataclass(frozen=True)
 class Layout:
-    """Sizes and offsets of the QP's variables and rows."""
+    """Sizes of the QP's variable blocks: inputs and positions (H n d each), slacks (H n)."""
 
     n: int
     dim: int
     horizon: int
-    n_pairs: int
-    n_singles: int
 
     @property
     def nud(self) -> int:
@@ -94,9 +92,6 @@ class Layout:
     def n_var(self) -> int:
         return 2 * self.nud + self.n_slack
 
-    @property
-    def rows_per_item(self) -> int:
-        return 2 * self.horizon - 1
 
 
 class MPCQP:
@@ -117,7 +112,7 @@ class MPCQP:
         singles: Array,
     ) -> None:
         h = settings.horizon
-        self.layout = lay = Layout(n, dim, h, int(pairs.shape[0]), int(singles.shape[0]))
+        self.layout = lay = Layout(n, dim, h)
         self.dt_s, self.limits, self.settings = dt_s, limits, settings
         k = settings.gain_per_s
         nud = lay.nud
@@ -153,12 +148,12 @@ class MPCQP:
         # velocity set
         vmax = limits.v_max_mps
         if vmax is not None:
-            normals, self.vel_h = velocity_set(dim, settings, vmax)
+            normals, vel_h = velocity_set(dim, settings, vmax)
             m = normals.shape[0]
             rr = np.arange(h * n * m).reshape(h, n, m, 1).repeat(dim, axis=3)
             cc = np.broadcast_to(u_col[:, :, None, :], (h, n, m, dim))
             vv = np.broadcast_to(normals, (h, n, m, dim))
-            add(rr, cc, vv, np.full(h * n * m, -INF), np.full(h * n * m, self.vel_h))
+            add(rr, cc, vv, np.full(h * n * m, -INF), np.full(h * n * m, vel_h))
         # acceleration: |u_j - u_{j-1}| <= a_max dt (u_{-1} is the last applied command)
         self.acc_rows: slice | None = None
         if limits.a_max_mps2 is not None:
