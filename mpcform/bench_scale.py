@@ -14,8 +14,9 @@ grows with n), horizon 10, ``dt = 0.1 s``, ``v_max = 1 m/s``, ``d_min = 0.5 m``:
   run starts with the fronts one spacing apart, so the measured steps are inside the crossing.
 
 Each case runs a fixed number of closed-loop steps with exact execution; only
-:meth:`MPCPlanner.step` is timed. Modes: ``decoupled`` (``coupling="decoupled"``, grouping),
-``joint`` (joint rows, conflict grouping) and ``monolithic`` (``grouping=False``,
+:meth:`MPCPlanner.step` is timed. Modes: ``decoupled`` (``coupling="decoupled"``, grouping,
+each conflicted drone's QP solved by DAQP), ``decoupled-sparse`` (the same as one sparse QP with
+the ``--solver``), ``joint`` (joint rows, conflict grouping) and ``monolithic`` (``grouping=False``,
 ``coupling="joint"``: the one joint QP over every drone whenever a solve is needed). The
 monolithic cases run under a wall-clock budget: a case over budget stops early (its row says
 so) and larger n of that scenario are skipped.
@@ -58,7 +59,8 @@ from mpcform.state import FormationState
 from mpcform.template import Template
 
 SCENARIOS = ("formation", "crossing")
-MODES = ("decoupled", "joint", "monolithic")
+MODES = ("decoupled", "decoupled-sparse", "joint", "monolithic")
+PLANNER_MODES = MODES[:-1]  # the grouped modes (--coupling)
 DEFAULT_N = (10, 30, 100, 300, 1000)
 SPACING_M = 1.5  # lattice spacing of every formation [m] (constant density)
 LIMITS = Limits(v_max_mps=1.0, d_min_m=0.5)
@@ -155,7 +157,8 @@ def mode_settings(mode: str, horizon: int) -> MPCSettings:
         return MPCSettings(horizon=horizon, coupling="joint", grouping=False)
     if mode not in MODES:
         raise ValueError(f"unknown mode {mode!r}, expected one of {MODES}")
-    return MPCSettings(horizon=horizon, coupling=mode, grouping=True)
+    coupling, _, solve = mode.partition("-")
+    return MPCSettings(horizon=horizon, coupling=coupling, grouping=True, per_drone=solve != "sparse")
 
 
 def _maxrss_mib() -> float:
@@ -210,13 +213,15 @@ def bench_case(
     ref, p0 = make_case(scenario, n)
     settings = mode_settings(mode, horizon)
     rss_before = _maxrss_mib()
-    run = _closed_loop(MPCPlanner(ref, DT_S, LIMITS, settings, solver=solver), p0, steps, budget_s)
+    planner = MPCPlanner(ref, DT_S, LIMITS, settings, solver=solver)
+    run = _closed_loop(planner, p0, steps, budget_s)
     rss_after = _maxrss_mib()
     times = run["times"]
     qp_ms = times["qp"] + times["fallback"]
     all_ms = qp_ms + times["fast_path"]
     row: dict[str, Any] = {
-        "table": "cases", "scenario": scenario, "n": n, "mode": mode, "solver": solver, "horizon": horizon,
+        "table": "cases", "scenario": scenario, "n": n, "mode": mode, "solver": planner.solver_name,
+        "horizon": horizon,
         "steps": steps,
         "steps_run": run["steps_run"], "qp_steps": len(qp_ms), "fast_path_steps": len(times["fast_path"]),
         "fallback_steps": len(times["fallback"]),

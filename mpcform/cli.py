@@ -15,7 +15,6 @@ from typing import NoReturn
 
 from mpcform import cli_runner
 from mpcform.errors import MPCFormError
-from mpcform.mpc_settings import COUPLINGS
 from mpcform.output import OUTPUT_FILES, format_summary
 from mpcform.scenario import (
     key_reference_markdown,
@@ -92,7 +91,8 @@ def _add_bench(sub: argparse._SubParsersAction) -> None:
     mpc.add_argument("--spatial-n", type=int, nargs="*", default=[20], help="spatial swap sizes")
     mpc.add_argument("--steps", type=int, default=60, help="closed-loop steps per swap (dt 0.1 s)")
     mpc.add_argument("--solver", default=DEFAULT_SOLVER, choices=sorted(BACKENDS), help="QP backend")
-    mpc.add_argument("--coupling", default="joint", choices=COUPLINGS)
+    mpc.add_argument("--coupling", default="joint", choices=("joint", "decoupled", "decoupled-sparse"),
+                     help="planner mode (decoupled-sparse: one sparse QP, not per-drone DAQP QPs)")
     mpc.add_argument("--cvxpy-max-n", type=int, default=16, help="largest n also run through cvxpy")
     mpc.add_argument("--json", metavar="PATH", help="also write the rows as a JSON list of records")
     _add_bench_solvers(kinds)
@@ -188,14 +188,15 @@ def _bench_scale(args: argparse.Namespace) -> int:
 
 
 def _add_bench_scale(kinds: argparse._SubParsersAction) -> None:
-    from mpcform.bench_scale import DEFAULT_N, SCENARIOS
+    from mpcform.bench_scale import DEFAULT_N, PLANNER_MODES, SCENARIOS
 
     scale = kinds.add_parser("scale", help="step time and peak memory, 10 to 1000 drones (growth exponent)")
     scale.set_defaults(func=_bench_scale)
     scale.add_argument("--n", type=int, nargs="+", default=list(DEFAULT_N), help="swarm sizes")
     scale.add_argument("--steps", type=int, default=30, help="closed-loop steps per case (dt 0.1 s)")
     scale.add_argument("--scenario", nargs="+", choices=SCENARIOS, default=list(SCENARIOS))
-    scale.add_argument("--coupling", default="decoupled", choices=COUPLINGS, help="planner mode (grouped)")
+    scale.add_argument("--coupling", default="decoupled", choices=PLANNER_MODES,
+                       help="planner mode, grouped (decoupled-sparse: one sparse QP, not per-drone DAQP)")
     scale.add_argument("--solver", default=DEFAULT_SOLVER, choices=sorted(BACKENDS), help="QP backend")
     scale.add_argument("--horizon", type=int, default=10, help="planner horizon [steps]")
     scale.add_argument("--budget", type=float, default=60.0, metavar="S",

@@ -35,6 +35,8 @@ class MPCSettings:
       ``"decoupled"`` (each pair row split into two per-drone rows about the guess's midpoint,
       ``c^T (p_i - m) >= d_min / 2``: slightly more conservative, but the QP is block-diagonal
       per drone, so it scales to large swarms; the same continuous-time guarantee holds).
+    - ``per_drone`` (decoupled only): solve each drone's block as a small dense QP with DAQP
+      (:mod:`mpcform.per_drone`) instead of one sparse block-diagonal QP with the ``solver``.
     - ``grouping``: solve only the groups of drones (connected by pair rows within reach) that
       hold a conflict; the other groups' optimum is their eq. 14 rollout (needs ``fast_path``).
       Equal to the monolithic QP up to solver tolerance.
@@ -52,6 +54,7 @@ class MPCSettings:
     margin_m: float = 2e-3
     tie_break_rad: float = 0.5
     coupling: str = "joint"
+    per_drone: bool = True
     grouping: bool = True
     fast_path: bool = True
     eps_abs: float = 1e-4

@@ -25,11 +25,13 @@ from mpcform.laws import check_gain_dt, saturate
 from mpcform.limits import Limits, SphereObstacle
 from mpcform.mpc_qp import MPCQP, row_ends, row_segments, velocity_set
 from mpcform.mpc_settings import MPCSettings
+from mpcform.per_drone import PerDroneQP
 from mpcform.reference import Reference
 from mpcform.solvers import DEFAULT_SOLVER, QPBackend, QPContext, QPSolution, SolverOptions, make_backend
 
 CERTIFY_TOL_M = 1e-7  # separation certification tolerance [m]
 SLACK_REPORT_M = 1e-6  # slack above this is reported
+PER_DRONE_SOLVER = "daqp (per drone)"  # solver_name in decoupled mode with per_drone
 
 
 @dataclass(frozen=True)
@@ -120,6 +122,10 @@ class MPCPlanner(Controller):
         options = SolverOptions(settings.eps_abs, settings.eps_rel, settings.max_iter, settings.time_limit_s)
         self._backend = solver if isinstance(solver, QPBackend) else make_backend(solver, options)
         self.solver_name = self._backend.name
+        self._per_drone: PerDroneQP | None = None
+        if settings.coupling == "decoupled" and settings.per_drone:
+            self._per_drone = PerDroneQP(self.dim, dt_s, limits, settings)
+            self.solver_name = PER_DRONE_SOLVER
         metric = np.ones(self.dim)
         if limits.downwash_kappa is not None:
             metric[2] = 1.0 / limits.downwash_kappa
@@ -137,6 +143,7 @@ class MPCPlanner(Controller):
 
     # ---- state ----------------------------------------------------------------------------
     def reset(self, t_s: float, positions_m: Array) -> None:
+        self._fresh = True  # no candidate set chosen yet
         self._qp: MPCQP | None = None
         self._qp_key = b""
         self._backend_qp: MPCQP | None = None
@@ -177,23 +184,21 @@ class MPCPlanner(Controller):
         drones = self._qp_drones(bad, rows) if st.fast_path and st.grouping else np.arange(self.n)
         grouped = st.fast_path and st.grouping
         sub = _subset_rows(rows, drones, self.n, on_only=grouped)  # grouped: the pattern follows the groups
-        qp = self._sub_qp(drones, sub, cand.rebuilt)
-        sol = self._solve(qp, drones, p0, c, sub, u_nom, x_nom)
-        lay = qp.layout
+        sol, active = self._solve(drones, p0, c, sub, cand.rebuilt, u_nom, x_nom)
+        nud = horizon * drones.shape[0] * self.dim
         status = sol.status
         if sol.success and sol.x is not None:
             u, x = u_nom.copy(), x_nom.copy()
-            u[:, drones] = sol.x[: lay.nud].reshape(horizon, drones.shape[0], self.dim)
-            x[:, drones] = sol.x[lay.nud : 2 * lay.nud].reshape(horizon, drones.shape[0], self.dim)
+            u[:, drones] = sol.x[:nud].reshape(horizon, drones.shape[0], self.dim)
+            x[:, drones] = sol.x[nud : 2 * nud].reshape(horizon, drones.shape[0], self.dim)
             u0 = saturate(u[0], self.limits.v_max_mps)
             if self._certified(p0, u0, cand):
                 self._accept(p0, u, x)
-                slack = sol.x[2 * lay.nud :]
+                slack = sol.x[2 * nud :]
                 shortfall, slack_items = 0.0, tuple[tuple[int, int], ...]()
                 if slack.max(initial=0.0) > SLACK_REPORT_M / 2:
                     shortfall, missed = self._row_shortfall(x, rows, SLACK_REPORT_M)
                     slack_items = tuple((int(a), int(b)) for a, b in missed)
-                active = int(np.count_nonzero(np.abs(sol.y[lay.nud :]) > 1e-6)) if sol.y is not None else 0
                 return ControlStep(u0, StepInfo(
                     "qp", status=status, iterations=sol.iterations, solve_time_s=sol.solve_time_s,
                     active_rows=active, max_slack_m=max(shortfall, 0.0), slack_pairs=slack_items,
@@ -245,7 +250,7 @@ class MPCPlanner(Controller):
         """
         lim, st = self.limits, self.settings
         travel = (lim.v_max_mps or 0.0) * st.horizon * self.dt_s
-        rebuilt = self._qp is None
+        rebuilt, self._fresh = self._fresh, False
         pair_on: Array | None = np.zeros(self._pairs.shape[0], dtype=bool)
         if lim.d_min_m is not None:
             reach = lim.d_min_m * (lim.downwash_kappa or 1.0) + st.margin_m + 2.0 * travel
@@ -385,9 +390,17 @@ class MPCPlanner(Controller):
         return worst, np.unique(np.concatenate(missed), axis=0)
 
     def _solve(
-        self, qp: MPCQP, drones: Array, p0: Array, c: Array, rows: _Rows, u_nom: Array, x_nom: Array
-    ) -> QPSolution:
-        """Set up (new pattern) or update the backend with the QP over ``drones`` and solve it."""
+        self, drones: Array, p0: Array, c: Array, rows: _Rows, rebuilt: bool, u_nom: Array, x_nom: Array
+    ) -> tuple[QPSolution, int]:
+        """Solve the QP over ``drones``: per drone (decoupled with ``per_drone``), or set up (new
+        pattern) or update the backend with the sparse QP. Also returns the number of active rows."""
+        if self._per_drone is not None:
+            on = rows.single_on
+            return self._per_drone.solve(
+                p0[drones], c[:, drones], self._u_prev[drones], rows.singles[on], rows.single_coeffs[on],
+                rows.single_lower[on], self._warm(p0, u_nom, x_nom)[0][:, drones]
+            )  # fmt: skip
+        qp = self._sub_qp(drones, rows, rebuilt)
         q = qp.cost_vector(c[:, drones])
         lower = np.concatenate([rows.pair_lower, rows.single_lower])
         on = np.concatenate([rows.pair_on, rows.single_on])
@@ -402,10 +415,13 @@ class MPCPlanner(Controller):
             self._backend.update(q, lo, hi, a_data)
         if self._backend.needs_context:
             self._backend.set_context(self._context(qp, drones, p0, rows))
-        warm = self._warm(p0, u_nom, x_nom)[:, :, drones] if self._backend.warm_starts else None
-        return self._backend.solve(
-            None if warm is None else np.concatenate([warm.ravel(), np.zeros(qp.layout.n_slack)])
-        )
+        x0 = None
+        if self._backend.warm_starts:
+            warm = self._warm(p0, u_nom, x_nom)[:, :, drones]
+            x0 = np.concatenate([warm.ravel(), np.zeros(qp.layout.n_slack)])
+        sol = self._backend.solve(x0)
+        active = 0 if sol.y is None else int(np.count_nonzero(np.abs(sol.y[qp.layout.nud :]) > 1e-6))
+        return sol, active
 
     def _context(self, qp: MPCQP, drones: Array, p0: Array, rows: _Rows) -> QPContext:
         """What the QP over ``drones`` means, numbered locally (for ``casadi:ipopt``'s exact

@@ -278,6 +278,8 @@ SCHEMA: tuple[Table, ...] = (
                  "so symmetric swaps circulate (0: off).", "rad", bound=">= 0"),
         _mpc_key("coupling", "string", "`joint` pair rows, or `decoupled` per-drone rows about "
                  "the pair midpoint (block-diagonal QP, for large swarms).", choices=COUPLINGS),
+        _mpc_key("per_drone", "bool", "With `decoupled`: solve each conflicted drone's QP with DAQP "
+                 "(small dense QPs, the fast way) instead of one sparse QP with `solver`."),
         _mpc_key("grouping", "bool", "Solve only the groups of drones that hold a conflict; the others "
                  "take their eq. 14 rollout (exact)."),
         _mpc_key("fast_path", "bool", "Skip the solver when the eq. 14 rollout meets every row."),
@@ -891,7 +893,7 @@ def run_scenario(
         dim=scenario.dim,
         dt_s=sim.dt_s,
         controller=ctrl.name,
-        solver=(solver or scenario.controller.solver) if is_mpc else None,
+        solver=getattr(ctrl, "solver_name", None) if is_mpc else None,  # "daqp (per drone)" if so
         v_max_mps=limits.v_max_mps,
         d_min_m=limits.d_min_m,
         seed=scenario.seed,

@@ -1,0 +1,168 @@
+"""Decoupled mode per drone (DAQP): the sparse QP's optimum, slack exactness, failures handled."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from mpcform.limits import Limits, SphereObstacle
+from mpcform.mpc_settings import MPCSettings
+from mpcform.planner import PER_DRONE_SOLVER, MPCPlanner
+from mpcform.reference import ConstantReference
+from mpcform.simulation import simulate
+from mpcform.state import FormationState
+from mpcform.template import Template
+
+# The sparse reference: Clarabel at tight tolerances (PIQP stops ~3e-6 away at any tolerance here).
+# Where plans differ by more than ~1e-6 (an optimum at a vertex of the velocity polygon), the
+# per-drone one has the lower cost: the comparison is by cost, plans only loosely.
+ACCURATE = {"eps_abs": 1e-10, "eps_rel": 1e-10}
+REFERENCE = "qpsolvers:clarabel"
+PLAN_TOL = 1e-4
+
+VARIANTS: dict[str, tuple[int, Limits, tuple[SphereObstacle, ...]]] = {
+    "planar": (2, Limits(v_max_mps=1.0, d_min_m=0.5), ()),
+    "spatial": (3, Limits(v_max_mps=1.0, d_min_m=0.5), ()),
+    "fence, acceleration, obstacle": (
+        2,
+        Limits(v_max_mps=1.0, d_min_m=0.5, a_max_mps2=3.0,
+               geofence_min_m=np.array([-2.2, -1.0]), geofence_max_m=np.array([2.2, 1.6])),
+        (SphereObstacle(np.array([0.0, -1.2]), 0.4),),
+    ),  # fmt: skip
+    "downwash": (3, Limits(v_max_mps=1.0, d_min_m=0.5, downwash_kappa=2.0), ()),
+}
+
+
+def crowd(seed: int, n: int, dim: int) -> tuple[ConstantReference, np.ndarray]:
+    """n drones at random in a small box, at least 0.6 m apart, each heading for the antipode."""
+    rng = np.random.default_rng(seed)
+    pts: list[np.ndarray] = []
+    while len(pts) < n:
+        p = rng.uniform(-1.8, 1.8, dim) * ([1.0, 0.6] + [1.0] * (dim - 2))
+        if all(np.linalg.norm(p - q) >= 0.6 for q in pts):
+            pts.append(p)
+    start = np.array(pts)
+    tpl = Template(-(start - start.mean(axis=0)))
+    return ConstantReference(tpl, FormationState.from_param(-start.mean(axis=0))), start
+
+
+def pair(
+    ref: ConstantReference, lim: Limits, obstacles: Any = (), **kw: Any
+) -> tuple[MPCPlanner, MPCPlanner]:
+    """The planner per drone, and the same decoupled QP solved as one sparse QP to high accuracy."""
+    per = MPCPlanner(ref, 0.1, lim, MPCSettings(coupling="decoupled", **kw), obstacles)
+    sparse = MPCSettings(coupling="decoupled", per_drone=False, **kw, **ACCURATE)
+    return per, MPCPlanner(ref, 0.1, lim, sparse, obstacles, solver=REFERENCE)
+
+
+class SparseQPs:
+    """Keeps the last sparse QP a planner's backend solved, and its solution."""
+
+    def __init__(self, planner: MPCPlanner) -> None:
+        be = planner._backend
+        setup, update, solve = be.setup, be.update, be.solve
+
+        def on_setup(P: Any, q: Any, A: Any, lo: Any, hi: Any) -> None:
+            self.P, self.A = (P + sp.triu(P, 1).T).toarray(), A.copy()
+            self.q, self.lo, self.hi = q, lo, hi
+            setup(P, q, A, lo, hi)
+
+        def on_update(q: Any, lo: Any, hi: Any, a_data: Any) -> None:
+            self.q, self.lo, self.hi = q, lo, hi
+            self.A.data = a_data.copy()
+            update(q, lo, hi, a_data)
+
+        def on_solve(x0: Any = None) -> Any:
+            out = solve(x0)
+            self.x = out.x
+            return out
+
+        be.setup, be.update, be.solve = on_setup, on_update, on_solve  # type: ignore[method-assign]
+
+    def cost_and_violation(self, z: np.ndarray) -> tuple[float, float]:
+        r = self.A @ z
+        return float(0.5 * z @ self.P @ z + self.q @ z), float(max(np.max(self.lo - r), np.max(r - self.hi)))
+
+
+@settings(max_examples=12, deadline=None)
+@given(seed=st.integers(0, 10_000), variant=st.sampled_from(sorted(VARIANTS)), n=st.integers(2, 7))
+def test_per_drone_solves_the_sparse_qp(seed: int, variant: str, n: int) -> None:
+    """Fed the same positions and guess, the per-drone solution is feasible for the sparse QP and
+    at least as good as a high-accuracy interior point on it (so it is its optimum)."""
+    dim, lim, obstacles = VARIANTS[variant]
+    ref, p = crowd(seed, n, dim)
+    per, sparse = pair(ref, lim, obstacles)
+    assert per.solver_name == PER_DRONE_SOLVER and sparse.solver_name == REFERENCE
+    qps, mine = SparseQPs(sparse), {}
+    solve = per._per_drone.solve  # type: ignore[union-attr]
+
+    def keep(*args: Any) -> Any:
+        out = solve(*args)
+        mine["x"] = out[0].x
+        return out
+
+    per._per_drone.solve = keep  # type: ignore[union-attr, method-assign]
+    for planner in (per, sparse):
+        planner.reset(0.0, p)
+    for j in range(4):
+        a, b = per.step(0.1 * j, p), sparse.step(0.1 * j, p)
+        assert a.info.mode == b.info.mode
+        if a.info.mode == "qp":
+            cost, violation = qps.cost_and_violation(mine["x"])
+            ref_cost, _ = qps.cost_and_violation(qps.x)
+            assert violation <= 1e-8
+            assert cost <= ref_cost + 1e-9 * (1.0 + abs(ref_cost))
+            assert per.plan is not None and sparse.plan is not None
+            np.testing.assert_allclose(per.plan.inputs_mps, sparse.plan.inputs_mps, atol=PLAN_TOL, rtol=0)
+        p = p + 0.1 * a.command_mps
+        sparse._plan, sparse._u_prev = per._plan, per._u_prev  # the same guess next step
+
+
+def test_soft_qp_when_the_hard_optimum_is_not_the_penalised_one() -> None:
+    """A weak penalty (w1 below the hard QP's multipliers): the optimum uses slack although the
+    hard QP is feasible, and the per-drone solve finds it too."""
+    tpl = Template.line(2, 2.0)
+    ref = ConstantReference(tpl, FormationState.from_param([0.0, 0.0], 0.0))
+    start = np.array([[0.45, 0.0], [-0.45, 0.0]])  # separated; each wants the other's side
+    lim = Limits(v_max_mps=1.0, d_min_m=0.4)
+    per, sparse = pair(ref, lim, slack_weight=0.05, tie_break_rad=0.0)
+    a, b = per.step(0.0, start), sparse.step(0.0, start)
+    assert a.info.max_slack_m > 1e-3 and a.info.slack_pairs == ((0, 1), (1, 0))
+    assert a.info.max_slack_m == pytest.approx(b.info.max_slack_m, abs=1e-6)
+    np.testing.assert_allclose(a.command_mps, b.command_mps, atol=1e-6)
+
+
+def test_infeasible_start_separates_with_slack() -> None:
+    tpl = Template.line(2, 2.0)
+    ref = ConstantReference(tpl, FormationState.from_param([0.0, 0.0]))
+    start = np.array([[0.0, 0.0], [0.1, 0.0]])
+    planner = MPCPlanner(ref, 0.1, Limits(v_max_mps=0.5, d_min_m=0.5), MPCSettings(coupling="decoupled"))
+    res = simulate(planner, start, 4.0)
+    assert res.infos[0].mode == "qp" and res.infos[0].max_slack_m > 0.1  # each side: half of d_min
+    dist = np.linalg.norm(res.positions_m[:, 0] - res.positions_m[:, 1], axis=1)
+    assert np.all(np.diff(dist) >= -1e-9) and dist[-1] >= 0.5 - 1e-6
+
+
+def test_a_failed_drone_solve_falls_back(monkeypatch: pytest.MonkeyPatch) -> None:
+    ref, start = crowd(3, 5, 2)
+    planner = MPCPlanner(ref, 0.1, Limits(v_max_mps=1.0, d_min_m=0.5), MPCSettings(coupling="decoupled"))
+    solver = planner._per_drone
+    assert solver is not None
+
+    class Failing:
+        @staticmethod
+        def solve(*args: Any, **kwargs: Any) -> tuple[Any, ...]:
+            info = {"iterations": 3, "lam": np.zeros(args[2].shape[0])}
+            return np.full(args[1].shape[0], np.nan), 0.0, -6, info
+
+    monkeypatch.setattr(solver, "_daqp", Failing)
+    res = simulate(planner, start, 1.0)
+    failed = [i for i in res.infos if i.mode == "fallback"]
+    assert failed and all("daqp: exit flag -6" in i.status for i in failed)
+    assert np.all(np.isfinite(res.commands_mps))
+    assert np.linalg.norm(res.commands_mps, axis=-1).max() <= 1.0 + 1e-12
