@@ -32,6 +32,8 @@ from mpcform.solvers import DEFAULT_SOLVER, QPBackend, QPContext, QPSolution, So
 CERTIFY_TOL_M = 1e-7  # separation certification tolerance [m]
 SLACK_REPORT_M = 1e-6  # slack above this is reported
 PER_DRONE_SOLVER = "daqp (per drone)"  # solver_name in decoupled mode with per_drone
+STALL_FRACTION = 0.02  # a conflicted drone whose last command is below this fraction of its wish is stalled
+STALL_GROWTH = 0.1  # the tie-break angle grows by this fraction of itself per stalled step
 
 
 @dataclass(frozen=True)
@@ -153,6 +155,7 @@ class MPCPlanner(Controller):
         self._ob_codes = np.empty(0, dtype=np.intp)  # drone * m + obstacle
         self._plan: Plan | None = None
         self._u_prev = np.zeros((self.n, self.dim))
+        self._stalled = np.zeros(self.n, dtype=int)  # steps in a row each drone was stalled in conflict
 
     @property
     def plan(self) -> Plan | None:
@@ -179,7 +182,7 @@ class MPCPlanner(Controller):
         if st.fast_path and not (off_limits | conflicted).any():
             return self._fast_path(p0, u_nom, x_nom)
         if st.tie_break_rad > 0:  # turn the conflicted drones' wishes to the right
-            c = np.where(conflicted[:, None], _turn_about_z(c, -st.tie_break_rad), c)
+            c = np.where(conflicted[:, None], _turn_about_z(c, -self._tie_break_angles(conflicted, c[0])), c)
         bad = off_limits | conflicted
         drones = self._qp_drones(bad, rows) if st.fast_path and st.grouping else np.arange(self.n)
         grouped = st.fast_path and st.grouping
@@ -208,7 +211,18 @@ class MPCPlanner(Controller):
         return self._fallback(p0, cand, StepInfo("fallback", status=status, iterations=sol.iterations,
                                                  solve_time_s=sol.solve_time_s))  # fmt: skip
 
+    def _tie_break_angles(self, conflicted: Array, wish: Array) -> Array:
+        """Turn angle per drone [rad]: ``tie_break``, growing by ``STALL_GROWTH`` of it for every
+        step in a row that the drone has been conflicted and stalled (its last command below
+        ``STALL_FRACTION`` of its wish), up to a quarter turn: a symmetric ring that the first
+        angle holds in balance (16 drones swapping in decoupled mode) is broken within a few steps."""
+        stalled = conflicted & (_norms(self._u_prev) < STALL_FRACTION * _norms(wish))
+        self._stalled = np.where(stalled, self._stalled + 1, 0)
+        angle = self.settings.tie_break_rad * (1.0 + STALL_GROWTH * self._stalled)
+        return np.minimum(angle, 0.5 * np.pi)
+
     def _fast_path(self, p0: Array, u_nom: Array, x_nom: Array) -> ControlStep:
+        self._stalled[:] = 0
         self._accept(p0, u_nom, x_nom)
         return ControlStep(u_nom[0].copy(), StepInfo("fast_path"))
 
@@ -525,8 +539,12 @@ def _rollout(c: Array, k: float, dt: float) -> tuple[Array, Array]:
     return u, x
 
 
-def _turn_about_z(v: Array, angle: float) -> Array:
-    """Rotate vectors (..., d) by ``angle`` about the world z axis (in-plane when d = 2)."""
+def _norms(v: Array) -> Array:
+    return np.sqrt(np.einsum("...d,...d->...", v, v))
+
+
+def _turn_about_z(v: Array, angle: Array) -> Array:
+    """Rotate vectors (..., n, d) by ``angle`` (n,) [rad] about the world z axis (in-plane when d = 2)."""
     ca, sa = np.cos(angle), np.sin(angle)
     out = v.copy()
     out[..., 0] = ca * v[..., 0] - sa * v[..., 1]

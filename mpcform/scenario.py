@@ -275,7 +275,8 @@ SCHEMA: tuple[Table, ...] = (
         _mpc_key("margin", "float", "Tightening of separation and obstacle rows.", "m",
                  bound=">= 0"),
         _mpc_key("tie_break", "float", "Right turn of conflicted drones' desired velocities, "
-                 "so symmetric swaps circulate (0: off).", "rad", bound=">= 0"),
+                 "so symmetric swaps circulate; grows while a drone stays stalled (0: off).", "rad",
+                 bound=">= 0"),
         _mpc_key("coupling", "string", "`joint` pair rows, or `decoupled` per-drone rows about "
                  "the pair midpoint (block-diagonal QP, for large swarms).", choices=COUPLINGS),
         _mpc_key("per_drone", "bool", "With `decoupled`: solve each conflicted drone's QP with DAQP "

@@ -12,6 +12,7 @@ from saved_runs import short_run
 
 from mpcform import cli_runner
 from mpcform.cli import main
+from mpcform.rundata import load_run
 
 ROOT = Path(__file__).resolve().parents[1]
 WORKED = ROOT / "scenarios" / "worked_example.toml"
@@ -145,6 +146,11 @@ def test_compare(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     assert len([line for line in table if line.startswith("| worked_example")]) == 3
     assert figure.stat().st_size > 5_000
     rows = json.loads(records.read_text())
+    run = load_run(tmp_path / "tracking")
+    err2 = np.sum((run.positions_m - run.reference_m) ** 2, axis=(1, 2))  # trapezoid by hand
+    steps = zip(err2[:-1], err2[1:], run.t_s[:-1], run.t_s[1:], strict=True)
+    want = sum(0.5 * (a + b) * (t1 - t0) for a, b, t0, t1 in steps)
+    assert rows[0]["tracking_cost"] == pytest.approx(want, rel=1e-12) and want > 0
     assert [r["controller"] for r in rows] == ["tracking", "proportional", "mpc"]
     assert rows[2]["solver"] and rows[0]["solver"] is None
 
