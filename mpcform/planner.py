@@ -217,6 +217,7 @@ class MPCPlanner(Controller):
         ``STALL_FRACTION`` of its wish), up to a quarter turn: a symmetric ring that the first
         angle holds in balance (16 drones swapping in decoupled mode) is broken within a few steps."""
         stalled = conflicted & (_norms(self._u_prev) < STALL_FRACTION * _norms(wish))
+        stalled &= self._plan is not None  # no command given yet: nothing has stalled
         self._stalled = np.where(stalled, self._stalled + 1, 0)
         angle = self.settings.tie_break_rad * (1.0 + STALL_GROWTH * self._stalled)
         return np.minimum(angle, 0.5 * np.pi)
