@@ -11,8 +11,8 @@ loop while a recording backend keeps every QP it sends. Side by side, in the sam
   the yardstick of fast-path steps;
 - **cvxpy**: the same QP written in cvxpy with parameters (cost vector, bounds, and the values
   of A, ``A(v) z = R (v * (C z))`` with constant selections R and C), solved by the same
-  solver through cvxpy for every step of the scenario (a cvxpy user has no fast path); per drone,
-  the same problem as one sparse QP with the ``--solver``.
+  solver through cvxpy for every step of the scenario (a cvxpy user has no fast path); in
+  decoupled mode (solved per drone) the same rows as one sparse QP with ``--solver``.
 
 Times are wall-clock medians and 90th percentiles; set ``OPENBLAS_NUM_THREADS=1`` for runs.
 """
@@ -32,9 +32,9 @@ from mpcform._validate import Array
 from mpcform.bench_scale import mode_settings
 from mpcform.controllers import feedforward_targets
 from mpcform.limits import Limits
-from mpcform.planner import PER_DRONE_SOLVER, MPCPlanner
+from mpcform.planner import MPCPlanner
 from mpcform.reference import ConstantReference
-from mpcform.solvers import QPBackend, QPSolution, SolverOptions, make_backend
+from mpcform.solvers import DEFAULT_SOLVER, QPBackend, QPSolution, SolverOptions, make_backend
 from mpcform.state import FormationState
 from mpcform.template import Template
 
@@ -195,8 +195,8 @@ def bench_case(
     limits = Limits(v_max_mps=1.0, d_min_m=0.5)
     options = SolverOptions(settings.eps_abs, settings.eps_rel, settings.max_iter, settings.time_limit_s)
     rec = RecordingBackend(make_backend(solver, options))
-    planner = MPCPlanner(ref, 0.1, limits, settings, solver=rec)
-    per_drone = planner.solver_name == PER_DRONE_SOLVER
+    per_drone = settings.coupling == "decoupled" and settings.per_drone  # solver: cvxpy's only
+    planner = MPCPlanner(ref, 0.1, limits, settings, solver=DEFAULT_SOLVER if per_drone else rec)
     planner.reset(0.0, p)
     ours: dict[str, list[float]] = {"qp": [], "fast_path": [], "fallback": []}
     rollout: list[float] = []

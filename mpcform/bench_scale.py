@@ -161,6 +161,11 @@ def mode_settings(mode: str, horizon: int) -> MPCSettings:
     return MPCSettings(horizon=horizon, coupling=coupling, grouping=True, per_drone=solve != "sparse")
 
 
+def _solver(settings: MPCSettings, solver: str) -> str:
+    """The backend for a mode: the per-drone decoupled mode takes no sparse solver."""
+    return DEFAULT_SOLVER if settings.coupling == "decoupled" and settings.per_drone else solver
+
+
 def _maxrss_mib() -> float:
     """Peak resident set size of this process [MiB] (ru_maxrss is KiB on Linux, bytes on macOS)."""
     peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
@@ -213,7 +218,7 @@ def bench_case(
     ref, p0 = make_case(scenario, n)
     settings = mode_settings(mode, horizon)
     rss_before = _maxrss_mib()
-    planner = MPCPlanner(ref, DT_S, LIMITS, settings, solver=solver)
+    planner = MPCPlanner(ref, DT_S, LIMITS, settings, solver=_solver(settings, solver))
     run = _closed_loop(planner, p0, steps, budget_s)
     rss_after = _maxrss_mib()
     times = run["times"]
@@ -238,7 +243,8 @@ def bench_case(
     if trace_memory:  # a second run: tracing slows allocations, so it is never timed
         tracemalloc.start()
         tracemalloc.reset_peak()
-        _closed_loop(MPCPlanner(ref, DT_S, LIMITS, settings, solver=solver), p0, run["steps_run"], math.inf)
+        _closed_loop(MPCPlanner(ref, DT_S, LIMITS, settings, solver=_solver(settings, solver)), p0,
+                     run["steps_run"], math.inf)  # fmt: skip
         row["tracemalloc_peak_mib"] = tracemalloc.get_traced_memory()[1] / 2**20
         tracemalloc.stop()
     row["min_separation_segments"] = run["min_seg"]
@@ -325,7 +331,10 @@ def run(
     """
     modes = [coupling] + (["monolithic"] if monolithic_budget_s > 0 else [])
     for mode in modes:  # bad input fails here, before any case process starts
-        mode_settings(mode, horizon)
+        settings = mode_settings(mode, horizon)
+        if solver != _solver(settings, solver):
+            raise ValidationError("--solver", f"mode {mode!r} solves each drone's QP with DAQP, not "
+                                  f"{solver!r}; time it with --coupling decoupled-sparse")  # fmt: skip
     smallest = 2 if "crossing" in scenarios else 1
     if steps < 1 or min(sizes, default=smallest) < smallest:
         raise ValidationError("--n/--steps", f"expected n >= {smallest} and steps >= 1, got n = "

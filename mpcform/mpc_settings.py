@@ -37,7 +37,9 @@ class MPCSettings:
       ``c^T (p_i - m) >= d_min / 2``: slightly more conservative, but the QP is block-diagonal
       per drone, so it scales to large swarms; the same continuous-time guarantee holds).
     - ``per_drone`` (decoupled only): solve each drone's block as a small dense QP with DAQP
-      (:mod:`mpcform.per_drone`) instead of one sparse block-diagonal QP with the ``solver``.
+      (:mod:`mpcform.per_drone`) instead of one sparse block-diagonal QP with the ``solver``
+      (naming another solver is then an error). DAQP solves to 1e-9 row feasibility; of the
+      solver settings below only ``max_iter`` applies to it.
     - ``grouping``: solve only the groups of drones (connected by pair rows within reach) that
       hold a conflict; the other groups' optimum is their eq. 14 rollout (needs ``fast_path``).
       Equal to the monolithic QP up to solver tolerance.

@@ -37,6 +37,7 @@ DAQP_INF = 1e30  # DAQP's "no bound"
 DAQP_OK = 1
 PRIMAL_TOL = 1e-9  # DAQP row feasibility tolerance (its default 1e-6 shows in the plans)
 MIN_SLACK_QUADRATIC = 1e-6  # keeps the soft QP's Hessian positive definite when w2 = 0
+ACTIVE_TOL = 1e-6  # a row with a multiplier above this is reported active (as for the sparse QP)
 
 
 class PerDroneQP:
@@ -54,7 +55,6 @@ class PerDroneQP:
         self._m = np.eye(nu) + k * dt_s * np.kron(np.tril(np.ones((h, h)), -1), eye_d)
         self._r = r = np.linalg.cholesky(self._m.T @ self._m).T  # upper: R^T R = M^T M
         self._r_inv = solve_triangular(r, np.eye(nu))  # u = R^-1 v
-        self._slack_scale = np.sqrt(max(settings.slack_quadratic, MIN_SLACK_QUADRATIC))  # v_s = sqrt(w2) s
         rows: list[Array] = []  # constant rows over u; bounds per drone from _bounds
         self._vel_h: float | None = None
         self._n_vel = 0
@@ -71,7 +71,8 @@ class PerDroneQP:
         # x_e = dt sum_{j<e} u_j, so a^T x_e = a^T (sum_{j<e} dt R^-1[(j, .), :]) v: (H, d, H d) per end e
         self._x_v = dt_s * np.cumsum(self._r_inv.reshape(h, dim, nu), axis=0)
         self._eye = np.eye(nu)
-        self._eye_soft = np.eye(h + nu)
+        w2 = max(settings.slack_quadratic, MIN_SLACK_QUADRATIC)
+        self._hess_soft = np.diag(np.concatenate([np.full(h, w2), np.ones(nu)]))
         self._options: dict[str, Any] = {"iter_limit": settings.max_iter, "primal_tol": PRIMAL_TOL}
         self._a, self._lo, self._hi = np.zeros((0, nu)), np.zeros(0), np.zeros(0)
 
@@ -95,7 +96,7 @@ class PerDroneQP:
         a, lo, hi = self._buffers(int(counts.max(initial=0)))
         offsets = [0, *np.cumsum(counts).tolist()]
         v_out, s_out = np.zeros((n, nu)), np.zeros((n, h))
-        flags, lams = np.zeros(n, dtype=int), []
+        flags, lams, active = np.zeros(n, dtype=int), [], np.zeros(n, dtype=int)
         iters, in_daqp = 0, 0.0
 
         def load(i: int) -> int:
@@ -116,12 +117,12 @@ class PerDroneQP:
             iters += int(info["iterations"])
             v_out[i], lam = v, info["lam"]
             lams.append(lam[n_const:])
+            active[i] = np.count_nonzero(np.abs(lam) > ACTIVE_TOL)
         # the hard optimum is the soft one (s = 0) where no step's multipliers sum above w1
-        lam_sep = np.abs(np.concatenate(lams)) if lams else np.zeros(0)
+        lam_sep = np.abs(np.concatenate(lams)) if lams else np.zeros(0)  # (only read where flag is OK)
         drone = np.repeat(np.arange(n), counts)
         step_sum = np.bincount(drone * h + sep_end - 1, lam_sep, minlength=n * h).reshape(n, h)
         soft = (flags != DAQP_OK) | (step_sum.max(axis=1, initial=0.0) > st.slack_weight)
-        active = int(np.count_nonzero(lam_sep))
         for i in np.flatnonzero(soft).tolist():
             m = load(i)
             t0 = time.perf_counter()
@@ -130,6 +131,7 @@ class PerDroneQP:
             )  # fmt: skip
             in_daqp += time.perf_counter() - t0
             iters += int(info["iterations"])
+            active[i] = np.count_nonzero(np.abs(info["lam"]) > ACTIVE_TOL)
         bad = np.flatnonzero((flags != DAQP_OK) | ~np.isfinite(v_out).all(axis=1))
         if bad.size:
             status = f"daqp: exit flag {flags[bad[0]]} (drone {bad[0]})"
@@ -137,7 +139,8 @@ class PerDroneQP:
         u_out = v_out @ self._r_inv.T
         x_out = u_out @ self._x_of_u.T
         flat = [v.reshape(n, h, -1).transpose(1, 0, 2).ravel() for v in (u_out, x_out, s_out)]
-        return QPSolution(np.concatenate(flat), None, True, "daqp: optimal", iters, in_daqp), active
+        sol = QPSolution(np.concatenate(flat), None, True, "daqp: optimal", iters, in_daqp)
+        return sol, int(active.sum())
 
     def _buffers(self, max_sep: int) -> tuple[Array, Array, Array]:
         """Row and bound buffers with room for ``max_sep`` separation rows after the constant ones
@@ -153,16 +156,19 @@ class PerDroneQP:
     def _solve_soft(
         self, f_v: Array, a: Array, hi: Array, lo: Array, end: Array, n_const: int
     ) -> tuple[Array, Array, int, dict[str, Any]]:
-        """The drone's QP with its slacks ``v_s = sqrt(w2) s`` (first, as simple bounds >= 0)."""
+        """The drone's QP with its slacks (first, simple bounds ``s >= 0``; Hessian ``diag(w2, I)``).
+
+        The slacks are not scaled to a unit Hessian: a column ``1 / sqrt(w2)`` would scale DAQP's
+        row tolerance up with it (measured: 3.5e-8 misses at ``w2 = 0``)."""
         st, h = self.settings, self.settings.horizon
         a_s = np.zeros((a.shape[0], h))
-        a_s[n_const + np.arange(end.shape[0]), end - 1] = 1.0 / self._slack_scale
-        f = np.concatenate([np.full(h, st.slack_weight / self._slack_scale), f_v])
+        a_s[n_const + np.arange(end.shape[0]), end - 1] = 1.0
+        f = np.concatenate([np.full(h, st.slack_weight), f_v])
         z, _, flag, info = self._daqp.solve(
-            self._eye_soft, f, np.hstack([a_s, a]), np.concatenate([np.full(h, DAQP_INF), hi]),
+            self._hess_soft, f, np.hstack([a_s, a]), np.concatenate([np.full(h, DAQP_INF), hi]),
             np.concatenate([np.zeros(h), lo]), **self._options,
         )  # fmt: skip
-        return z[h:], z[:h] / self._slack_scale, flag, info
+        return z[h:], z[:h], flag, info
 
     def _separation(
         self, n: int, singles: Array, coeffs: Array, lower: Array

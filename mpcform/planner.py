@@ -121,13 +121,20 @@ class MPCPlanner(Controller):
                 "limits.geofence_min",
                 f"expected {self.dim} numbers, got {limits.geofence_min_m.tolist()}",
             )
-        options = SolverOptions(settings.eps_abs, settings.eps_rel, settings.max_iter, settings.time_limit_s)
-        self._backend = solver if isinstance(solver, QPBackend) else make_backend(solver, options)
-        self.solver_name = self._backend.name
+        self._backend: QPBackend | None = None
         self._per_drone: PerDroneQP | None = None
         if settings.coupling == "decoupled" and settings.per_drone:
+            if solver != DEFAULT_SOLVER:  # it would be ignored
+                raise ValidationError("controller.solver", f"{_solver_text(solver)} solves the sparse QP, "
+                                      "but decoupled mode solves each drone's QP with DAQP here; set "
+                                      "controller.per_drone = false to use it")  # fmt: skip
             self._per_drone = PerDroneQP(self.dim, dt_s, limits, settings)
             self.solver_name = PER_DRONE_SOLVER
+        else:
+            st = settings
+            options = SolverOptions(st.eps_abs, st.eps_rel, st.max_iter, st.time_limit_s)
+            self._backend = solver if isinstance(solver, QPBackend) else make_backend(solver, options)
+            self.solver_name = self._backend.name
         metric = np.ones(self.dim)
         if limits.downwash_kappa is not None:
             metric[2] = 1.0 / limits.downwash_kappa
@@ -215,12 +222,13 @@ class MPCPlanner(Controller):
         """Turn angle per drone [rad]: ``tie_break``, growing by ``STALL_GROWTH`` of it for every
         step in a row that the drone has been conflicted and stalled (its last command below
         ``STALL_FRACTION`` of its wish), up to a quarter turn: a symmetric ring that the first
-        angle holds in balance (16 drones swapping in decoupled mode) is broken within a few steps."""
+        angle holds in balance (16 drones swapping in decoupled mode) is broken within a few steps.
+        A ``tie_break`` above a quarter turn is kept as it is."""
         stalled = conflicted & (_norms(self._u_prev) < STALL_FRACTION * _norms(wish))
         stalled &= self._plan is not None  # no command given yet: nothing has stalled
         self._stalled = np.where(stalled, self._stalled + 1, 0)
-        angle = self.settings.tie_break_rad * (1.0 + STALL_GROWTH * self._stalled)
-        return np.minimum(angle, 0.5 * np.pi)
+        base = self.settings.tie_break_rad
+        return np.minimum(base * (1.0 + STALL_GROWTH * self._stalled), max(base, 0.5 * np.pi))
 
     def _fast_path(self, p0: Array, u_nom: Array, x_nom: Array) -> ControlStep:
         self._stalled[:] = 0
@@ -415,6 +423,8 @@ class MPCPlanner(Controller):
                 p0[drones], c[:, drones], self._u_prev[drones], rows.singles[on], rows.single_coeffs[on],
                 rows.single_lower[on], self._warm(p0, u_nom, x_nom)[0][:, drones]
             )  # fmt: skip
+        backend = self._backend
+        assert backend is not None  # set whenever the QP is not solved per drone
         qp = self._sub_qp(drones, rows, rebuilt)
         q = qp.cost_vector(c[:, drones])
         lower = np.concatenate([rows.pair_lower, rows.single_lower])
@@ -424,17 +434,17 @@ class MPCPlanner(Controller):
         if self._backend_qp is not qp:
             a_matrix = qp.A.copy()
             a_matrix.data = a_data
-            self._backend.setup(qp.P, q, a_matrix, lo, hi)
+            backend.setup(qp.P, q, a_matrix, lo, hi)
             self._backend_qp = qp
         else:
-            self._backend.update(q, lo, hi, a_data)
-        if self._backend.needs_context:
-            self._backend.set_context(self._context(qp, drones, p0, rows))
+            backend.update(q, lo, hi, a_data)
+        if backend.needs_context:
+            backend.set_context(self._context(qp, drones, p0, rows))
         x0 = None
-        if self._backend.warm_starts:
+        if backend.warm_starts:
             warm = self._warm(p0, u_nom, x_nom)[:, :, drones]
             x0 = np.concatenate([warm.ravel(), np.zeros(qp.layout.n_slack)])
-        sol = self._backend.solve(x0)
+        sol = backend.solve(x0)
         active = 0 if sol.y is None else int(np.count_nonzero(np.abs(sol.y[qp.layout.nud :]) > 1e-6))
         return sol, active
 
@@ -538,6 +548,10 @@ def _rollout(c: Array, k: float, dt: float) -> tuple[Array, Array]:
         xj = xj + dt * u[j]
         x[j] = xj
     return u, x
+
+
+def _solver_text(solver: str | QPBackend) -> str:
+    return repr(solver) if isinstance(solver, str) else f"the backend {solver.name!r}"
 
 
 def _norms(v: Array) -> Array:

@@ -280,7 +280,8 @@ SCHEMA: tuple[Table, ...] = (
         _mpc_key("coupling", "string", "`joint` pair rows, or `decoupled` per-drone rows about "
                  "the pair midpoint (block-diagonal QP, for large swarms).", choices=COUPLINGS),
         _mpc_key("per_drone", "bool", "With `decoupled`: solve each conflicted drone's QP with DAQP "
-                 "(small dense QPs, the fast way) instead of one sparse QP with `solver`."),
+                 "(small dense QPs, the fast way; of the solver keys only `max_iter` applies) instead "
+                 "of one sparse QP with `solver`."),
         _mpc_key("grouping", "bool", "Solve only the groups of drones that hold a conflict; the others "
                  "take their eq. 14 rollout (exact)."),
         _mpc_key("fast_path", "bool", "Skip the solver when the eq. 14 rollout meets every row."),
@@ -289,8 +290,9 @@ SCHEMA: tuple[Table, ...] = (
         _mpc_key("max_iter", "int", "Solver iteration limit.", bound=">= 1"),
         _mpc_key("time_limit", "float", "Solver time limit per QP (0: none).", "s", bound=">= 0"),
         Key("solver", "string", "QP backend: `osqp`, `piqp`, `qpsolvers:<name>`, "
-            "`casadi:<plugin>` (see `mpcform solvers`); `--solver` overrides it.",
-            default=DEFAULT_SOLVER, when=_MPC),
+            "`casadi:<plugin>` (see `mpcform solvers`); `--solver` overrides it. Not with "
+            "`decoupled` and `per_drone`.",
+            when=_MPC, shown_default=f'"{DEFAULT_SOLVER}"'),
     ), selector="kind"),
     Table("graph", "Communication graph of the consensus controller, undirected, and its link "
           "effects; other controllers ignore it.", (
@@ -752,6 +754,8 @@ def _controller(c: dict[str, Any], dt_s: float) -> ControllerSpec:
         feedforward = c["feedforward"] or "jacobian"
         mpc = MPCSettings(**{**given, "gain_per_s": c["gain"], "feedforward": feedforward})
     solver = check_solver_name(c["solver"] or DEFAULT_SOLVER)
+    if c["solver"] is not None:
+        _check_sparse_solver(mpc, "controller.solver", solver)
     saturate = True if c["saturate"] is None else c["saturate"]
     return ControllerSpec(c["kind"], c["gain"], feedforward, saturate, mpc, solver)
 
@@ -862,10 +866,21 @@ def build_controller(scenario: Scenario, kind: str | None = None, solver: str | 
                                        scenario.allow_disconnected)  # fmt: skip
     from mpcform.planner import MPCPlanner
 
-    name = spec.solver if solver is None else check_solver_name(solver, "solver")
+    name = spec.solver
+    if solver is not None:
+        name = check_solver_name(solver, "solver")
+        _check_sparse_solver(spec.mpc, "solver", name)
     with _as_scenario_error("controller"):
         planner: Controller = MPCPlanner(ref, dt, limits, spec.mpc, obstacles=scenario.obstacles, solver=name)
     return planner
+
+
+def _check_sparse_solver(mpc: MPCSettings, field: str, solver: str) -> None:
+    """A solver named for a planner that solves per drone would be ignored: an error."""
+    if mpc.coupling == "decoupled" and mpc.per_drone:
+        raise ScenarioError(field, f"{solver!r} solves the sparse QP, but this scenario solves each "
+                            "drone's QP with DAQP (controller.coupling = \"decoupled\", per_drone = "
+                            "true); set controller.per_drone = false to use it")  # fmt: skip
 
 
 def run_scenario(

@@ -25,17 +25,21 @@ ACCURATE = {"eps_abs": 1e-10, "eps_rel": 1e-10}
 REFERENCE = "qpsolvers:clarabel"
 PLAN_TOL = 1e-4
 
-VARIANTS: dict[str, tuple[int, Limits, tuple[SphereObstacle, ...]]] = {
-    "planar": (2, Limits(v_max_mps=1.0, d_min_m=0.5), ()),
-    "spatial": (3, Limits(v_max_mps=1.0, d_min_m=0.5), ()),
+LIMITS = Limits(v_max_mps=1.0, d_min_m=0.5)
+VARIANTS: dict[str, tuple[int, Limits, tuple[SphereObstacle, ...], dict[str, Any]]] = {
+    "planar": (2, LIMITS, (), {}),
+    "spatial": (3, LIMITS, (), {}),
     "fence, acceleration, obstacle": (
         2,
         Limits(v_max_mps=1.0, d_min_m=0.5, a_max_mps2=3.0,
-               geofence_min_m=np.array([-2.2, -1.0]), geofence_max_m=np.array([2.2, 1.6])),
-        (SphereObstacle(np.array([0.0, -1.2]), 0.4),),
-    ),  # fmt: skip
-    "downwash": (3, Limits(v_max_mps=1.0, d_min_m=0.5, downwash_kappa=2.0), ()),
-}
+               geofence_min_m=np.array([-2.2, -1.0]), geofence_max_m=np.array([2.2, np.inf])),
+        (SphereObstacle(np.array([0.0, -1.2]), 0.4),), {},
+    ),
+    "downwash, obstacle": (3, Limits(v_max_mps=1.0, d_min_m=0.5, downwash_kappa=2.0),
+                           (SphereObstacle(np.array([0.0, 0.0, -1.5]), 0.3),), {}),
+    "box, no quadratic slack term": (3, LIMITS, (), {"velocity_set": "box", "slack_quadratic": 0.0}),
+    "planar, no grouping, no fast path": (2, LIMITS, (), {"grouping": False, "fast_path": False}),
+}  # fmt: skip
 
 
 def crowd(seed: int, n: int, dim: int) -> tuple[ConstantReference, np.ndarray]:
@@ -89,14 +93,14 @@ class SparseQPs:
         return float(0.5 * z @ self.P @ z + self.q @ z), float(max(np.max(self.lo - r), np.max(r - self.hi)))
 
 
-@settings(max_examples=12, deadline=None)
+@settings(max_examples=16, deadline=None)
 @given(seed=st.integers(0, 10_000), variant=st.sampled_from(sorted(VARIANTS)), n=st.integers(2, 7))
 def test_per_drone_solves_the_sparse_qp(seed: int, variant: str, n: int) -> None:
     """Fed the same positions and guess, the per-drone solution is feasible for the sparse QP and
     at least as good as a high-accuracy interior point on it (so it is its optimum)."""
-    dim, lim, obstacles = VARIANTS[variant]
+    dim, lim, obstacles, kw = VARIANTS[variant]
     ref, p = crowd(seed, n, dim)
-    per, sparse = pair(ref, lim, obstacles)
+    per, sparse = pair(ref, lim, obstacles, **kw)
     assert per.solver_name == PER_DRONE_SOLVER and sparse.solver_name == REFERENCE
     qps, mine = SparseQPs(sparse), {}
     solve = per._per_drone.solve  # type: ignore[union-attr]

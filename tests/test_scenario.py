@@ -222,6 +222,8 @@ BAD_INPUTS: list[tuple[str, dict[str, Any], str, str]] = [
      "limits.geofence_max", "geofence_min < geofence_max"),
     ("unknown solver", {"controller.kind": "mpc", "controller.solver": "osqq"},
      "controller.solver", "did you mean 'osqp'"),
+    ("solver ignored per drone", {"controller.kind": "mpc", "controller.coupling": "decoupled",
+                                  "controller.solver": "osqp"}, "controller.solver", "per_drone = false"),
     ("shorter than a step", {"simulation.duration": 0.01}, "simulation.duration", "one step"),
     ("path in name", {"name": "../x"}, "name", "directory"),
 ]  # fmt: skip
