@@ -11,9 +11,9 @@ In decoupled mode every separation row involves one drone, so the planner's spar
 (``L`` strictly lower triangular ones, so ``(M u)_j = u_j + k x_j``): the sparse QP's block,
 with a positive-definite Hessian. Two things make it cheap:
 
-- the Hessian is the same for every drone, so the problem is handed to DAQP in the variables
-  ``v = R u`` (``R^T R = M^T M``) with an identity Hessian; the constant rows are transformed
-  once, the separation rows of all drones in one matrix product;
+- in the variables ``v = M u`` (``v_j = u_j + k x_j``, what the cost compares with ``c_j``) the
+  cost is ``0.5 ||v - c||^2``: DAQP gets an identity Hessian (its cheapest setup), the constant
+  rows are transformed once and the separation rows of all drones in one matrix product;
 - the slacks are almost always zero, so each drone is first solved without them: if that hard
   QP is feasible and its multipliers at every step sum to at most ``w1``, its solution with
   ``s = 0`` meets the soft QP's optimality conditions (exact penalty), else the soft QP is solved.
@@ -52,9 +52,8 @@ class PerDroneQP:
         self._nu = nu = h * dim
         eye_d = np.eye(dim)
         self._x_of_u = dt_s * np.kron(np.tril(np.ones((h, h))), eye_d)  # x_1..x_H from u
-        self._m = np.eye(nu) + k * dt_s * np.kron(np.tril(np.ones((h, h)), -1), eye_d)
-        self._r = r = np.linalg.cholesky(self._m.T @ self._m).T  # upper: R^T R = M^T M
-        self._r_inv = solve_triangular(r, np.eye(nu))  # u = R^-1 v
+        self._m = np.eye(nu) + k * dt_s * np.kron(np.tril(np.ones((h, h)), -1), eye_d)  # v = M u
+        self._m_inv = solve_triangular(self._m, np.eye(nu), lower=True)  # u = M^-1 v
         rows: list[Array] = []  # constant rows over u; bounds per drone from _bounds
         self._vel_h: float | None = None
         self._n_vel = 0
@@ -66,10 +65,10 @@ class PerDroneQP:
             rows.append(np.kron(np.eye(h) - np.eye(h, k=-1), eye_d))
         if limits.geofence_min_m is not None:
             rows.append(self._x_of_u)
-        self._const_v = (np.vstack(rows) if rows else np.zeros((0, nu))) @ self._r_inv
+        self._const_v = (np.vstack(rows) if rows else np.zeros((0, nu))) @ self._m_inv
         self._ends = row_ends(h)
-        # x_e = dt sum_{j<e} u_j, so a^T x_e = a^T (sum_{j<e} dt R^-1[(j, .), :]) v: (H, d, H d) per end e
-        self._x_v = dt_s * np.cumsum(self._r_inv.reshape(h, dim, nu), axis=0)
+        # x_e = dt sum_{j<e} u_j, so a^T x_e = a^T (sum_{j<e} dt M^-1[(j, .), :]) v: (H, d, H d) per end e
+        self._x_v = dt_s * np.cumsum(self._m_inv.reshape(h, dim, nu), axis=0)
         self._eye = np.eye(nu)
         w2 = max(settings.slack_quadratic, MIN_SLACK_QUADRATIC)
         self._hess_soft = np.diag(np.concatenate([np.full(h, w2), np.ones(nu)]))
@@ -89,8 +88,8 @@ class PerDroneQP:
         """
         st = self.settings
         h, n, nu, n_const = st.horizon, p0.shape[0], self._nu, self._const_v.shape[0]
-        f_v = -(c.transpose(1, 0, 2).reshape(n, nu) @ self._m @ self._r_inv)  # (R^-T M^T (-c))^T
-        v_warm = warm_u.transpose(1, 0, 2).reshape(n, nu) @ self._r.T
+        f_v = -c.transpose(1, 0, 2).reshape(n, nu)  # 0.5 ||v - c||^2
+        v_warm = warm_u.transpose(1, 0, 2).reshape(n, nu) @ self._m.T
         c_lo, c_hi = self._bounds(p0, u_prev)
         sep_v, sep_end, sep_lo, counts = self._separation(n, singles, coeffs, lower)
         a, lo, hi = self._buffers(int(counts.max(initial=0)))
@@ -136,7 +135,7 @@ class PerDroneQP:
         if bad.size:
             status = f"daqp: exit flag {flags[bad[0]]} (drone {bad[0]})"
             return failed(status, in_daqp, iters), 0
-        u_out = v_out @ self._r_inv.T
+        u_out = v_out @ self._m_inv.T
         x_out = u_out @ self._x_of_u.T
         flat = [v.reshape(n, h, -1).transpose(1, 0, 2).ravel() for v in (u_out, x_out, s_out)]
         sol = QPSolution(np.concatenate(flat), None, True, "daqp: optimal", iters, in_daqp)
