@@ -54,6 +54,12 @@ class _Candidates:
     obstacle_on: Array  # (O,) bool
     rebuilt: bool
 
+    def within_reach(self) -> _Candidates:
+        """Only the items within reach this step."""
+        p, o = self.pairs[self.pair_on], self.obstacles[self.obstacle_on]
+        on = np.ones(p.shape[0], dtype=bool), np.ones(o.shape[0], dtype=bool)
+        return _Candidates(p, on[0], o, on[1], self.rebuilt)
+
 
 @dataclass(frozen=True)
 class _Rows:
@@ -182,6 +188,9 @@ class MPCPlanner(Controller):
         if st.fast_path and not off_limits.any() and self._clear_of_rows(p0, guess, x_nom):
             return self._fast_path(p0, u_nom, x_nom)
         cand = self._candidates(p0)
+        grouped = st.fast_path and st.grouping
+        if grouped or self._per_drone is not None:  # no fixed pattern to keep: rows only within reach
+            cand = cand.within_reach()
         rows = self._separation_rows(p0, guess, cand)
         conflicted = np.zeros(self.n, dtype=bool)
         labels = self._row_shortfall(x_nom, rows, 0.0)[1]
@@ -191,8 +200,7 @@ class MPCPlanner(Controller):
         if st.tie_break_rad > 0:  # turn the conflicted drones' wishes to the right
             c = np.where(conflicted[:, None], _turn_about_z(c, -self._tie_break_angles(conflicted, c[0])), c)
         bad = off_limits | conflicted
-        drones = self._qp_drones(bad, rows) if st.fast_path and st.grouping else np.arange(self.n)
-        grouped = st.fast_path and st.grouping
+        drones = self._qp_drones(bad, rows) if grouped else np.arange(self.n)
         sub = _subset_rows(rows, drones, self.n, on_only=grouped)  # grouped: the pattern follows the groups
         sol, active = self._solve(drones, p0, c, sub, cand.rebuilt, u_nom, x_nom)
         nud = horizon * drones.shape[0] * self.dim
