@@ -90,7 +90,8 @@ def _add_bench(sub: argparse._SubParsersAction) -> None:
     mpc.add_argument("--n", type=int, nargs="*", default=[8, 16, 32, 64], help="planar swap sizes")
     mpc.add_argument("--spatial-n", type=int, nargs="*", default=[20], help="spatial swap sizes")
     mpc.add_argument("--steps", type=int, default=60, help="closed-loop steps per swap (dt 0.1 s)")
-    mpc.add_argument("--solver", default=DEFAULT_SOLVER, choices=sorted(BACKENDS), help="QP backend")
+    mpc.add_argument("--solver", default=DEFAULT_SOLVER, choices=sorted(BACKENDS),
+                     help="QP backend (decoupled, solved per drone: of the cvxpy reference only)")
     mpc.add_argument("--coupling", default="joint", choices=("joint", "decoupled", "decoupled-sparse"),
                      help="planner mode (decoupled-sparse: one sparse QP, not per-drone DAQP QPs)")
     mpc.add_argument("--cvxpy-max-n", type=int, default=16, help="largest n also run through cvxpy")

@@ -3,7 +3,9 @@
 Every step: targets over the horizon, the eq. 14 rollout, separation items culled with a k-d
 tree, their rows linearised about the guess (the previous plan shifted one step, ending in a
 hold; at the first step every drone holding), then either the fast path (the rollout meets every
-row, so it *is* the QP's optimum) or a solve. The command returned is certified: inside the
+row, so it *is* the QP's optimum) or a solve: of the sparse QP (:mod:`mpcform.mpc_qp`) with the
+backend, or in decoupled mode of each conflicted drone's block with DAQP (:mod:`mpcform.per_drone`).
+The command returned is certified: inside the
 ball ``||u_i|| <= v_max`` and, along the first segment, no pair closer than ``d_min`` (or than it
 already was). A failed or uncertifiable solve falls back to the previous plan's next input or a
 hold, and is reported; the loop never raises or returns NaN for a solver's failure.
@@ -137,8 +139,9 @@ class MPCPlanner(Controller):
             self._per_drone = PerDroneQP(self.dim, dt_s, limits, settings)
             self.solver_name = PER_DRONE_SOLVER
         else:
-            st = settings
-            options = SolverOptions(st.eps_abs, st.eps_rel, st.max_iter, st.time_limit_s)
+            options = SolverOptions(
+                settings.eps_abs, settings.eps_rel, settings.max_iter, settings.time_limit_s
+            )
             self._backend = solver if isinstance(solver, QPBackend) else make_backend(solver, options)
             self.solver_name = self._backend.name
         metric = np.ones(self.dim)
