@@ -129,21 +129,20 @@ class MPCPlanner(Controller):
                 "limits.geofence_min",
                 f"expected {self.dim} numbers, got {limits.geofence_min_m.tolist()}",
             )
-        self._backend: QPBackend | None = None
-        self._per_drone: PerDroneQP | None = None
+        self._solver: PerDroneQP | QPBackend  # the sparse QP's backend, or DAQP per drone
         if settings.coupling == "decoupled" and settings.per_drone:
             if solver != DEFAULT_SOLVER:  # it would be ignored
                 raise ValidationError("controller.solver", f"{_solver_text(solver)} solves the sparse QP, "
                                       "but decoupled mode solves each drone's QP with DAQP here; set "
                                       "controller.per_drone = false to use it")  # fmt: skip
-            self._per_drone = PerDroneQP(self.dim, dt_s, limits, settings)
+            self._solver = PerDroneQP(self.dim, dt_s, limits, settings)
             self.solver_name = PER_DRONE_SOLVER
         else:
             options = SolverOptions(
                 settings.eps_abs, settings.eps_rel, settings.max_iter, settings.time_limit_s
             )
-            self._backend = solver if isinstance(solver, QPBackend) else make_backend(solver, options)
-            self.solver_name = self._backend.name
+            self._solver = solver if isinstance(solver, QPBackend) else make_backend(solver, options)
+            self.solver_name = self._solver.name
         metric = np.ones(self.dim)
         if limits.downwash_kappa is not None:
             metric[2] = 1.0 / limits.downwash_kappa
@@ -192,7 +191,7 @@ class MPCPlanner(Controller):
             return self._fast_path(p0, u_nom, x_nom)
         cand = self._candidates(p0)
         grouped = st.fast_path and st.grouping
-        if grouped or self._per_drone is not None:  # no fixed pattern to keep: rows only within reach
+        if grouped or isinstance(self._solver, PerDroneQP):  # no fixed pattern: rows only within reach
             cand = cand.within_reach()
         rows = self._separation_rows(p0, guess, cand)
         conflicted = np.zeros(self.n, dtype=bool)
@@ -428,14 +427,13 @@ class MPCPlanner(Controller):
     ) -> tuple[QPSolution, int]:
         """Solve the QP over ``drones``: per drone (decoupled with ``per_drone``), or set up (new
         pattern) or update the backend with the sparse QP. Also returns the number of active rows."""
-        if self._per_drone is not None:
+        backend = self._solver
+        if isinstance(backend, PerDroneQP):
             on = rows.single_on
-            return self._per_drone.solve(
+            return backend.solve(
                 p0[drones], c[:, drones], self._u_prev[drones], rows.singles[on], rows.single_coeffs[on],
                 rows.single_lower[on], self._warm(p0, u_nom, x_nom)[0][:, drones]
             )  # fmt: skip
-        backend = self._backend
-        assert backend is not None  # set whenever the QP is not solved per drone
         qp = self._sub_qp(drones, rows, rebuilt)
         q = qp.cost_vector(c[:, drones])
         lower = np.concatenate([rows.pair_lower, rows.single_lower])

@@ -12,6 +12,7 @@ from hypothesis import strategies as st
 
 from mpcform.limits import Limits, SphereObstacle
 from mpcform.mpc_settings import MPCSettings
+from mpcform.per_drone import PerDroneQP
 from mpcform.planner import PER_DRONE_SOLVER, MPCPlanner
 from mpcform.reference import ConstantReference
 from mpcform.simulation import simulate
@@ -68,7 +69,7 @@ class SparseQPs:
     """Keeps the last sparse QP a planner's backend solved, and its solution."""
 
     def __init__(self, planner: MPCPlanner) -> None:
-        be = planner._backend
+        be = planner._solver
         setup, update, solve = be.setup, be.update, be.solve
 
         def on_setup(P: Any, q: Any, A: Any, lo: Any, hi: Any) -> None:
@@ -103,14 +104,15 @@ def test_per_drone_solves_the_sparse_qp(seed: int, variant: str, n: int) -> None
     per, sparse = pair(ref, lim, obstacles, **kw)
     assert per.solver_name == PER_DRONE_SOLVER and sparse.solver_name == REFERENCE
     qps, mine = SparseQPs(sparse), {}
-    solve = per._per_drone.solve  # type: ignore[union-attr]
+    assert isinstance(per._solver, PerDroneQP)
+    solve = per._solver.solve
 
     def keep(*args: Any) -> Any:
         out = solve(*args)
         mine["x"] = out[0].x
         return out
 
-    per._per_drone.solve = keep  # type: ignore[union-attr, method-assign]
+    per._solver.solve = keep  # type: ignore[method-assign]
     for planner in (per, sparse):
         planner.reset(0.0, p)
     for j in range(4):
@@ -155,8 +157,8 @@ def test_infeasible_start_separates_with_slack() -> None:
 def test_a_failed_drone_solve_falls_back(monkeypatch: pytest.MonkeyPatch) -> None:
     ref, start = crowd(3, 5, 2)
     planner = MPCPlanner(ref, 0.1, Limits(v_max_mps=1.0, d_min_m=0.5), MPCSettings(coupling="decoupled"))
-    solver = planner._per_drone
-    assert solver is not None
+    solver = planner._solver
+    assert isinstance(solver, PerDroneQP)
 
     class Failing:
         @staticmethod

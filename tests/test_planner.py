@@ -178,7 +178,7 @@ def test_solver_failure_falls_back_to_a_certified_command(monkeypatch: pytest.Mo
     ref, start = swap(6, 2)
     planner = MPCPlanner(ref, 0.1, Limits(v_max_mps=1.0, d_min_m=0.5))
     fail = QPSolution(None, None, False, "forced failure", 7, 0.0)
-    monkeypatch.setattr(planner._backend, "solve", lambda x0=None: fail)
+    monkeypatch.setattr(planner._solver, "solve", lambda x0=None: fail)
     res = simulate(planner, start, 2.0)
     assert {i.mode for i in res.infos} <= {"fallback", "fast_path"}
     assert any("forced failure" in i.status for i in res.infos)
