@@ -195,7 +195,7 @@ def bench_case(
     limits = Limits(v_max_mps=1.0, d_min_m=0.5)
     options = SolverOptions(settings.eps_abs, settings.eps_rel, settings.max_iter, settings.time_limit_s)
     rec = RecordingBackend(make_backend(solver, options))
-    per_drone = settings.coupling == "decoupled" and settings.per_drone  # solver: cvxpy's only
+    per_drone = settings.solves_per_drone  # then --solver is cvxpy's only
     planner = MPCPlanner(ref, 0.1, limits, settings, solver=DEFAULT_SOLVER if per_drone else rec)
     planner.reset(0.0, p)
     ours: dict[str, list[float]] = {"qp": [], "fast_path": [], "fallback": []}

@@ -163,7 +163,7 @@ def mode_settings(mode: str, horizon: int) -> MPCSettings:
 
 def _solver(settings: MPCSettings, solver: str) -> str:
     """The backend for a mode: the per-drone decoupled mode takes no sparse solver."""
-    return DEFAULT_SOLVER if settings.coupling == "decoupled" and settings.per_drone else solver
+    return DEFAULT_SOLVER if settings.solves_per_drone else solver
 
 
 def _maxrss_mib() -> float:

@@ -65,6 +65,11 @@ class MPCSettings:
     max_iter: int = 4000
     time_limit_s: float = 0.0
 
+    @property
+    def solves_per_drone(self) -> bool:
+        """Whether the planner solves each drone's QP with DAQP (decoupled mode with ``per_drone``)."""
+        return self.coupling == "decoupled" and self.per_drone
+
     def __post_init__(self) -> None:
         if isinstance(self.horizon, bool) or not isinstance(self.horizon, int) or self.horizon < 1:
             raise ValidationError("controller.horizon", f"expected an integer >= 1, got {self.horizon!r}")

@@ -130,7 +130,7 @@ class MPCPlanner(Controller):
                 f"expected {self.dim} numbers, got {limits.geofence_min_m.tolist()}",
             )
         self._solver: PerDroneQP | QPBackend  # the sparse QP's backend, or DAQP per drone
-        if settings.coupling == "decoupled" and settings.per_drone:
+        if settings.solves_per_drone:
             if solver != DEFAULT_SOLVER:  # it would be ignored
                 raise ValidationError("controller.solver", f"{_solver_text(solver)} solves the sparse QP, "
                                       "but decoupled mode solves each drone's QP with DAQP here; set "

@@ -877,7 +877,7 @@ def build_controller(scenario: Scenario, kind: str | None = None, solver: str | 
 
 def _check_sparse_solver(mpc: MPCSettings, field: str, solver: str) -> None:
     """A solver named for a planner that solves per drone would be ignored: an error."""
-    if mpc.coupling == "decoupled" and mpc.per_drone:
+    if mpc.solves_per_drone:
         raise ScenarioError(field, f"{solver!r} solves the sparse QP, but this scenario solves each "
                             "drone's QP with DAQP (controller.coupling = \"decoupled\", per_drone = "
                             "true); set controller.per_drone = false to use it")  # fmt: skip

@@ -146,6 +146,8 @@ def qpsolvers_settings(solver: str, options: SolverOptions) -> dict[str, Any]:
     a, r, it = options.eps_abs, options.eps_rel, options.max_iter
     tl = options.time_limit_s if options.time_limit_s > 0 else None
     gap_check = True if a is not None else None
+    with_gap = _given(eps_abs=a, eps_rel=r, eps_duality_gap_abs=a, eps_duality_gap_rel=r,
+                      check_duality_gap=gap_check, max_iter=it)  # fmt: skip
     table: dict[str, dict[str, Any]] = {
         "clarabel": _given(tol_feas=a, tol_gap_abs=a, tol_gap_rel=r, max_iter=it, time_limit=tl),
         "cvxopt": _given(feastol=a, abstol=a, reltol=r, maxiters=it),
@@ -154,22 +156,8 @@ def qpsolvers_settings(solver: str, options: SolverOptions) -> dict[str, Any]:
         "highs": _given(primal_feasibility_tolerance=a, dual_feasibility_tolerance=a, time_limit=tl),
         "hpipm": _given(tol_stat=a, tol_eq=a, tol_ineq=a, tol_comp=a, iter_max=it),
         "osqp": _given(eps_abs=a, eps_rel=r, max_iter=it, time_limit=tl),
-        "piqp": _given(
-            eps_abs=a,
-            eps_rel=r,
-            eps_duality_gap_abs=a,
-            eps_duality_gap_rel=r,
-            check_duality_gap=gap_check,
-            max_iter=it,
-        ),
-        "proxqp": _given(
-            eps_abs=a,
-            eps_rel=r,
-            eps_duality_gap_abs=a,
-            eps_duality_gap_rel=r,
-            check_duality_gap=gap_check,
-            max_iter=it,
-        ),
+        "piqp": with_gap,
+        "proxqp": with_gap,
         "qpalm": _given(eps_abs=a, eps_rel=r, max_iter=it, time_limit=tl),
         "scs": _given(eps_abs=a, eps_rel=r, max_iters=it, time_limit_secs=tl),
     }

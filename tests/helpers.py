@@ -18,3 +18,37 @@ def random_state(rng: np.random.Generator, dim: int) -> FormationState:
     """A random centroid, rotation (any angle or axis) and scale in [0.5, 3]."""
     rotation = rng.uniform(-np.pi, np.pi) if dim == 2 else Rotation.random(rng=rng).as_rotvec()
     return FormationState.from_param(rng.uniform(-10.0, 10.0, dim), rotation, rng.uniform(0.5, 3.0))
+
+
+def tiny_swap_toml(name: str, radius_m: float, horizon: int, duration_s: float) -> str:
+    """A scenario file: 4 planar drones on a ring swapping sides (half a turn) under the MPC."""
+    return f"""version = 1
+name = "{name}"
+dim = 2
+seed = 0
+
+[template]
+shape = "polygon"
+n = 4
+radius = {radius_m}
+
+[initial]
+centroid = [0.0, 0.0]
+rotation = 3.141592653589793
+
+[reference]
+kind = "constant"
+rotation = 0.0
+
+[limits]
+v_max = 1.0
+d_min = 0.5
+
+[controller]
+kind = "mpc"
+horizon = {horizon}
+
+[simulation]
+dt = 0.1
+duration = {duration_s}
+"""

@@ -61,7 +61,8 @@ def test_summary_counts_failures_at_the_time_limit() -> None:
     assert row["median_runtime_ms"] == pytest.approx(10.0) and row["shgeom_ratio"] == 1.0
 
 
-def _send(conn: Connection, task: Task) -> None:
+def _send(conn: Connection, task: Task, **extra: object) -> None:
+    """A successful result for ``task`` (plus ``extra`` fields)."""
     conn.send(
         (
             "result",
@@ -75,6 +76,7 @@ def _send(conn: Connection, task: Task) -> None:
                 "runtime_s": 1e-3,
                 "objective": 0.0,
                 "primal_residual": 0.0,
+                **extra,
             },
         )
     )
@@ -121,23 +123,7 @@ def _order_worker(conn: Connection) -> None:
     """Answers at once, with the time it was asked (to check the interleaving)."""
     conn.send(("ready", ""))
     while (task := conn.recv()) is not None:
-        conn.send(
-            (
-                "result",
-                {
-                    "index": task.index,
-                    "solver": task.solver,
-                    "setting": task.setting,
-                    "mode": task.mode,
-                    "found": True,
-                    "status": "ok",
-                    "runtime_s": 1e-3,
-                    "objective": 0.0,
-                    "primal_residual": 0.0,
-                    "at": time.perf_counter(),
-                },
-            )
-        )
+        _send(conn, task, at=time.perf_counter())
 
 
 def test_solvers_run_side_by_side_problem_by_problem() -> None:

@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import scipy.sparse as sp
+from helpers import tiny_swap_toml
 
 from mpcform.cli import main
 from mpcform.errors import MPCFormError
@@ -26,35 +27,7 @@ from mpcform.problems import (
 from mpcform.solvers import SolverOptions, make_backend
 
 ROOT = Path(__file__).resolve().parents[1]
-TINY = """version = 1
-name = "tiny_swap"
-dim = 2
-
-[template]
-shape = "polygon"
-n = 4
-radius = 1.5
-
-[initial]
-centroid = [0.0, 0.0]
-rotation = 3.141592653589793
-
-[reference]
-kind = "constant"
-rotation = 0.0
-
-[limits]
-v_max = 1.0
-d_min = 0.5
-
-[controller]
-kind = "mpc"
-horizon = 5
-
-[simulation]
-dt = 0.1
-duration = 1.0
-"""
+TINY = tiny_swap_toml("tiny_swap", radius_m=1.5, horizon=5, duration_s=1.0)
 
 
 @pytest.fixture(scope="module")

@@ -6,6 +6,7 @@ import json
 from pathlib import Path
 
 import pytest
+from helpers import tiny_swap_toml
 
 from mpcform.cli import main
 from mpcform.errors import ScenarioError, ValidationError
@@ -22,37 +23,7 @@ from mpcform.sweep import (
     run_sweep,
 )
 
-TINY = """
-version = 1
-name = "tiny"
-dim = 2
-seed = 0
-
-[template]
-shape = "polygon"
-n = 4
-radius = 1.0
-
-[initial]
-centroid = [0.0, 0.0]
-rotation = 3.141592653589793
-
-[reference]
-kind = "constant"
-rotation = 0.0
-
-[limits]
-v_max = 1.0
-d_min = 0.5
-
-[controller]
-kind = "mpc"
-horizon = 4
-
-[simulation]
-dt = 0.1
-duration = 0.6
-"""
+TINY = tiny_swap_toml("tiny", radius_m=1.0, horizon=4, duration_s=0.6)
 
 
 @pytest.fixture
