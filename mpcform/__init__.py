@@ -8,27 +8,27 @@ from __future__ import annotations
 from importlib import metadata
 from typing import Any
 
-from mpcform.consensus import ConsensusController, ConsensusSettings, Network
-from mpcform.controllers import ProportionalController, TrackingController
+from mpcform.control.base import ProportionalController, TrackingController
+from mpcform.control.consensus import ConsensusController, ConsensusSettings, Network
+from mpcform.control.graph import Graph
+from mpcform.control.nullspace import NullSpaceController, NullSpaceSettings
 from mpcform.errors import MPCFormError, ScenarioError, ValidationError
-from mpcform.graph import Graph
-from mpcform.kinematics import (
+from mpcform.formation.kinematics import (
     fit_formation,
     formation_jacobian,
     forward_kinematics,
     jacobian_pinv,
     nullspace_projector,
 )
-from mpcform.limits import Limits, SphereObstacle
-from mpcform.metrics import run_metrics
-from mpcform.mission import Keyframe, MissionLimits, MissionReference, SpeedBudget
-from mpcform.mpc_settings import MPCSettings
-from mpcform.nullspace import NullSpaceController, NullSpaceSettings
-from mpcform.reference import ConstantReference, ExponentialReference
-from mpcform.scenario import load_scenario, run_scenario
-from mpcform.simulation import simulate
-from mpcform.state import FormationState
-from mpcform.template import Template
+from mpcform.formation.state import FormationState
+from mpcform.formation.template import Template
+from mpcform.mpc.limits import Limits, SphereObstacle
+from mpcform.mpc.settings import MPCSettings
+from mpcform.reference.base import ConstantReference, ExponentialReference
+from mpcform.reference.mission import Keyframe, MissionLimits, MissionReference, SpeedBudget
+from mpcform.scenario.spec import load_scenario, run_scenario
+from mpcform.sim.metrics import run_metrics
+from mpcform.sim.simulation import simulate
 
 try:
     __version__ = metadata.version("mpcform")
@@ -75,7 +75,7 @@ __all__ = [
 def __getattr__(name: str) -> Any:
     """Import :class:`MPCPlanner` (and its solver dependencies) only when it is used."""
     if name == "MPCPlanner":
-        from mpcform.planner import MPCPlanner
+        from mpcform.mpc.planner import MPCPlanner
 
         return MPCPlanner
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from mpcform.state import FormationState
-from mpcform.template import Template
+from mpcform.formation.state import FormationState
+from mpcform.formation.template import Template
 
 
 def random_template(rng: np.random.Generator, n: int, dim: int) -> Template:

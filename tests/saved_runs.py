@@ -5,8 +5,8 @@ from __future__ import annotations
 import dataclasses
 from pathlib import Path
 
-from mpcform.rundata import write_formation_npz
-from mpcform.scenario import RunResult, Scenario, load_scenario, run_scenario
+from mpcform.outputs.rundata import write_formation_npz
+from mpcform.scenario.spec import RunResult, Scenario, load_scenario, run_scenario
 
 ROOT = Path(__file__).resolve().parents[1]
 SCENARIOS = ROOT / "scenarios"

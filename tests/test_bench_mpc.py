@@ -8,14 +8,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from mpcform.bench_mpc import RecordingBackend, bench_case, markdown_table, swap_case
-from mpcform.cli import main
-from mpcform.solvers import SolverOptions, make_backend
+from mpcform.bench.mpc import RecordingBackend, bench_case, markdown_table, swap_case
+from mpcform.cli.main import main
+from mpcform.solvers.base import SolverOptions, make_backend
 
 
 def test_recording_backend_keeps_every_problem_and_solves_like_its_inner_backend() -> None:
-    from mpcform.limits import Limits
-    from mpcform.planner import MPCPlanner
+    from mpcform.mpc.limits import Limits
+    from mpcform.mpc.planner import MPCPlanner
 
     ref, start = swap_case(4, 2)
     rec = RecordingBackend(make_backend("piqp", SolverOptions()))

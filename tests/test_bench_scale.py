@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from mpcform.bench_scale import (
+from mpcform.bench.scale import (
     LIMITS,
     SPACING_M,
     bench_case,
@@ -23,9 +23,9 @@ from mpcform.bench_scale import (
     run,
     two_point_exponent,
 )
-from mpcform.cli import main
-from mpcform.geometry import min_pair_distance, min_segment_distance
-from mpcform.planner import MPCPlanner
+from mpcform.cli.main import main
+from mpcform.formation.geometry import min_pair_distance, min_segment_distance
+from mpcform.mpc.planner import MPCPlanner
 
 CASE_FIELDS = (
     "step_ms_median", "step_ms_p90", "step_ms_max", "fast_ms_median", "fast_ms_p90", "rss_peak_mib",

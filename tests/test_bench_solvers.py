@@ -13,10 +13,10 @@ from typing import Any
 
 import pytest
 
-from mpcform import bench_solvers as bs
-from mpcform.bench_solvers import Task, run_isolated, shifted_geometric_mean, succeeded, summarize
-from mpcform.cli import main
-from mpcform.problems import problem_files
+from mpcform.bench import solvers as bs
+from mpcform.bench.problems import problem_files
+from mpcform.bench.solvers import Task, run_isolated, shifted_geometric_mean, succeeded, summarize
+from mpcform.cli.main import main
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 
-from mpcform.check import check_scenario_file, locate
+from mpcform.scenario.check import check_scenario_file, locate
 
 ROOT = Path(__file__).resolve().parents[1]
 

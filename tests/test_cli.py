@@ -7,8 +7,8 @@ from pathlib import Path
 
 import pytest
 
-from mpcform.cli import main
-from mpcform.scenario import key_reference_markdown
+from mpcform.cli.main import main
+from mpcform.scenario.spec import key_reference_markdown
 
 ROOT = Path(__file__).resolve().parents[1]
 WORKED = str(ROOT / "scenarios" / "worked_example.toml")
@@ -57,7 +57,7 @@ def test_run_default_out_dir_is_relative_to_the_working_directory(
 
 
 def test_run_mpc_with_solver(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    pytest.importorskip("mpcform.planner")
+    pytest.importorskip("mpcform.mpc.planner")
     path = short_copy(tmp_path)
     assert main(["run", path, "--out", str(tmp_path / "o"), "--controller", "mpc",
                  "--solver", "osqp"]) == 0  # fmt: skip

@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 from saved_runs import short_run
 
-from mpcform import cli_runner
-from mpcform.cli import main
-from mpcform.rundata import load_run
+from mpcform.cli import handlers as cli_runner
+from mpcform.cli.main import main
+from mpcform.outputs.rundata import load_run
 
 ROOT = Path(__file__).resolve().parents[1]
 WORKED = ROOT / "scenarios" / "worked_example.toml"

@@ -21,12 +21,12 @@ from mpcform import (
     ValidationError,
     simulate,
 )
-from mpcform.cli import main
-from mpcform.consensus import relative_position_error
-from mpcform.graph import DisconnectedGraphWarning
-from mpcform.kinematics import forward_kinematics
-from mpcform.reference import Profile, Reference
-from mpcform.scenario import build_controller, load_scenario, run_scenario
+from mpcform.cli.main import main
+from mpcform.control.consensus import relative_position_error
+from mpcform.control.graph import DisconnectedGraphWarning
+from mpcform.formation.kinematics import forward_kinematics
+from mpcform.reference.base import Profile, Reference
+from mpcform.scenario.spec import build_controller, load_scenario, run_scenario
 
 ROOT = Path(__file__).resolve().parents[1]
 RING = ROOT / "scenarios" / "consensus_ring.toml"

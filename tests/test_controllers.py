@@ -3,18 +3,18 @@
 import numpy as np
 import pytest
 
-from mpcform.controllers import (
+from mpcform.control.base import (
     ProportionalController,
     TrackingController,
     feedforward_targets,
 )
+from mpcform.control.laws import saturate
 from mpcform.errors import ValidationError
-from mpcform.kinematics import drone_velocities, forward_kinematics
-from mpcform.laws import saturate
-from mpcform.reference import ExponentialReference
-from mpcform.simulation import simulate
-from mpcform.state import FormationState
-from mpcform.template import Template
+from mpcform.formation.kinematics import drone_velocities, forward_kinematics
+from mpcform.formation.state import FormationState
+from mpcform.formation.template import Template
+from mpcform.reference.base import ExponentialReference
+from mpcform.sim.simulation import simulate
 
 GAIN, DT, V_MAX = 2.0, 0.02, 3.0
 TEMPLATE = Template.polygon(3, 1.0)

@@ -13,7 +13,7 @@ from hypothesis import strategies as st
 from saved_runs import SCENARIOS, short_run, shortened
 
 from mpcform.errors import ValidationError
-from mpcform.export import (
+from mpcform.outputs.export import (
     CONTINUITY,
     CRAZYFLIE_MAX_PIECES,
     POLY_HEADER,
@@ -25,8 +25,8 @@ from mpcform.export import (
     read_poly,
     read_setpoints,
 )
-from mpcform.rundata import load_run
-from mpcform.scenario import load_scenario, run_scenario
+from mpcform.outputs.rundata import load_run
+from mpcform.scenario.spec import load_scenario, run_scenario
 
 TOLERANCE_M = 0.02  # the stated tolerance: every planned sample within 2 cm of the pieces
 

@@ -6,7 +6,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 from scipy.spatial.distance import pdist
 
-from mpcform.geometry import (
+from mpcform.formation.geometry import (
     closest_on_segments,
     min_pair_distance,
     min_segment_distance,

@@ -13,8 +13,8 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from mpcform import Graph, ScenarioError, Template, ValidationError
-from mpcform.graph import DisconnectedGraphWarning, describe_components
-from mpcform.scenario import build_controller, scenario_from_dict
+from mpcform.control.graph import DisconnectedGraphWarning, describe_components
+from mpcform.scenario.spec import build_controller, scenario_from_dict
 
 ROOT = Path(__file__).resolve().parents[1]
 RING = ROOT / "scenarios" / "consensus_ring.toml"

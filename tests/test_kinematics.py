@@ -9,7 +9,7 @@ from hypothesis import strategies as st
 from scipy.linalg import expm
 
 from mpcform.errors import ValidationError
-from mpcform.kinematics import (
+from mpcform.formation.kinematics import (
     drone_velocities,
     fit_formation,
     formation_jacobian,
@@ -18,9 +18,9 @@ from mpcform.kinematics import (
     nullspace_projector,
     velocity_size,
 )
-from mpcform.rotation import hat
-from mpcform.state import FormationState
-from mpcform.template import Template
+from mpcform.formation.rotation import hat
+from mpcform.formation.state import FormationState
+from mpcform.formation.template import Template
 
 seeds = st.integers(0, 2**32 - 1)
 dims = st.sampled_from([2, 3])

@@ -8,14 +8,14 @@ from hypothesis import given
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
-from mpcform.errors import ValidationError
-from mpcform.laws import (
+from mpcform.control.laws import (
     check_gain_dt,
     go_to_goal_closed_form,
     go_to_goal_discrete,
     saturate,
     tracking_command,
 )
+from mpcform.errors import ValidationError
 
 commands = arrays(float, st.tuples(st.integers(1, 6), st.sampled_from([2, 3])), elements=st.floats(-50, 50))
 speeds = st.floats(0.1, 20.0)

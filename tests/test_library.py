@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 from saved_runs import SCENARIOS, shortened
 
-from mpcform.export import export_run
-from mpcform.rundata import load_run, write_formation_npz
-from mpcform.scenario import load_scenario, run_scenario
+from mpcform.outputs.export import export_run
+from mpcform.outputs.rundata import load_run, write_formation_npz
+from mpcform.scenario.spec import load_scenario, run_scenario
 
 FILES = sorted(SCENARIOS.glob("*.toml"))
 STEPS = 6

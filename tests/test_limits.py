@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from mpcform.errors import ValidationError
-from mpcform.limits import Limits, SphereObstacle
+from mpcform.mpc.limits import Limits, SphereObstacle
 
 
 def test_limits_store_validated_values():

@@ -3,9 +3,9 @@
 import numpy as np
 import pytest
 
-from mpcform.controllers import StepInfo
-from mpcform.metrics import run_metrics
-from mpcform.simulation import SimulationResult
+from mpcform.control.base import StepInfo
+from mpcform.sim.metrics import run_metrics
+from mpcform.sim.simulation import SimulationResult
 
 # Three planar drones A, B, C over four samples (dt = 1 s).
 # p0 -> p1: A (0,0) -> (2,1) and B (2,0) -> (0,0) pass each other: their relative position runs

@@ -16,12 +16,12 @@ from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
 
 from mpcform.errors import MPCFormError, ScenarioError, ValidationError
-from mpcform.kinematics import drone_velocities
-from mpcform.mission import CAPTWarning, Keyframe, MissionLimits, MissionReference, SpeedBudget
-from mpcform.rotation import rotation_matrix
-from mpcform.scenario import load_scenario, run_scenario, scenario_from_dict
-from mpcform.state import FormationState
-from mpcform.template import Template
+from mpcform.formation.kinematics import drone_velocities
+from mpcform.formation.rotation import rotation_matrix
+from mpcform.formation.state import FormationState
+from mpcform.formation.template import Template
+from mpcform.reference.mission import CAPTWarning, Keyframe, MissionLimits, MissionReference, SpeedBudget
+from mpcform.scenario.spec import load_scenario, run_scenario, scenario_from_dict
 
 ROOT = Path(__file__).resolve().parents[1]
 H = 1e-6

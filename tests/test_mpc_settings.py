@@ -3,7 +3,7 @@
 import pytest
 
 from mpcform.errors import ValidationError
-from mpcform.mpc_settings import MPCSettings
+from mpcform.mpc.settings import MPCSettings
 
 
 def test_defaults_are_valid():

@@ -11,7 +11,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from mpcform.output import (
+from mpcform.outputs.files import (
     DEPENDENCIES,
     OUTPUT_FILES,
     SUMMARY_KEYS,
@@ -20,7 +20,7 @@ from mpcform.output import (
     json_safe,
     write_summary_json,
 )
-from mpcform.scenario import RunResult, load_scenario, run_scenario
+from mpcform.scenario.spec import RunResult, load_scenario, run_scenario
 
 ROOT = Path(__file__).resolve().parents[1]
 METRIC_KEYS = {

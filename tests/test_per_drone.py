@@ -10,14 +10,14 @@ import scipy.sparse as sp
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from mpcform.limits import Limits, SphereObstacle
-from mpcform.mpc_settings import MPCSettings
-from mpcform.per_drone import PerDroneQP
-from mpcform.planner import PER_DRONE_SOLVER, MPCPlanner
-from mpcform.reference import ConstantReference
-from mpcform.simulation import simulate
-from mpcform.state import FormationState
-from mpcform.template import Template
+from mpcform.formation.state import FormationState
+from mpcform.formation.template import Template
+from mpcform.mpc.limits import Limits, SphereObstacle
+from mpcform.mpc.per_drone import PerDroneQP
+from mpcform.mpc.planner import PER_DRONE_SOLVER, MPCPlanner
+from mpcform.mpc.settings import MPCSettings
+from mpcform.reference.base import ConstantReference
+from mpcform.sim.simulation import simulate
 
 # The sparse reference: Clarabel at tight tolerances (PIQP stops ~3e-6 away at any tolerance here).
 # Where plans differ by more than ~1e-6 (an optimum at a vertex of the velocity polygon), the

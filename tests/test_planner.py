@@ -7,18 +7,18 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from mpcform.controllers import ControlStep, TrackingController
+from mpcform.control.base import ControlStep, TrackingController
 from mpcform.errors import ValidationError
-from mpcform.geometry import closest_on_segments, min_segment_distance
-from mpcform.kinematics import forward_kinematics
-from mpcform.limits import Limits, SphereObstacle
-from mpcform.mpc_settings import MPCSettings
-from mpcform.planner import MPCPlanner
-from mpcform.reference import ConstantReference, ExponentialReference
-from mpcform.simulation import SimulationResult, simulate
-from mpcform.solvers import QPSolution
-from mpcform.state import FormationState
-from mpcform.template import Template
+from mpcform.formation.geometry import closest_on_segments, min_segment_distance
+from mpcform.formation.kinematics import forward_kinematics
+from mpcform.formation.state import FormationState
+from mpcform.formation.template import Template
+from mpcform.mpc.limits import Limits, SphereObstacle
+from mpcform.mpc.planner import MPCPlanner
+from mpcform.mpc.settings import MPCSettings
+from mpcform.reference.base import ConstantReference, ExponentialReference
+from mpcform.sim.simulation import SimulationResult, simulate
+from mpcform.solvers.base import QPSolution
 
 SOLVERS = ["osqp", "piqp"]
 

@@ -13,8 +13,8 @@ from saved_runs import short_run
 pytest.importorskip("matplotlib")
 PIL = pytest.importorskip("PIL.Image")
 
-from mpcform import plotting  # noqa: E402
-from mpcform.rundata import load_run  # noqa: E402
+from mpcform.outputs import plotting  # noqa: E402
+from mpcform.outputs.rundata import load_run  # noqa: E402
 
 
 def png(path: Path) -> tuple[int, int]:
@@ -84,9 +84,9 @@ def test_compare_runs(tmp_path: Path) -> None:
 
 def test_plotting_is_imported_only_when_asked_for() -> None:
     code = (
-        "import sys, mpcform, mpcform.cli, mpcform.export, mpcform.rundata\n"
+        "import sys, mpcform, mpcform.cli.main, mpcform.outputs.export, mpcform.outputs.rundata\n"
         "assert 'matplotlib' not in sys.modules, 'matplotlib imported with the package'\n"
-        "import mpcform.plotting\n"
+        "import mpcform.outputs.plotting\n"
         "assert 'matplotlib.pyplot' not in sys.modules, 'pyplot (global state) imported'\n"
     )
     subprocess.run([sys.executable, "-c", code], check=True)

@@ -11,9 +11,7 @@ import pytest
 import scipy.sparse as sp
 from helpers import tiny_swap_toml
 
-from mpcform.cli import main
-from mpcform.errors import MPCFormError
-from mpcform.problems import (
+from mpcform.bench.problems import (
     DEFAULT_SCENARIOS,
     FORMAT,
     RecordedQP,
@@ -24,7 +22,9 @@ from mpcform.problems import (
     record_scenario,
     save_problem,
 )
-from mpcform.solvers import SolverOptions, make_backend
+from mpcform.cli.main import main
+from mpcform.errors import MPCFormError
+from mpcform.solvers.base import SolverOptions, make_backend
 
 ROOT = Path(__file__).resolve().parents[1]
 TINY = tiny_swap_toml("tiny_swap", radius_m=1.5, horizon=5, duration_s=1.0)

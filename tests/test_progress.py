@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import io
 
-from mpcform.progress import BAR_WIDTH, ProgressBar, format_line
+from mpcform.cli.progress import BAR_WIDTH, ProgressBar, format_line
 
 
 class FakeTerminal(io.StringIO):

@@ -7,10 +7,10 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from mpcform.errors import ValidationError
-from mpcform.kinematics import drone_velocities, forward_kinematics
-from mpcform.reference import ConstantReference, ExponentialReference
-from mpcform.state import FormationState
-from mpcform.template import Template
+from mpcform.formation.kinematics import drone_velocities, forward_kinematics
+from mpcform.formation.state import FormationState
+from mpcform.formation.template import Template
+from mpcform.reference.base import ConstantReference, ExponentialReference
 
 H = 1e-5
 TIMES = np.array([0.05, 0.3, 1.0, 2.5, 6.0])

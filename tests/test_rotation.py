@@ -6,7 +6,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from mpcform.errors import ValidationError
-from mpcform.rotation import (
+from mpcform.formation.rotation import (
     check_rotation,
     cross_world,
     exp_body,

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from saved_runs import short_run
 
-from mpcform.rundata import FORMATION_NPZ, RunDirError, load_run
+from mpcform.outputs.rundata import FORMATION_NPZ, RunDirError, load_run
 
 
 def test_round_trip_with_formation_data(tmp_path: Path) -> None:

@@ -13,8 +13,9 @@ import numpy as np
 import pytest
 
 from mpcform import MPCSettings, ScenarioError, TrackingController
-from mpcform.kinematics import forward_kinematics
-from mpcform.scenario import (
+from mpcform.formation.kinematics import forward_kinematics
+from mpcform.formation.state import FormationState
+from mpcform.scenario.spec import (
     MPC_FIELDS,
     SCHEMA,
     TABLES,
@@ -26,8 +27,7 @@ from mpcform.scenario import (
     run_scenario,
     scenario_from_dict,
 )
-from mpcform.solvers import DEFAULT_SOLVER
-from mpcform.state import FormationState
+from mpcform.solvers.base import DEFAULT_SOLVER
 
 ROOT = Path(__file__).resolve().parents[1]
 SCENARIOS = sorted((ROOT / "scenarios").glob("*.toml"))
@@ -113,7 +113,7 @@ def test_spatial_scenario_reaches_the_goal_formation() -> None:
 
 
 def test_mpc_reproduces_tracking_when_no_constraint_is_active() -> None:
-    pytest.importorskip("mpcform.planner")
+    pytest.importorskip("mpcform.mpc.planner")
     scenario = shortened(load_scenario(WORKED), 1.0)
     tracking = run_scenario(scenario, controller="tracking")
     mpc = run_scenario(scenario, controller="mpc", solver="osqp")

@@ -3,13 +3,13 @@
 import numpy as np
 import pytest
 
-from mpcform.controllers import Controller, ControlStep, ProportionalController, StepInfo
+from mpcform.control.base import Controller, ControlStep, ProportionalController, StepInfo
+from mpcform.control.laws import go_to_goal_closed_form, go_to_goal_discrete
 from mpcform.errors import MPCFormError, ValidationError
-from mpcform.laws import go_to_goal_closed_form, go_to_goal_discrete
-from mpcform.reference import ConstantReference
-from mpcform.simulation import simulate
-from mpcform.state import FormationState
-from mpcform.template import Template
+from mpcform.formation.state import FormationState
+from mpcform.formation.template import Template
+from mpcform.reference.base import ConstantReference
+from mpcform.sim.simulation import simulate
 
 P0, GOAL, GAIN = np.array([1.0, -2.0, 0.5]), np.array([4.0, 2.0, -1.0]), 1.5
 SINGLE = Template(np.zeros((1, 3)))

@@ -9,15 +9,17 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from mpcform.cli import main
+from mpcform.bench.problems import RecordedQP, load_problem, problem_files
+from mpcform.cli.main import main
 from mpcform.errors import SolverError
-from mpcform.limits import Limits
-from mpcform.mpc_settings import MPCSettings
-from mpcform.planner import MPCPlanner
-from mpcform.problems import RecordedQP, load_problem, problem_files
-from mpcform.reference import ConstantReference
-from mpcform.simulation import simulate
-from mpcform.solvers import (
+from mpcform.formation.state import FormationState
+from mpcform.formation.template import Template
+from mpcform.mpc.limits import Limits
+from mpcform.mpc.planner import MPCPlanner
+from mpcform.mpc.settings import MPCSettings
+from mpcform.reference.base import ConstantReference
+from mpcform.sim.simulation import simulate
+from mpcform.solvers.base import (
     CASADI_CONIC_PLUGINS,
     QPBackend,
     SolverOptions,
@@ -26,9 +28,7 @@ from mpcform.solvers import (
     solver_info,
     solver_infos,
 )
-from mpcform.solvers_ext import exact_separation_residual, full_symmetric
-from mpcform.state import FormationState
-from mpcform.template import Template
+from mpcform.solvers.families import exact_separation_residual, full_symmetric
 
 ROOT = Path(__file__).resolve().parents[1]
 

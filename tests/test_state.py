@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 
 from mpcform.errors import ValidationError
-from mpcform.rotation import rotation_matrix
-from mpcform.state import FormationState
+from mpcform.formation.rotation import rotation_matrix
+from mpcform.formation.state import FormationState
 
 
 def test_from_param_planar():

@@ -8,9 +8,9 @@ from pathlib import Path
 import pytest
 from helpers import tiny_swap_toml
 
-from mpcform.cli import main
+from mpcform.cli.main import main
 from mpcform.errors import ScenarioError, ValidationError
-from mpcform.sweep import (
+from mpcform.run.sweep import (
     SweepJob,
     aggregate,
     apply_overrides,

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from mpcform.errors import MPCFormError, ValidationError
-from mpcform.template import Template
+from mpcform.formation.template import Template
 
 
 def assert_centred(tpl: Template) -> None:

@@ -1,0 +1,1 @@
+"""Benchmarks (imported only by the CLI)."""

@@ -1,0 +1,196 @@
+"""The scenario runner's commands beyond ``run``: figures, animation, comparison, export, checks.
+
+``mpcform.cli.main`` wires these in; each command is a thin layer over library functions
+(:mod:`mpcform.outputs.rundata`, :mod:`mpcform.outputs.plotting`, :mod:`mpcform.outputs.export`,
+:mod:`mpcform.outputs.compare`, :mod:`mpcform.scenario.check`). Plotting is imported only when a figure is
+asked for, after checking that matplotlib is installed (else exit 2 with the install hint).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from importlib.util import find_spec
+from pathlib import Path
+from typing import Any
+
+from mpcform.cli.progress import ProgressBar
+from mpcform.errors import MPCFormError, ValidationError
+from mpcform.outputs.export import CRAZYFLIE_MAX_PIECES, DEFAULT_TOLERANCE_M, ExportResult, export_run
+from mpcform.outputs.rundata import RunData, load_run, write_formation_npz
+from mpcform.scenario.check import check_scenario_file
+from mpcform.scenario.spec import RunResult, Scenario, describe
+
+PLOTS_DIR = "plots"
+EXPORT_DIR = "export"
+PLOT_HINT = "plotting needs matplotlib: pip install 'mpcform[plot]'"
+
+
+class PlotUnavailable(MPCFormError):
+    """matplotlib (or pillow for GIFs) is not installed."""
+
+
+# ---- run ----------------------------------------------------------------------------------
+def add_run_options(cmd: argparse.ArgumentParser) -> None:
+    """``--plot``, ``--animate``, ``--export`` (with ``--altitude``, ``--tolerance``) of ``run``."""
+    cmd.add_argument("--plot", action="store_true", help="also write PNG figures into DIR/plots/")
+    cmd.add_argument(
+        "--animate", action="store_true", help="also write a GIF of the flight, DIR/plots/flight.gif"
+    )
+    cmd.add_argument(
+        "--export",
+        action="store_true",
+        help="also write per-drone setpoint and polynomial CSVs into DIR/export/",
+    )
+    _add_export_options(cmd)
+
+
+def progress_bar(scenario: Scenario) -> ProgressBar:
+    """The progress callback of a CLI run (draws on a terminal only, after half a second)."""
+    return ProgressBar(f"{scenario.name}")
+
+
+def check_run_options(args: argparse.Namespace, scenario: Scenario) -> None:
+    """Fail before simulating when a requested figure cannot be drawn or an option does not apply."""
+    if args.plot or args.animate:
+        require_plotting(gif=args.animate)
+    if args.altitude is not None and not args.export:
+        raise ValidationError("--altitude", "applies only with --export")
+    if args.altitude is not None and scenario.dim == 3:
+        raise ValidationError(
+            "--altitude", "applies only to planar scenarios; a spatial run exports its own z"
+        )
+
+
+def finish_run(args: argparse.Namespace, scenario: Scenario, run: RunResult) -> None:
+    """After ``run`` wrote its files: formation data, figures, animation and export as asked."""
+    if run.out_dir is None or not (args.plot or args.animate or args.export):
+        return
+    write_formation_npz(run.out_dir, scenario, run.simulation.t_s)
+    data = load_run(run.out_dir)
+    _figures(data, run.out_dir / PLOTS_DIR, args.plot, args.animate)
+    if args.export:
+        _report_export(export_run(data, run.out_dir / EXPORT_DIR, altitude_m=args.altitude,
+                                  tolerance_m=args.tolerance))  # fmt: skip
+
+
+# ---- plot, compare, export ----------------------------------------------------------------
+def _plot(args: argparse.Namespace) -> int:
+    require_plotting(gif=args.animate)
+    data = load_run(args.dir)
+    out = Path(args.dir) / PLOTS_DIR if args.out is None else Path(args.out)
+    _figures(data, out, True, args.animate)
+    return 0
+
+
+def _compare(args: argparse.Namespace) -> int:
+    from mpcform.outputs.compare import comparison_records, markdown_table, run_labels
+
+    if not args.no_figure:
+        require_plotting()
+    runs = [load_run(d) for d in args.dirs]
+    records = comparison_records(runs)
+    print(markdown_table(records))
+    if args.json:
+        Path(args.json).write_text(json.dumps(records, indent=2) + "\n")
+    if not args.no_figure:
+        from mpcform.outputs.plotting import compare_runs
+
+        path = compare_runs(runs, args.figure, run_labels(runs))
+        print(f"wrote {path}")
+    return 0
+
+
+def _export(args: argparse.Namespace) -> int:
+    data = load_run(args.dir)
+    out = Path(args.dir) / EXPORT_DIR if args.out is None else Path(args.out)
+    _report_export(export_run(data, out, altitude_m=args.altitude, tolerance_m=args.tolerance))
+    return 0
+
+
+def validate(args: argparse.Namespace) -> int:
+    """``mpcform validate``: OK and a description, or every problem found (exit 2)."""
+    result = check_scenario_file(args.scenario)
+    if result.scenario is not None:
+        print(f"OK {describe(result.scenario)}")
+        return 0
+    for problem in result.problems:
+        where = f"{args.scenario}:{problem.line}: " if problem.line is not None else ""
+        message = " ".join(f"{problem.field}: {problem.message}".split())
+        print(f"mpcform: error: {where}{message}", file=sys.stderr)
+    if len(result.problems) > 1:
+        print(f"mpcform: {len(result.problems)} problems in {args.scenario}", file=sys.stderr)
+    return 2
+
+
+def add_commands(sub: Any) -> None:
+    """Add ``plot``, ``compare`` and ``export`` to the ``mpcform`` subcommands."""
+    plot = sub.add_parser("plot", help="draw the figures of a saved run (DIR from `mpcform run --out DIR`)",
+                          description="Draw the figures of a saved run into DIR/plots/.")  # fmt: skip
+    plot.set_defaults(func=_plot)
+    plot.add_argument("dir", metavar="DIR", help="output directory of `mpcform run`")
+    plot.add_argument("--out", metavar="OUT", help="figure directory (default: DIR/plots/)")
+    plot.add_argument("--animate", action="store_true", help="also write flight.gif")
+
+    compare = sub.add_parser("compare", help="several saved runs on one figure and one markdown table",
+                             description="Compare saved runs (e.g. controllers or solvers on one "
+                             "scenario): a markdown table of their metrics and one figure.")  # fmt: skip
+    compare.set_defaults(func=_compare)
+    compare.add_argument("dirs", nargs="+", metavar="DIR", help="output directories of `mpcform run`")
+    compare.add_argument(
+        "--figure", default="compare.png", metavar="PNG", help="figure path (default: compare.png)"
+    )
+    compare.add_argument("--no-figure", action="store_true", help="print the table only")
+    compare.add_argument("--json", metavar="PATH", help="also write the rows as a JSON list of records")
+
+    export = sub.add_parser("export", help="per-drone setpoint CSVs and Crazyswarm polynomial trajectories",
+                            description="Export a saved run for a flight stack: per drone, a setpoint "
+                            "CSV (t, position, velocity, acceleration, yaw) and 7th-order polynomial "
+                            "pieces in the Crazyswarm uav_trajectories CSV format.")  # fmt: skip
+    export.set_defaults(func=_export)
+    export.add_argument("dir", metavar="DIR", help="output directory of `mpcform run`")
+    export.add_argument("--out", metavar="OUT", help="export directory (default: DIR/export/)")
+    _add_export_options(export)
+
+
+def require_plotting(gif: bool = False) -> None:
+    """Raise :class:`PlotUnavailable` when matplotlib (or pillow, for a GIF) is missing."""
+    if find_spec("matplotlib") is None:
+        raise PlotUnavailable(PLOT_HINT)
+    if gif and find_spec("PIL") is None:
+        raise PlotUnavailable("the GIF writer needs pillow: pip install 'mpcform[plot]'")
+
+
+# ---- helpers ------------------------------------------------------------------------------
+def _add_export_options(cmd: argparse.ArgumentParser) -> None:
+    cmd.add_argument(
+        "--altitude", type=float, metavar="M", help="flight altitude of a planar run [m] (default 1)"
+    )
+    cmd.add_argument("--tolerance", type=float, default=DEFAULT_TOLERANCE_M, metavar="M",
+                     help=f"largest distance between the polynomials and the planned positions [m] "
+                     f"(default {DEFAULT_TOLERANCE_M:g})")  # fmt: skip
+
+
+def _figures(data: RunData, out: Path, plot: bool, animate: bool) -> None:
+    if not (plot or animate):
+        return
+    from mpcform.outputs import plotting  # imported only when figures are asked for
+
+    if plot:
+        paths = plotting.plot_run(data, out)
+        print(f"wrote {len(paths)} figures ({', '.join(p.name for p in paths)}) to {out}")
+    if animate:
+        print(f"wrote {plotting.animate_run(data, out / plotting.ANIMATION_FILE)}")
+
+
+def _report_export(result: ExportResult) -> None:
+    fit = result.fit
+    n = sum(p.name.endswith("_setpoints.csv") for p in result.files)
+    print(f"exported {n} drone{'s' * (n != 1)} to {result.directory}: setpoint CSVs and "
+          f"{fit.polynomial.pieces} polynomial pieces of {fit.polynomial.durations_s[0]:.3g} s each "
+          f"({result.files_per_drone} file{'s' * (result.files_per_drone != 1)} per drone, at most "
+          f"{CRAZYFLIE_MAX_PIECES} pieces each), max fit error {fit.max_error_m:.2g} m "
+          f"(tolerance {fit.tolerance_m:g} m)")  # fmt: skip
+    for warning in result.warnings:
+        print(f"mpcform: warning: {warning}", file=sys.stderr)

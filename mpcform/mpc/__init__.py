@@ -1,0 +1,1 @@
+"""The receding-horizon QP planner: limits, settings, rows, QP, per-drone solve, planner."""

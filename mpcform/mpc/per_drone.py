@@ -1,0 +1,216 @@
+"""Decoupled mode solved drone by drone: one small dense QP per drone, with DAQP.
+
+In decoupled mode every separation row involves one drone, so the planner's sparse QP
+(:mod:`mpcform.mpc.qp`) is block-diagonal per drone. Eliminating the positions
+(``x_e = dt sum_{j<e} u_j``) leaves per drone ``H d`` inputs and ``H`` slacks::
+
+    min  0.5 ||M u - c||^2 + w1 sum s + 0.5 w2 ||s||^2        M = I + k dt L (x) I_d
+    s.t. D u_j <= h,  |u_j - u_{j-1}| <= a_max dt,  lo <= x_e <= hi,
+         a_r^T x_{e_r} + s_{e_r} >= b_r,  s >= 0
+
+(``L`` strictly lower triangular ones, so ``(M u)_j = u_j + k x_j``): the sparse QP's block,
+with a positive-definite Hessian. Two things make it cheap:
+
+- in the variables ``v = M u`` (``v_j = u_j + k x_j``, what the cost compares with ``c_j``) the
+  cost is ``0.5 ||v - c||^2``: DAQP gets an identity Hessian (its cheapest setup), the constant
+  rows are transformed once and the separation rows of all drones in one matrix product;
+- the slacks are almost always zero, so each drone is first solved without them: if that hard
+  QP is feasible and its multipliers at every step sum to at most ``w1``, its solution with
+  ``s = 0`` meets the soft QP's optimality conditions (exact penalty), else the soft QP is solved.
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Any
+
+import numpy as np
+from scipy.linalg import solve_triangular
+
+from mpcform._validate import Array
+from mpcform.mpc.limits import Limits
+from mpcform.mpc.qp import row_ends, velocity_set
+from mpcform.mpc.settings import MPCSettings
+from mpcform.solvers.base import QPSolution, failed
+
+DAQP_INF = 1e30  # DAQP's "no bound"
+DAQP_OK = 1
+PRIMAL_TOL = 1e-9  # DAQP row feasibility tolerance (its default 1e-6 shows in the plans)
+MIN_SLACK_QUADRATIC = 1e-6  # keeps the soft QP's Hessian positive definite when w2 = 0
+ACTIVE_TOL = 1e-6  # a row with a multiplier above this is reported active (as for the sparse QP)
+
+
+class PerDroneQP:
+    """The per-drone condensed QPs of the decoupled planner: everything constant built once."""
+
+    def __init__(self, dim: int, dt_s: float, limits: Limits, settings: MPCSettings) -> None:
+        import daqp
+
+        self._daqp = daqp
+        self.dim, self.dt_s, self.limits, self.settings = dim, dt_s, limits, settings
+        h, k = settings.horizon, settings.gain_per_s
+        self._nu = nu = h * dim
+        eye_d = np.eye(dim)
+        self._x_of_u = dt_s * np.kron(np.tril(np.ones((h, h))), eye_d)  # x_1..x_H from u
+        self._m = np.eye(nu) + k * dt_s * np.kron(np.tril(np.ones((h, h)), -1), eye_d)  # v = M u
+        self._m_inv = solve_triangular(self._m, np.eye(nu), lower=True)  # u = M^-1 v
+        rows: list[Array] = []  # constant rows over u; bounds per drone from _bounds
+        self._vel_h: float | None = None
+        self._n_vel = 0
+        if limits.v_max_mps is not None:
+            normals, self._vel_h = velocity_set(dim, settings, limits.v_max_mps)
+            rows.append(np.kron(np.eye(h), normals))
+            self._n_vel = h * normals.shape[0]
+        if limits.a_max_mps2 is not None:
+            rows.append(np.kron(np.eye(h) - np.eye(h, k=-1), eye_d))
+        if limits.geofence_min_m is not None:
+            rows.append(self._x_of_u)
+        self._const_v = (np.vstack(rows) if rows else np.zeros((0, nu))) @ self._m_inv
+        self._ends = row_ends(h)
+        # x_e = dt sum_{j<e} u_j, so a^T x_e = a^T (sum_{j<e} dt M^-1[(j, .), :]) v: (H, d, H d) per end e
+        self._x_v = dt_s * np.cumsum(self._m_inv.reshape(h, dim, nu), axis=0)
+        self._eye = np.eye(nu)
+        w2 = max(settings.slack_quadratic, MIN_SLACK_QUADRATIC)
+        self._hess_soft = np.diag(np.concatenate([np.full(h, w2), np.ones(nu)]))
+        self._options: dict[str, Any] = {"iter_limit": settings.max_iter, "primal_tol": PRIMAL_TOL}
+        self._a, self._lo, self._hi = np.zeros((0, nu)), np.zeros(0), np.zeros(0)
+
+    def solve(
+        self, p0: Array, c: Array, u_prev: Array, singles: Array, coeffs: Array, lower: Array, warm_u: Array
+    ) -> tuple[QPSolution, int]:
+        """Solve every drone's QP.
+
+        ``p0`` (n, d) starts, ``c`` (H, n, d) targets, ``u_prev`` (n, d) last commands; separation
+        items (all within reach) ``singles`` (S,) drone index, ``coeffs`` (S, R, d), ``lower``
+        (S, R); ``warm_u`` (H, n, d) inputs whose nearly active rows start DAQP's active set.
+        Returns the solution in the sparse QP's layout ``[u | x | s]`` over these n drones (its
+        ``solve_time_s`` is the time spent inside DAQP), and the number of active rows.
+        """
+        st = self.settings
+        h, n, nu, n_const = st.horizon, p0.shape[0], self._nu, self._const_v.shape[0]
+        f_v = -c.transpose(1, 0, 2).reshape(n, nu)  # 0.5 ||v - c||^2
+        v_warm = warm_u.transpose(1, 0, 2).reshape(n, nu) @ self._m.T
+        c_lo, c_hi = self._bounds(p0, u_prev)
+        sep_v, sep_end, sep_lo, counts = self._separation(n, singles, coeffs, lower)
+        a, lo, hi = self._buffers(int(counts.max(initial=0)))
+        offsets = [0, *np.cumsum(counts).tolist()]
+        v_out, s_out = np.zeros((n, nu)), np.zeros((n, h))
+        flags, lams, active = np.zeros(n, dtype=int), [], np.zeros(n, dtype=int)
+        iters, in_daqp = 0, 0.0
+
+        def load(i: int) -> int:
+            """Put drone i's rows and bounds into the buffers; return its number of rows."""
+            first, last = offsets[i], offsets[i + 1]
+            m = n_const + last - first
+            a[n_const:m] = sep_v[first:last]
+            lo[:n_const], hi[:n_const], lo[n_const:m] = c_lo[i], c_hi[i], sep_lo[first:last]
+            return m
+
+        for i in range(n):  # the hard QPs
+            m = load(i)
+            t0 = time.perf_counter()
+            v, _, flags[i], info = self._daqp.solve(
+                self._eye, f_v[i], a[:m], hi[:m], lo[:m], primal_start=v_warm[i], **self._options
+            )  # fmt: skip
+            in_daqp += time.perf_counter() - t0
+            iters += int(info["iterations"])
+            v_out[i], lam = v, info["lam"]
+            lams.append(lam[n_const:])
+            active[i] = np.count_nonzero(np.abs(lam) > ACTIVE_TOL)
+        # the hard optimum is the soft one (s = 0) where no step's multipliers sum above w1
+        lam_sep = np.abs(np.concatenate(lams)) if lams else np.zeros(0)  # (only read where flag is OK)
+        drone = np.repeat(np.arange(n), counts)
+        step_sum = np.bincount(drone * h + sep_end - 1, lam_sep, minlength=n * h).reshape(n, h)
+        soft = (flags != DAQP_OK) | (step_sum.max(axis=1, initial=0.0) > st.slack_weight)
+        for i in np.flatnonzero(soft).tolist():
+            m = load(i)
+            t0 = time.perf_counter()
+            v_out[i], s_out[i], flags[i], info = self._solve_soft(
+                f_v[i], a[:m], hi[:m], lo[:m], sep_end[offsets[i] : offsets[i + 1]], n_const
+            )  # fmt: skip
+            in_daqp += time.perf_counter() - t0
+            iters += int(info["iterations"])
+            active[i] = np.count_nonzero(np.abs(info["lam"]) > ACTIVE_TOL)
+        bad = np.flatnonzero((flags != DAQP_OK) | ~np.isfinite(v_out).all(axis=1))
+        if bad.size:
+            status = f"daqp: exit flag {flags[bad[0]]} (drone {bad[0]})"
+            return failed(status, in_daqp, iters), 0
+        u_out = v_out @ self._m_inv.T
+        x_out = u_out @ self._x_of_u.T
+        flat = [v.reshape(n, h, -1).transpose(1, 0, 2).ravel() for v in (u_out, x_out, s_out)]
+        sol = QPSolution(np.concatenate(flat), None, True, "daqp: optimal", iters, in_daqp)
+        return sol, int(active.sum())
+
+    def _buffers(self, max_sep: int) -> tuple[Array, Array, Array]:
+        """Row and bound buffers with room for ``max_sep`` separation rows after the constant ones
+        (kept between calls; only the separation part and the per-drone bounds are rewritten)."""
+        n_const = self._const_v.shape[0]
+        if self._a.shape[0] < n_const + max_sep:
+            size = n_const + max(max_sep, 2 * (self._a.shape[0] - n_const))
+            self._a = np.empty((size, self._nu))
+            self._a[:n_const] = self._const_v
+            self._lo, self._hi = np.empty(size), np.full(size, DAQP_INF)
+        return self._a, self._lo, self._hi
+
+    def _solve_soft(
+        self, f_v: Array, a: Array, hi: Array, lo: Array, end: Array, n_const: int
+    ) -> tuple[Array, Array, int, dict[str, Any]]:
+        """The drone's QP with its slacks (first, simple bounds ``s >= 0``; Hessian ``diag(w2, I)``).
+
+        The slacks are not scaled to a unit Hessian: a column ``1 / sqrt(w2)`` would scale DAQP's
+        row tolerance up with it (measured: 3.5e-8 misses at ``w2 = 0``)."""
+        st, h = self.settings, self.settings.horizon
+        a_s = np.zeros((a.shape[0], h))
+        a_s[n_const + np.arange(end.shape[0]), end - 1] = 1.0
+        f = np.concatenate([np.full(h, st.slack_weight), f_v])
+        z, _, flag, info = self._daqp.solve(
+            self._hess_soft, f, np.hstack([a_s, a]), np.concatenate([np.full(h, DAQP_INF), hi]),
+            np.concatenate([np.zeros(h), lo]), **self._options,
+        )  # fmt: skip
+        return z[h:], z[:h], flag, info
+
+    def _separation(
+        self, n: int, singles: Array, coeffs: Array, lower: Array
+    ) -> tuple[Array, Array, Array, Array]:
+        """Separation rows in ``v``, their position steps and lower bounds, sorted by drone, and
+        the number of rows per drone.
+
+        A row ``a^T x_e + s_e >= b`` that every reachable ``x_e`` meets (``b <= -|a| e v_max dt``,
+        since the velocity set lies in the ball) is dropped: the optimum is unchanged.
+        """
+        order = np.argsort(singles, kind="stable")
+        singles, coeffs, lower = singles[order], coeffs[order], lower[order]
+        ends = self._ends
+        keep = np.ones(lower.shape, dtype=bool)
+        if self.limits.v_max_mps is not None:
+            reach = np.linalg.norm(coeffs, axis=2) * (ends * (self.limits.v_max_mps * self.dt_s))
+            keep = lower > -reach
+        rows_v = np.matmul(coeffs.transpose(1, 0, 2), self._x_v[ends - 1]).transpose(1, 0, 2)  # (S, R, H d)
+        end = np.broadcast_to(ends, lower.shape)[keep]
+        counts = np.bincount(singles, keep.sum(axis=1), minlength=n).astype(np.intp)
+        return rows_v[keep], end, lower[keep], counts
+
+    def _bounds(self, p0: Array, u_prev: Array) -> tuple[Array, Array]:
+        """Lower and upper bounds (n, rows) of the constant rows for each drone."""
+        lim, st, dt = self.limits, self.settings, self.dt_s
+        h, n, d = st.horizon, p0.shape[0], self.dim
+        lo: list[Array] = []
+        hi: list[Array] = []
+        if self._vel_h is not None:
+            lo.append(np.full((n, self._n_vel), -DAQP_INF))
+            hi.append(np.full((n, self._n_vel), self._vel_h))
+        if lim.a_max_mps2 is not None:
+            da = np.full((n, h, d), lim.a_max_mps2 * dt)
+            shift = np.zeros((n, h, d))
+            shift[:, 0] = u_prev
+            lo.append((shift - da).reshape(n, -1))
+            hi.append((shift + da).reshape(n, -1))
+        if lim.geofence_min_m is not None and lim.geofence_max_m is not None:
+            margin = st.margin_m
+            f_lo = np.minimum(lim.geofence_min_m + margin - p0, 0.0)  # may stay or move inwards
+            f_hi = np.maximum(lim.geofence_max_m - margin - p0, 0.0)
+            lo.append(np.repeat(f_lo[:, None], h, axis=1).reshape(n, -1))
+            hi.append(np.repeat(f_hi[:, None], h, axis=1).reshape(n, -1))
+        if not lo:
+            return np.zeros((n, 0)), np.zeros((n, 0))
+        return np.hstack(lo), np.hstack(hi)

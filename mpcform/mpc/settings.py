@@ -1,0 +1,103 @@
+"""Settings of the receding-horizon QP planner (scenario table ``[controller]`` with kind "mpc")."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from mpcform._validate import positive
+from mpcform.control.base import FEEDFORWARDS
+from mpcform.errors import ValidationError
+
+VELOCITY_SETS = ("polytope", "box")
+COUPLINGS = ("joint", "decoupled")
+
+
+@dataclass(frozen=True)
+class MPCSettings:
+    """Horizon, cost and constraint-shaping parameters of :class:`mpcform.MPCPlanner`.
+
+    - ``horizon``: steps H of the plan (H * dt seconds ahead).
+    - ``gain_per_s``: k of eq. 14 inside the cost ``sum_j ||u_j - ff_j - k (p*_j - p_j)||^2``.
+    - ``feedforward``: ``"jacobian"`` (eq. 14) or ``"secant"``.
+    - ``velocity_set``: ``"polytope"`` (``facets`` half-spaces inscribed in the ball; planar:
+      a regular polygon, spatial: ``facets`` directions on a Fibonacci sphere; None picks 16
+      planar, 32 spatial, which keep 98 % and 89 % of v_max in the worst direction) or
+      ``"box"`` (the square or cube inscribed in the ball).
+    - ``slack_weight``: exact L1 penalty per metre of separation slack [1/m], plus
+      ``slack_quadratic`` [1/m^2] to help the solver's conditioning (keeps exactness).
+    - ``margin_m``: separation and obstacle rows are tightened by this much so that the
+      certified distance holds despite solver tolerance [m].
+    - ``tie_break_rad``: when the eq. 14 rollout breaks a separation row, the desired
+      velocities of the drones involved are turned by this angle about the world z axis (to the
+      right), so symmetric encounters (antipodal swaps) circulate instead of deadlocking; for a
+      drone that stays stalled in conflict the angle grows step by step (up to a quarter turn).
+      It changes nothing when no row is active (0 disables).
+    - ``coupling``: ``"joint"`` (one row per pair, ``c^T (p_i - p_k) >= d_min``) or
+      ``"decoupled"`` (each pair row split into two per-drone rows about the guess's midpoint,
+      ``c^T (p_i - m) >= d_min / 2``: slightly more conservative, but the QP is block-diagonal
+      per drone, so it scales to large swarms; the same continuous-time guarantee holds).
+    - ``per_drone`` (decoupled only): solve each drone's block as a small dense QP with DAQP
+      (:mod:`mpcform.mpc.per_drone`) instead of one sparse block-diagonal QP with the ``solver``
+      (naming another solver is then an error). DAQP solves to 1e-9 row feasibility; of the
+      solver settings below only ``max_iter`` applies to it.
+    - ``grouping``: solve only the groups of drones (connected by pair rows within reach) that
+      hold a conflict; the other groups' optimum is their eq. 14 rollout (needs ``fast_path``).
+      Equal to the monolithic QP up to solver tolerance.
+    - ``fast_path``: return the eq. 14 rollout without a solver call when it meets every row.
+    - ``eps_abs`` / ``eps_rel`` / ``max_iter`` / ``time_limit_s``: solver tolerances and limits.
+    """
+
+    horizon: int = 10
+    gain_per_s: float = 1.0
+    feedforward: str = "jacobian"
+    velocity_set: str = "polytope"
+    facets: int | None = None
+    slack_weight: float = 1e3
+    slack_quadratic: float = 10.0
+    margin_m: float = 2e-3
+    tie_break_rad: float = 0.5
+    coupling: str = "joint"
+    per_drone: bool = True
+    grouping: bool = True
+    fast_path: bool = True
+    eps_abs: float = 1e-4
+    eps_rel: float = 1e-4
+    max_iter: int = 4000
+    time_limit_s: float = 0.0
+
+    @property
+    def solves_per_drone(self) -> bool:
+        """Whether the planner solves each drone's QP with DAQP (decoupled mode with ``per_drone``)."""
+        return self.coupling == "decoupled" and self.per_drone
+
+    def __post_init__(self) -> None:
+        if isinstance(self.horizon, bool) or not isinstance(self.horizon, int) or self.horizon < 1:
+            raise ValidationError("controller.horizon", f"expected an integer >= 1, got {self.horizon!r}")
+        positive("controller.gain", self.gain_per_s)
+        if self.feedforward not in FEEDFORWARDS:
+            raise ValidationError(
+                "controller.feedforward",
+                f"expected one of {FEEDFORWARDS}, got {self.feedforward!r}",
+            )
+        if self.coupling not in COUPLINGS:
+            raise ValidationError(
+                "controller.coupling", f"expected one of {COUPLINGS}, got {self.coupling!r}"
+            )
+        if self.velocity_set not in VELOCITY_SETS:
+            raise ValidationError(
+                "controller.velocity_set",
+                f"expected one of {VELOCITY_SETS}, got {self.velocity_set!r}",
+            )
+        if self.facets is not None and (
+            isinstance(self.facets, bool) or not isinstance(self.facets, int) or self.facets < 4
+        ):
+            raise ValidationError("controller.facets", f"expected an integer >= 4, got {self.facets!r}")
+        positive("controller.slack_weight", self.slack_weight)
+        positive("controller.slack_quadratic", self.slack_quadratic, allow_zero=True)
+        positive("controller.margin", self.margin_m, allow_zero=True)
+        positive("controller.tie_break", self.tie_break_rad, allow_zero=True)
+        positive("controller.eps_abs", self.eps_abs)
+        positive("controller.eps_rel", self.eps_rel, allow_zero=True)
+        if isinstance(self.max_iter, bool) or not isinstance(self.max_iter, int) or self.max_iter < 1:
+            raise ValidationError("controller.max_iter", f"expected an integer >= 1, got {self.max_iter!r}")
+        positive("controller.time_limit", self.time_limit_s, allow_zero=True)

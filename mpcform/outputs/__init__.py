@@ -1,0 +1,1 @@
+"""What a run writes and shows: files, run data, plots, comparisons, exports, tables."""

@@ -1,0 +1,1 @@
+"""Desired formation trajectories xi_d(t): closed-form references and ruckig missions."""

@@ -1,0 +1,133 @@
+"""Desired formation trajectories ``xi_d(t)`` and their drone-level targets ``p*_i(t)``, ``p_dot*_i(t)``.
+
+Every reference describes itself by a vectorised :class:`Profile` (centroid, rotation and scale
+with their rates at many times); the drone-level targets follow from eq. 13 and eq. 14's
+feedforward ``J xi_dot_d``. Times before 0 are clamped to 0.
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from mpcform._validate import Array, positive
+from mpcform.errors import ValidationError
+from mpcform.formation.kinematics import velocity_size
+from mpcform.formation.rotation import S_PLANAR, geodesic
+from mpcform.formation.state import FormationState
+from mpcform.formation.template import Template
+
+
+@dataclass(frozen=True)
+class Profile:
+    """Formation states and velocities at T times (world-frame angular velocity)."""
+
+    centroid_m: Array  # (T, d)
+    rotation_body_to_world: Array  # (T, d, d)
+    scale: Array  # (T,)
+    centroid_velocity_mps: Array  # (T, d)
+    omega_world_radps: Array  # (T, 1) planar, (T, 3) spatial
+    scale_rate_per_s: Array  # (T,)
+
+
+class Reference(ABC):
+    """A desired formation trajectory over ``template``."""
+
+    template: Template
+
+    @abstractmethod
+    def profile(self, times_s: Array) -> Profile:
+        """Formation states and velocities at ``times_s`` (T,)."""
+
+    def targets(self, times_s: object) -> tuple[Array, Array]:
+        """Drone targets ``p*`` [m] and ``p_dot*`` [m/s], each (T, n, d), at ``times_s`` (T,)."""
+        pr = self.profile(np.atleast_1d(np.asarray(times_s, dtype=float)))
+        q = np.einsum("tij,nj->tni", pr.rotation_body_to_world, self.template.offsets)
+        s = pr.scale[:, None, None]
+        pos = pr.centroid_m[:, None, :] + s * q
+        if q.shape[-1] == 2:
+            spin = pr.omega_world_radps[:, :, None] * (q @ S_PLANAR.T)
+        else:
+            spin = np.cross(pr.omega_world_radps[:, None, :], q)
+        vel = pr.centroid_velocity_mps[:, None, :] + pr.scale_rate_per_s[:, None, None] * q + s * spin
+        return pos, vel
+
+    def state(self, t_s: float) -> FormationState:
+        """The desired formation state at ``t_s``."""
+        pr = self.profile(np.array([t_s], dtype=float))
+        return FormationState(pr.centroid_m[0], pr.rotation_body_to_world[0], float(pr.scale[0]))
+
+    def velocity(self, t_s: float) -> Array:
+        """The desired formation velocity ``xi_dot_d`` (4 or 7) at ``t_s``."""
+        pr = self.profile(np.array([t_s], dtype=float))
+        return np.concatenate([pr.centroid_velocity_mps[0], pr.omega_world_radps[0], pr.scale_rate_per_s[:1]])
+
+
+class ConstantReference(Reference):
+    """Hold one formation state (the go-to-goal case of eq. 4 for every drone)."""
+
+    def __init__(self, template: Template, state: FormationState) -> None:
+        _same_dim(template, state, "reference")
+        self.template, self.goal = template, state
+
+    def profile(self, times_s: Array) -> Profile:
+        t = times_s.shape[0]
+        g, d = self.goal, self.template.dim
+        return Profile(
+            np.broadcast_to(g.centroid_m, (t, d)),
+            np.broadcast_to(g.rotation_body_to_world, (t, d, d)),
+            np.full(t, g.scale),
+            np.zeros((t, d)),
+            np.zeros((t, velocity_size(d) - d - 1)),
+            np.zeros(t),
+        )
+
+
+class ExponentialReference(Reference):
+    """Exponential convergence from ``start`` to ``goal`` at ``rate_per_s`` (eq. 16, generalised).
+
+    ``s(t) = s* + (s0 - s*) e^{-lambda t}``; the centroid converges the same way, and the
+    rotation turns along the geodesic ``R(t) = R0 exp(phi(t) hat(a))`` with
+    ``phi(t) = phi_total (1 - e^{-lambda t})``, so ``omega_world = phi_dot R0 a``.
+    """
+
+    def __init__(
+        self, template: Template, start: FormationState, goal: FormationState, rate_per_s: float
+    ) -> None:
+        _same_dim(template, start, "reference.start")
+        _same_dim(template, goal, "reference")
+        self.template, self.start, self.goal = template, start, goal
+        self.rate_per_s = positive("reference.rate", rate_per_s)
+        self._axis, self._phi = geodesic(start.rotation_body_to_world, goal.rotation_body_to_world)
+
+    def profile(self, times_s: Array) -> Profile:
+        t = np.maximum(times_s, 0.0)
+        lam = self.rate_per_s
+        decay = np.exp(-lam * t)
+        s0, g = self.start, self.goal
+        centroid = g.centroid_m + np.outer(decay, s0.centroid_m - g.centroid_m)
+        cvel = np.outer(-lam * decay, s0.centroid_m - g.centroid_m)
+        scale = g.scale + (s0.scale - g.scale) * decay
+        srate = -lam * (s0.scale - g.scale) * decay
+        phi = self._phi * (1.0 - decay)
+        phi_dot = self._phi * lam * decay
+        r0 = s0.rotation_body_to_world
+        if self.template.dim == 2:
+            ang = self._axis[0] * phi
+            c, s = np.cos(ang), np.sin(ang)
+            rel = np.stack([np.stack([c, -s], -1), np.stack([s, c], -1)], -2)
+            omega = (self._axis[0] * phi_dot)[:, None]
+        else:
+            rel = Rotation.from_rotvec(np.outer(phi, self._axis)).as_matrix()
+            omega = np.outer(phi_dot, r0 @ self._axis)
+        return Profile(centroid, r0 @ rel, scale, cvel, omega, srate)
+
+
+def _same_dim(template: Template, state: FormationState, field: str) -> None:
+    if not isinstance(state, FormationState):
+        raise ValidationError(field, f"expected a FormationState, got {type(state).__name__}")
+    if state.dim != template.dim:
+        raise ValidationError(field, f"state has dimension {state.dim}, template has {template.dim}")

@@ -1,0 +1,1 @@
+"""Running scenarios: the runner, sweeps and the worker pool."""

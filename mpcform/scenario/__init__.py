@@ -1,0 +1,1 @@
+"""Scenario files: key schema, spec, TOML loading, the controller factory, validation."""

@@ -1,0 +1,1 @@
+"""QP backends behind one interface and one registry."""
