@@ -30,7 +30,7 @@ from mpcform.solvers.base import (
 )
 from mpcform.solvers.families import exact_separation_residual, full_symmetric
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 
 @dataclass(frozen=True)

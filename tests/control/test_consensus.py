@@ -28,7 +28,7 @@ from mpcform.formation.kinematics import forward_kinematics
 from mpcform.reference.base import Profile, Reference
 from mpcform.scenario.spec import build_controller, load_scenario, run_scenario
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 RING = ROOT / "scenarios" / "consensus_ring.toml"
 LOSSY = ROOT / "scenarios" / "consensus_ring_lossy.toml"
 LAWS = ("eq20", "centroid_preserving")

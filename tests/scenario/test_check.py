@@ -8,7 +8,7 @@ import pytest
 
 from mpcform.scenario.check import check_scenario_file, locate
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 MESSY = """\
 version = 1

@@ -14,7 +14,7 @@ from mpcform.cli import handlers as cli_runner
 from mpcform.cli.main import main
 from mpcform.outputs.rundata import load_run
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 WORKED = ROOT / "scenarios" / "worked_example.toml"
 HAS_PLOT = find_spec("matplotlib") is not None and find_spec("PIL") is not None
 needs_plot = pytest.mark.skipif(not HAS_PLOT, reason="matplotlib is not installed")

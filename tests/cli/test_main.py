@@ -10,7 +10,7 @@ import pytest
 from mpcform.cli.main import main
 from mpcform.scenario.spec import key_reference_markdown
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 WORKED = str(ROOT / "scenarios" / "worked_example.toml")
 
 

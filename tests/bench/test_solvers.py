@@ -18,7 +18,7 @@ from mpcform.bench.problems import problem_files
 from mpcform.bench.solvers import Task, run_isolated, shifted_geometric_mean, succeeded, summarize
 from mpcform.cli.main import main
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def test_shifted_geometric_mean() -> None:

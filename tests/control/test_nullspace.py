@@ -28,7 +28,7 @@ from mpcform.formation.kinematics import fit_formation, formation_jacobian, forw
 from mpcform.scenario.spec import build_controller, load_scenario, run_scenario, scenario_from_dict
 from tests.helpers import random_state, random_template
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 SPATIAL = ROOT / "scenarios" / "spatial_nullspace_repulsion.toml"
 
 

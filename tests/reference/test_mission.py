@@ -23,7 +23,7 @@ from mpcform.formation.template import Template
 from mpcform.reference.mission import CAPTWarning, Keyframe, MissionLimits, MissionReference, SpeedBudget
 from mpcform.scenario.spec import load_scenario, run_scenario, scenario_from_dict
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 H = 1e-6
 TRIANGLE_6 = Template.centred(
     [[0.0, np.sqrt(3.0)], [-0.5, np.sqrt(3.0) / 2], [0.5, np.sqrt(3.0) / 2], [-1, 0], [0, 0], [1, 0]]

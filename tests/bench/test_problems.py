@@ -26,7 +26,7 @@ from mpcform.cli.main import main
 from mpcform.errors import MPCFormError
 from mpcform.solvers.base import SolverOptions, make_backend
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 TINY = tiny_swap_toml("tiny_swap", radius_m=1.5, horizon=5, duration_s=1.0)
 
 

@@ -22,7 +22,7 @@ from mpcform.outputs.files import (
 )
 from mpcform.scenario.spec import RunResult, load_scenario, run_scenario
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 METRIC_KEYS = {
     "final_tracking_error", "max_tracking_error", "min_separation", "min_separation_segments",
     "max_speed", "separation_violations", "speed_violations", "qp_solves", "fast_path_steps",

@@ -16,7 +16,7 @@ from mpcform import Graph, ScenarioError, Template, ValidationError
 from mpcform.control.graph import DisconnectedGraphWarning, describe_components
 from mpcform.scenario.spec import build_controller, scenario_from_dict
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 RING = ROOT / "scenarios" / "consensus_ring.toml"
 
 

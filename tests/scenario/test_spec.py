@@ -29,7 +29,7 @@ from mpcform.scenario.spec import (
 )
 from mpcform.solvers.base import DEFAULT_SOLVER
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 SCENARIOS = sorted((ROOT / "scenarios").glob("*.toml"))
 WORKED = ROOT / "scenarios" / "worked_example.toml"
 DELETE = object()
