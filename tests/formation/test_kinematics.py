@@ -217,3 +217,42 @@ def test_pinv_of_full_rank_jacobian_is_the_normal_equation_inverse():
     jac = formation_jacobian(tpl, state)
     expected = np.linalg.solve(jac.T @ jac, jac.T)  # (J^T J)^{-1} J^T, full column rank
     np.testing.assert_allclose(jacobian_pinv(jac).matrix, expected, atol=1e-10)
+
+
+ISOTROPIC = [Template.polygon(6, radius=1.2), Template.polygon(3), Template.centred(
+    [[s0, s1, s2] for s0 in (-1, 1) for s1 in (-1, 1) for s2 in (-1, 1)])[0]]
+
+
+@pytest.mark.parametrize("tpl", ISOTROPIC, ids=lambda t: f"{t.n}x{t.dim}")
+@pytest.mark.parametrize("seed", range(3))
+def test_fit_of_a_mirrored_start_falls_back_instead_of_failing(tpl: Template, seed: int) -> None:
+    """A reflection of an isotropic template, permuted: no proper rotation with s > 0 fits it (such
+    starts were rejected as 'all drones coincide'); the fit says so and falls back."""
+    rng = np.random.default_rng(seed)
+    mirror = np.diag([-1.0] + [1.0] * (tpl.dim - 1))
+    positions = 3.0 + 2.0 * tpl.offsets[rng.permutation(tpl.n)] @ mirror.T
+    positions = positions if seed else 3.0 + 2.0 * tpl.offsets @ mirror.T  # seed 0: the exact mirror
+    fit = fit_formation(tpl, positions)
+    spread = np.sqrt(((positions - positions.mean(0)) ** 2).sum() / (tpl.offsets**2).sum())
+    assert fit.state.scale > 0 and np.isfinite(fit.residual_rms_m)
+    np.testing.assert_allclose(fit.state.centroid_m, positions.mean(0), atol=1e-12)
+    if not fit.scale_identifiable:
+        assert fit.state.scale == pytest.approx(spread)
+    if seed == 0:  # planar: s = sv1 - sv2 = 0; spatial: s = sv1 + sv2 - sv3 = 1/3 of the mirror's
+        assert fit.scale_identifiable == (tpl.dim == 3)
+    proper = fit_formation(tpl, 3.0 + 2.0 * tpl.offsets)
+    assert proper.scale_identifiable and proper.state.scale == pytest.approx(2.0)
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_fit_of_a_mirrored_random_template_has_a_positive_scale(dim: int) -> None:
+    rng = np.random.default_rng(dim)
+    for _ in range(50):
+        tpl = Template.centred(rng.normal(size=(int(rng.integers(2, 12)), dim)))[0]
+        positions = tpl.offsets[rng.permutation(tpl.n)] * np.r_[-1.0, np.ones(dim - 1)]
+        assert fit_formation(tpl, positions).state.scale > 0
+
+
+def test_fit_keeps_the_coincide_message_for_zero_spread() -> None:
+    with pytest.raises(ValidationError, match="all drones coincide"):
+        fit_formation(Template.polygon(4), np.full((4, 2), 2.5))
