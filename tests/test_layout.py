@@ -58,11 +58,15 @@ def imports(name: str) -> list[tuple[str, str, int]]:
     for node in ast.walk(_tree(name)):
         if isinstance(node, ast.Import):
             found += [(_resolve(a.name), "", node.lineno) for a in node.names if a.name.startswith("mpcform")]
-        elif isinstance(node, ast.ImportFrom) and node.level == 0 and (node.module or "").startswith("mpcform"):
+        elif (
+            isinstance(node, ast.ImportFrom) and node.level == 0 and (node.module or "").startswith("mpcform")
+        ):
             module = node.module or ""
             for alias in node.names:
                 sub = f"{module}.{alias.name}"
-                found.append((sub, "", node.lineno) if sub in MODULES else (_resolve(module), alias.name, node.lineno))
+                found.append(
+                    (sub, "", node.lineno) if sub in MODULES else (_resolve(module), alias.name, node.lineno)
+                )
     return found
 
 
@@ -104,7 +108,7 @@ def test_no_import_cycle() -> None:
         state[node] = 1
         for nxt in sorted(graph.get(node, ())):
             if state.get(nxt) == 1:
-                pytest.fail("import cycle: " + " -> ".join([*path[path.index(nxt):], nxt]))
+                pytest.fail("import cycle: " + " -> ".join([*path[path.index(nxt) :], nxt]))
             if nxt not in state:
                 visit(nxt, [*path, nxt])
         state[node] = 2
@@ -132,13 +136,21 @@ def test_modules_and_classes_stay_small() -> None:
         if lines > MAX_MODULE_LINES:
             big.append(f"module {name}: {lines} lines")
         for node in ast.walk(_tree(name)):
-            if isinstance(node, ast.ClassDef) and (size := node.end_lineno - node.lineno + 1) > MAX_CLASS_LINES:
+            if (
+                isinstance(node, ast.ClassDef)
+                and (size := node.end_lineno - node.lineno + 1) > MAX_CLASS_LINES
+            ):
                 big.append(f"class {name}.{node.name}: {size} lines")
     assert not big, big
 
 
 def test_no_private_name_crosses_a_module() -> None:
-    bad = [f"{n}:{line} imports {t}.{what}" for n in MODULES for t, what, line in imports(n) if what.startswith("_")]
+    bad = [
+        f"{n}:{line} imports {t}.{what}"
+        for n in MODULES
+        for t, what, line in imports(n)
+        if what.startswith("_")
+    ]
     assert not bad, bad
 
 
