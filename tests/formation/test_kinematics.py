@@ -8,8 +8,10 @@ from hypothesis import given
 from hypothesis import strategies as st
 from scipy.linalg import expm
 
+from mpcform._validate import Array
 from mpcform.errors import ValidationError
 from mpcform.formation.kinematics import (
+    PINV_RTOL,
     drone_velocities,
     fit_formation,
     formation_jacobian,
@@ -256,3 +258,32 @@ def test_fit_of_a_mirrored_random_template_has_a_positive_scale(dim: int) -> Non
 def test_fit_keeps_the_coincide_message_for_zero_spread() -> None:
     with pytest.raises(ValidationError, match="all drones coincide"):
         fit_formation(Template.polygon(4), np.full((4, 2), 2.5))
+
+
+def _bent_line_jacobian(eps: float) -> Array:
+    """J of a spatial line of 5 drones bent by ``eps`` [m] in y (eps = 0: rank 6, the turn about
+    the line is invisible; its singular value grows linearly with eps)."""
+    x = np.linspace(-1.0, 1.0, 5)
+    offsets = np.column_stack([x, eps * (x**2 - (x**2).mean()), np.zeros(5)])
+    return formation_jacobian(Template.centred(offsets)[0], FormationState.from_param(np.zeros(3)))
+
+
+@pytest.mark.parametrize("factor", [0.3, 0.9, 0.99, 1.01, 1.1, 3.0])
+def test_projected_motion_keeps_the_formation_velocity_near_the_rank_threshold(factor: float) -> None:
+    """``J^+ N u = 0`` while the smallest singular value of J sits at ``factor`` x the cut
+    ``PINV_RTOL * sigma_max`` of the pseudo-inverse, on either side of it: the drone velocities
+    ``J J^+ N u`` and the centroid, scale and well-seen rotation rates stay at roundoff; only the
+    rate about the weakest direction (the turn about the nearly straight line) carries roundoff
+    amplified by ``sigma_max / sigma_min`` (at most ``1 / PINV_RTOL``), as any pseudo-inverse does."""
+    s = np.linalg.svd(_bent_line_jacobian(1e-6), compute_uv=False)
+    jac = _bent_line_jacobian(1e-6 * factor * PINV_RTOL * s[0] / s[-1])
+    s = np.linalg.svd(jac, compute_uv=False)
+    assert s[-1] / (PINV_RTOL * s[0]) == pytest.approx(factor, rel=1e-3)
+    pinv, proj = jacobian_pinv(jac), nullspace_projector(jac)
+    u = np.random.default_rng(7).normal(size=(jac.shape[0], 20))
+    xi_dot = pinv.matrix @ proj @ u  # rows: c_dot (3), omega (3; omega_x about the line), s_dot
+    eps = np.finfo(float).eps * np.abs(u).max()
+    assert np.abs(jac @ xi_dot).max() <= 100 * eps
+    assert np.abs(np.delete(xi_dot, 3, axis=0)).max() <= 100 * eps
+    assert np.abs(xi_dot[3]).max() <= 100 * eps * s[0] / s[-1]
+    assert pinv.rank == (7 if factor > 1 else 6)
