@@ -356,7 +356,8 @@ def _disagreement(factor_position: float, factor_scale: float, check: bool) -> t
     )  # fmt: skip
     ctrl = (ConsensusController if check else _Unchecked)(ref, graph, dt, settings)
     rng = np.random.default_rng(3)
-    start = forward_kinematics(tpl, FormationState.from_param([0.0, 0.0], 0.0, 1.0)) + 0.05 * rng.normal(size=(8, 2))
+    start = forward_kinematics(tpl, FormationState.from_param([0.0, 0.0], 0.0, 1.0))
+    start = start + 0.05 * rng.normal(size=(8, 2))
     sim = simulate(ctrl, start, 300 * dt)
     s_hat = ctrl.scale_estimates
     s_shape = 2.0 if settings.initial_scale == 2.0 else float(np.clip(s_hat.mean(), 0.0, 4.0))
