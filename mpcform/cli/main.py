@@ -189,14 +189,16 @@ def _bench_scale(args: argparse.Namespace) -> int:
 
 
 def _add_bench_scale(kinds: argparse._SubParsersAction) -> None:
-    from mpcform.bench.scale import DEFAULT_N, PLANNER_MODES, SCENARIOS
+    from mpcform.bench.scale import DEFAULT_N
+    from mpcform.bench.scale_cases import SCENARIOS
+    from mpcform.mpc.settings import GROUPED_MODES
 
     scale = kinds.add_parser("scale", help="step time and peak memory, 10 to 1000 drones (growth exponent)")
     scale.set_defaults(func=_bench_scale)
     scale.add_argument("--n", type=int, nargs="+", default=list(DEFAULT_N), help="swarm sizes")
     scale.add_argument("--steps", type=int, default=30, help="closed-loop steps per case (dt 0.1 s)")
     scale.add_argument("--scenario", nargs="+", choices=SCENARIOS, default=list(SCENARIOS))
-    scale.add_argument("--coupling", default="decoupled", choices=PLANNER_MODES,
+    scale.add_argument("--coupling", default="decoupled", choices=GROUPED_MODES,
                        help="planner mode, grouped (decoupled-sparse: one sparse QP, not per-drone DAQP)")
     scale.add_argument("--solver", default=DEFAULT_SOLVER, choices=sorted(BACKENDS), help="QP backend")
     scale.add_argument("--horizon", type=int, default=10, help="planner horizon [steps]")
