@@ -243,8 +243,7 @@ def _version() -> str:
 
 def record_scenario(path: str | Path, solver: str | None = None) -> list[RecordedQP]:
     """Run the scenario at ``path`` closed-loop with the MPC planner and return every QP it solved."""
-    from mpcform.mpc.planner import MPCPlanner
-    from mpcform.scenario.spec import load_scenario
+    from mpcform.scenario.spec import build_controller, load_scenario
     from mpcform.sim.simulation import simulate
 
     scenario = load_scenario(path)
@@ -253,9 +252,7 @@ def record_scenario(path: str | Path, solver: str | None = None) -> list[Recorde
     recorder = RecordingBackend(
         make_backend(solver or scenario.controller.solver, options), scenario.name, sim.dt_s
     )
-    planner = MPCPlanner(
-        scenario.reference, sim.dt_s, scenario.limits, st, scenario.obstacles, solver=recorder
-    )
+    planner = build_controller(scenario, "mpc", solver=recorder)
 
     def at_step(done: int, total: int) -> None:
         recorder.step = done  # the next step's index

@@ -106,24 +106,26 @@ def _progress(text: str) -> None:
 
 
 def _bench_solvers(args: argparse.Namespace) -> int:
+    from mpcform.bench import report as bench_report
     from mpcform.bench import solvers as bs
 
     problems = args.problems or bs.DEFAULT_PROBLEMS_DIR
     bench = bs.run_solver_benchmark(problems, args.solvers, args.settings, args.modes, args.time_limit,
                                     exact=not args.no_exact, progress=_progress)  # fmt: skip
-    report = bs.markdown_report(bench)
-    _print_bench(report, bs.records(bench), args.json)
+    report = bench_report.markdown_report(bench)
+    _print_bench(report, bench_report.records(bench), args.json)
     if args.report:
         Path(args.report).write_text(report + "\n")
     return 0
 
 
 def _bench_closed_loop(args: argparse.Namespace) -> int:
-    from mpcform.bench import solvers as bs
+    from mpcform.bench import closed_loop
+    from mpcform.bench.problems import DEFAULT_SCENARIOS
 
-    rows = bs.run_closed_loop(args.scenarios or bs.DEFAULT_SCENARIOS[:2], args.solvers, args.timeout,
-                              args.duration, progress=_progress)  # fmt: skip
-    report = bs.closed_loop_markdown(rows)
+    rows = closed_loop.run_closed_loop(args.scenarios or DEFAULT_SCENARIOS[:2], args.solvers, args.timeout,
+                                       args.duration, progress=_progress)  # fmt: skip
+    report = closed_loop.closed_loop_markdown(rows)
     _print_bench(report, rows, args.json)
     if args.report:
         Path(args.report).write_text(report)
@@ -131,7 +133,9 @@ def _bench_closed_loop(args: argparse.Namespace) -> int:
 
 
 def _add_bench_solvers(kinds: argparse._SubParsersAction) -> None:
-    from mpcform.bench.solvers import DEFAULT_TIME_LIMIT_S, MODES, SETTINGS
+    from mpcform.bench.accuracy import SETTINGS
+    from mpcform.bench.solvers import DEFAULT_TIME_LIMIT_S
+    from mpcform.bench.worker import MODES
 
     solvers = kinds.add_parser("solvers", help="QP solvers on the recorded problems (problems/)")
     solvers.set_defaults(func=_bench_solvers)
@@ -189,14 +193,16 @@ def _bench_scale(args: argparse.Namespace) -> int:
 
 
 def _add_bench_scale(kinds: argparse._SubParsersAction) -> None:
-    from mpcform.bench.scale import DEFAULT_N, PLANNER_MODES, SCENARIOS
+    from mpcform.bench.scale import DEFAULT_N
+    from mpcform.bench.scale_cases import SCENARIOS
+    from mpcform.mpc.settings import GROUPED_MODES
 
     scale = kinds.add_parser("scale", help="step time and peak memory, 10 to 1000 drones (growth exponent)")
     scale.set_defaults(func=_bench_scale)
     scale.add_argument("--n", type=int, nargs="+", default=list(DEFAULT_N), help="swarm sizes")
     scale.add_argument("--steps", type=int, default=30, help="closed-loop steps per case (dt 0.1 s)")
     scale.add_argument("--scenario", nargs="+", choices=SCENARIOS, default=list(SCENARIOS))
-    scale.add_argument("--coupling", default="decoupled", choices=PLANNER_MODES,
+    scale.add_argument("--coupling", default="decoupled", choices=GROUPED_MODES,
                        help="planner mode, grouped (decoupled-sparse: one sparse QP, not per-drone DAQP)")
     scale.add_argument("--solver", default=DEFAULT_SOLVER, choices=sorted(BACKENDS), help="QP backend")
     scale.add_argument("--horizon", type=int, default=10, help="planner horizon [steps]")

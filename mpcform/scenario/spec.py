@@ -47,7 +47,7 @@ from mpcform.reference.base import ConstantReference, ExponentialReference, Refe
 from mpcform.reference.mission import DEFAULT_SPEED_FRACTION, MissionLimits, MissionReference, SpeedBudget
 from mpcform.sim.metrics import run_metrics
 from mpcform.sim.simulation import SimulationResult, simulate
-from mpcform.solvers.base import DEFAULT_SOLVER
+from mpcform.solvers.base import DEFAULT_SOLVER, QPBackend
 from mpcform.solvers.base import check_solver_name as check_backend_name
 
 FORMAT_VERSION = 1
@@ -837,15 +837,19 @@ def check_solver_name(name: str, field: str = "controller.solver") -> str:
         raise ScenarioError(field, str(exc)) from None
 
 
-def build_controller(scenario: Scenario, kind: str | None = None, solver: str | None = None) -> Controller:
-    """The scenario's controller; ``kind`` and ``solver`` override the file (CLI flags)."""
+def build_controller(
+    scenario: Scenario, kind: str | None = None, solver: str | QPBackend | None = None
+) -> Controller:
+    """The scenario's controller; ``kind`` and ``solver`` override the file (CLI flags). ``solver``
+    names a backend or is a :class:`~mpcform.solvers.base.QPBackend` instance (e.g. a recording wrapper)."""
     spec = scenario.controller
     kind = spec.kind if kind is None else kind
     if kind not in CONTROLLER_KINDS:
         raise ScenarioError("controller.kind", f"expected one of {_listing(CONTROLLER_KINDS)}, "
                             f"got {kind!r}{_did_you_mean(kind, CONTROLLER_KINDS)}")  # fmt: skip
-    if solver is not None and kind != "mpc":
-        raise ScenarioError("controller.solver", f"a solver ({solver!r}) applies only to the mpc "
+    label = solver.name if isinstance(solver, QPBackend) else solver
+    if label is not None and kind != "mpc":
+        raise ScenarioError("controller.solver", f"a solver ({label!r}) applies only to the mpc "
                             f"controller, this run uses {kind!r}")  # fmt: skip
     ref, dt, limits = scenario.reference, scenario.simulation.dt_s, scenario.limits
     v_max = limits.v_max_mps if spec.saturate else None
@@ -866,10 +870,11 @@ def build_controller(scenario: Scenario, kind: str | None = None, solver: str | 
                                        scenario.allow_disconnected)  # fmt: skip
     from mpcform.mpc.planner import MPCPlanner
 
-    name = spec.solver
+    name: str | QPBackend = spec.solver
     if solver is not None:
-        name = check_solver_name(solver, "solver")
-        _check_sparse_solver(spec.mpc, "solver", name)
+        label = solver.name if isinstance(solver, QPBackend) else check_solver_name(solver, "solver")
+        _check_sparse_solver(spec.mpc, "solver", label)
+        name = solver if isinstance(solver, QPBackend) else label
     with _as_scenario_error("controller"):
         planner: Controller = MPCPlanner(ref, dt, limits, spec.mpc, obstacles=scenario.obstacles, solver=name)
     return planner

@@ -15,6 +15,7 @@ import pytest
 from mpcform import MPCSettings, ScenarioError, TrackingController
 from mpcform.formation.kinematics import forward_kinematics
 from mpcform.formation.state import FormationState
+from mpcform.mpc.planner import MPCPlanner
 from mpcform.scenario.spec import (
     MPC_FIELDS,
     SCHEMA,
@@ -27,7 +28,7 @@ from mpcform.scenario.spec import (
     run_scenario,
     scenario_from_dict,
 )
-from mpcform.solvers.base import DEFAULT_SOLVER
+from mpcform.solvers.base import DEFAULT_SOLVER, SolverOptions, make_backend
 
 ROOT = Path(__file__).resolve().parents[2]
 SCENARIOS = sorted((ROOT / "scenarios").glob("*.toml"))
@@ -286,3 +287,17 @@ def test_scenario_is_frozen() -> None:
         s.name = "other"  # type: ignore[misc]
     with pytest.raises(ValueError):
         s.initial_positions_m[0, 0] = 1.0
+
+
+def test_build_controller_takes_a_backend_instance() -> None:
+    s = load_scenario(ROOT / "scenarios" / "swap_planar_8.toml")
+    backend = make_backend("osqp", SolverOptions())
+    backend.name = "my osqp"  # not a solver name: the instance is used as is, never looked up
+    planner = build_controller(s, "mpc", solver=backend)
+    assert isinstance(planner, MPCPlanner) and planner.solver_name == "my osqp"
+    with pytest.raises(ScenarioError, match="a solver \\('my osqp'\\) applies only to the mpc"):
+        build_controller(s, "tracking", solver=backend)
+    mpc = dataclasses.replace(s.controller.mpc, coupling="decoupled")  # solved per drone by DAQP
+    per_drone = dataclasses.replace(s, controller=dataclasses.replace(s.controller, mpc=mpc))
+    with pytest.raises(ScenarioError, match="'my osqp' solves the sparse QP"):
+        build_controller(per_drone, "mpc", solver=backend)
