@@ -244,7 +244,7 @@ def _version() -> str:
 def record_scenario(path: str | Path, solver: str | None = None) -> list[RecordedQP]:
     """Run the scenario at ``path`` closed-loop with the MPC planner and return every QP it solved."""
     from mpcform.mpc.planner import MPCPlanner
-    from mpcform.scenario.spec import load_scenario
+    from mpcform.scenario.load import load_scenario
     from mpcform.sim.simulation import simulate
 
     scenario = load_scenario(path)

@@ -645,7 +645,8 @@ def records(bench: SolverBenchmark) -> list[dict[str, Any]]:
 def _closed_loop_worker(conn: Connection, scenario: str, solver: str, duration_s: float | None) -> None:
     import dataclasses
 
-    from mpcform.scenario.spec import load_scenario, run_scenario
+    from mpcform.run.runner import run_scenario
+    from mpcform.scenario.load import load_scenario
 
     try:
         sc = load_scenario(scenario)
