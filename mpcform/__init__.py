@@ -26,7 +26,8 @@ from mpcform.mpc.limits import Limits, SphereObstacle
 from mpcform.mpc.settings import MPCSettings
 from mpcform.reference.base import ConstantReference, ExponentialReference
 from mpcform.reference.mission import Keyframe, MissionLimits, MissionReference, SpeedBudget
-from mpcform.scenario.spec import load_scenario, run_scenario
+from mpcform.run.runner import run_scenario
+from mpcform.scenario.load import load_scenario
 from mpcform.sim.metrics import run_metrics
 from mpcform.sim.simulation import simulate
 

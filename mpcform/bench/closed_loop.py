@@ -1,6 +1,6 @@
 """``mpcform bench closed-loop``: each QP solver drives the same scenarios through the planner.
 
-Each solver runs every scenario through :func:`mpcform.scenario.spec.run_scenario` with the
+Each solver runs every scenario through :func:`mpcform.run.runner.run_scenario` with the
 ``mpc`` controller and that solver (in its own process, with a time limit per run): tracking
 error, minimum separation along segments, slack, fallbacks and per-step times of QP steps. A
 missing or unsupported solver is reported, not run.
@@ -41,7 +41,8 @@ CLOSED_LOOP_COLUMNS: list[Column] = [
 def _closed_loop_worker(conn: Connection, scenario: str, solver: str, duration_s: float | None) -> None:
     import dataclasses
 
-    from mpcform.scenario.spec import load_scenario, run_scenario
+    from mpcform.run.runner import run_scenario
+    from mpcform.scenario.load import load_scenario
 
     try:
         sc = load_scenario(scenario)

@@ -243,29 +243,20 @@ def _version() -> str:
 
 def record_scenario(path: str | Path, solver: str | None = None) -> list[RecordedQP]:
     """Run the scenario at ``path`` closed-loop with the MPC planner and return every QP it solved."""
-    from mpcform.scenario.spec import build_controller, load_scenario
-    from mpcform.sim.simulation import simulate
+    from mpcform.run.runner import run_scenario
+    from mpcform.scenario.load import load_scenario
 
     scenario = load_scenario(path)
-    st, sim = scenario.controller.mpc, scenario.simulation
+    st = scenario.controller.mpc
     options = SolverOptions(st.eps_abs, st.eps_rel, st.max_iter, st.time_limit_s)
     recorder = RecordingBackend(
-        make_backend(solver or scenario.controller.solver, options), scenario.name, sim.dt_s
+        make_backend(solver or scenario.controller.solver, options), scenario.name, scenario.simulation.dt_s
     )
-    planner = build_controller(scenario, "mpc", solver=recorder)
 
     def at_step(done: int, total: int) -> None:
         recorder.step = done  # the next step's index
 
-    simulate(
-        planner,
-        scenario.initial_positions_m,
-        sim.duration_s,
-        lag_s=sim.lag_s,
-        noise_std_m=sim.noise_std_m,
-        seed=scenario.seed,
-        progress=at_step,
-    )
+    run_scenario(scenario, controller="mpc", solver=recorder, progress=at_step)
     return recorder.problems
 
 

@@ -1,4 +1,4 @@
-"""The ``mpcform`` command: a thin argparse layer over :mod:`mpcform.scenario.spec`.
+"""The ``mpcform`` command: a thin argparse layer over :mod:`mpcform.run.runner`.
 
 Errors in user input print one line ``mpcform: error: <message>`` on stderr and exit with
 status 2 (argparse usage errors too); no traceback.
@@ -16,11 +16,9 @@ from typing import NoReturn
 from mpcform.cli import handlers as cli_runner
 from mpcform.errors import MPCFormError
 from mpcform.outputs.files import OUTPUT_FILES, format_summary
-from mpcform.scenario.spec import (
-    key_reference_markdown,
-    load_scenario,
-    run_scenario,
-)
+from mpcform.run.runner import run_scenario
+from mpcform.scenario.keys import key_reference_markdown
+from mpcform.scenario.load import load_scenario
 from mpcform.solvers.base import BACKENDS, DEFAULT_SOLVER, solver_infos
 
 EXIT_USAGE = 2

@@ -26,7 +26,9 @@ from mpcform.control.consensus import relative_position_error
 from mpcform.control.graph import DisconnectedGraphWarning
 from mpcform.formation.kinematics import forward_kinematics
 from mpcform.reference.base import Profile, Reference
-from mpcform.scenario.spec import build_controller, load_scenario, run_scenario
+from mpcform.run.runner import run_scenario
+from mpcform.scenario.build import build_controller
+from mpcform.scenario.load import load_scenario
 
 ROOT = Path(__file__).resolve().parents[2]
 RING = ROOT / "scenarios" / "consensus_ring.toml"

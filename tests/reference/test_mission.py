@@ -21,7 +21,8 @@ from mpcform.formation.rotation import rotation_matrix
 from mpcform.formation.state import FormationState
 from mpcform.formation.template import Template
 from mpcform.reference.mission import CAPTWarning, Keyframe, MissionLimits, MissionReference, SpeedBudget
-from mpcform.scenario.spec import load_scenario, run_scenario, scenario_from_dict
+from mpcform.run.runner import run_scenario
+from mpcform.scenario.load import load_scenario, scenario_from_dict
 
 ROOT = Path(__file__).resolve().parents[2]
 H = 1e-6
