@@ -41,7 +41,7 @@ import numpy as np
 
 from mpcform._validate import Array, positive
 from mpcform.control.base import FEEDFORWARDS, Controller, ControlStep, StepInfo, feedforward_targets
-from mpcform.control.laws import check_gain_dt, saturate, tracking_command
+from mpcform.control.laws import check_gain_dt, count_saturated, saturate, tracking_command
 from mpcform.errors import ValidationError
 from mpcform.formation.geometry import pairs_within
 from mpcform.formation.kinematics import fit_formation, formation_jacobian, nullspace_projector
@@ -165,4 +165,4 @@ class NullSpaceController(Controller):
         self.last_primary_mps, self.last_secondary_mps = primary, secondary
         raw = primary + secondary
         u = saturate(raw, self.v_max_mps)
-        return ControlStep(u, StepInfo("law", saturated=int(np.any(raw != u, axis=-1).sum())))
+        return ControlStep(u, StepInfo("law", saturated=count_saturated(raw, u)))

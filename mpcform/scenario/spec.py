@@ -24,7 +24,7 @@ from typing import Any
 import numpy as np
 
 from mpcform._validate import Array
-from mpcform.control.base import FEEDFORWARDS, Controller, ProportionalController, TrackingController
+from mpcform.control.base import FEEDFORWARDS, Controller
 from mpcform.control.consensus import (
     CONSENSUS_LAWS,
     RELATIVE_POSITIONS,
@@ -35,6 +35,7 @@ from mpcform.control.consensus import (
 from mpcform.control.graph import GRAPH_KINDS, Graph
 from mpcform.control.laws import check_gain_dt
 from mpcform.control.nullspace import OBJECTIVES, NullSpaceController, NullSpaceSettings
+from mpcform.control.tracking import ProportionalController, TrackingController
 from mpcform.errors import ScenarioError, SolverError, ValidationError
 from mpcform.formation.kinematics import fit_formation, forward_kinematics
 from mpcform.formation.rotation import rotation_matrix
@@ -44,7 +45,8 @@ from mpcform.mpc.limits import Limits, SphereObstacle
 from mpcform.mpc.settings import COUPLINGS, VELOCITY_SETS, MPCSettings
 from mpcform.outputs.files import build_summary, write_outputs
 from mpcform.reference.base import ConstantReference, ExponentialReference, Reference
-from mpcform.reference.mission import DEFAULT_SPEED_FRACTION, MissionLimits, MissionReference, SpeedBudget
+from mpcform.reference.keyframes import DEFAULT_SPEED_FRACTION, MissionLimits, SpeedBudget
+from mpcform.reference.mission import MissionReference
 from mpcform.sim.metrics import run_metrics
 from mpcform.sim.simulation import SimulationResult, simulate
 from mpcform.solvers.base import DEFAULT_SOLVER, QPBackend
