@@ -1,4 +1,4 @@
-"""Decentralised scale consensus (seed eq. 20) with the corrections of DESIGN.md section 2.
+"""Decentralised scale consensus (seed eq. 20), as printed and in a centroid-preserving variant.
 
 Each drone ``i`` knows its own position and scale estimate ``s_hat_i``, the shared frame
 ``R(t)`` (the reference's rotation, known to all drones) and the template offsets ``r``; from

@@ -2,8 +2,8 @@
 
 The seed prints ``u = J xi_dot_d + (I - J^+ J) u_sec``; ``J^+ J`` is 4 x 4 or 7 x 7 and does not
 type-check. The projector onto drone motions that leave the formation velocity unchanged is
-``N = I - J J^+`` (DESIGN.md section 2, :func:`~mpcform.formation.kinematics.nullspace_projector`). This
-module implements
+``N = I - J J^+`` (:func:`~mpcform.formation.kinematics.nullspace_projector`). This module
+implements
 
     ``u = J xi_dot_d + k (p* - p) + N u_sec``
 
