@@ -84,10 +84,10 @@ def nullspace_projector(jacobian: Array, rtol: float = PINV_RTOL) -> Array:
 
     The seed's eq. 15 prints ``I - J^+ J``, which is (7 x 7) and does not type-check against
     ``u in R^{3n}``; the projector onto the orthogonal complement of range(J) is ``I - J J^+``
-    (DESIGN.md section 2). It is symmetric, idempotent, and ``J^+ N = 0``. Numerically, drone
-    velocities ``J J^+ N u`` stay at roundoff; a formation rate along a direction whose singular
-    value is barely above the cut carries roundoff amplified by ``sigma_max / sigma_min`` (at most
-    ``1 / rtol``), as any pseudo-inverse does.
+    (from the SVD of J with a rank tolerance, so rank-deficient J work too). It is symmetric,
+    idempotent, and ``J^+ N = 0``. Numerically, drone velocities ``J J^+ N u`` stay at roundoff; a
+    formation rate along a direction whose singular value is barely above the cut carries roundoff
+    amplified by ``sigma_max / sigma_min`` (at most ``1 / rtol``), as any pseudo-inverse does.
     """
     u, sv, _ = np.linalg.svd(jacobian, full_matrices=False)
     basis = u[:, sv > rtol * (sv[0] if sv.size else 0.0)]

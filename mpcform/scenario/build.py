@@ -2,10 +2,11 @@
 
 from __future__ import annotations
 
-from mpcform.control.base import Controller, ProportionalController, TrackingController
+from mpcform.control.base import Controller
 from mpcform.control.consensus import ConsensusController, ConsensusSettings
 from mpcform.control.graph import GRAPH_KINDS
 from mpcform.control.nullspace import NullSpaceController, NullSpaceSettings
+from mpcform.control.tracking import ProportionalController, TrackingController
 from mpcform.errors import ScenarioError, SolverError
 from mpcform.mpc.settings import MPCSettings
 from mpcform.scenario.parse import as_scenario_error

@@ -30,7 +30,8 @@ from mpcform.formation.template import Template
 from mpcform.mpc.limits import Limits, SphereObstacle
 from mpcform.mpc.settings import MPCSettings
 from mpcform.reference.base import ConstantReference, ExponentialReference, Reference
-from mpcform.reference.mission import DEFAULT_SPEED_FRACTION, MissionLimits, MissionReference, SpeedBudget
+from mpcform.reference.keyframes import DEFAULT_SPEED_FRACTION, MissionLimits, SpeedBudget
+from mpcform.reference.mission import MissionReference
 from mpcform.scenario.build import check_solver_key, check_sparse_solver
 from mpcform.scenario.parse import as_scenario_error, parse_keys, parse_table, parse_top_level
 from mpcform.scenario.schema import CONSENSUS_FIELDS, MPC_FIELDS, NULLSPACE_FIELDS, TABLES

@@ -17,7 +17,7 @@ from mpcform.control.consensus import CONSENSUS_LAWS, RELATIVE_POSITIONS, Consen
 from mpcform.control.graph import GRAPH_KINDS
 from mpcform.control.nullspace import OBJECTIVES, NullSpaceSettings
 from mpcform.mpc.settings import COUPLINGS, VELOCITY_SETS, MPCSettings
-from mpcform.reference.mission import DEFAULT_SPEED_FRACTION
+from mpcform.reference.keyframes import DEFAULT_SPEED_FRACTION
 from mpcform.solvers.base import DEFAULT_SOLVER
 
 FORMAT_VERSION = 1

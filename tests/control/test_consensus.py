@@ -121,7 +121,7 @@ def test_exponential_reference_ring_and_initial_estimates() -> None:
     assert relative_position_error(tpl, sim.positions_m[-1], 2.0, np.eye(2)) < 1e-3
 
 
-# ---- the centroid (DESIGN.md section 2) ------------------------------------------------------
+# ---- the centroid: eq. 20 as printed lets it drift, the centroid-preserving law keeps it ----
 def test_eq20_as_printed_drifts_as_the_closed_form_predicts() -> None:
     """Ring of 8 doubling its scale, k = gamma = lambda = 1: the centroid moves about 0.9 m.
 
