@@ -122,10 +122,13 @@ STATE = 13
 
 def body_z(rpy: Array) -> Array:
     """Third column of ``R = Rz Ry Rx`` (n, 3): the thrust direction in the world frame."""
-    cr, sr = np.cos(rpy[:, 0]), np.sin(rpy[:, 0])
-    cp, sp = np.cos(rpy[:, 1]), np.sin(rpy[:, 1])
-    cy, sy = np.cos(rpy[:, 2]), np.sin(rpy[:, 2])
-    return np.stack([cr * sp * cy + sr * sy, cr * sp * sy - sr * cy, cr * cp], axis=1)
+    c, s = np.cos(rpy), np.sin(rpy)
+    z = np.empty_like(rpy)
+    crsp = c[:, 0] * s[:, 1]
+    z[:, 0] = crsp * c[:, 2] + s[:, 0] * s[:, 2]
+    z[:, 1] = crsp * s[:, 2] - s[:, 0] * c[:, 2]
+    z[:, 2] = c[:, 0] * c[:, 1]
+    return z
 
 
 def drag_force(params: QuadrotorParams, z: Array, air_mps: Array) -> Array:
@@ -134,33 +137,35 @@ def drag_force(params: QuadrotorParams, z: Array, air_mps: Array) -> Array:
     For ``D = diag(a, a, b)`` this is ``a air + (b - a) z (z . air)`` with ``z`` the body z axis.
     """
     a, b = params.drag_matrix[0, 0], params.drag_matrix[2, 2]
-    return a * air_mps + (b - a) * z * np.sum(z * air_mps, axis=1, keepdims=True)
+    return a * air_mps + ((b - a) * (z * air_mps).sum(axis=1))[:, None] * z
 
 
-def euler_derivatives(params: QuadrotorParams, x: Array, cmd: Array, dist_f: Array) -> Array:
+def euler_derivatives(
+    params: QuadrotorParams, x: Array, cmd: Array, dist_f: Array, z: Array | None = None
+) -> Array:
     """d/dt of the Euler-form state ``x`` (n, 13) under ``cmd`` (n, 4) and world force ``dist_f``.
 
     The model's own drag term acts for ``so_rpy_rotor_drag`` only (``so_rpy`` has none);
-    ``dist_f`` (n, 3) [N] is the package's disturbance-force input.
+    ``dist_f`` (n, 3) [N] is the package's disturbance-force input; ``z`` is ``body_z(x[:, RPY])``
+    when the caller has it.
     """
     dx = np.empty_like(x)
-    rpy = x[:, RPY]
-    z = body_z(rpy)
+    if z is None:
+        z = body_z(x[:, RPY])
     if params.thrust_time_s is None:
         thrust = cmd[:, 3]
         dx[:, F] = 0.0
     else:
         thrust = x[:, F]
-        dx[:, F] = (cmd[:, 3] - thrust) / params.thrust_time_s
-    force = (params.acc_coef_N + params.cmd_f_coef * thrust)[:, None] * z + dist_f
-    if params.thrust_time_s is not None:
-        force = force + drag_force(params, z, x[:, V])
+        dx[:, F] = (cmd[:, 3] - thrust) * (1.0 / params.thrust_time_s)
+        dist_f = dist_f + drag_force(params, z, x[:, V])
+    inv_m = 1.0 / params.mass_kg
+    dx[:, V] = ((params.acc_coef_N + params.cmd_f_coef * thrust) * inv_m)[:, None] * z + dist_f * inv_m
+    dx[:, 8] -= params.gravity_mps2
     dx[:, P] = x[:, V]
     dx[:, RPY] = x[:, DRPY]
-    dx[:, V] = force / params.mass_kg
-    dx[:, 8] -= params.gravity_mps2
     dx[:, DRPY] = (
-        params.rpy_coef * rpy + params.rpy_rates_coef * x[:, DRPY] + params.cmd_rpy_coef * cmd[:, :3]
+        params.rpy_coef * x[:, RPY] + params.rpy_rates_coef * x[:, DRPY] + params.cmd_rpy_coef * cmd[:, :3]
     )
     return dx
 
