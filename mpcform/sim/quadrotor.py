@@ -155,7 +155,8 @@ class QuadrotorPlant(Plant):
     # -- one control interval ----------------------------------------------------------------
 
     def steps_per_interval(self, dt_s: float) -> int:
-        """Inner steps in one control interval; the rate must be a multiple of ``1 / dt_s``."""
+        """Inner steps in one control interval: a multiple of ``1 / dt_s`` (to 1e-9 relative) and at
+        least ``samples_per_step``."""
         ratio = self.spec.rate_hz * dt_s
         steps = int(round(ratio))
         if steps < 1 or abs(ratio - steps) > 1e-9 * ratio:
@@ -163,6 +164,12 @@ class QuadrotorPlant(Plant):
                 "quadrotor.rate_hz",
                 f"expected a multiple of the control rate 1/dt = {1.0 / dt_s:g} Hz, "
                 f"got {self.spec.rate_hz:g} Hz",
+            )
+        if steps < self.samples_per_step:
+            raise ValidationError(
+                "quadrotor.rate_hz",
+                f"{self.spec.rate_hz:g} Hz gives {steps} inner steps per {dt_s:g} s interval, fewer than the "
+                f"{self.samples_per_step} dense samples asked for",
             )
         return steps
 

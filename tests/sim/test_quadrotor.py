@@ -82,6 +82,8 @@ def test_inner_loop_is_stable_at_the_declared_rate_and_refused_otherwise():
     with pytest.raises(ValidationError, match="multiple of the control rate"):
         plant.advance(np.zeros((1, 3)), DT)
     assert QuadrotorPlant(1, 3).steps_per_interval(DT) == 50
+    with pytest.raises(ValidationError, match="fewer than the 10 dense samples"):
+        QuadrotorPlant(1, 3, QuadrotorSpec(rate_hz=50.0)).steps_per_interval(DT)
 
 
 def test_thrust_and_tilt_limits_hold_under_violent_commands():
