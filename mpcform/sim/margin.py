@@ -27,7 +27,11 @@ the norm of the per-axis values. Closed forms for one step (``steps = 1``):
   linearisation leaves out (tilt and thrust coupling, sampling, saturation); the tests check it
   against the simulated plant on random and worst-case command sequences, with and without wind.
 
-An unbounded wind (gust std > 0 with an infinite gust bound) gives an infinite margin.
+An unbounded wind (gust std > 0 with an infinite gust bound) gives an infinite margin. The
+quadrotor's bound holds while the commanded speed stays below :attr:`Margin.valid_speed_mps`
+(beyond it drag plus ``a_max`` exceed the tilt or thrust authority and the drone falls behind
+without bound); it covers velocity tracking (no planned positions passed to the plant). Position
+noise is not included: the planner's measured start is off by the noise on top of this margin.
 """
 
 from __future__ import annotations
