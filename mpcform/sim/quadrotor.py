@@ -22,7 +22,8 @@ The command is held over each inner step and the state is integrated with classi
 inner rate (the models are smooth; their fastest poles are about 16 rad/s, so ``h |lambda|`` is
 0.03 at 500 Hz). Wind acts through drag: the world force ``R D R^T (v - w)`` (``D`` the
 platform's drag matrix, kg/s), passed as the model's disturbance force (for ``so_rpy_rotor_drag``
-the model itself supplies ``R D R^T v`` and the input carries ``-R D R^T w``). Position noise,
+the model itself supplies ``R D R^T v``, and the extra ``-R D R^T w`` is folded into that term by
+giving it the airspeed: the same force, one evaluation). Position noise,
 when set, only affects ``p_measured_m``; the inner loop uses the true state (an ideal onboard
 estimator). A rate too coarse for RK4 (``h |lambda_max| > 0.5`` on the linearised loop), or
 gains and rate whose linearised sampled loop is unstable, are refused.
@@ -129,6 +130,7 @@ class QuadrotorPlant(Plant):
             self._x[:, 2] = self.spec.altitude_m
         self._x[:, F] = self.params.hover_command_N  # level hover thrust
         self._i = np.zeros((self.n, 3))
+        self._no_force = np.zeros((self.n, 3))
         self._cmd = np.zeros((self.n, 4))
         self._cmd[:, 3] = self.params.hover_command_N
 
@@ -225,11 +227,10 @@ class QuadrotorPlant(Plant):
         """One PID update at the inner rate: sets the held command ``[roll, pitch, yaw, thrust]``."""
         pr, g, lim = self.params, self.params.gravity_mps2, self.spec
         e = v_sp - x[:, V]
-        self._i = np.clip(self._i + h * e, -self._i_max, self._i_max)
+        self._i = np.minimum(np.maximum(self._i + h * e, -self._i_max), self._i_max)
         a = self._kv * e + self._ki * self._i
-        fz = g + np.clip(
-            a[:, 2], -0.5 * g, (pr.cmd_f_coef * pr.thrust_max_N + pr.acc_coef_N) / pr.mass_kg - g
-        )
+        az_max = (pr.cmd_f_coef * pr.thrust_max_N + pr.acc_coef_N) / pr.mass_kg - g
+        fz = g + np.minimum(np.maximum(a[:, 2], -0.5 * g), az_max)
         axy = a[:, :2]
         norm = np.hypot(axy[:, 0], axy[:, 1])
         cap = fz * np.tan(lim.max_tilt_rad)
@@ -243,13 +244,18 @@ class QuadrotorPlant(Plant):
         self._cmd[:, 1] = np.arctan2(fx, fz) / gain[1]
         z = so_rpy.body_z(x[:, RPY])
         along = pr.mass_kg * (z[:, 0] * axy[:, 0] + z[:, 1] * axy[:, 1] + z[:, 2] * fz)
-        self._cmd[:, 3] = np.clip((along - pr.acc_coef_N) / pr.cmd_f_coef, pr.thrust_min_N, pr.thrust_max_N)
+        thrust = np.maximum((along - pr.acc_coef_N) / pr.cmd_f_coef, pr.thrust_min_N)
+        self._cmd[:, 3] = np.minimum(thrust, pr.thrust_max_N)
 
     def _rhs(self, x: Array, w3: Array) -> Array:
-        """Model derivatives with the held command; drag on the airspeed via the force input."""
+        """Model derivatives with the held command; drag on the airspeed ``v - w``."""
         z = so_rpy.body_z(x[:, RPY])
-        air = -w3 if self.params.thrust_time_s is not None else x[:, V] - w3
-        return so_rpy.euler_derivatives(self.params, x, self._cmd, so_rpy.drag_force(self.params, z, air), z)
+        air = x[:, V] - w3
+        if self.params.thrust_time_s is None:  # so_rpy: no drag of its own
+            return so_rpy.euler_derivatives(
+                self.params, x, self._cmd, so_rpy.drag_force(self.params, z, air), z
+            )
+        return so_rpy.euler_derivatives(self.params, x, self._cmd, self._no_force, z, drag_air_mps=air)
 
     # -- linearisation ---------------------------------------------------------------------
 

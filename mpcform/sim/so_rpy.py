@@ -141,13 +141,21 @@ def drag_force(params: QuadrotorParams, z: Array, air_mps: Array) -> Array:
 
 
 def euler_derivatives(
-    params: QuadrotorParams, x: Array, cmd: Array, dist_f: Array, z: Array | None = None
+    params: QuadrotorParams,
+    x: Array,
+    cmd: Array,
+    dist_f: Array,
+    z: Array | None = None,
+    *,
+    drag_air_mps: Array | None = None,
 ) -> Array:
     """d/dt of the Euler-form state ``x`` (n, 13) under ``cmd`` (n, 4) and world force ``dist_f``.
 
-    The model's own drag term acts for ``so_rpy_rotor_drag`` only (``so_rpy`` has none);
-    ``dist_f`` (n, 3) [N] is the package's disturbance-force input; ``z`` is ``body_z(x[:, RPY])``
-    when the caller has it.
+    The model's own drag term acts for ``so_rpy_rotor_drag`` only (``so_rpy`` has none), on
+    ``drag_air_mps`` (n, 3) if given, else on the velocity as in the package (the drag being
+    linear, air ``v - w`` is the package's drag plus the disturbance force ``-R D R^T w``);
+    ``dist_f`` (n, 3) [N] is the package's disturbance-force input; ``z`` is
+    ``body_z(x[:, RPY])`` when the caller has it.
     """
     dx = np.empty_like(x)
     if z is None:
@@ -158,7 +166,7 @@ def euler_derivatives(
     else:
         thrust = x[:, F]
         dx[:, F] = (cmd[:, 3] - thrust) * (1.0 / params.thrust_time_s)
-        dist_f = dist_f + drag_force(params, z, x[:, V])
+        dist_f = dist_f + drag_force(params, z, x[:, V] if drag_air_mps is None else drag_air_mps)
     inv_m = 1.0 / params.mass_kg
     dx[:, V] = ((params.acc_coef_N + params.cmd_f_coef * thrust) * inv_m)[:, None] * z + dist_f * inv_m
     dx[:, 8] -= params.gravity_mps2
