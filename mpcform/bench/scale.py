@@ -56,7 +56,7 @@ from mpcform.mpc.settings import MPCSettings
 from mpcform.outputs import tables
 from mpcform.reference.base import ExponentialReference, Profile, Reference
 from mpcform.run.parallel import blas_threads, process_pool
-from mpcform.solvers.base import DEFAULT_SOLVER
+from mpcform.solvers.registry import DEFAULT_SOLVER
 
 SCENARIOS = ("formation", "crossing")
 MODES = ("decoupled", "decoupled-sparse", "joint", "monolithic")

@@ -47,8 +47,8 @@ from mpcform.reference.base import ConstantReference, ExponentialReference, Refe
 from mpcform.reference.mission import DEFAULT_SPEED_FRACTION, MissionLimits, MissionReference, SpeedBudget
 from mpcform.sim.metrics import run_metrics
 from mpcform.sim.simulation import SimulationResult, simulate
-from mpcform.solvers.base import DEFAULT_SOLVER
-from mpcform.solvers.base import check_solver_name as check_backend_name
+from mpcform.solvers.registry import DEFAULT_SOLVER
+from mpcform.solvers.registry import check_solver_name as check_backend_name
 
 FORMAT_VERSION = 1
 SHAPES = ("polygon", "ring", "line", "grid", "sphere", "explicit")

@@ -27,7 +27,7 @@ from mpcform.scenario.spec import (
     run_scenario,
     scenario_from_dict,
 )
-from mpcform.solvers.base import DEFAULT_SOLVER
+from mpcform.solvers.registry import DEFAULT_SOLVER
 
 ROOT = Path(__file__).resolve().parents[2]
 SCENARIOS = sorted((ROOT / "scenarios").glob("*.toml"))
