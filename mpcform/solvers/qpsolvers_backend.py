@@ -2,13 +2,15 @@
 
 qpsolvers takes ``G z <= h, A_eq z = b``: :func:`qpsolvers_form` rewrites ``l <= A z <= u`` in
 that form and :class:`RowSplit` maps the duals back. ``solve`` never raises for a solver's failure
-(the solver's own exception text becomes the status) and prints nothing (warnings suppressed).
+(the solver's own exception text becomes the status) and prints nothing (warnings suppressed,
+the solvers of :data:`PRINTS_FROM_C` silenced).
 """
 
 from __future__ import annotations
 
 import time
 import warnings
+from contextlib import nullcontext
 from dataclasses import dataclass
 from typing import Any
 
@@ -18,12 +20,16 @@ import scipy.sparse as sp
 from mpcform._validate import Array
 from mpcform.errors import SolverError
 from mpcform.solvers.base import QPSolution, SolverOptions, failed, given
-from mpcform.solvers.stored import StoredQP, full_symmetric
+from mpcform.solvers.stored import StoredQP, full_symmetric, quiet_fds
 
 QPSOLVERS_WARM = frozenset(
     {"cvxopt", "daqp", "hpipm", "kvxopt", "nppro", "osqp", "pdhcg", "proxqp", "pyqpmad", "qpalm", "scs"}
 )
 """qpsolvers wrappers that pass ``initvals`` to the solver (the others ignore it, with a warning)."""
+PRINTS_FROM_C = frozenset({"highs"})
+"""Solvers that print whatever their settings say, solved with stdout and stderr sent to
+``/dev/null``: HiGHS prints its banner when a ``highspy.Highs`` object is built, before any
+option (``output_flag``, ``log_to_console``) can be set."""
 
 
 @dataclass(frozen=True)
@@ -95,7 +101,7 @@ class QPSolversBackend(StoredQP):
     """A qpsolvers solver, called afresh each step (qpsolvers sets up on every call).
 
     Dense-only solvers get dense matrices. ``x0`` goes to ``initvals`` only where the wrapper uses
-    it (:data:`QPSOLVERS_WARM`).
+    it (:data:`QPSOLVERS_WARM`); the solvers of :data:`PRINTS_FROM_C` run with the output silenced.
     """
 
     def __init__(self, solver: str, options: SolverOptions) -> None:
@@ -109,13 +115,14 @@ class QPSolversBackend(StoredQP):
         self.warm_starts = solver in QPSOLVERS_WARM
         self._dense = solver not in qpsolvers.sparse_solvers
         self._settings = qpsolvers_settings(solver, options)
+        self._quiet = solver in PRINTS_FROM_C
 
     def solve(self, x0: Array | None = None) -> QPSolution:
         if self._P is None:
             raise SolverError(self.name, "solve() before setup()")
         start = time.perf_counter()
         try:
-            with warnings.catch_warnings():
+            with warnings.catch_warnings(), quiet_fds() if self._quiet else nullcontext():
                 warnings.simplefilter("ignore")
                 problem, rows = qpsolvers_form(self._P, self._q, self._A, self._lo, self._hi, self._dense)
                 sol = self._qpsolvers.solve_problem(

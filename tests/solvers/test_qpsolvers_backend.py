@@ -1,9 +1,13 @@
 """qpsolvers backends: they solve the recorded problems to the reference, the planner gives piqp's
-first input with each, duals in OSQP's sign convention and a solver's exception is a failed solve."""
+first input with each, duals in OSQP's sign convention, a solver's exception is a failed solve,
+and HiGHS prints nothing (not even its banner)."""
 
 from __future__ import annotations
 
+import subprocess
+import sys
 from collections.abc import Callable
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -73,3 +77,26 @@ def test_a_solver_exception_is_a_failed_solve(
     monkeypatch.setattr(qpsolvers, "solve_problem", broken)
     sol = backend.solve()
     assert not sol.success and sol.x is None and "solver exploded" in sol.status
+
+
+HIGHS_SOLVE = """
+from pathlib import Path
+from mpcform.bench.problems import load_problem, problem_files
+from mpcform.solvers.base import SolverOptions
+from mpcform.solvers.registry import make_backend
+
+qp = load_problem(problem_files(Path("problems"))[0])
+backend = make_backend("qpsolvers:highs", SolverOptions())
+backend.setup(qp.P, qp.q, qp.A, qp.l, qp.u)
+raise SystemExit(0 if backend.solve().success else 1)
+"""
+
+
+def test_highs_prints_nothing_in_a_fresh_process(require_usable: Callable[[str], None]) -> None:
+    """HiGHS prints its banner once per process, when the first ``highspy.Highs`` is built (before
+    any option applies): only a fresh process shows whether the backend lets it through."""
+    require_usable("qpsolvers:highs")
+    root = Path(__file__).resolve().parents[2]
+    out = subprocess.run([sys.executable, "-c", HIGHS_SOLVE], cwd=root, capture_output=True, text=True)
+    assert out.returncode == 0, out.stderr
+    assert (out.stdout, out.stderr) == ("", "")
