@@ -134,11 +134,24 @@ def _single(backend: type[QPBackend], installed: Callable[[], bool], note: str, 
     )
 
 
+def _qpsolvers_note(solver: str) -> str:
+    warm = "warm start via initvals" if solver in QPSOLVERS_WARM else "cold"
+    return f"qpsolvers, set up every call, {warm}"
+
+
 FAMILIES: tuple[Family, ...] = (
-    _single(OSQPBackend, lambda: _installed("osqp"), "persistent ADMM object (update + warm start)",
-            "pip install osqp"),
-    _single(PIQPBackend, lambda: _installed("piqp"), "persistent proximal interior point (update)",
-            "pip install piqp"),
+    _single(
+        OSQPBackend,
+        installed=lambda: _installed("osqp"),
+        note="persistent ADMM object (update + warm start)",
+        install="pip install osqp",
+    ),
+    _single(
+        PIQPBackend,
+        installed=lambda: _installed("piqp"),
+        note="persistent proximal interior point (update)",
+        install="pip install piqp",
+    ),
     Family(
         key="qpsolvers:",
         form="qpsolvers:<name> (one of {members})",
@@ -148,8 +161,7 @@ FAMILIES: tuple[Family, ...] = (
         installed=lambda solver: solver in _qpsolvers_available(),
         warm=QPSOLVERS_WARM,
         persistent=False,
-        describe=lambda solver: "qpsolvers, set up every call"
-        + (", warm start via initvals" if solver in QPSOLVERS_WARM else ", cold"),
+        describe=_qpsolvers_note,
         install='pip install "qpsolvers[{member}]" (or "mpcform[solvers]")',
         unsupported={
             "quadprog": "needs a positive-definite P; this QP's P is singular in the position variables"
@@ -167,9 +179,13 @@ FAMILIES: tuple[Family, ...] = (
         install=CASADI_INSTALL,
         refused={"highs": "casadi's highs plugin segfaulted on this QP class"},
     ),
-    _single(CasadiIpoptBackend, lambda: _casadi_has("nlpsol", "ipopt"),
-            "exact non-convex separation problem (NLP), a quality reference; slow", CASADI_INSTALL),
-)  # fmt: skip
+    _single(
+        CasadiIpoptBackend,
+        installed=lambda: _casadi_has("nlpsol", "ipopt"),
+        note="exact non-convex separation problem (NLP), a quality reference; slow",
+        install=CASADI_INSTALL,
+    ),
+)
 """Every backend family, in the order ``mpcform solvers`` lists them."""
 PERSISTENT_SOLVERS = tuple(f.key for f in FAMILIES if f.persistent)
 """The persistent backends' names (``bench mpc`` and ``bench scale`` measure these)."""
