@@ -24,7 +24,8 @@ import numpy as np
 
 from mpcform.bench.problems import RecordedQP
 from mpcform.bench.stats import shifted_geometric_mean
-from mpcform.solvers.base import SolverOptions, solver_names
+from mpcform.solvers.base import SolverOptions
+from mpcform.solvers.registry import solver_names
 
 SETTINGS: dict[str, float | None] = {"default": None, "low": 1e-3, "mid": 1e-6, "high": 1e-9}
 """Accuracy settings: eps_abs given to the solver (None: the solver's defaults); eps_rel is 0."""
@@ -48,7 +49,7 @@ def options_for(eps: float | None, time_limit_s: float) -> SolverOptions:
 def exact_residual(qp: RecordedQP, x: np.ndarray) -> float:
     """Largest violation of the exact problem: the QP's rows other than the linearised separation
     rows, and the true distance constraints of its context."""
-    from mpcform.solvers.families import exact_separation_residual
+    from mpcform.solvers.exact import exact_separation_residual
 
     ctx = qp.context
     if ctx is None:

@@ -20,7 +20,7 @@ from mpcform.bench.accuracy import default_solvers
 from mpcform.bench.problems import DEFAULT_SCENARIOS
 from mpcform.bench.worker import BENCH_ENV
 from mpcform.outputs.tables import Column, markdown_table
-from mpcform.solvers.base import solver_info
+from mpcform.solvers.registry import solver_info
 
 CLOSED_LOOP_COLUMNS: list[Column] = [
     ("scenario", "scenario", "{}"),

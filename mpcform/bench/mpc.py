@@ -41,7 +41,8 @@ from mpcform.mpc.planner import MPCPlanner
 from mpcform.mpc.settings import mode_settings
 from mpcform.outputs import tables
 from mpcform.reference.base import ConstantReference
-from mpcform.solvers.base import DEFAULT_SOLVER, QPBackend, QPSolution, SolverOptions, make_backend
+from mpcform.solvers.base import QPBackend, QPSolution, SolverOptions
+from mpcform.solvers.registry import DEFAULT_SOLVER, make_backend
 
 
 @dataclass

@@ -36,7 +36,8 @@ import scipy.sparse as sp
 
 from mpcform._validate import Array
 from mpcform.errors import MPCFormError
-from mpcform.solvers.base import QPBackend, QPContext, QPSolution, SolverOptions, make_backend
+from mpcform.solvers.base import QPBackend, QPContext, QPSolution, SolverOptions
+from mpcform.solvers.registry import make_backend
 
 FORMAT = "mpcform-qp"
 VERSION = 1
@@ -94,7 +95,7 @@ class RecordedQP:
         """The problem as a :class:`qpsolvers.Problem`: ``min 0.5 x^T P x + q^T x`` s.t.
         ``G x <= h`` (each finite side of the two-sided rows), ``A x = b`` (rows with
         ``l == u``), full symmetric P; dense matrices when ``dense``."""
-        from mpcform.solvers.families import qpsolvers_form
+        from mpcform.solvers.qpsolvers_backend import qpsolvers_form
 
         return qpsolvers_form(self.P, self.q, self.A, self.l, self.u, dense)[0]
 

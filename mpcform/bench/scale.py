@@ -43,7 +43,7 @@ from mpcform.mpc.planner import MPCPlanner
 from mpcform.mpc.settings import MPCSettings, mode_settings
 from mpcform.outputs import tables
 from mpcform.run.parallel import blas_threads, process_pool
-from mpcform.solvers.base import DEFAULT_SOLVER
+from mpcform.solvers.registry import DEFAULT_SOLVER
 
 DEFAULT_N = (10, 30, 100, 300, 1000)
 

@@ -28,7 +28,7 @@ from mpcform.bench.accuracy import (
 )
 from mpcform.bench.problems import DEFAULT_PROBLEMS_DIR, RecordedQP, load_problem, problem_files
 from mpcform.bench.worker import MODES, Task, run_isolated
-from mpcform.solvers.base import check_solver_name, solver_info
+from mpcform.solvers.registry import check_solver_name, solver_info
 
 DEFAULT_TIME_LIMIT_S = 1.0
 EXACT_TIME_LIMIT_S = 60.0

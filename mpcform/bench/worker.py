@@ -31,7 +31,8 @@ from typing import Any
 
 from mpcform.bench.accuracy import EXACT_SOLVER, SETTINGS, exact_residual, options_for
 from mpcform.bench.problems import RecordedQP, load_problem
-from mpcform.solvers.base import QPBackend, make_backend
+from mpcform.solvers.base import QPBackend
+from mpcform.solvers.registry import make_backend
 
 MODES = ("cold", "warm")
 """Fresh setup per problem, or each scenario's sequence replayed as the planner runs it."""

@@ -19,7 +19,7 @@ from mpcform.outputs.files import OUTPUT_FILES, format_summary
 from mpcform.run.runner import run_scenario
 from mpcform.scenario.keys import key_reference_markdown
 from mpcform.scenario.load import load_scenario
-from mpcform.solvers.base import BACKENDS, DEFAULT_SOLVER, solver_infos
+from mpcform.solvers.registry import DEFAULT_SOLVER, PERSISTENT_SOLVERS, solver_infos
 
 EXIT_USAGE = 2
 
@@ -88,7 +88,7 @@ def _add_bench(sub: argparse._SubParsersAction) -> None:
     mpc.add_argument("--n", type=int, nargs="*", default=[8, 16, 32, 64], help="planar swap sizes")
     mpc.add_argument("--spatial-n", type=int, nargs="*", default=[20], help="spatial swap sizes")
     mpc.add_argument("--steps", type=int, default=60, help="closed-loop steps per swap (dt 0.1 s)")
-    mpc.add_argument("--solver", default=DEFAULT_SOLVER, choices=sorted(BACKENDS),
+    mpc.add_argument("--solver", default=DEFAULT_SOLVER, choices=PERSISTENT_SOLVERS,
                      help="QP backend (decoupled, solved per drone: of the cvxpy reference only)")
     mpc.add_argument("--coupling", default="joint", choices=("joint", "decoupled", "decoupled-sparse"),
                      help="planner mode (decoupled-sparse: one sparse QP, not per-drone DAQP QPs)")
@@ -202,7 +202,7 @@ def _add_bench_scale(kinds: argparse._SubParsersAction) -> None:
     scale.add_argument("--scenario", nargs="+", choices=SCENARIOS, default=list(SCENARIOS))
     scale.add_argument("--coupling", default="decoupled", choices=GROUPED_MODES,
                        help="planner mode, grouped (decoupled-sparse: one sparse QP, not per-drone DAQP)")
-    scale.add_argument("--solver", default=DEFAULT_SOLVER, choices=sorted(BACKENDS), help="QP backend")
+    scale.add_argument("--solver", default=DEFAULT_SOLVER, choices=PERSISTENT_SOLVERS, help="QP backend")
     scale.add_argument("--horizon", type=int, default=10, help="planner horizon [steps]")
     scale.add_argument("--budget", type=float, default=60.0, metavar="S",
                        help="planning time per case [s]; a case over it stops early")  # fmt: skip

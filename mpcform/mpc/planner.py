@@ -29,7 +29,8 @@ from mpcform.mpc.per_drone import PerDroneQP
 from mpcform.mpc.qp import MPCQP, row_ends, row_segments, velocity_set
 from mpcform.mpc.settings import MPCSettings
 from mpcform.reference.base import Reference
-from mpcform.solvers.base import DEFAULT_SOLVER, QPBackend, QPContext, QPSolution, SolverOptions, make_backend
+from mpcform.solvers.base import QPBackend, QPContext, QPSolution, SolverOptions
+from mpcform.solvers.registry import DEFAULT_SOLVER, make_backend
 
 CERTIFY_TOL_M = 1e-7  # separation certification tolerance [m]
 SLACK_REPORT_M = 1e-6  # slack above this is reported

@@ -12,7 +12,8 @@ from mpcform.mpc.settings import MPCSettings
 from mpcform.scenario.parse import as_scenario_error
 from mpcform.scenario.schema import CONTROLLER_KINDS, did_you_mean, listing
 from mpcform.scenario.spec import Scenario
-from mpcform.solvers.base import QPBackend, check_solver_name
+from mpcform.solvers.base import QPBackend
+from mpcform.solvers.registry import check_solver_name
 
 
 def build_controller(
@@ -65,7 +66,7 @@ def build_controller(
 
 def check_solver_key(name: str, field: str = "controller.solver") -> str:
     """Return ``name`` if it names a QP backend; else raise a :class:`ScenarioError` naming the
-    scenario key ``field`` (where :func:`mpcform.solvers.base.check_solver_name` raises a SolverError)."""
+    scenario key ``field`` (where :func:`mpcform.solvers.registry.check_solver_name` raises a SolverError)."""
     try:
         return check_solver_name(name)
     except SolverError as exc:

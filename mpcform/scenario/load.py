@@ -36,7 +36,7 @@ from mpcform.scenario.build import check_solver_key, check_sparse_solver
 from mpcform.scenario.parse import as_scenario_error, parse_keys, parse_table, parse_top_level
 from mpcform.scenario.schema import CONSENSUS_FIELDS, MPC_FIELDS, NULLSPACE_FIELDS, TABLES
 from mpcform.scenario.spec import ControllerSpec, Scenario, SimulationSpec
-from mpcform.solvers.base import DEFAULT_SOLVER
+from mpcform.solvers.registry import DEFAULT_SOLVER
 
 
 def load_scenario(path: str | Path) -> Scenario:

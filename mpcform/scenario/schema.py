@@ -18,7 +18,7 @@ from mpcform.control.graph import GRAPH_KINDS
 from mpcform.control.nullspace import OBJECTIVES, NullSpaceSettings
 from mpcform.mpc.settings import COUPLINGS, VELOCITY_SETS, MPCSettings
 from mpcform.reference.keyframes import DEFAULT_SPEED_FRACTION
-from mpcform.solvers.base import DEFAULT_SOLVER
+from mpcform.solvers.registry import DEFAULT_SOLVER
 
 FORMAT_VERSION = 1
 SHAPES = ("polygon", "ring", "line", "grid", "sphere", "explicit")

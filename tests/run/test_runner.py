@@ -15,7 +15,8 @@ from mpcform.formation.kinematics import forward_kinematics
 from mpcform.formation.state import FormationState
 from mpcform.run.runner import describe, run_scenario
 from mpcform.scenario.load import load_scenario
-from mpcform.solvers.base import QPBackend, QPSolution, SolverOptions, make_backend
+from mpcform.solvers.base import QPBackend, QPSolution, SolverOptions
+from mpcform.solvers.registry import make_backend
 
 BUNDLED = sorted(SCENARIOS.glob("*.toml"))
 WORKED = SCENARIOS / "worked_example.toml"

@@ -11,7 +11,8 @@ from mpcform import MPCSettings, ScenarioError, TrackingController
 from mpcform.scenario.build import build_controller, check_solver_key
 from mpcform.scenario.load import load_scenario
 from mpcform.scenario.spec import Scenario
-from mpcform.solvers.base import SolverOptions, make_backend
+from mpcform.solvers.base import SolverOptions
+from mpcform.solvers.registry import make_backend
 
 WORKED = SCENARIOS / "worked_example.toml"
 

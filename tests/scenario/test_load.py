@@ -15,7 +15,7 @@ from mpcform import MPCSettings, ScenarioError
 from mpcform.formation.kinematics import forward_kinematics
 from mpcform.formation.state import FormationState
 from mpcform.scenario.load import load_scenario, scenario_from_dict
-from mpcform.solvers.base import DEFAULT_SOLVER
+from mpcform.solvers.registry import DEFAULT_SOLVER
 
 WORKED = SCENARIOS / "worked_example.toml"
 DELETE = object()
