@@ -3,7 +3,10 @@
 ``mpcform run`` writes into its directory (these names and columns are a contract):
 
 - ``trajectory.npz``: ``t`` (T,) [s], ``p`` (T, n, d) positions [m], ``u`` (T-1, n, d) the
-  command [m/s] applied over ``[t_j, t_{j+1})``, ``p_ref`` (T, n, d) desired positions [m];
+  command [m/s] applied over ``[t_j, t_{j+1})``, ``p_ref`` (T, n, d) desired positions [m]; and
+  the plant's dense true motion: ``t_true`` (K,) [s] (every control sample among them, at least
+  10 per interval), ``p_true`` and ``v_true`` (K, n, d) [m, m/s], ``p_ref_true`` (K, n, d) [m],
+  and for the quadrotor ``quat_true`` (K, n, 4, xyzw) and ``thrust_true`` (K, n) [N];
 - ``trajectory.csv``: one row per time and drone, ``t, drone, x, y[, z], vx, vy[, vz],
   x_ref, y_ref[, z_ref]`` (the command columns are empty at the final time);
 - ``summary.json``: ``scenario, n, dim, dt, steps, controller, solver``, ``limits``
@@ -42,10 +45,22 @@ def csv_header(dim: int) -> list[str]:
     return ["t", "drone", *axes, *(f"v{a}" for a in axes), *(f"{a}_ref" for a in axes)]
 
 
+TRUE_ARRAYS = {
+    "t_true": "t_s", "p_true": "positions_m", "v_true": "velocities_mps", "p_ref_true": "reference_m",
+    "quat_true": "quat_xyzw", "thrust_true": "thrust_N",
+}  # fmt: skip
+"""Keys of ``trajectory.npz`` for the :class:`~mpcform.sim.trajectory.TrueTrajectory` fields."""
+
+
 def write_trajectory_npz(path: Path, trajectory: Trajectory) -> None:
-    """Arrays ``t`` (T,) [s], ``p`` (T, n, d) [m], ``u`` (T-1, n, d) [m/s], ``p_ref`` (T, n, d)."""
+    """Arrays ``t`` (T,) [s], ``p`` (T, n, d) [m], ``u`` (T-1, n, d) [m/s], ``p_ref`` (T, n, d), and
+    the dense true motion when the trajectory has it (:data:`TRUE_ARRAYS`)."""
     traj = trajectory
-    np.savez_compressed(path, t=traj.t_s, p=traj.positions_m, u=traj.commands_mps, p_ref=traj.reference_m)
+    true = {} if traj.true is None else {key: getattr(traj.true, name) for key, name in TRUE_ARRAYS.items()}
+    np.savez_compressed(
+        path, t=traj.t_s, p=traj.positions_m, u=traj.commands_mps, p_ref=traj.reference_m,
+        **{key: value for key, value in true.items() if value is not None},
+    )  # fmt: skip
 
 
 def write_trajectory_csv(path: Path, trajectory: Trajectory) -> None:

@@ -21,8 +21,8 @@ import numpy as np
 
 from mpcform._validate import Array
 from mpcform.errors import ValidationError
-from mpcform.outputs.files import SUMMARY_JSON, TRAJECTORY_NPZ
-from mpcform.sim.trajectory import Trajectory
+from mpcform.outputs.files import SUMMARY_JSON, TRAJECTORY_NPZ, TRUE_ARRAYS
+from mpcform.sim.trajectory import Trajectory, TrueTrajectory
 
 if TYPE_CHECKING:
     from mpcform.scenario.spec import Scenario
@@ -119,9 +119,12 @@ def load_run(directory: str | Path) -> RunData:
     root = Path(directory)
     if not root.is_dir():
         raise RunDirError(str(root), "no such run directory (write one with `mpcform run --out DIR`)")
-    arrays = _npz(root / TRAJECTORY_NPZ, ("t", "p", "u", "p_ref"))
+    arrays = _npz(root / TRAJECTORY_NPZ, ("t", "p", "u", "p_ref"), optional=tuple(TRUE_ARRAYS))
     try:
-        trajectory = Trajectory(arrays["t"], arrays["p"], arrays["u"], arrays["p_ref"])
+        true = None
+        if "t_true" in arrays:
+            true = TrueTrajectory(**{name: arrays.get(key) for key, name in TRUE_ARRAYS.items()})  # type: ignore[arg-type]
+        trajectory = Trajectory(arrays["t"], arrays["p"], arrays["u"], arrays["p_ref"], true=true)
     except ValidationError as exc:
         raise RunDirError(str(root / TRAJECTORY_NPZ), str(exc)) from None
     summary_path = root / SUMMARY_JSON
@@ -148,13 +151,13 @@ def _load_formation(path: Path, trajectory: Trajectory) -> FormationData:
     return FormationData(extra["offsets"], extra["scale_ref"], extra["obstacles"].reshape(-1, d + 2))
 
 
-def _npz(path: Path, keys: tuple[str, ...]) -> dict[str, Array]:
+def _npz(path: Path, keys: tuple[str, ...], optional: tuple[str, ...] = ()) -> dict[str, Array]:
     try:
         with np.load(path) as npz:
             missing = [k for k in keys if k not in npz.files]
             if missing:
                 raise RunDirError(str(path), f"missing arrays {missing} (has {sorted(npz.files)})")
-            return {k: np.asarray(npz[k], dtype=float) for k in keys}
+            return {k: np.asarray(npz[k], dtype=float) for k in (*keys, *optional) if k in npz.files}
     except RunDirError:
         raise
     except FileNotFoundError:

@@ -41,7 +41,7 @@ def run_scenario(
     sim = scenario.simulation
     result = simulate(
         ctrl, scenario.initial_positions_m, sim.duration_s,
-        lag_s=sim.lag_s, noise_std_m=sim.noise_std_m, seed=scenario.seed, progress=progress,
+        plant=scenario.plant, noise_std_m=sim.noise_std_m, seed=scenario.seed, progress=progress,
     )  # fmt: skip
     limits = scenario.limits
     is_mpc = (controller or scenario.controller.kind) == "mpc"

@@ -34,6 +34,7 @@ from mpcform.reference.keyframes import DEFAULT_SPEED_FRACTION, MissionLimits, S
 from mpcform.reference.mission import MissionReference
 from mpcform.scenario.build import check_solver_key, check_sparse_solver
 from mpcform.scenario.parse import as_scenario_error, parse_keys, parse_table, parse_top_level
+from mpcform.scenario.plant import parse_plant
 from mpcform.scenario.schema import CONSENSUS_FIELDS, MPC_FIELDS, NULLSPACE_FIELDS, TABLES
 from mpcform.scenario.spec import ControllerSpec, Scenario, SimulationSpec
 from mpcform.solvers.registry import DEFAULT_SOLVER
@@ -75,6 +76,7 @@ def scenario_from_dict(
     limits = _limits(parse_table(data, "limits", dim), dim)
     reference = _reference(tpl, start, parse_table(data, "reference", dim), limits)
     sim = SimulationSpec(**_renamed(parse_table(data, "simulation", dim), "simulation"))
+    plant = parse_plant(data, dim, sim.dt_s)
     controller = _controller(parse_table(data, "controller", dim), sim.dt_s)
     controller = _decentralised_settings(controller, parse_table(data, "controller", dim), limits)
     if sim.duration_s < sim.dt_s:
@@ -99,6 +101,7 @@ def scenario_from_dict(
         **_graph(data, tpl, positions, seed),
         controller=controller,
         simulation=sim,
+        plant=plant,
         source=source,
         source_sha256=source_sha256,
     )
@@ -285,12 +288,12 @@ _ATTRS = {
     "limits": {"v_max": "v_max_mps", "d_min": "d_min_m", "a_max": "a_max_mps2",
                "geofence_min": "geofence_min_m", "geofence_max": "geofence_max_m",
                "downwash": "downwash_kappa"},
-    "simulation": {"dt": "dt_s", "duration": "duration_s", "lag": "lag_s", "noise": "noise_std_m"},
+    "simulation": {"dt": "dt_s", "duration": "duration_s", "noise": "noise_std_m"},
 }  # fmt: skip
 
 
 def _renamed(values: dict[str, Any], table: str) -> dict[str, Any]:
-    return {_ATTRS[table][k]: v for k, v in values.items()}
+    return {_ATTRS[table][k]: v for k, v in values.items() if k in _ATTRS[table]}
 
 
 def _line_hint(text: str, message: str) -> str:

@@ -67,9 +67,12 @@ def parse_keys(table: Table, raw: Mapping[str, Any], prefix: str, dim: int, n: i
     variant = None
     if table.selector is not None:
         sel = table.key(table.selector)
-        if table.selector not in raw:
+        if table.selector in raw:
+            variant = _convert(sel, raw[sel.name], field_name(prefix, sel.name), dim, n)
+        elif sel.default is not None:  # a selector with a default ([plant] kind = "ideal")
+            variant = sel.default
+        else:
             raise ScenarioError(field_name(prefix, sel.name), f"missing required key ({sel.doc})")
-        variant = _convert(sel, raw[sel.name], field_name(prefix, sel.name), dim, n)
     out: dict[str, Any] = {}
     for key in table.keys:
         field = field_name(prefix, key.name)

@@ -15,6 +15,7 @@ from mpcform.formation.template import Template
 from mpcform.mpc.limits import Limits, SphereObstacle
 from mpcform.mpc.settings import MPCSettings
 from mpcform.reference.base import Reference
+from mpcform.sim.plant_spec import PlantSpec
 
 
 @dataclass(frozen=True)
@@ -33,11 +34,10 @@ class ControllerSpec:
 
 @dataclass(frozen=True)
 class SimulationSpec:
-    """Period ``dt_s`` [s], ``duration_s`` [s], velocity ``lag_s`` [s], ``noise_std_m`` [m]."""
+    """Period ``dt_s`` [s], ``duration_s`` [s], process disturbance ``noise_std_m`` [m]."""
 
     dt_s: float
     duration_s: float
-    lag_s: float = 0.0
     noise_std_m: float = 0.0
 
 
@@ -65,6 +65,7 @@ class Scenario:
     graph: Graph | None = None  # [graph] of the consensus controller (None: absent)
     network: Network = dataclasses.field(default_factory=Network)
     allow_disconnected: bool = False
+    plant: PlantSpec = dataclasses.field(default_factory=PlantSpec)
 
     @property
     def n(self) -> int:

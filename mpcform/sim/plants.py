@@ -151,6 +151,11 @@ class Plant(ABC):
             meas += self._noise_rng.normal(0.0, self.noise_std_m, meas.shape)
         return PlantSamples(t_s=t, p_true_m=p, v_true_mps=v, p_measured_m=meas, **extra)
 
+    def displace(self, delta_m: Array) -> None:
+        """Move every drone's true position by ``delta_m`` (n, d) [m], velocities kept: a process
+        disturbance (the simulation's ``noise``) acting at the end of an interval."""
+        self._displace(finite_array("plant.displacement", delta_m, (self.n, self.dim)))
+
     @property
     def wind_clip_fraction(self) -> float:
         """Fraction of gust samples so far that the wind's bound clipped (0 without wind)."""
@@ -164,6 +169,9 @@ class Plant(ABC):
 
     @abstractmethod
     def _advance(self, u: Array, dt: float, planned: Array | None) -> tuple[Array, Array, Array, dict]: ...
+
+    @abstractmethod
+    def _displace(self, delta: Array) -> None: ...
 
     @abstractmethod
     def velocity_loops(self) -> list[Loop]:
@@ -182,6 +190,9 @@ class IdealPlant(Plant):
 
     def _reset(self, p: Array, v: Array) -> None:
         self._p = p.copy()
+
+    def _displace(self, delta: Array) -> None:
+        self._p = self._p + delta
 
     def _advance(self, u: Array, dt: float, planned: Array | None) -> tuple[Array, Array, Array, dict]:
         s = np.linspace(0.0, dt, self.samples_per_step + 1)
@@ -222,6 +233,9 @@ class LinearPlant(Plant):
     def _reset(self, p: Array, v: Array) -> None:
         self._x = np.zeros((self.n, self.dim, self._states))
         self._x[..., 0], self._x[..., 1] = p, v
+
+    def _displace(self, delta: Array) -> None:
+        self._x[..., 0] += delta
 
     def _advance(self, u: Array, dt: float, planned: Array | None) -> tuple[Array, Array, Array, dict]:
         m = self.samples_per_step

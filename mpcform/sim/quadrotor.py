@@ -134,6 +134,9 @@ class QuadrotorPlant(Plant):
         self._cmd = np.zeros((self.n, 4))
         self._cmd[:, 3] = self.params.hover_command_N
 
+    def _displace(self, delta: Array) -> None:
+        self._x[:, P][:, : self.dim] += delta
+
     @property
     def positions_3d_m(self) -> Array:
         """True positions (n, 3), altitude included for planar flights."""

@@ -1,32 +1,42 @@
-"""Closed-loop simulation: zero-order hold at ``dt`` and the exact single-integrator update.
+"""Closed-loop simulation: the controller's command is held for ``dt`` (zero-order hold) and a plant
+turns it into motion.
 
-The simulator drives a controller through its interface and owns no controller state. As the
-single integrator abstracts an inner autopilot loop, it can add a first-order velocity lag
-(time constant ``lag_s``) and seeded Gaussian position disturbances (``noise_std_m`` per step).
+The simulator drives a controller through its interface and owns no controller state. The plant
+(:mod:`mpcform.sim.plants`; default: the ideal plant, the exact single integrator ``p+ = p + dt u``
+that the planner assumes) integrates each interval and returns its dense true motion; the
+controller sees the plant's measured positions. ``noise_std_m`` adds seeded Gaussian position
+disturbances at the end of every interval (a process disturbance, drawn from ``seed`` itself, so
+earlier seeded runs are unchanged); the plant's wind and measurement noise draw from their own
+child streams of ``seed``.
 """
 
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from collections.abc import Callable
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from mpcform._validate import Array, finite_array, positive
 from mpcform.control.base import Controller, StepInfo
 from mpcform.errors import MPCFormError, ValidationError
-from mpcform.sim.trajectory import Trajectory
+from mpcform.sim.plant_spec import PlantSpec
+from mpcform.sim.plants import Plant, PlantSamples, concat_samples
+from mpcform.sim.trajectory import Trajectory, TrueTrajectory
 
 
 @dataclass(frozen=True, eq=False)
 class SimulationResult(Trajectory):
     """A simulated :class:`~mpcform.sim.trajectory.Trajectory` and the controller's record of its
     T - 1 steps (fields ``t_s, positions_m, commands_mps, reference_m, infos, step_times_s,
-    controller``, in this order)."""
+    controller``, in this order); ``wind_clip_fraction``: the share of gust samples the wind's
+    bound clipped (0 without wind)."""
 
     infos: tuple[StepInfo, ...]
     step_times_s: Array  # (T - 1,) wall-clock time of each controller call
     controller: str
+    wind_clip_fraction: float = field(default=0.0, kw_only=True)
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -35,18 +45,25 @@ class SimulationResult(Trajectory):
                                   f"got {len(self.infos)} and shape {self.step_times_s.shape}")  # fmt: skip
 
 
+def plant_seed(seed: int) -> np.random.SeedSequence:
+    """The plant's own stream of a run's ``seed`` (a child, so the process noise keeps ``seed``)."""
+    return np.random.SeedSequence(seed).spawn(1)[0]
+
+
 def simulate(
     controller: Controller,
     initial_positions_m: object,
     duration_s: float,
     *,
     t0_s: float = 0.0,
-    lag_s: float = 0.0,
+    plant: Plant | PlantSpec | None = None,
     noise_std_m: float = 0.0,
     seed: int = 0,
-    progress: object = None,
+    progress: Callable[[int, int], object] | None = None,
 ) -> SimulationResult:
-    """Run ``controller`` for ``duration_s`` from ``initial_positions_m`` (n, d).
+    """Run ``controller`` for ``duration_s`` from ``initial_positions_m`` (n, d) on ``plant`` (a
+    plant, a :class:`~mpcform.sim.plant_spec.PlantSpec` built here with :func:`plant_seed`, or None
+    for the ideal plant).
 
     ``progress``, if given, is called as ``progress(step, steps)`` after every step.
     """
@@ -54,17 +71,18 @@ def simulate(
     p = finite_array("initial.positions", initial_positions_m, (tpl.n, tpl.dim)).copy()
     dt = controller.dt_s
     steps = max(1, int(round(positive("simulation.duration", duration_s) / dt)))
-    lag = positive("simulation.lag", lag_s, allow_zero=True)
     noise = positive("simulation.noise", noise_std_m, allow_zero=True)
+    if not isinstance(plant, Plant):
+        plant = (plant or PlantSpec()).build(tpl.n, tpl.dim, plant_seed(seed))
     rng = np.random.default_rng(seed)
     t = t0_s + dt * np.arange(steps + 1)
     pos = np.empty((steps + 1, tpl.n, tpl.dim))
     cmd = np.empty((steps, tpl.n, tpl.dim))
     times = np.empty(steps)
     infos: list[StepInfo] = []
-    velocity = np.zeros_like(p)
-    decay = np.exp(-dt / lag) if lag > 0 else 0.0
+    parts: list[PlantSamples] = []
     pos[0] = p
+    plant.reset(p, t0_s=t0_s)
     controller.reset(t0_s, p.copy())
     for j in range(steps):
         start = time.perf_counter()
@@ -73,16 +91,27 @@ def simulate(
         u = out.command_mps
         if u.shape != p.shape or not np.all(np.isfinite(u)):
             raise MPCFormError(f"controller {controller.name!r} returned a bad command at t = {t[j]:g} s")
-        if lag > 0:  # exact first-order lag: v' = (u - v) / lag
-            p = p + dt * u + (velocity - u) * lag * (1.0 - decay)
-            velocity = u + (velocity - u) * decay
-        else:
-            p = p + dt * u
+        part = plant.advance(u, dt)
+        p = part.p_measured_m
         if noise > 0:
-            p = p + rng.normal(0.0, noise, p.shape)
+            kick = rng.normal(0.0, noise, p.shape)
+            plant.displace(kick)
+            part.p_true_m[-1] = part.p_true_m[-1] + kick
+            p = p + kick
+        part.t_s[:] = t[j] + (part.t_s - part.t_s[0])  # the control samples exactly among the times
+        part.t_s[-1] = t[j + 1]
         pos[j + 1], cmd[j] = p, u
         infos.append(out.info)
+        parts.append(part)
         if progress is not None:
-            progress(j + 1, steps)  # type: ignore[operator]
+            progress(j + 1, steps)
     ref, _ = controller.reference.targets(t)
-    return SimulationResult(t, pos, cmd, ref, tuple(infos), times, controller.name)
+    dense = concat_samples(parts)
+    true = TrueTrajectory(
+        dense.t_s, dense.p_true_m, dense.v_true_mps, controller.reference.targets(dense.t_s)[0],
+        dense.quat_xyzw, dense.thrust_N,
+    )  # fmt: skip
+    return SimulationResult(
+        t, pos, cmd, ref, tuple(infos), times, controller.name, true=true,
+        wind_clip_fraction=plant.wind_clip_fraction,
+    )  # fmt: skip

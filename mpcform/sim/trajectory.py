@@ -5,14 +5,49 @@ positions ``reference_m`` (eq. 13's ``p*_i(t)``), and the T - 1 velocity command
 ``commands_mps``, each held over ``[t_j, t_{j+1})`` (zero-order hold). ``simulate`` returns one
 (a :class:`~mpcform.sim.simulation.SimulationResult` is a trajectory with its step record), and
 ``load_run`` reads one back from ``trajectory.npz``.
+
+``true`` (a :class:`TrueTrajectory`) holds the plant's dense true motion between the control
+samples: K >= 10 (T - 1) + 1 times that include every control sample, the true positions and
+velocities, the desired positions at those times and, for the quadrotor, attitude and thrust.
+``positions_m`` are what the controller saw (equal to the true positions at the control samples
+unless the plant adds measurement noise).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 from mpcform._validate import Array
 from mpcform.errors import ValidationError
+
+
+@dataclass(frozen=True, eq=False)
+class TrueTrajectory:
+    """K >= 2 dense samples of the true motion (arrays kept as given; see the module docstring)."""
+
+    t_s: Array  # (K,)
+    positions_m: Array  # (K, n, d)
+    velocities_mps: Array  # (K, n, d)
+    reference_m: Array  # (K, n, d) desired positions p*(t) at t_s
+    quat_xyzw: Array | None = None  # (K, n, 4) quadrotor attitude, scalar last
+    thrust_N: Array | None = None  # (K, n) quadrotor collective thrust force
+
+    def __post_init__(self) -> None:
+        p = self.positions_m
+        shapes = [self.velocities_mps.shape, self.reference_m.shape]
+        bad = p.ndim != 3 or self.t_s.shape != (p.shape[0],) or p.shape[0] < 2
+        if bad or any(s != p.shape for s in shapes):
+            raise ValidationError(
+                "true trajectory",
+                f"expected t_s (K,), positions, velocities and reference (K, n, d) with K >= 2, got "
+                f"{self.t_s.shape}, {p.shape}, {shapes[0]} and {shapes[1]}",
+            )
+        if self.quat_xyzw is not None and self.quat_xyzw.shape != (*p.shape[:2], 4):
+            raise ValidationError(
+                "true trajectory", f"expected quat_xyzw (K, n, 4), got {self.quat_xyzw.shape}"
+            )
+        if self.thrust_N is not None and self.thrust_N.shape != p.shape[:2]:
+            raise ValidationError("true trajectory", f"expected thrust_N (K, n), got {self.thrust_N.shape}")
 
 
 @dataclass(frozen=True, eq=False)
@@ -23,6 +58,7 @@ class Trajectory:
     positions_m: Array  # (T, n, d)
     commands_mps: Array  # (T - 1, n, d), applied over [t_j, t_{j+1})
     reference_m: Array  # (T, n, d) desired positions p*(t)
+    true: TrueTrajectory | None = field(default=None, kw_only=True)
 
     def __post_init__(self) -> None:
         t, p, u, ref = self.t_s, self.positions_m, self.commands_mps, self.reference_m

@@ -47,7 +47,7 @@ def test_defaults_and_objects() -> None:
     assert s.controller.saturate is True and s.controller.solver == DEFAULT_SOLVER
     assert s.controller.mpc == MPCSettings(gain_per_s=2.0)
     assert s.limits.v_max_mps == 3.0 and s.limits.a_max_mps2 is None and s.obstacles == ()
-    assert s.simulation.lag_s == 0.0 and s.steps == 500
+    assert s.simulation.noise_std_m == 0.0 and s.plant.ideal and s.steps == 500
     assert np.allclose(s.initial_positions_m, forward_kinematics(s.template, s.start))
 
 

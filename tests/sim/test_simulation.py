@@ -10,6 +10,7 @@ from mpcform.errors import MPCFormError, ValidationError
 from mpcform.formation.state import FormationState
 from mpcform.formation.template import Template
 from mpcform.reference.base import ConstantReference
+from mpcform.sim.plant_spec import PlantSpec
 from mpcform.sim.simulation import SimulationResult, simulate
 from mpcform.sim.trajectory import Trajectory
 
@@ -101,17 +102,34 @@ def test_result_keeps_one_record_per_step():
 def test_lag_is_the_exact_first_order_response():
     """From rest under a constant u: p(t) = p0 + u (t - tau (1 - e^{-t/tau}))."""
     u, tau = np.array([[1.0, -2.0], [0.5, 0.0]]), 0.3
-    run = simulate(ConstantCommand(u), np.zeros((2, 2)), 2.0, lag_s=tau)
+    run = simulate(ConstantCommand(u), np.zeros((2, 2)), 2.0, plant=PlantSpec("lag", time_constant_s=tau))
     t = run.t_s[:, None, None]
     np.testing.assert_allclose(run.positions_m, u * (t - tau * (1 - np.exp(-t / tau))), atol=1e-12)
+    dense = run.true
+    assert dense is not None and dense.t_s.shape == (10 * run.steps + 1,)
+    t = dense.t_s[:, None, None]
+    np.testing.assert_allclose(dense.positions_m, u * (t - tau * (1 - np.exp(-t / tau))), atol=1e-12)
+    np.testing.assert_allclose(dense.velocities_mps, u * (1 - np.exp(-t / tau)), atol=1e-12)
 
 
 def test_go_to_goal_with_lag_stays_finite_and_converges():
-    run = go_to_goal(0.02, duration=20.0, lag_s=0.1)
+    run = go_to_goal(0.02, duration=20.0, plant=PlantSpec("lag", time_constant_s=0.1))
     assert np.all(np.isfinite(run.positions_m))
     assert np.linalg.norm(run.positions_m[-1, 0] - GOAL) < 1e-6
     lagless = go_to_goal(0.02, duration=20.0)
     assert not np.allclose(run.positions_m, lagless.positions_m)
+
+
+def test_the_ideal_plant_gives_straight_segments_through_every_sample():
+    run = go_to_goal(0.05, duration=2.0, noise_std_m=0.01, seed=3)
+    dense = run.true
+    assert dense is not None
+    np.testing.assert_array_equal(dense.t_s[::10], run.t_s)  # the control samples, exactly
+    np.testing.assert_array_equal(dense.positions_m[::10], run.positions_m)
+    frac = (dense.t_s[1:11] - run.t_s[0]) / (run.t_s[1] - run.t_s[0])
+    straight = run.positions_m[0] + frac[:, None, None] * (run.positions_m[1] - run.positions_m[0])
+    np.testing.assert_allclose(dense.positions_m[1:10], straight[:-1], atol=0.05)  # up to the kick
+    np.testing.assert_allclose(dense.velocities_mps[:10], np.broadcast_to(run.commands_mps[0], (10, 1, 3)))
 
 
 def test_noise_is_seeded():
@@ -140,7 +158,6 @@ def test_a_bad_command_stops_the_run(bad):
         ({"initial_positions_m": np.zeros((2, 3))}, "initial.positions"),
         ({"initial_positions_m": [[0.0, np.nan, 0.0]]}, "initial.positions"),
         ({"duration_s": 0.0}, "simulation.duration"),
-        ({"lag_s": -0.1}, "simulation.lag"),
         ({"noise_std_m": -1.0}, "simulation.noise"),
     ],
 )

@@ -1,0 +1,79 @@
+"""The [plant] table: kinds, wind, the migrated simulation.lag, and errors that name the key."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from helpers import tiny_swap_toml
+
+from mpcform.errors import ScenarioError
+from mpcform.scenario.load import scenario_from_dict
+
+try:
+    import tomllib
+except ImportError:  # pragma: no cover - Python < 3.11
+    import tomli as tomllib  # type: ignore[no-redef]
+
+
+LAG_WIND = '[plant]\nkind = "lag"\n[plant.wind]\nmean = [1.0, 0.0]\n'
+
+
+def scenario(extra: str) -> dict:
+    return tomllib.loads(tiny_swap_toml("plant", 1.5, 8, 2.0) + extra)
+
+
+def test_no_table_is_the_ideal_plant() -> None:
+    assert scenario_from_dict(scenario("")).plant.ideal
+
+
+def test_lag_second_order_and_quadrotor_with_wind() -> None:
+    lag = scenario_from_dict(scenario('[plant]\nkind = "lag"\ntime_constant = 0.2\n')).plant
+    assert lag.kind == "lag" and lag.time_constant_s == 0.2
+    text = '[plant]\nkind = "second_order"\ndamping = 0.5\nnatural_frequency = 8.0\n'
+    second = scenario_from_dict(scenario(text)).plant
+    assert (second.damping, second.natural_frequency_rad_s) == (0.5, 8.0)
+    text = (
+        '[plant]\nkind = "quadrotor"\nplatform = "cf2x_P250"\nrate = 500\n'
+        '[plant.wind]\nmean = [1.0, 0.0]\ngust_std = 0.5\ngust_time = 1.0\ngust_field = "shared"\n'
+    )
+    quad = scenario_from_dict(scenario(text)).plant
+    assert quad.platform == "cf2x_P250" and quad.wind is not None
+    np.testing.assert_array_equal(quad.wind.mean_mps, [1.0, 0.0])
+    np.testing.assert_array_equal(quad.wind.gust_bound_mps, [1.5, 1.5])  # 3 gust_std
+    unclipped = scenario('[plant]\nkind = "lag"\n[plant.wind]\nmean = [0.0, 0.0]\ngust_std = 0.5\n')
+    unclipped["plant"]["wind"]["gust_bound"] = math.inf
+    assert np.all(np.isinf(scenario_from_dict(unclipped).plant.wind.gust_bound_mps))
+
+
+@pytest.mark.parametrize(
+    ("text", "field", "says"),
+    [
+        ('[simulation]\nlag = 0.1\n', "simulation.lag", 'kind = "lag"'),
+        ('[plant]\nkind = "rocket"\n', "plant.kind", "quadrotor"),
+        ('[plant]\nkind = "lag"\ntime_constant = -0.1\n', "plant.time_constant", "> 0"),
+        ('[plant]\nkind = "second_order"\ndamping = 0.0\n', "plant.damping", "> 0"),
+        ('[plant]\nkind = "quadrotor"\nplatform = "cf9"\n', "plant.platform", "cf2x_L250"),
+        ('[plant]\nkind = "quadrotor"\nrate = 5\n', "plant.rate", "multiple"),
+        ('[plant]\nkind = "quadrotor"\nrate = 505\n', "plant.rate", "multiple"),
+        ('[plant]\nkind = "lag"\ndamping = 0.7\n', "plant.damping", "does not apply"),
+        ('[plant]\nkind = "lag"\n[plant.wind]\nmean = [1.0, 0.0, 0.0]\n', "plant.wind.mean", "2 finite"),
+        ('[plant]\nkind = "lag"\n[plant.wind]\nmean = [1.0, nan]\n', "plant.wind.mean", "finite"),
+        (f"{LAG_WIND}gust_bound = -1.0\n", "plant.wind.gust_bound", ">= 0"),
+        (f"{LAG_WIND}gusts = 1.0\n", "plant.wind.gusts", "unknown"),
+        ('[plant]\n[plant.wind]\nmean = [1.0, 0.0]\n', "plant.wind", "does not apply"),
+        ('[plant]\nmeasurement_noise = -0.1\n', "plant.measurement_noise", ">= 0"),
+    ],
+)
+def test_bad_plant_keys_name_the_key(text: str, field: str, says: str) -> None:
+    data = scenario(text) if not text.startswith("[simulation]") else _with_sim_lag()
+    with pytest.raises(ScenarioError, match=field) as err:
+        scenario_from_dict(data)
+    assert says in str(err.value)
+
+
+def _with_sim_lag() -> dict:
+    data = scenario("")
+    data["simulation"]["lag"] = 0.1
+    return data
