@@ -1,6 +1,7 @@
 /* mpcform viewer: plays a run from the JSON in #mpcform-data with the Canvas 2D API (no library,
    no network). 3-D: drag to orbit, shift- or right-drag to pan, wheel to zoom; 2-D: drag to pan,
-   wheel to zoom; double-click resets. Space plays/pauses, arrows step one sample. After the first
+   wheel to zoom; double-click resets. Space plays/pauses, arrows step one sample. The address's
+   hash may hold t=<s>, speed=<0.25..8> and play (e.g. page.html#t=2&speed=4&play). After the first
    frame the page sets <body data-viewer="ok:<samples>"> and logs "viewer-ready" (its self-check). */
 (function () {
   "use strict";
@@ -164,6 +165,14 @@
     }
     const yF = pr.f(C[0], yl, zl)[2] > pr.f(C[0], yh, zl)[2] ? yl : yh, sy = yF === yl ? -1 : 1;
     const xF = pr.f(xl, C[1], zl)[2] > pr.f(xh, C[1], zl)[2] ? xl : xh, sx = xF === xl ? -1 : 1;
+    const yB = yF === yl ? yh : yl, xB = xF === xl ? xh : xl; // the back walls, as matplotlib's panes
+    g.strokeStyle = COL.grid;
+    for (const z of tz.values) { line([xl, yB, z], [xh, yB, z]); line([xB, yl, z], [xB, yh, z]); }
+    for (const x of tx.values) line([x, yB, zl], [x, yB, zh]);
+    for (const y of ty.values) line([xB, y, zl], [xB, y, zh]);
+    g.strokeStyle = "#d2d2d2";
+    line([xl, yB, zh], [xh, yB, zh]); line([xB, yl, zh], [xB, yh, zh]);
+    for (const [x, y] of [[xl, yB], [xh, yB], [xB, yF]]) line([x, y, zl], [x, y, zh]);
     for (const x of tx.values) {
       const q = pr.f(x, yF + sy * off, zl); text(g, tx.label(x), q[0], q[1], "center", "middle", font(11), COL.axis);
     }
@@ -186,7 +195,9 @@
   }
   function drawFence(g, pr) {
     if (!D.fence) return;
-    const lo = D.fence.min_m.map((v, a) => (v === null ? LO[a] : v)), hi = D.fence.max_m.map((v, a) => (v === null ? HI[a] : v));
+    const open = dim === 2 ? 50 * S : 0; // 2-D: open sides run out of the (clipped) plot
+    const lo = D.fence.min_m.map((v, a) => (v === null ? LO[a] - open : v));
+    const hi = D.fence.max_m.map((v, a) => (v === null ? HI[a] + open : v));
     g.save(); g.setLineDash([7, 5]); g.strokeStyle = COL.fence; g.lineWidth = 1.4;
     for (let a = 0; a < dim; a++) {
       for (const side of [D.fence.min_m[a], D.fence.max_m[a]]) {
@@ -449,7 +460,7 @@
   if (D.obstacles.length) meta.push(D.obstacles.length + (D.obstacles.length === 1 ? " obstacle" : " obstacles"));
   if (D.fence) meta.push("geofence");
   $("meta").textContent = meta.join(" · ");
-  const hash = /t=([-0-9.eE+]+)/.exec(window.location.hash);
+  const hash = /(?:^#|&)t=([-0-9.eE+]+)/.exec(window.location.hash);
   const info = (state.time = hash ? Math.min(t1, Math.max(t0, parseFloat(hash[1]) || t0)) : t0, render());
   const px = canvas.getContext("2d").getImageData(0, 0, canvas.width, canvas.height).data;
   let ink = 0; for (let j = 0; j < px.length; j += 4) if (px[j] < 200 || px[j + 1] < 200 || px[j + 2] < 200) ink++;
@@ -458,4 +469,7 @@
     body.dataset.viewer = "ok:" + T;
     console.log("viewer-ready samples=" + T + " drones=" + n + " dim=" + dim + " sample=" + info.k + " below=" + info.below);
   }
+  const speed = /(?:^#|&)speed=([0-9.]+)/.exec(window.location.hash), sel = $("speed");
+  if (speed && [...sel.options].some((o) => o.value === speed[1])) { sel.value = speed[1]; state.speed = parseFloat(speed[1]); }
+  if (/(?:^#|&)play(?:&|$)/.test(window.location.hash)) setPlaying(true);
 })();
