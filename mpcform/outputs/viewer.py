@@ -26,7 +26,7 @@ from typing import Any
 
 import numpy as np
 
-from mpcform._validate import Array, finite_array
+from mpcform._validate import Array, finite_array, positive
 from mpcform.errors import ValidationError
 from mpcform.formation.geometry import min_pair_distance, pairs_within
 from mpcform.sim.metrics import REL_TOL
@@ -113,8 +113,8 @@ def viewer_payload(
     t = _times(t_s)
     p = _positions("positions_m", positions_m, t.shape[0])
     n, d = p.shape[1:]
-    d_min = None if d_min_m is None else _positive("d_min_m", d_min_m)
-    v_max = None if v_max_mps is None else _positive("v_max_mps", v_max_mps)
+    d_min = None if d_min_m is None else positive("d_min_m", d_min_m)
+    v_max = None if v_max_mps is None else positive("v_max_mps", v_max_mps)
     payload: dict[str, Any] = {
         "title": str(title),
         "n": n,
@@ -167,13 +167,6 @@ def _positions(field: str, value: Array, samples: int, shape: tuple[int, int] | 
     if p.shape[1] < 1 or p.shape[2] not in (2, 3):
         raise ValidationError(field, f"expected (T, n >= 1, 2 or 3) positions, got shape {p.shape}")
     return p
-
-
-def _positive(field: str, value: float) -> float:
-    x = float(value)
-    if not (math.isfinite(x) and x > 0):
-        raise ValidationError(field, f"expected a finite number > 0 or None, got {value!r}")
-    return x
 
 
 def _millimetres(p: Array) -> list[int]:

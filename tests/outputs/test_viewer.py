@@ -95,6 +95,7 @@ def test_viewer_curves() -> None:
         ({"obstacles": np.array([[0.0, 0.0, -1.0]])}, "obstacles"),
         ({"geofence": ([0.0, 0.0], [1.0, -1.0])}, "geofence"),
         ({"d_min_m": 0.0}, "d_min_m"),
+        ({"v_max_mps": "fast"}, "v_max_mps"),
         ({"curves": {"x_m": np.zeros(40)}}, "curves['x_m']"),
     ],
 )
