@@ -305,7 +305,8 @@
     const { g, w, h } = fit(canvas);
     const info = drawScene(g, w, h, state.time);
     drawLegend(g);
-    text(g, "t = " + state.time.toFixed(TIME_DEC) + " s", w - 14, 26, "right", "alphabetic", font(16, "600"), COL.ink);
+    const [tx, ty] = dim === 2 ? [w - 26, 40] : [w - 14, 26]; // 2-D: inside the plot's frame
+    text(g, "t = " + state.time.toFixed(TIME_DEC) + " s", tx, ty, "right", "alphabetic", font(16, "600"), COL.ink);
     const hint = dim === 3 ? "drag: orbit · shift-drag: pan · wheel: zoom · double-click: reset" : "drag: pan · wheel: zoom · double-click: reset";
     text(g, hint, w - 10, h - 8, "right", "alphabetic", font(11), "#999");
     return info;
