@@ -1,0 +1,254 @@
+"""An interactive viewer of a run: one self-contained HTML file (no network, no library).
+
+:func:`write_viewer_html` writes a page that plays the drones' flight in 2-D (top view) or 3-D
+(orbit, zoom, pan) with a time slider, play/pause at real time (0.25x to 8x), the formation's
+edges, the obstacles, the geofence and the pairs closer than d_min (red), beside the metric
+curves (see :func:`viewer_curves`) with a cursor linked to the time. The page is drawn with
+the browser's Canvas 2D API by ``static/viewer.js``; the data is embedded as compact JSON
+(positions in integer millimetres, curves to 4 significant digits), so a 20-drone run of a
+few hundred samples is ~0.1 MB. Open ``<file>#t=5.2`` to start at t = 5.2 s.
+
+Curve keys carry their unit (``_m``, ``_mps``, ``_s``, ...); a curve whose key holds
+``separation`` gets the d_min line, one whose key holds ``speed`` the v_max line, and a curve
+without such a line spanning more than two decades of positive values gets a log axis.
+"""
+
+from __future__ import annotations
+
+import html
+import json
+import math
+import re
+from collections.abc import Mapping, Sequence
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from mpcform._validate import Array, finite_array, positive
+from mpcform.errors import ValidationError
+from mpcform.formation.geometry import min_pair_distance, pairs_within
+from mpcform.sim.metrics import REL_TOL
+
+SEPARATION_KEY = "min_separation_m"
+SPEED_KEY = "max_speed_mps"
+TRACKING_KEY = "max_tracking_error_m"
+UNITS = {"_mps2": "m/s²", "_mps": "m/s", "_m": "m", "_s": "s", "_rad": "rad", "_deg": "°"}
+LOG_DECADES = 2.0  # positive curves spanning more decades than this get a log axis
+_PLACEHOLDER = re.compile(r"/\*@(CSS|JS|DATA)@\*/|@TITLE@")
+
+
+def write_viewer_html(
+    path: str | Path,
+    *,
+    t_s: Array,
+    positions_m: Array,
+    d_min_m: float | None = None,
+    v_max_mps: float | None = None,
+    edges: Array | Sequence[tuple[int, int]] = (),
+    obstacles: Array | None = None,
+    geofence: tuple[Array, Array] | None = None,
+    reference_m: Array | None = None,
+    title: str = "mpcform run",
+    curves: Mapping[str, Array] | None = None,
+) -> Path:
+    """Write the viewer of a run to ``path`` (parents created); returns the path.
+
+    ``t_s`` (T,) increasing; ``positions_m`` and ``reference_m`` (T, n, d), d = 2 or 3;
+    ``edges`` (E, 2) drone index pairs; ``obstacles`` (k, d + 1 or d + 2): centre, radius
+    and clearance from the surface (missing or NaN: d_min / 2); ``geofence``: (min, max)
+    corners (d,) of a box, +-inf for open sides; ``curves``: name -> (T,) values (NaN: none).
+    """
+    data = viewer_payload(
+        t_s=t_s, positions_m=positions_m, d_min_m=d_min_m, v_max_mps=v_max_mps, edges=edges,
+        obstacles=obstacles, geofence=geofence, reference_m=reference_m, title=title, curves=curves,
+    )  # fmt: skip
+    out = Path(path)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(render_html(data), encoding="utf-8")
+    return out
+
+
+def viewer_curves(
+    t_s: Array, positions_m: Array, *, reference_m: Array | None = None, commands_mps: Array | None = None
+) -> dict[str, Array]:
+    """The standard curves (T,): min separation, max speed, max tracking error over drones.
+
+    The speed is that of the commands (T - 1, n, d) held over each step (NaN at the last
+    sample), else of the positions' finite differences; separation needs two drones.
+    """
+    t = _times(t_s)
+    p = _positions("positions_m", positions_m, t.shape[0])
+    curves: dict[str, Array] = {}
+    if p.shape[1] >= 2:
+        curves[SEPARATION_KEY] = np.array([min_pair_distance(pk) for pk in p])
+    if commands_mps is not None:
+        u = finite_array("commands_mps", commands_mps, (t.shape[0] - 1, p.shape[1], p.shape[2]))
+        speed = np.linalg.norm(u, axis=-1).max(axis=1) if u.shape[0] else np.empty(0)
+    else:
+        dt = np.diff(t)[:, None]
+        speed = (np.linalg.norm(np.diff(p, axis=0), axis=-1) / dt).max(axis=1)
+    curves[SPEED_KEY] = np.append(speed, np.nan)
+    if reference_m is not None:
+        ref = _positions("reference_m", reference_m, t.shape[0], p.shape[1:])
+        curves[TRACKING_KEY] = np.linalg.norm(p - ref, axis=-1).max(axis=1)
+    return curves
+
+
+def viewer_payload(
+    *,
+    t_s: Array,
+    positions_m: Array,
+    d_min_m: float | None = None,
+    v_max_mps: float | None = None,
+    edges: Array | Sequence[tuple[int, int]] = (),
+    obstacles: Array | None = None,
+    geofence: tuple[Array, Array] | None = None,
+    reference_m: Array | None = None,
+    title: str = "mpcform run",
+    curves: Mapping[str, Array] | None = None,
+) -> dict[str, Any]:
+    """The checked, rounded JSON object that the page reads (see :func:`write_viewer_html`)."""
+    t = _times(t_s)
+    p = _positions("positions_m", positions_m, t.shape[0])
+    n, d = p.shape[1:]
+    d_min = None if d_min_m is None else positive("d_min_m", d_min_m)
+    v_max = None if v_max_mps is None else positive("v_max_mps", v_max_mps)
+    payload: dict[str, Any] = {
+        "title": str(title),
+        "n": n,
+        "dim": d,
+        "t_s": [_sig(x, 9) for x in t],
+        "p_mm": _millimetres(p),
+        "ref_mm": None,
+        "edges": _edges(edges, n),
+        "obstacles": _obstacles(obstacles, d, d_min),
+        "fence": _geofence(geofence, d),
+        "d_min_m": d_min,
+        "v_max_mps": v_max,
+        "below": {},
+        "curves": [_curve(k, v, t.shape[0], d_min, v_max) for k, v in (curves or {}).items()],
+    }
+    if reference_m is not None:
+        payload["ref_mm"] = _millimetres(_positions("reference_m", reference_m, t.shape[0], (n, d)))
+    if d_min is not None:
+        limit = d_min * (1.0 - REL_TOL)  # counted as the run's metrics count violations
+        for k, pk in enumerate(p):
+            pairs = pairs_within(pk, limit)
+            if pairs.shape[0]:
+                payload["below"][str(k)] = pairs.ravel().tolist()
+    return payload
+
+
+def render_html(data: dict[str, Any]) -> str:
+    """The page with ``data`` (a :func:`viewer_payload`), its script and style inlined."""
+    static = resources.files("mpcform.outputs").joinpath("static")
+    parts = {
+        "CSS": static.joinpath("viewer.css").read_text(encoding="utf-8"),
+        "JS": static.joinpath("viewer.js").read_text(encoding="utf-8"),
+        "DATA": _script_json(data),
+        "TITLE": html.escape(str(data["title"])),
+    }
+    page = static.joinpath("viewer.html").read_text(encoding="utf-8")
+    return _PLACEHOLDER.sub(lambda m: parts[m.group(1) or "TITLE"], page)
+
+
+# ---- checks and encodings ---------------------------------------------------------------
+def _times(t_s: Array) -> Array:
+    t = finite_array("t_s", t_s, (None,))
+    if t.shape[0] < 1 or np.any(np.diff(t) <= 0):
+        raise ValidationError("t_s", f"expected at least one strictly increasing time, got {t.tolist()[:8]}")
+    return t
+
+
+def _positions(field: str, value: Array, samples: int, shape: tuple[int, int] | None = None) -> Array:
+    p = finite_array(field, value, (samples, None, None) if shape is None else (samples, *shape))
+    if p.shape[1] < 1 or p.shape[2] not in (2, 3):
+        raise ValidationError(field, f"expected (T, n >= 1, 2 or 3) positions, got shape {p.shape}")
+    return p
+
+
+def _millimetres(p: Array) -> list[int]:
+    return [int(v) for v in np.rint(p * 1e3).astype(np.int64).ravel()]
+
+
+def _sig(x: float, digits: int = 4) -> float | None:
+    return float(f"{x:.{digits}g}") if math.isfinite(x) else None
+
+
+def _edges(edges: Array | Sequence[tuple[int, int]], n: int) -> list[list[int]]:
+    arr = np.asarray(edges, dtype=float).reshape(-1, 2) if len(edges) else np.empty((0, 2))
+    if np.any(arr != np.round(arr)) or np.any((arr < 0) | (arr >= n)):
+        raise ValidationError("edges", f"expected (E, 2) drone indices in [0, {n}), got {arr.tolist()}")
+    return arr.astype(int).tolist()
+
+
+def _obstacles(obstacles: Array | None, d: int, d_min: float | None) -> list[list[float | None]]:
+    if obstacles is None or np.size(obstacles) == 0:
+        return []
+    arr = np.array(obstacles, dtype=float)
+    if arr.ndim != 2 or arr.shape[1] not in (d + 1, d + 2):
+        raise ValidationError("obstacles", f"expected (k, {d + 1} or {d + 2}) rows of centre, radius"
+                              f"[, clearance], got shape {arr.shape}")  # fmt: skip
+    if not np.all(np.isfinite(arr[:, : d + 1])) or np.any(arr[:, d] <= 0):
+        raise ValidationError("obstacles", f"expected finite centres and radii > 0, got {arr.tolist()}")
+    clearance = arr[:, d + 1] if arr.shape[1] == d + 2 else np.full(arr.shape[0], np.nan)
+    default = np.nan if d_min is None else d_min / 2.0
+    clearance = np.where(np.isnan(clearance), default, clearance)
+    rows: list[list[float | None]] = []
+    for row, c in zip(arr, clearance, strict=True):
+        centre_radius: list[float | None] = [round(float(v), 3) for v in row[: d + 1]]
+        rows.append([*centre_radius, _sig(float(c))])
+    return rows
+
+
+def _geofence(geofence: tuple[Array, Array] | None, d: int) -> dict[str, list[float | None]] | None:
+    if geofence is None:
+        return None
+    try:
+        lo, hi = (np.array(corner, dtype=float).reshape(-1) for corner in geofence)
+    except (TypeError, ValueError) as exc:
+        raise ValidationError("geofence", f"expected (min, max) corners of {d} numbers, "
+                              f"got {geofence!r}") from exc  # fmt: skip
+    if lo.shape != (d,) or hi.shape != (d,) or np.any(np.isnan(lo) | np.isnan(hi)) or np.any(lo >= hi):
+        raise ValidationError("geofence", f"expected (min, max) with min < max per axis, {d} numbers each, "
+                              f"got {lo.tolist()} and {hi.tolist()}")  # fmt: skip
+    return {"min_m": [_sig(v, 6) for v in lo], "max_m": [_sig(v, 6) for v in hi]}
+
+
+def _curve(key: str, values: Array, samples: int, d_min: float | None, v_max: float | None) -> dict[str, Any]:
+    field = f"curves[{key!r}]"
+    try:
+        y = np.array(values, dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise ValidationError(field, f"expected ({samples},) numbers, got {values!r}") from exc
+    if y.shape != (samples,) or np.any(np.isinf(y)):
+        raise ValidationError(field, f"expected ({samples},) finite numbers or NaN, got shape {y.shape}")
+    name, unit = str(key), ""
+    for suffix, label in UNITS.items():
+        if name.endswith(suffix):
+            name, unit = name[: -len(suffix)], label
+            break
+    limit = None
+    if "separation" in key and d_min is not None:
+        limit = {"value": d_min, "label": f"d_min = {d_min:g} m", "kind": "min"}
+    elif "speed" in key and v_max is not None:
+        limit = {"value": v_max, "label": f"v_max = {v_max:g} m/s", "kind": "max"}
+    pos = y[np.isfinite(y) & (y > 0)]
+    spread = float(np.log10(pos.max() / pos.min())) if pos.size else 0.0
+    log = limit is None and bool(np.all(y[np.isfinite(y)] >= 0)) and spread > LOG_DECADES
+    return {
+        "key": key,
+        "label": name.replace("_", " "),
+        "unit": unit,
+        "y": [_sig(v) for v in y],
+        "limit": limit,
+        "log": log,
+    }
+
+
+def _script_json(data: dict[str, Any]) -> str:
+    """JSON that cannot close its ``<script>`` element (``<``, ``>``, ``&`` escaped)."""
+    text = json.dumps(data, separators=(",", ":"), allow_nan=False)
+    return text.replace("<", "\\u003c").replace(">", "\\u003e").replace("&", "\\u0026")

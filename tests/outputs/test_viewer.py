@@ -1,0 +1,243 @@
+"""The HTML viewer: checked, compact payload; one self-contained file; drawn by headless Chromium.
+
+The browser tests need Chromium (Debian: ``apt-get install chromium``); without it they skip,
+unless ``MPCFORM_REQUIRE_BROWSER=1`` (set by ``.ci/run``), where they fail.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import shutil
+import subprocess
+import sys
+import tomllib
+import zipfile
+from fnmatch import fnmatch
+from pathlib import Path
+
+import numpy as np
+import pytest
+from saved_runs import short_run
+
+from mpcform.errors import ValidationError
+from mpcform.outputs import viewer
+from mpcform.outputs.rundata import RunData, load_run
+
+ROOT = Path(__file__).resolve().parents[2]
+MAX_BYTES = 8 * 2**20  # the 20-drone swap's page must stay below this (it is ~0.1 MB)
+BROWSERS = ("chromium", "chromium-browser", "google-chrome", "google-chrome-stable")
+WINDOW = (1200, 800)
+SHOTS = Path(os.environ.get("MPCFORM_VIEWER_SHOTS", "")) if os.environ.get("MPCFORM_VIEWER_SHOTS") else None
+
+
+def synthetic() -> dict:
+    """A planar run of 4 drones: drones 0 and 1 pass 0.3 m apart at t = 2 s (d_min = 0.5 m)."""
+    t = np.round(np.arange(41) * 0.1, 10)
+    p = np.zeros((41, 4, 2))
+    p[:, 0] = np.column_stack([-2.0 + t, np.full_like(t, 0.15)])
+    p[:, 1] = np.column_stack([2.0 - t, np.full_like(t, -0.15)])
+    p[:, 2] = [0.0, -1.5]
+    p[:, 3] = [1.5, 1.0]
+    ref = p + 0.05 * np.exp(-2.0 * t)[:, None, None]
+    return {
+        "t_s": t,
+        "positions_m": p,
+        "d_min_m": 0.5,
+        "v_max_mps": 1.2,
+        "edges": [(0, 2), (1, 2), (1, 3)],
+        "obstacles": np.array([[0.0, 2.0, 0.4]]),  # centre, radius; clearance d_min / 2
+        "geofence": ([-3.0, -np.inf], [3.0, 2.8]),
+        "reference_m": ref,
+        "title": "synthetic </script> crossing & pass",
+        "curves": viewer.viewer_curves(t, p, reference_m=ref),
+    }
+
+
+# ---- payload and page, no browser -----------------------------------------------------------
+def test_payload_is_rounded_and_marks_pairs_closer_than_d_min() -> None:
+    run = synthetic()
+    data = viewer.viewer_payload(**run)
+    assert data["n"] == 4 and data["dim"] == 2 and len(data["t_s"]) == 41
+    assert data["p_mm"][:2] == [-2000, 150] and all(isinstance(v, int) for v in data["p_mm"])
+    assert set(data["below"]) == {"19", "20", "21"} and data["below"]["20"] == [0, 1]  # 0.5 m at 18, 22
+    assert data["obstacles"] == [[0.0, 2.0, 0.4, 0.25]]
+    assert data["fence"] == {"min_m": [-3.0, None], "max_m": [3.0, 2.8]}
+    curves = {c["key"]: c for c in data["curves"]}
+    assert curves["min_separation_m"]["limit"]["value"] == 0.5 and curves["min_separation_m"]["unit"] == "m"
+    assert curves["max_speed_mps"]["limit"]["label"] == "v_max = 1.2 m/s"
+    assert curves["max_speed_mps"]["y"][-1] is None and not curves["max_speed_mps"]["log"]
+    assert curves["max_tracking_error_m"]["log"] and curves["max_tracking_error_m"]["limit"] is None
+
+
+def test_viewer_curves() -> None:
+    run = synthetic()
+    curves = viewer.viewer_curves(run["t_s"], run["positions_m"], reference_m=run["reference_m"])
+    assert curves["min_separation_m"][20] == pytest.approx(0.3)
+    assert np.allclose(curves["max_speed_mps"][:-1], 1.0) and np.isnan(curves["max_speed_mps"][-1])
+    assert curves["max_tracking_error_m"][0] == pytest.approx(0.05 * np.sqrt(2))
+    u = np.full((40, 4, 2), 0.6)
+    held = viewer.viewer_curves(run["t_s"], run["positions_m"], commands_mps=u)
+    assert np.allclose(held["max_speed_mps"][:-1], 0.6 * np.sqrt(2)) and "max_tracking_error_m" not in held
+    single = viewer.viewer_curves(run["t_s"], run["positions_m"][:, :1])
+    assert set(single) == {"max_speed_mps"}
+
+
+@pytest.mark.parametrize(
+    ("change", "field"),
+    [
+        ({"t_s": np.zeros(41)}, "t_s"),
+        ({"positions_m": np.zeros((41, 4, 4))}, "positions_m"),
+        ({"reference_m": np.zeros((41, 3, 2))}, "reference_m"),
+        ({"edges": [(0, 4)]}, "edges"),
+        ({"obstacles": np.zeros((1, 5))}, "obstacles"),
+        ({"obstacles": np.array([[0.0, 0.0, -1.0]])}, "obstacles"),
+        ({"geofence": ([0.0, 0.0], [1.0, -1.0])}, "geofence"),
+        ({"d_min_m": 0.0}, "d_min_m"),
+        ({"v_max_mps": "fast"}, "v_max_mps"),
+        ({"curves": {"x_m": np.zeros(40)}}, "curves['x_m']"),
+    ],
+)
+def test_bad_input_names_the_field(change: dict, field: str) -> None:
+    with pytest.raises(ValidationError) as info:
+        viewer.viewer_payload(**{**synthetic(), **change})
+    assert info.value.field == field
+
+
+def test_page_is_one_file_that_needs_no_network(tmp_path: Path) -> None:
+    path = viewer.write_viewer_html(tmp_path / "sub" / "view.html", **synthetic())
+    page = path.read_text(encoding="utf-8")
+    assert not re.search(r"https?://|<link|\ssrc=|import\s*\(|fetch\(", page)
+    assert "</script> crossing" not in page and "synthetic &lt;/script&gt; crossing &amp; pass" in page
+    data = re.search(r'<script type="application/json" id="mpcform-data">(.*?)</script>', page, re.S)
+    assert data is not None and json.loads(data.group(1))["title"] == "synthetic </script> crossing & pass"
+    assert "/*@" not in page and "@TITLE@" not in page
+
+
+def test_static_files_are_package_data(tmp_path: Path) -> None:
+    """Every static file matches pyproject's package-data, and a built wheel carries them."""
+    static = sorted(p.name for p in (ROOT / "mpcform" / "outputs" / "static").iterdir())
+    assert {"viewer.html", "viewer.js", "viewer.css"} <= set(static)
+    globs = tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"]["package-data"]
+    assert all(any(fnmatch(f"static/{name}", g) for g in globs["mpcform.outputs"]) for name in static)
+    src = tmp_path / "src"  # a copy: the build leaves nothing in the work tree
+    shutil.copytree(ROOT / "mpcform", src / "mpcform", ignore=shutil.ignore_patterns("__pycache__"))
+    for name in ("pyproject.toml", "README.md"):
+        shutil.copy(ROOT / name, src / name)
+    pip = [sys.executable, "-m", "pip", "wheel", "-q", "--no-deps", "-w", str(tmp_path / "dist"), str(src)]
+    build = subprocess.run(pip, capture_output=True, text=True, timeout=300)
+    if build.returncode != 0:
+        pytest.skip(f"cannot build a wheel here (pip wheel: {build.stderr.strip()[-300:]})")
+    wheel = next((tmp_path / "dist").glob("mpcform-*.whl"))
+    zipfile.ZipFile(wheel).extractall(tmp_path / "site")
+    code = (
+        "import mpcform.outputs.viewer as v, numpy as np; print(v.__file__); "
+        "print(v.write_viewer_html('page.html', t_s=[0.0, 1.0], positions_m=np.zeros((2, 1, 3))))"
+    )
+    env = {**os.environ, "PYTHONPATH": str(tmp_path / "site")}
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=tmp_path, env=env)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.startswith(str(tmp_path / "site")) and (tmp_path / "page.html").stat().st_size > 10_000
+
+
+# ---- the 20-drone swap ------------------------------------------------------------------------
+@pytest.fixture(scope="module")
+def swap20(tmp_path_factory: pytest.TempPathFactory) -> RunData:
+    out = tmp_path_factory.mktemp("swap_spatial_20")
+    short_run("swap_spatial_20", out, steps=120)
+    return load_run(out)
+
+
+def swap20_page(run: RunData, path: Path) -> Path:
+    """The page as the CLI writes it for a saved run."""
+    plotting = pytest.importorskip("mpcform.outputs.plotting")
+    curves = viewer.viewer_curves(run.t_s, run.positions_m, reference_m=run.reference_m,
+                                  commands_mps=run.commands_mps)  # fmt: skip
+    return viewer.write_viewer_html(
+        path, t_s=run.t_s, positions_m=run.positions_m, d_min_m=run.d_min_m, v_max_mps=run.v_max_mps,
+        edges=plotting.formation_edges(run.offsets_m), obstacles=run.obstacles, geofence=None,
+        reference_m=run.reference_m, title=run.label, curves=curves,
+    )  # fmt: skip
+
+
+def test_swap20_page_is_small(swap20: RunData, tmp_path: Path) -> None:
+    path = swap20_page(swap20, tmp_path / "swap20.html")
+    assert swap20.n == 20 and swap20.dim == 3
+    assert path.stat().st_size <= MAX_BYTES, f"{path.stat().st_size} bytes"
+
+
+# ---- headless Chromium ------------------------------------------------------------------------
+@pytest.fixture(scope="module")
+def browser() -> str:
+    found = next((shutil.which(name) for name in BROWSERS if shutil.which(name)), None)
+    if found is None:
+        reason = f"no headless browser ({', '.join(BROWSERS)}) on PATH: apt-get install chromium"
+        if os.environ.get("MPCFORM_REQUIRE_BROWSER") == "1":
+            pytest.fail(reason + " (MPCFORM_REQUIRE_BROWSER=1)")
+        pytest.skip(reason)
+    return found
+
+
+def chromium(browser: str, page: Path, mode: str, profile: Path, hash_: str = "",
+             *extra: str) -> tuple[str, str]:  # fmt: skip
+    """Run the browser headless on ``page`` with ``--screenshot=...`` or ``--dump-dom``; (stdout, log)."""
+    args = [browser, "--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
+            "--disable-background-networking", "--disable-component-update", "--disable-sync",
+            f"--user-data-dir={profile}", "--enable-logging=stderr", "--v=0", "--hide-scrollbars",
+            f"--window-size={WINDOW[0]},{WINDOW[1]}", *extra, mode,
+            page.resolve().as_uri() + hash_]  # fmt: skip
+    out = subprocess.run(args, capture_output=True, text=True, timeout=180)
+    assert out.returncode == 0, out.stderr[-2000:]
+    return out.stdout, out.stderr
+
+
+def console(log: str) -> list[str]:
+    return [line for line in log.splitlines() if "CONSOLE" in line or "Uncaught" in line]
+
+
+def check_page(browser: str, page: Path, tmp_path: Path, samples: int, hash_: str) -> str:
+    """Screenshot (not blank, no console error) and DOM (self-check passed); returns the DOM."""
+    png = tmp_path / (page.stem + ".png")
+    _, log = chromium(browser, page, f"--screenshot={png}", tmp_path / "profile-shot", hash_)
+    lines = console(log)
+    assert lines and all("viewer-ready" in line for line in lines), "\n".join(lines)
+    image = plt_image(png)
+    assert image.shape[:2] == (WINDOW[1], WINDOW[0])
+    grey = image[..., :3].mean(axis=-1)
+    assert grey.std() > 0.08 and (grey < 0.9).mean() > 0.02, "the screenshot is (nearly) blank"
+    if SHOTS is not None:
+        SHOTS.mkdir(parents=True, exist_ok=True)
+        shutil.copy(png, SHOTS / png.name)
+    dom, log = chromium(browser, page, "--dump-dom", tmp_path / "profile-dom", hash_)
+    assert f'data-viewer="ok:{samples}"' in dom, re.findall(r"<body[^>]*>", dom) + console(log)
+    return dom
+
+
+def plt_image(png: Path) -> np.ndarray:
+    from PIL import Image
+
+    with Image.open(png) as im:
+        return np.asarray(im.convert("RGB"), dtype=float) / 255.0
+
+
+def test_browser_draws_the_synthetic_run(browser: str, tmp_path: Path) -> None:
+    page = viewer.write_viewer_html(tmp_path / "synthetic.html", **synthetic())
+    dom = check_page(browser, page, tmp_path, 41, "#t=2")
+    assert 'data-sample="20"' in dom and 'data-below="1"' in dom  # the pair closer than d_min, red
+    assert "1 pair closer than d_min" in dom
+
+
+def test_browser_draws_the_20_drone_swap(browser: str, swap20: RunData, tmp_path: Path) -> None:
+    page = swap20_page(swap20, tmp_path / "swap_spatial_20.html")
+    dom = check_page(browser, page, tmp_path, swap20.t_s.shape[0], "#t=3")
+    assert 'data-sample="30"' in dom and "20 drones · 3-D" in dom
+
+
+def test_browser_plays_the_run(browser: str, tmp_path: Path) -> None:
+    """``#speed=8&play`` starts playback: after some (virtual) time the page shows a later sample."""
+    page = viewer.write_viewer_html(tmp_path / "play.html", **synthetic())
+    dom, _ = chromium(browser, page, "--dump-dom", tmp_path / "profile", "#t=0&speed=8&play",
+                      "--virtual-time-budget=3000")  # fmt: skip
+    sample = re.search(r'<body[^>]*data-sample="(\d+)"', dom)
+    assert sample is not None and int(sample.group(1)) > 0, re.findall(r"<body[^>]*>", dom)
