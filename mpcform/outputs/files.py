@@ -109,8 +109,10 @@ def build_summary(
     metrics: dict[str, Any],
     scenario_file: Path | None = None,
     scenario_sha256: str | None = None,
+    plant: dict[str, Any] | None = None,
 ) -> dict[str, Any]:
-    """The ``summary.json`` record (keys :data:`SUMMARY_KEYS`), JSON-safe (no NaN or inf)."""
+    """The ``summary.json`` record (keys :data:`SUMMARY_KEYS`, and ``plant`` when given: the plant's
+    kind, its robust margin and the acceleration limit the margin assumes), JSON-safe (no NaN or inf)."""
     summary = {
         "scenario": scenario,
         "n": n,
@@ -123,6 +125,8 @@ def build_summary(
         "provenance": provenance(seed, scenario_file, scenario_sha256),
         "metrics": metrics,
     }
+    if plant is not None:
+        summary["plant"] = plant
     return json_safe(summary)
 
 
@@ -171,6 +175,18 @@ def format_summary(summary: dict[str, Any]) -> str:
         ("qp solves", f"{m['qp_solves']} ({m['fast_path_steps']} fast-path steps, "
                       f"{m['solver_failures']} failures, max slack {_m(m['max_slack'], 'm')})"),
     ]  # fmt: skip
+    if "completion" in m:
+        done = m["time_to_complete"]
+        end = f" from t = {done:.4g} s" if done is not None else f", {m['stalled_drones']} stalled"
+        rows.append(("completion", f"{m['completion']:.0%} of drones at their final targets{end}"))
+    if "obstacle_violations" in m:
+        rows.append(("obstacles", f"min clearance {_m(m['min_obstacle_clearance'], 'm')} from a surface, "
+                                  f"{m['obstacle_violations']} violations"))
+    plant = summary.get("plant")
+    if plant is not None and plant.get("kind") != "ideal" and "min_separation_true" in m:
+        rows.append(("true motion", f"{plant['kind']} plant (margin {_m(plant['margin'], 'm')}): min "
+                     f"separation {_m(m['min_separation_true'], 'm')}, {m['separation_violations_true']} "
+                     f"violations, max speed {_m(m['max_speed_true'], 'm/s')}"))
     for mode, st in m["step_time_ms"].items():
         rows.append((f"step time {mode}", f"median {st['median']:.3g} ms, p90 {st['p90']:.3g} ms, "
                                           f"max {st['max']:.3g} ms"))  # fmt: skip

@@ -57,11 +57,25 @@ def run_scenario(
         seed=scenario.seed,
         scenario_file=scenario.source,
         scenario_sha256=scenario.source_sha256,
-        metrics=run_metrics(result, limits.v_max_mps, limits.d_min_m),
+        metrics=run_metrics(
+            result, limits.v_max_mps, limits.d_min_m, limits=limits, obstacles=scenario.obstacles,
+            final_targets_m=scenario.reference.final_targets_m(),
+        ),
         steps=result.commands_mps.shape[0],
+        plant=plant_record(scenario, result.wind_clip_fraction),
     )
     path = None if out_dir is None else write_outputs(Path(out_dir), result, summary)
     return RunResult(result, summary, path)
+
+
+def plant_record(scenario: Scenario, wind_clip_fraction: float) -> dict[str, Any]:
+    """``summary.json``'s ``plant``: kind, robust margin [m] per drone, the acceleration bound it
+    assumes [m/s^2], the speed it is valid below [m/s], and the share of clipped gust samples."""
+    rob = scenario.robustness
+    return {
+        "kind": scenario.plant.kind, "margin": rob.margin_m, "a_max": rob.a_max_mps2,
+        "margin_valid_below_speed": rob.valid_speed_mps, "wind_clip_fraction": wind_clip_fraction,
+    }  # fmt: skip
 
 
 def describe(scenario: Scenario) -> str:

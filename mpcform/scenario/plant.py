@@ -6,6 +6,8 @@ import math
 from collections.abc import Mapping
 from typing import Any
 
+import numpy as np
+
 from mpcform.errors import ScenarioError
 from mpcform.scenario.parse import as_scenario_error, parse_table
 from mpcform.sim.plant_spec import PlantSpec
@@ -79,7 +81,7 @@ def _wind(raw: Any, dim: int) -> Wind | None:
         raise ScenarioError("plant.wind.gust_field", f"expected {' or '.join(GUST_FIELDS)}, got {field!r}")
     with as_scenario_error("plant"):
         return Wind(
-            [float(x) for x in mean],
+            np.array(mean, dtype=float),
             gust_std_mps=numbers.get("gust_std", 0.0),
             gust_time_s=numbers.get("gust_time", 1.0),
             gust_bound_mps=numbers.get("gust_bound"),

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import functools
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -15,7 +16,7 @@ from mpcform.formation.template import Template
 from mpcform.mpc.limits import Limits, SphereObstacle
 from mpcform.mpc.settings import MPCSettings
 from mpcform.reference.base import Reference
-from mpcform.sim.plant_spec import PlantSpec
+from mpcform.sim.plant_spec import PlantSpec, Robustness
 
 
 @dataclass(frozen=True)
@@ -71,6 +72,11 @@ class Scenario:
     def n(self) -> int:
         """Number of drones."""
         return self.template.n
+
+    @functools.cached_property
+    def robustness(self) -> Robustness:
+        """The plant's robust margin and the acceleration bound it assumes (zero for the ideal plant)."""
+        return self.plant.robustness(self.dim, self.simulation.dt_s, self.limits.a_max_mps2)
 
     @property
     def steps(self) -> int:

@@ -22,8 +22,17 @@ from mpcform._validate import Array
 from mpcform.formation.geometry import min_pair_distance, min_segment_distance, pairs_within
 from mpcform.formation.kinematics import fit_formation
 from mpcform.formation.template import Template
+from mpcform.mpc.limits import Limits, SphereObstacle
+from mpcform.sim.completion import COMPLETION_TOL_M, completion_metrics
+from mpcform.sim.safety import (
+    downwash_metric,
+    geofence_violations,
+    min_separation_along,
+    obstacle_metrics,
+    separation_violations,
+)
 from mpcform.sim.simulation import SimulationResult
-from mpcform.sim.trajectory import Trajectory
+from mpcform.sim.trajectory import Trajectory, TrueTrajectory
 
 REL_TOL = 1e-9  # violations are counted beyond this relative tolerance
 
@@ -59,8 +68,19 @@ def tracking_cost_m2s(trajectory: Trajectory) -> float:
 
 
 # ---- the summary's metrics ---------------------------------------------------------------
-def run_metrics(result: SimulationResult, v_max_mps: float | None, d_min_m: float | None) -> dict[str, Any]:
-    """Tracking, separation, speed, solver and timing metrics of one run (JSON-ready)."""
+def run_metrics(
+    result: SimulationResult,
+    v_max_mps: float | None,
+    d_min_m: float | None,
+    *,
+    limits: Limits | None = None,
+    obstacles: tuple[SphereObstacle, ...] = (),
+    final_targets_m: Array | None = None,
+    completion_tol_m: float = COMPLETION_TOL_M,
+) -> dict[str, Any]:
+    """Tracking, separation, speed, solver and timing metrics of one run (JSON-ready); with
+    ``limits``, ``obstacles`` and ``final_targets_m`` also the obstacle, geofence and completion
+    metrics, and with the plant's dense motion (``result.true``) the ``*_true`` metrics."""
     err = tracking_errors_m(result).max(axis=1)
     speed = command_speeds_mps(result)
     pos = result.positions_m
@@ -86,7 +106,48 @@ def run_metrics(result: SimulationResult, v_max_mps: float | None, d_min_m: floa
         "step_time_ms": {
             mode: _stats(1e3 * result.step_times_s[modes == mode]) for mode in sorted(set(modes.tolist()))
         },
+        **_path_metrics(result.positions_m, "", d_min_m, limits, obstacles),
+        **({} if result.true is None else _true_metrics(result.true, d_min_m, limits, obstacles)),
+        **({} if final_targets_m is None else completion_metrics(result, final_targets_m, completion_tol_m)),
     }
+
+
+def _path_metrics(
+    path: Array,
+    suffix: str,
+    d_min_m: float | None,
+    limits: Limits | None,
+    obstacles: tuple[SphereObstacle, ...],
+) -> dict[str, Any]:
+    """Obstacle, geofence and downwash separation of a path (straight between its samples)."""
+    out: dict[str, Any] = {}
+    if obstacles:
+        clearance, violations = obstacle_metrics(path, obstacles, d_min_m)
+        out |= {f"min_obstacle_clearance{suffix}": clearance, f"obstacle_violations{suffix}": violations}
+    if limits is not None:
+        out[f"geofence_violations{suffix}"] = geofence_violations(path, limits)
+        metric = downwash_metric(limits, path.shape[-1])
+        if metric is not None:
+            out[f"min_separation_downwash{suffix}"] = _finite_or_none(min_separation_along(path, metric))
+    return out
+
+
+def _true_metrics(
+    true: TrueTrajectory, d_min_m: float | None, limits: Limits | None, obstacles: tuple[SphereObstacle, ...]
+) -> dict[str, Any]:
+    """The safety and tracking metrics of the plant's dense true motion (distances linear between
+    dense samples)."""
+    p = true.positions_m
+    out: dict[str, Any] = {
+        "min_separation_true": _finite_or_none(min_separation_along(p)),
+        "separation_violations_true": 0 if d_min_m is None else separation_violations(p, d_min_m),
+        "max_speed_true": float(np.linalg.norm(true.velocities_mps, axis=-1).max()),
+        "max_tracking_error_true": float(np.linalg.norm(p - true.reference_m, axis=-1).max()),
+    }
+    if obstacles:
+        clearance, violations = obstacle_metrics(p, obstacles, d_min_m)
+        out |= {"min_obstacle_clearance_true": clearance, "obstacle_violations_true": violations}
+    return out | _path_metrics(p, "_true", d_min_m, limits, ())
 
 
 def _stats(ms: np.ndarray) -> dict[str, float]:

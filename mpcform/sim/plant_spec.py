@@ -25,6 +25,18 @@ DEFAULT_RATE_HZ = 500.0
 DEFAULT_ALTITUDE_M = 1.0
 
 
+@dataclass(frozen=True)
+class Robustness:
+    """What the planner assumes of a plant: the robust margin per drone ``margin_m`` [m] its rows
+    are tightened by (pairs by twice it), the command-change bound ``a_max_mps2`` the margin holds
+    for (the scenario's ``limits.a_max``, else the plant's default), and the speed below which the
+    quadrotor's margin is valid (inf for the linear plants)."""
+
+    margin_m: float
+    a_max_mps2: float | None
+    valid_speed_mps: float = float("inf")
+
+
 @dataclass(frozen=True, eq=False)
 class PlantSpec:
     """A plant as declared: ``kind`` and its parameters (the others are ignored), wind, noise.
@@ -73,6 +85,21 @@ class PlantSpec:
     def ideal(self) -> bool:
         """True for the exact single integrator without measurement noise (the planner's model)."""
         return self.kind == "ideal" and self.measurement_noise_m == 0.0
+
+    def robustness(self, dim: int, dt_s: float, a_max_mps2: float | None) -> Robustness:
+        """The margin and acceleration bound the planner uses for this plant (module
+        :mod:`mpcform.sim.margin`): zero for the ideal plant; otherwise ``margin_m`` if given, else
+        the plant's margin over one control interval of ``dt_s`` with ``a_max_mps2`` (None: the
+        plant's default). Measurement noise is not part of it."""
+        if self.kind == "ideal":
+            return Robustness(self.margin_m or 0.0, a_max_mps2)
+        from mpcform.sim.margin import default_a_max, plant_margin
+
+        plant = self.build(1, dim)
+        a_max = default_a_max(plant) if a_max_mps2 is None else a_max_mps2
+        margin = plant_margin(plant, dt_s, a_max)
+        chosen = margin.norm_m if self.margin_m is None else self.margin_m
+        return Robustness(chosen, a_max, margin.valid_speed_mps)
 
     def build(self, n: int, dim: int, seed: int | np.random.SeedSequence = 0) -> Plant:
         """The plant for ``n`` drones in ``dim`` dimensions; ``seed`` feeds its wind and noise."""

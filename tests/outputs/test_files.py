@@ -28,6 +28,9 @@ METRIC_KEYS = {
     "final_tracking_error", "max_tracking_error", "min_separation", "min_separation_segments",
     "max_speed", "separation_violations", "speed_violations", "qp_solves", "fast_path_steps",
     "solver_failures", "max_slack", "step_time_ms",
+    # added with the plants, completion and geofence metrics (the worked example has no obstacles)
+    "min_separation_true", "separation_violations_true", "max_speed_true", "max_tracking_error_true",
+    "geofence_violations", "geofence_violations_true", "completion", "stalled_drones", "time_to_complete",
 }  # fmt: skip
 
 
@@ -51,7 +54,13 @@ def test_npz_holds_exactly_the_simulation(tmp_path: Path, name: str) -> None:
     assert sorted(p.name for p in run.out_dir.iterdir()) == sorted(OUTPUT_FILES)
     sim = run.simulation
     with np.load(run.out_dir / "trajectory.npz") as npz:
-        assert set(npz.files) == {"t", "p", "u", "p_ref"}
+        assert set(npz.files) == {"t", "p", "u", "p_ref", "t_true", "p_true", "v_true", "p_ref_true"}
+        true = sim.true
+        assert true is not None
+        for key, value in [("t_true", true.t_s), ("p_true", true.positions_m), ("v_true", true.velocities_mps),
+                           ("p_ref_true", true.reference_m)]:  # fmt: skip
+            assert np.array_equal(npz[key], value)
+        assert np.array_equal(npz["p_true"][::10], npz["p"])  # ideal plant: the samples themselves
         assert np.array_equal(npz["t"], sim.t_s)
         assert np.array_equal(npz["p"], sim.positions_m)
         assert np.array_equal(npz["u"], sim.commands_mps)
@@ -93,7 +102,8 @@ def test_summary_keys_and_values(tmp_path: Path) -> None:
     run = run_short("worked_example", tmp_path)
     summary = strict_json(tmp_path / "summary.json")
     assert summary == run.summary
-    assert tuple(summary) == SUMMARY_KEYS
+    assert tuple(summary) == (*SUMMARY_KEYS, "plant")
+    assert summary["plant"]["kind"] == "ideal" and summary["plant"]["margin"] == 0.0
     assert summary["scenario"] == "worked_example"
     assert (summary["n"], summary["dim"], summary["dt"], summary["steps"]) == (3, 2, 0.02, 7)
     assert summary["controller"] == "tracking" and summary["solver"] is None
