@@ -64,7 +64,7 @@ class MPCPlanner(Controller):
         self._separation = sep = Separation(self.dim, limits, settings, self.obstacles)
         self._candidates = CandidateSelector(self.n, dt_s, limits, settings, self.obstacles)
         self._certifier = Certifier(dt_s, limits.v_max_mps, sep)
-        self._solver: StepSolver  # the sparse QP's backend, or DAQP per drone
+        self._solver: StepSolver  # the sparse QP with a backend, or DAQP per drone
         if settings.solves_per_drone:
             self._solver = PerDroneQP(self.dim, dt_s, limits, settings, self._families)
         else:
