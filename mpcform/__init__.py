@@ -8,10 +8,10 @@ from __future__ import annotations
 from importlib import metadata
 from typing import Any
 
-from mpcform.control.base import ProportionalController, TrackingController
 from mpcform.control.consensus import ConsensusController, ConsensusSettings, Network
 from mpcform.control.graph import Graph
 from mpcform.control.nullspace import NullSpaceController, NullSpaceSettings
+from mpcform.control.tracking import ProportionalController, TrackingController
 from mpcform.errors import MPCFormError, ScenarioError, ValidationError
 from mpcform.formation.kinematics import (
     fit_formation,
@@ -25,8 +25,10 @@ from mpcform.formation.template import Template
 from mpcform.mpc.limits import Limits, SphereObstacle
 from mpcform.mpc.settings import MPCSettings
 from mpcform.reference.base import ConstantReference, ExponentialReference
-from mpcform.reference.mission import Keyframe, MissionLimits, MissionReference, SpeedBudget
-from mpcform.scenario.spec import load_scenario, run_scenario
+from mpcform.reference.keyframes import Keyframe, MissionLimits, SpeedBudget
+from mpcform.reference.mission import MissionReference
+from mpcform.run.runner import run_scenario
+from mpcform.scenario.load import load_scenario
 from mpcform.sim.metrics import run_metrics
 from mpcform.sim.simulation import simulate
 

@@ -6,7 +6,9 @@ import dataclasses
 from pathlib import Path
 
 from mpcform.outputs.rundata import write_formation_npz
-from mpcform.scenario.spec import RunResult, Scenario, load_scenario, run_scenario
+from mpcform.run.runner import RunResult, run_scenario
+from mpcform.scenario.load import load_scenario
+from mpcform.scenario.spec import Scenario
 
 ROOT = Path(__file__).resolve().parents[1]
 SCENARIOS = ROOT / "scenarios"

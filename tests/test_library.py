@@ -11,7 +11,8 @@ from saved_runs import SCENARIOS, shortened
 
 from mpcform.outputs.export import export_run
 from mpcform.outputs.rundata import load_run, write_formation_npz
-from mpcform.scenario.spec import load_scenario, run_scenario
+from mpcform.run.runner import run_scenario
+from mpcform.scenario.load import load_scenario
 
 FILES = sorted(SCENARIOS.glob("*.toml"))
 STEPS = 6

@@ -36,7 +36,8 @@ import scipy.sparse as sp
 
 from mpcform._validate import Array
 from mpcform.errors import MPCFormError
-from mpcform.solvers.base import QPBackend, QPContext, QPSolution, SolverOptions, make_backend
+from mpcform.solvers.base import QPBackend, QPContext, QPSolution, SolverOptions
+from mpcform.solvers.registry import make_backend
 
 FORMAT = "mpcform-qp"
 VERSION = 1
@@ -94,7 +95,7 @@ class RecordedQP:
         """The problem as a :class:`qpsolvers.Problem`: ``min 0.5 x^T P x + q^T x`` s.t.
         ``G x <= h`` (each finite side of the two-sided rows), ``A x = b`` (rows with
         ``l == u``), full symmetric P; dense matrices when ``dense``."""
-        from mpcform.solvers.families import qpsolvers_form
+        from mpcform.solvers.qpsolvers_backend import qpsolvers_form
 
         return qpsolvers_form(self.P, self.q, self.A, self.l, self.u, dense)[0]
 
@@ -243,32 +244,20 @@ def _version() -> str:
 
 def record_scenario(path: str | Path, solver: str | None = None) -> list[RecordedQP]:
     """Run the scenario at ``path`` closed-loop with the MPC planner and return every QP it solved."""
-    from mpcform.mpc.planner import MPCPlanner
-    from mpcform.scenario.spec import load_scenario
-    from mpcform.sim.simulation import simulate
+    from mpcform.run.runner import run_scenario
+    from mpcform.scenario.load import load_scenario
 
     scenario = load_scenario(path)
-    st, sim = scenario.controller.mpc, scenario.simulation
+    st = scenario.controller.mpc
     options = SolverOptions(st.eps_abs, st.eps_rel, st.max_iter, st.time_limit_s)
     recorder = RecordingBackend(
-        make_backend(solver or scenario.controller.solver, options), scenario.name, sim.dt_s
-    )
-    planner = MPCPlanner(
-        scenario.reference, sim.dt_s, scenario.limits, st, scenario.obstacles, solver=recorder
+        make_backend(solver or scenario.controller.solver, options), scenario.name, scenario.simulation.dt_s
     )
 
     def at_step(done: int, total: int) -> None:
         recorder.step = done  # the next step's index
 
-    simulate(
-        planner,
-        scenario.initial_positions_m,
-        sim.duration_s,
-        lag_s=sim.lag_s,
-        noise_std_m=sim.noise_std_m,
-        seed=scenario.seed,
-        progress=at_step,
-    )
+    run_scenario(scenario, controller="mpc", solver=recorder, progress=at_step)
     return recorder.problems
 
 

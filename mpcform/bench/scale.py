@@ -1,20 +1,9 @@
 """``mpcform bench scale``: planner step time and peak memory from tens to a thousand drones.
 
-Two spatial scenarios at constant density (lattice spacing ``SPACING_M``, so the occupied volume
-grows with n), horizon 10, ``dt = 0.1 s``, ``v_max = 1 m/s``, ``d_min = 0.5 m``:
-
-- **formation**: a cubic grid formation translating and turning about z
-  (:class:`~mpcform.reference.base.ExponentialReference`, rate 0.1/s; at the start the centroid moves
-  at 0.3 m/s and the outermost drone turns at 0.2 m/s, so reference speeds stay well inside the
-  velocity polytope and the fast path normally applies), drones starting on the reference with
-  a seeded 5 cm perturbation;
-- **crossing**: two slab-shaped grid formations (two layers deep along x) flying head-on
-  through each other at 0.5 m/s each, laterally offset by less than ``d_min`` so that every
-  drone of a column meets the drones of the opposite column (:class:`CrossingReference`). The
-  run starts with the fronts one spacing apart, so the measured steps are inside the crossing.
-
-Each case runs a fixed number of closed-loop steps with exact execution; only
-:meth:`MPCPlanner.step` is timed. Modes: ``decoupled`` (``coupling="decoupled"``, grouping,
+The scenarios (``formation`` and ``crossing``, at constant density) are those of
+:mod:`mpcform.bench.scale_cases`, horizon 10 by default. Each case runs a fixed number of
+closed-loop steps with exact execution; only :meth:`MPCPlanner.step` is timed. Modes
+(:func:`mpcform.mpc.settings.mode_settings`): ``decoupled`` (``coupling="decoupled"``, grouping,
 each conflicted drone's QP solved by DAQP), ``decoupled-sparse`` (the same as one sparse QP with
 the ``--solver``), ``joint`` (joint rows, conflict grouping) and ``monolithic`` (``grouping=False``,
 ``coupling="joint"``: the one joint QP over every drone whenever a solve is needed). The
@@ -45,120 +34,18 @@ from typing import Any
 import numpy as np
 
 from mpcform._validate import Array
+from mpcform.bench.growth import growth_rows
+from mpcform.bench.scale_cases import DT_S, LIMITS, SCENARIOS, make_case
+from mpcform.bench.stats import median_p90
 from mpcform.errors import ValidationError
 from mpcform.formation.geometry import min_segment_distance
-from mpcform.formation.kinematics import velocity_size
-from mpcform.formation.state import FormationState
-from mpcform.formation.template import Template
-from mpcform.mpc.limits import Limits
 from mpcform.mpc.planner import MPCPlanner
-from mpcform.mpc.settings import MPCSettings
+from mpcform.mpc.settings import MPCSettings, mode_settings
 from mpcform.outputs import tables
-from mpcform.reference.base import ExponentialReference, Profile, Reference
 from mpcform.run.parallel import blas_threads, process_pool
-from mpcform.solvers.base import DEFAULT_SOLVER
+from mpcform.solvers.registry import DEFAULT_SOLVER
 
-SCENARIOS = ("formation", "crossing")
-MODES = ("decoupled", "decoupled-sparse", "joint", "monolithic")
-PLANNER_MODES = MODES[:-1]  # the grouped modes (--coupling)
 DEFAULT_N = (10, 30, 100, 300, 1000)
-SPACING_M = 1.5  # lattice spacing of every formation [m] (constant density)
-LIMITS = Limits(v_max_mps=1.0, d_min_m=0.5)
-DT_S = 0.1
-FORMATION_RATE_PER_S = 0.1  # ExponentialReference rate
-FORMATION_TRANSLATION_MPS = 0.3  # centroid speed at t = 0
-FORMATION_RIM_MPS = 0.2  # speed of the outermost drone due to the turn, at t = 0
-FORMATION_PERTURBATION_M = 0.05
-CROSSING_SPEED_MPS = 0.5  # each slab's speed; they close at twice this
-CROSSING_LATERAL_M = (0.15, 0.1)  # y, z offset of the second slab's columns (< d_min)
-GROWTH_MIN_N = 100  # exponents are fitted over n >= this
-
-
-class CrossingReference(Reference):
-    """Drone ``i``'s target moves from ``start_m[i]`` at constant ``velocity_mps[i]``.
-
-    Two groups flying through each other are not a rigid formation motion, so :meth:`targets`
-    is given directly; :meth:`profile` describes the (centred) template at rest.
-    """
-
-    def __init__(self, start_m: Array, velocity_mps: Array) -> None:
-        self.template, shift = Template.centred(start_m, name="crossing")
-        self.start_m = np.asarray(start_m, dtype=float) - shift
-        self.velocity_mps = np.asarray(velocity_mps, dtype=float)
-
-    def profile(self, times_s: Array) -> Profile:
-        t, d = times_s.shape[0], self.template.dim
-        zeros = np.zeros((t, d))
-        return Profile(zeros, np.broadcast_to(np.eye(d), (t, d, d)), np.ones(t), zeros,
-                       np.zeros((t, velocity_size(d) - d - 1)), np.zeros(t))  # fmt: skip
-
-    def targets(self, times_s: object) -> tuple[Array, Array]:
-        t = np.atleast_1d(np.asarray(times_s, dtype=float))
-        pos = self.start_m + t[:, None, None] * self.velocity_mps
-        return pos, np.broadcast_to(self.velocity_mps, pos.shape).copy()
-
-
-def lattice(n: int, shape: Sequence[int], spacing_m: float = SPACING_M) -> Array:
-    """The first ``n`` points (n, len(shape)) of a ``shape`` lattice (row-major order), centred along
-    every axis but the first."""
-    axes = [spacing_m * np.arange(k) for k in shape]
-    pts = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, len(shape))[:n]
-    pts[:, 1:] -= 0.5 * spacing_m * (np.asarray(shape[1:]) - 1)
-    return pts
-
-
-def formation_case(n: int, seed: int = 0) -> tuple[Reference, Array]:
-    """Grid formation translating and turning about z; start positions (n, 3) near its start."""
-    side = max(1, math.ceil(round(n ** (1.0 / 3.0), 9)))
-    tpl, _ = Template.centred(lattice(n, (side, side, side)), name="grid")
-    rim = max(float(np.linalg.norm(tpl.offsets, axis=1).max()), SPACING_M)
-    lam = FORMATION_RATE_PER_S
-    move = FORMATION_TRANSLATION_MPS / lam * np.array([2.0, 1.0, 0.5]) / np.sqrt(5.25)
-    start = FormationState.from_param(np.array([0.0, 0.0, 20.0]))
-    turn = np.array([0.0, 0.0, FORMATION_RIM_MPS / (lam * rim)])  # rotation vector [rad]
-    goal = FormationState.from_param(start.centroid_m + move, turn)
-    ref = ExponentialReference(tpl, start, goal, lam)
-    rng = np.random.default_rng([seed, n])
-    p0 = ref.targets(0.0)[0][0] + rng.normal(0.0, FORMATION_PERTURBATION_M, (n, 3))
-    return ref, p0
-
-
-def crossing_case(n: int, gap_m: float = SPACING_M) -> tuple[Reference, Array]:
-    """Two slabs (2 layers deep along x), fronts ``gap_m`` apart, flying head-on through each other."""
-    if n < 2:
-        raise ValidationError("n", f"a crossing needs at least 2 drones, got {n}")
-    m_a, m_b = n // 2, n - n // 2
-    face = math.ceil(m_b / 2)
-    width = math.ceil(math.sqrt(face))
-    shape = (2, width, math.ceil(face / width))
-    a = lattice(m_a, shape)
-    b = lattice(m_b, shape) * np.array([-1.0, 1.0, 1.0])  # layers mirrored: the fronts face each other
-    a[:, 0] -= 0.5 * gap_m + SPACING_M  # front layer at x = -gap/2
-    b[:, 0] += 0.5 * gap_m + SPACING_M
-    b[:, 1:] += CROSSING_LATERAL_M
-    velocity = np.zeros((n, 3))
-    velocity[:m_a, 0], velocity[m_a:, 0] = CROSSING_SPEED_MPS, -CROSSING_SPEED_MPS
-    ref = CrossingReference(np.vstack([a, b]), velocity)
-    return ref, ref.targets(0.0)[0][0].copy()
-
-
-def make_case(scenario: str, n: int) -> tuple[Reference, Array]:
-    """Reference and start positions of a scenario of ``SCENARIOS``."""
-    if scenario == "formation":
-        return formation_case(n)
-    if scenario == "crossing":
-        return crossing_case(n)
-    raise ValueError(f"unknown scenario {scenario!r}, expected one of {SCENARIOS}")
-
-
-def mode_settings(mode: str, horizon: int) -> MPCSettings:
-    """Planner settings of a mode of ``MODES``."""
-    if mode == "monolithic":
-        return MPCSettings(horizon=horizon, coupling="joint", grouping=False)
-    if mode not in MODES:
-        raise ValueError(f"unknown mode {mode!r}, expected one of {MODES}")
-    coupling, _, solve = mode.partition("-")
-    return MPCSettings(horizon=horizon, coupling=coupling, grouping=True, per_drone=solve != "sparse")
 
 
 def _solver(settings: MPCSettings, solver: str) -> str:
@@ -170,12 +57,6 @@ def _maxrss_mib() -> float:
     """Peak resident set size of this process [MiB] (ru_maxrss is KiB on Linux, bytes on macOS)."""
     peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
     return peak / 2**20 if sys.platform == "darwin" else peak / 2**10
-
-
-def _stats(ms: list[float]) -> tuple[float, float]:
-    if not ms:
-        return float("nan"), float("nan")
-    return float(np.median(ms)), float(np.percentile(ms, 90))
 
 
 def _closed_loop(planner: MPCPlanner, p: Array, steps: int, budget_s: float) -> dict[str, Any]:
@@ -233,10 +114,10 @@ def bench_case(
         "qp_drones_mean": float(np.mean(run["qp_drones"])) if run["qp_drones"] else 0.0,
         "qp_drones_max": max(run["qp_drones"], default=0),
     }  # fmt: skip
-    row["step_ms_median"], row["step_ms_p90"] = _stats(all_ms)
+    row["step_ms_median"], row["step_ms_p90"] = median_p90(all_ms)
     row["step_ms_max"] = max(all_ms, default=float("nan"))
-    row["qp_ms_median"], row["qp_ms_p90"] = _stats(qp_ms)
-    row["fast_ms_median"], row["fast_ms_p90"] = _stats(times["fast_path"])
+    row["qp_ms_median"], row["qp_ms_p90"] = median_p90(qp_ms)
+    row["fast_ms_median"], row["fast_ms_p90"] = median_p90(times["fast_path"])
     row["planning_s"] = run["spent"]
     row["rss_peak_mib"], row["rss_delta_mib"] = rss_after, rss_after - rss_before
     row["tracemalloc_peak_mib"] = float("nan")
@@ -269,43 +150,6 @@ def skipped_row(scenario: str, n: int, mode: str, steps: int, note: str) -> dict
         "steps_run": 0,
         "note": note,
     }
-
-
-def growth_exponent(n: Sequence[float], t: Sequence[float], n_min: float = GROWTH_MIN_N) -> float:
-    """Least-squares slope of ``log t`` against ``log n`` over the points with ``n >= n_min`` and a
-    finite positive time (NaN with fewer than two such points at distinct n)."""
-    x, y = np.asarray(n, dtype=float), np.asarray(t, dtype=float)
-    ok = (x >= n_min) & np.isfinite(y) & (y > 0)
-    if np.unique(x[ok]).shape[0] < 2:
-        return float("nan")
-    slope, _ = np.polyfit(np.log(x[ok]), np.log(y[ok]), 1)
-    return float(slope)
-
-
-def two_point_exponent(n: Sequence[float], t: Sequence[float], a: float = 100, b: float = 1000) -> float:
-    """``log(t(b) / t(a)) / log(b / a)`` (NaN unless both sizes have a finite positive time)."""
-    at = {float(k): float(v) for k, v in zip(n, t, strict=True) if np.isfinite(v) and v > 0}
-    if float(a) not in at or float(b) not in at:
-        return float("nan")
-    return math.log(at[float(b)] / at[float(a)]) / math.log(b / a)
-
-
-def growth_rows(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
-    """Growth exponents per (scenario, mode) of the median step time and the median QP-step time.
-
-    Cases stopped by their budget count with the steps they ran (listed under ``partial``)."""
-    out = []
-    for scenario, mode in dict.fromkeys((r["scenario"], r["mode"]) for r in rows):
-        case = [r for r in rows if (r["scenario"], r["mode"]) == (scenario, mode) and r.get("steps_run")]
-        ns = [r["n"] for r in case]
-        rec: dict[str, Any] = {"table": "growth", "scenario": scenario, "mode": mode, "sizes": ns,
-                               "partial": [r["n"] for r in case if r["steps_run"] < r["steps"]]}  # fmt: skip
-        for key, name in (("step_ms_median", "step"), ("qp_ms_median", "qp")):
-            t = [r.get(key, float("nan")) for r in case]
-            rec[f"{name}_exponent_fit"] = growth_exponent(ns, t)
-            rec[f"{name}_exponent_100_1000"] = two_point_exponent(ns, t)
-        out.append(rec)
-    return out
 
 
 def run(
@@ -386,6 +230,7 @@ GROWTH_COLUMNS = [
 def markdown_table(rows: list[dict[str, Any]], columns: list[tuple[str, str, str]] | None = None) -> str:
     """The rows as a markdown table (missing or NaN entries shown as ``-``)."""
     return tables.markdown_table(rows, COLUMNS if columns is None else columns)
+
 
 def target_lines(rows: list[dict[str, Any]], growth: list[dict[str, Any]], coupling: str) -> list[str]:
     """The acceptance targets of the scaling issue for the planner mode ``coupling``, each with what

@@ -19,8 +19,9 @@ from mpcform.cli.progress import ProgressBar
 from mpcform.errors import MPCFormError, ValidationError
 from mpcform.outputs.export import CRAZYFLIE_MAX_PIECES, DEFAULT_TOLERANCE_M, ExportResult, export_run
 from mpcform.outputs.rundata import RunData, load_run, write_formation_npz
+from mpcform.run.runner import RunResult, describe
 from mpcform.scenario.check import check_scenario_file
-from mpcform.scenario.spec import RunResult, Scenario, describe
+from mpcform.scenario.spec import Scenario
 
 PLOTS_DIR = "plots"
 EXPORT_DIR = "export"

@@ -1,4 +1,4 @@
-"""The ``mpcform`` command: a thin argparse layer over :mod:`mpcform.scenario.spec`.
+"""The ``mpcform`` command: a thin argparse layer over :mod:`mpcform.run.runner`.
 
 Errors in user input print one line ``mpcform: error: <message>`` on stderr and exit with
 status 2 (argparse usage errors too); no traceback.
@@ -16,12 +16,10 @@ from typing import NoReturn
 from mpcform.cli import handlers as cli_runner
 from mpcform.errors import MPCFormError
 from mpcform.outputs.files import OUTPUT_FILES, format_summary
-from mpcform.scenario.spec import (
-    key_reference_markdown,
-    load_scenario,
-    run_scenario,
-)
-from mpcform.solvers.base import BACKENDS, DEFAULT_SOLVER, solver_infos
+from mpcform.run.runner import run_scenario
+from mpcform.scenario.keys import key_reference_markdown
+from mpcform.scenario.load import load_scenario
+from mpcform.solvers.registry import DEFAULT_SOLVER, PERSISTENT_SOLVERS, solver_infos
 
 EXIT_USAGE = 2
 
@@ -90,7 +88,7 @@ def _add_bench(sub: argparse._SubParsersAction) -> None:
     mpc.add_argument("--n", type=int, nargs="*", default=[8, 16, 32, 64], help="planar swap sizes")
     mpc.add_argument("--spatial-n", type=int, nargs="*", default=[20], help="spatial swap sizes")
     mpc.add_argument("--steps", type=int, default=60, help="closed-loop steps per swap (dt 0.1 s)")
-    mpc.add_argument("--solver", default=DEFAULT_SOLVER, choices=sorted(BACKENDS),
+    mpc.add_argument("--solver", default=DEFAULT_SOLVER, choices=PERSISTENT_SOLVERS,
                      help="QP backend (decoupled, solved per drone: of the cvxpy reference only)")
     mpc.add_argument("--coupling", default="joint", choices=("joint", "decoupled", "decoupled-sparse"),
                      help="planner mode (decoupled-sparse: one sparse QP, not per-drone DAQP QPs)")
@@ -106,24 +104,26 @@ def _progress(text: str) -> None:
 
 
 def _bench_solvers(args: argparse.Namespace) -> int:
+    from mpcform.bench import report as bench_report
     from mpcform.bench import solvers as bs
 
     problems = args.problems or bs.DEFAULT_PROBLEMS_DIR
     bench = bs.run_solver_benchmark(problems, args.solvers, args.settings, args.modes, args.time_limit,
                                     exact=not args.no_exact, progress=_progress)  # fmt: skip
-    report = bs.markdown_report(bench)
-    _print_bench(report, bs.records(bench), args.json)
+    report = bench_report.markdown_report(bench)
+    _print_bench(report, bench_report.records(bench), args.json)
     if args.report:
         Path(args.report).write_text(report + "\n")
     return 0
 
 
 def _bench_closed_loop(args: argparse.Namespace) -> int:
-    from mpcform.bench import solvers as bs
+    from mpcform.bench import closed_loop
+    from mpcform.bench.problems import DEFAULT_SCENARIOS
 
-    rows = bs.run_closed_loop(args.scenarios or bs.DEFAULT_SCENARIOS[:2], args.solvers, args.timeout,
-                              args.duration, progress=_progress)  # fmt: skip
-    report = bs.closed_loop_markdown(rows)
+    rows = closed_loop.run_closed_loop(args.scenarios or DEFAULT_SCENARIOS[:2], args.solvers, args.timeout,
+                                       args.duration, progress=_progress)  # fmt: skip
+    report = closed_loop.closed_loop_markdown(rows)
     _print_bench(report, rows, args.json)
     if args.report:
         Path(args.report).write_text(report)
@@ -131,7 +131,9 @@ def _bench_closed_loop(args: argparse.Namespace) -> int:
 
 
 def _add_bench_solvers(kinds: argparse._SubParsersAction) -> None:
-    from mpcform.bench.solvers import DEFAULT_TIME_LIMIT_S, MODES, SETTINGS
+    from mpcform.bench.accuracy import SETTINGS
+    from mpcform.bench.solvers import DEFAULT_TIME_LIMIT_S
+    from mpcform.bench.worker import MODES
 
     solvers = kinds.add_parser("solvers", help="QP solvers on the recorded problems (problems/)")
     solvers.set_defaults(func=_bench_solvers)
@@ -189,16 +191,18 @@ def _bench_scale(args: argparse.Namespace) -> int:
 
 
 def _add_bench_scale(kinds: argparse._SubParsersAction) -> None:
-    from mpcform.bench.scale import DEFAULT_N, PLANNER_MODES, SCENARIOS
+    from mpcform.bench.scale import DEFAULT_N
+    from mpcform.bench.scale_cases import SCENARIOS
+    from mpcform.mpc.settings import GROUPED_MODES
 
     scale = kinds.add_parser("scale", help="step time and peak memory, 10 to 1000 drones (growth exponent)")
     scale.set_defaults(func=_bench_scale)
     scale.add_argument("--n", type=int, nargs="+", default=list(DEFAULT_N), help="swarm sizes")
     scale.add_argument("--steps", type=int, default=30, help="closed-loop steps per case (dt 0.1 s)")
     scale.add_argument("--scenario", nargs="+", choices=SCENARIOS, default=list(SCENARIOS))
-    scale.add_argument("--coupling", default="decoupled", choices=PLANNER_MODES,
+    scale.add_argument("--coupling", default="decoupled", choices=GROUPED_MODES,
                        help="planner mode, grouped (decoupled-sparse: one sparse QP, not per-drone DAQP)")
-    scale.add_argument("--solver", default=DEFAULT_SOLVER, choices=sorted(BACKENDS), help="QP backend")
+    scale.add_argument("--solver", default=DEFAULT_SOLVER, choices=PERSISTENT_SOLVERS, help="QP backend")
     scale.add_argument("--horizon", type=int, default=10, help="planner horizon [steps]")
     scale.add_argument("--budget", type=float, default=60.0, metavar="S",
                        help="planning time per case [s]; a case over it stops early")  # fmt: skip

@@ -1,4 +1,4 @@
-"""One stateful interface for every controller, and the seed's two closed-form controllers.
+"""One stateful interface for every controller, and the feedforward targets they share.
 
 A controller is reset with the initial time and positions, then called once per step with the
 measured positions; it returns the command held over the next ``dt`` and per-step information.
@@ -11,12 +11,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from mpcform._validate import Array, finite_array, positive
-from mpcform.control.laws import check_gain_dt, saturate, tracking_command
-from mpcform.errors import ValidationError
+from mpcform._validate import Array, finite_array
 from mpcform.reference.base import Reference
 
 FEEDFORWARDS = ("jacobian", "secant")
+"""Eq. 14 feedforward: ``J xi_dot_d`` (jacobian) or the secant ``(p*(t + dt) - p*(t)) / dt``."""
 
 
 @dataclass(frozen=True)
@@ -65,61 +64,6 @@ class Controller(ABC):
         return finite_array("positions", positions_m, (tpl.n, tpl.dim))
 
 
-class ProportionalController(Controller):
-    """Eq. 4 with eq. 7 saturation: each drone flies to its target ``p*_i(t)`` without feedforward."""
-
-    name = "proportional"
-
-    def __init__(
-        self, reference: Reference, gain_per_s: float, dt_s: float, v_max_mps: float | None = None
-    ) -> None:
-        check_gain_dt(gain_per_s, dt_s)
-        self.reference, self.gain_per_s, self.dt_s = reference, gain_per_s, dt_s
-        self.v_max_mps = None if v_max_mps is None else positive("limits.v_max", v_max_mps)
-
-    def step(self, t_s: float, positions_m: Array) -> ControlStep:
-        p = self._check_positions(positions_m)
-        target, _ = self.reference.targets(t_s)
-        raw = self.gain_per_s * (target[0] - p)
-        u = saturate(raw, self.v_max_mps)
-        return ControlStep(u, StepInfo("law", saturated=_count_changed(raw, u)))
-
-
-class TrackingController(Controller):
-    """Eq. 14: feedforward plus ``k (p* - p)``, optionally saturated exactly (eq. 7).
-
-    ``feedforward="jacobian"`` uses ``J xi_dot_d`` (exact in continuous time, O(dt) error in
-    discrete time); ``"secant"`` uses ``(p*(t + dt) - p*(t)) / dt``, for which the discrete
-    error decays exactly as ``(1 - k dt)^j``.
-    """
-
-    name = "tracking"
-
-    def __init__(
-        self,
-        reference: Reference,
-        gain_per_s: float,
-        dt_s: float,
-        v_max_mps: float | None = None,
-        feedforward: str = "jacobian",
-    ) -> None:
-        check_gain_dt(gain_per_s, dt_s)
-        if feedforward not in FEEDFORWARDS:
-            raise ValidationError(
-                "controller.feedforward", f"expected one of {FEEDFORWARDS}, got {feedforward!r}"
-            )
-        self.reference, self.gain_per_s, self.dt_s = reference, gain_per_s, dt_s
-        self.v_max_mps = None if v_max_mps is None else positive("limits.v_max", v_max_mps)
-        self.feedforward = feedforward
-
-    def step(self, t_s: float, positions_m: Array) -> ControlStep:
-        p = self._check_positions(positions_m)
-        target, ff = feedforward_targets(self.reference, t_s, self.dt_s, 1, self.feedforward)
-        raw = tracking_command(p, target[0], ff[0], self.gain_per_s)
-        u = saturate(raw, self.v_max_mps)
-        return ControlStep(u, StepInfo("law", saturated=_count_changed(raw, u)))
-
-
 def feedforward_targets(
     reference: Reference, t_s: float, dt_s: float, steps: int, feedforward: str
 ) -> tuple[Array, Array]:
@@ -131,7 +75,3 @@ def feedforward_targets(
     if feedforward == "secant":
         return pos, np.diff(pos, axis=0) / dt_s
     return pos, vel[:-1]
-
-
-def _count_changed(raw: Array, u: Array) -> int:
-    return int(np.any(raw != u, axis=-1).sum())

@@ -1,4 +1,4 @@
-"""Decentralised scale consensus (seed eq. 20) with the corrections of DESIGN.md section 2.
+"""Decentralised scale consensus (seed eq. 20), as printed and in a centroid-preserving variant.
 
 Each drone ``i`` knows its own position and scale estimate ``s_hat_i``, the shared frame
 ``R(t)`` (the reference's rotation, known to all drones) and the template offsets ``r``; from
@@ -45,7 +45,7 @@ from scipy.spatial.distance import pdist
 from mpcform._validate import Array, positive
 from mpcform.control.base import Controller, ControlStep, StepInfo
 from mpcform.control.graph import DENSE_EIG_MAX_N, DisconnectedGraphWarning, Graph, describe_components
-from mpcform.control.laws import saturate
+from mpcform.control.laws import count_saturated, saturate
 from mpcform.errors import ValidationError
 from mpcform.formation.kinematics import fit_formation
 from mpcform.formation.template import Template
@@ -266,7 +266,7 @@ class ConsensusController(Controller):
         rate = -st.gamma_per_s * disagreement + st.leader_gain_per_s * self._leader * (goal.scale[0] - s)
         self._estimates = s + self.dt_s * rate
         u = saturate(raw, self.v_max_mps)
-        return ControlStep(u, StepInfo("law", saturated=int(np.any(raw != u, axis=-1).sum())))
+        return ControlStep(u, StepInfo("law", saturated=count_saturated(raw, u)))
 
     def _exchange(self, p: Array, s: Array) -> tuple[Array, Array]:
         """Broadcast ``(p, s_hat)``; return what each directed link's receiver now holds."""

@@ -50,6 +50,11 @@ def saturate(u_mps: Array, v_max_mps: float | None) -> Array:
     return u_mps * factor
 
 
+def count_saturated(raw_mps: Array, command_mps: Array) -> int:
+    """How many drones' commands (rows) saturation changed."""
+    return int(np.any(raw_mps != command_mps, axis=-1).sum())
+
+
 def tracking_command(positions_m: Array, target_m: Array, feedforward_mps: Array, gain_per_s: float) -> Array:
     """Eq. 14: ``u_i = feedforward_i + k (p*_i - p_i)`` for all drones, (n, d)."""
     return feedforward_mps + gain_per_s * (target_m - positions_m)

@@ -2,8 +2,8 @@
 
 The seed prints ``u = J xi_dot_d + (I - J^+ J) u_sec``; ``J^+ J`` is 4 x 4 or 7 x 7 and does not
 type-check. The projector onto drone motions that leave the formation velocity unchanged is
-``N = I - J J^+`` (DESIGN.md section 2, :func:`~mpcform.formation.kinematics.nullspace_projector`). This
-module implements
+``N = I - J J^+`` (:func:`~mpcform.formation.kinematics.nullspace_projector`). This module
+implements
 
     ``u = J xi_dot_d + k (p* - p) + N u_sec``
 
@@ -41,7 +41,7 @@ import numpy as np
 
 from mpcform._validate import Array, positive
 from mpcform.control.base import FEEDFORWARDS, Controller, ControlStep, StepInfo, feedforward_targets
-from mpcform.control.laws import check_gain_dt, saturate, tracking_command
+from mpcform.control.laws import check_gain_dt, count_saturated, saturate, tracking_command
 from mpcform.errors import ValidationError
 from mpcform.formation.geometry import pairs_within
 from mpcform.formation.kinematics import fit_formation, formation_jacobian, nullspace_projector
@@ -165,4 +165,4 @@ class NullSpaceController(Controller):
         self.last_primary_mps, self.last_secondary_mps = primary, secondary
         raw = primary + secondary
         u = saturate(raw, self.v_max_mps)
-        return ControlStep(u, StepInfo("law", saturated=int(np.any(raw != u, axis=-1).sum())))
+        return ControlStep(u, StepInfo("law", saturated=count_saturated(raw, u)))

@@ -84,7 +84,10 @@ def nullspace_projector(jacobian: Array, rtol: float = PINV_RTOL) -> Array:
 
     The seed's eq. 15 prints ``I - J^+ J``, which is (7 x 7) and does not type-check against
     ``u in R^{3n}``; the projector onto the orthogonal complement of range(J) is ``I - J J^+``
-    (DESIGN.md section 2). It is symmetric, idempotent, and ``J^+ N = 0``.
+    (from the SVD of J with a rank tolerance, so rank-deficient J work too). It is symmetric,
+    idempotent, and ``J^+ N = 0``. Numerically, drone velocities ``J J^+ N u`` stay at roundoff; a
+    formation rate along a direction whose singular value is barely above the cut carries roundoff
+    amplified by ``sigma_max / sigma_min`` (at most ``1 / rtol``), as any pseudo-inverse does.
     """
     u, sv, _ = np.linalg.svd(jacobian, full_matrices=False)
     basis = u[:, sv > rtol * (sv[0] if sv.size else 0.0)]
@@ -98,36 +101,52 @@ class FormationFit:
     ``residual_rms_m`` is the shape error: the RMS distance [m] between the positions and
     the fitted formation. ``rotation_identifiable`` is False when the template spans fewer
     than d - 1 dimensions (collinear in 3D, or one point): then compare positions, not R.
+    ``scale_identifiable`` is False when no proper rotation and positive scale fit the positions
+    (they are close to a mirror image of the template, or the template is one point): ``state``
+    is then the fallback of :func:`fit_formation`, not a best fit.
     """
 
     state: FormationState
     residual_rms_m: float
     rotation_identifiable: bool
+    scale_identifiable: bool = True
 
 
 def fit_formation(template: Template, positions_m: object) -> FormationFit:
-    """Similarity Procrustes (Umeyama 1991): argmin over (c, R, s) of sum ||p_i - c - s R r_i||^2."""
+    """Similarity Procrustes (Umeyama 1991): argmin over (c, R, s) of sum ||p_i - c - s R r_i||^2.
+
+    R is a proper rotation and s > 0. The reflection-corrected scale is ``(sv_1 - sv_2) / var_r``
+    in 2-D: zero when the positions mirror a regular polygon (in 3-D ``sv_1 + sv_2 - sv_3 > 0``).
+    When it is at most 1e-9 of the size ratio, no proper rotation and positive scale fit the
+    positions: the fit falls back to the centroid, the best proper rotation and the RMS size ratio
+    ``s = sqrt(sum ||p_i - c||^2 / sum ||r_i||^2)``, and says ``scale_identifiable=False``.
+    Only positions that all coincide (zero spread) are an error.
+    """
     d = template.dim
     p = finite_array("positions", positions_m, (template.n, d))
     centroid = p.mean(axis=0)
     y, r = p - centroid, template.offsets
-    var_r = float((r * r).sum() / template.n)
+    var_r, var_y = float((r * r).sum() / template.n), float((y * y).sum() / template.n)
     if var_r == 0.0:
-        state = FormationState(centroid, np.eye(d), 1.0)
-        return FormationFit(state, float(np.sqrt((y * y).sum() / template.n)), False)
+        return FormationFit(FormationState(centroid, np.eye(d), 1.0), float(np.sqrt(var_y)), False, False)
+    if var_y == 0.0:
+        raise ValidationError("positions", "all drones coincide: the formation scale is not identifiable")
     u, sv, vt = np.linalg.svd(y.T @ r / template.n)
     sign = np.ones(d)
     sign[-1] = np.sign(np.linalg.det(u @ vt)) or 1.0
     rot = (u * sign) @ vt
     scale = float((sv * sign).sum() / var_r)
-    if scale <= 0.0:
-        raise ValidationError("positions", "all drones coincide: the formation scale is not identifiable")
+    size_ratio = float(np.sqrt(var_y / var_r))
+    identifiable = scale > 1e-9 * size_ratio
+    if not identifiable:
+        scale = size_ratio
     resid = y - scale * r @ rot.T
     rank_r = int(np.linalg.matrix_rank(r, tol=1e-9 * np.abs(r).max()))
     return FormationFit(
         FormationState(centroid, rot, scale),
         float(np.sqrt((resid * resid).sum() / template.n)),
         rank_r >= d - 1,
+        identifiable,
     )
 
 

@@ -29,7 +29,8 @@ from mpcform.mpc.separation import Separation, SeparationRows
 from mpcform.mpc.settings import MPCSettings
 from mpcform.mpc.sparse import SparseSolver
 from mpcform.reference.base import Reference
-from mpcform.solvers.base import DEFAULT_SOLVER, QPBackend, QPSolution, SolverOptions, make_backend
+from mpcform.solvers.base import QPBackend, QPSolution, SolverOptions
+from mpcform.solvers.registry import DEFAULT_SOLVER, make_backend
 
 SLACK_REPORT_M = 1e-6  # slack above this is reported
 

@@ -184,7 +184,10 @@ class Separation:
         return SeparationRows(*joint, labels[:, 0], labels, s_coeffs, s_lower, s_on)
 
     def clear(self, p0: Array, guess: Array, x: Array) -> bool:
-        """A cheap sufficient test that positions ``x`` (H, n, d) meet every separation row.
+        """A cheap sufficient test that positions ``x`` (H, n, d) meet every joint pair row and
+        obstacle row (so every pair stays ``d_min`` apart over each step). It does not cover the
+        decoupled pair-side rows: two drones moving side by side can pass it while crossing the
+        guess's midpoint plane.
 
         A row's normal c is a unit vector with ``c^T g >= |closest point of its guess segment|
         >= max(|g_j|, |g_j+1|) - |g_j+1 - g_j|``, so ``c^T delta_e >= that - |delta_e - g_e|``.

@@ -101,3 +101,25 @@ class MPCSettings:
         if isinstance(self.max_iter, bool) or not isinstance(self.max_iter, int) or self.max_iter < 1:
             raise ValidationError("controller.max_iter", f"expected an integer >= 1, got {self.max_iter!r}")
         positive("controller.time_limit", self.time_limit_s, allow_zero=True)
+
+
+PLANNER_MODES = ("decoupled", "decoupled-sparse", "joint", "monolithic")
+"""Named planner configurations (:func:`mode_settings`), as the benchmarks compare them."""
+GROUPED_MODES = PLANNER_MODES[:-1]
+"""The modes that solve only the conflicted groups of drones (``grouping=True``)."""
+
+
+def mode_settings(mode: str, horizon: int) -> MPCSettings:
+    """Planner settings of a mode of :data:`PLANNER_MODES`, otherwise the defaults:
+
+    - ``decoupled``: decoupled rows, grouping, each conflicted drone's QP solved by DAQP;
+    - ``decoupled-sparse``: the same rows as one sparse block-diagonal QP (``per_drone=False``);
+    - ``joint``: joint pair rows, grouping;
+    - ``monolithic``: joint rows without grouping: one QP over every drone whenever a solve is needed.
+    """
+    if mode == "monolithic":
+        return MPCSettings(horizon=horizon, coupling="joint", grouping=False)
+    if mode not in PLANNER_MODES:
+        raise ValidationError("mode", f"expected one of {PLANNER_MODES}, got {mode!r}")
+    coupling, _, solve = mode.partition("-")
+    return MPCSettings(horizon=horizon, coupling=coupling, grouping=True, per_drone=solve != "sparse")

@@ -34,7 +34,9 @@ import numpy as np
 from mpcform.errors import ValidationError
 from mpcform.outputs import tables
 from mpcform.run.parallel import process_pool, single_threaded_env
-from mpcform.scenario.spec import Scenario, load_scenario, run_scenario, scenario_from_dict
+from mpcform.run.runner import run_scenario
+from mpcform.scenario.load import load_scenario, scenario_from_dict
+from mpcform.scenario.spec import Scenario
 from mpcform.sim.metrics import REL_TOL
 
 EXECUTORS = ("process", "dask")

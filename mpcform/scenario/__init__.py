@@ -1,1 +1,2 @@
-"""Scenario files: key schema, spec, TOML loading, the controller factory, validation."""
+"""Scenario files: key schema and reference, key parsing, spec, TOML loading, the controller factory,
+validation."""

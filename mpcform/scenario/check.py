@@ -23,17 +23,11 @@ from pathlib import Path
 from typing import Any
 
 from mpcform.errors import MPCFormError, ScenarioError, ValidationError
-from mpcform.scenario.spec import (
-    SCHEMA,
-    TABLES,
-    Scenario,
-    Table,
-    _parse_keys,
-    _parse_top,
-    build_controller,
-    load_scenario,
-    scenario_from_dict,
-)
+from mpcform.scenario.build import build_controller
+from mpcform.scenario.load import load_scenario, scenario_from_dict
+from mpcform.scenario.parse import parse_keys, parse_top_level
+from mpcform.scenario.schema import SCHEMA, TABLES, Table
+from mpcform.scenario.spec import Scenario
 
 MAX_ROUNDS = 100
 _HEADER = re.compile(r"^\s*(\[\[?)\s*([A-Za-z0-9_.\- ]+?)\s*\]\]?\s*(#.*)?$")
@@ -88,7 +82,7 @@ def check_document(data: dict[str, Any], default_name: str = "scenario") -> list
     doc = copy.deepcopy(data)
     problems: list[Problem] = []
     tainted: set[str] = set()
-    _sweep(lambda: _parse_top(doc), doc, problems, TABLES[""], 2, tainted)
+    _sweep(lambda: parse_top_level(doc), doc, problems, TABLES[""], 2, tainted)
     dim = doc.get("dim") if doc.get("dim") in (2, 3) and not isinstance(doc.get("dim"), bool) else None
     for table, raw, prefix in _tables(doc):
         if dim is None:  # types of vectors depend on dim: check the key names only
@@ -229,14 +223,14 @@ def _unknown_keys(table: Table, raw: dict[str, Any], prefix: str, problems: list
     for name in list(raw):
         if name not in names:
             try:  # the schema's own message (with its did-you-mean hint)
-                _parse_keys(table, {name: raw[name]}, prefix, 2, None)
+                parse_keys(table, {name: raw[name]}, prefix, 2, None)
             except ScenarioError as exc:
                 problems.append(_problem(exc, None))
             del raw[name]
 
 
 def _key_check(table: Table, raw: dict[str, Any], prefix: str, dim: int) -> Any:
-    return lambda: _parse_keys(table, raw, prefix, dim, None)
+    return lambda: parse_keys(table, raw, prefix, dim, None)
 
 
 def _table_of(field: str) -> str:

@@ -10,7 +10,8 @@ import pytest
 
 from mpcform.bench.mpc import RecordingBackend, bench_case, markdown_table, swap_case
 from mpcform.cli.main import main
-from mpcform.solvers.base import SolverOptions, make_backend
+from mpcform.solvers.base import SolverOptions
+from mpcform.solvers.registry import make_backend
 
 
 def test_recording_backend_keeps_every_problem_and_solves_like_its_inner_backend() -> None:

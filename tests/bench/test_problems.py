@@ -24,7 +24,8 @@ from mpcform.bench.problems import (
 )
 from mpcform.cli.main import main
 from mpcform.errors import MPCFormError
-from mpcform.solvers.base import SolverOptions, make_backend
+from mpcform.solvers.base import SolverOptions
+from mpcform.solvers.registry import make_backend
 
 ROOT = Path(__file__).resolve().parents[2]
 TINY = tiny_swap_toml("tiny_swap", radius_m=1.5, horizon=5, duration_s=1.0)

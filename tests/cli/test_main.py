@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 
 from mpcform.cli.main import main
-from mpcform.scenario.spec import key_reference_markdown
+from mpcform.scenario.keys import key_reference_markdown
 
 ROOT = Path(__file__).resolve().parents[2]
 WORKED = str(ROOT / "scenarios" / "worked_example.toml")

@@ -26,7 +26,9 @@ from mpcform.control.consensus import relative_position_error
 from mpcform.control.graph import DisconnectedGraphWarning
 from mpcform.formation.kinematics import forward_kinematics
 from mpcform.reference.base import Profile, Reference
-from mpcform.scenario.spec import build_controller, load_scenario, run_scenario
+from mpcform.run.runner import run_scenario
+from mpcform.scenario.build import build_controller
+from mpcform.scenario.load import load_scenario
 
 ROOT = Path(__file__).resolve().parents[2]
 RING = ROOT / "scenarios" / "consensus_ring.toml"
@@ -119,7 +121,7 @@ def test_exponential_reference_ring_and_initial_estimates() -> None:
     assert relative_position_error(tpl, sim.positions_m[-1], 2.0, np.eye(2)) < 1e-3
 
 
-# ---- the centroid (DESIGN.md section 2) ------------------------------------------------------
+# ---- the centroid: eq. 20 as printed lets it drift, the centroid-preserving law keeps it ----
 def test_eq20_as_printed_drifts_as_the_closed_form_predicts() -> None:
     """Ring of 8 doubling its scale, k = gamma = lambda = 1: the centroid moves about 0.9 m.
 
@@ -327,3 +329,52 @@ def test_cli_runs_consensus_and_explains_a_missing_graph(
     worked = ROOT / "scenarios" / "worked_example.toml"
     assert main(["run", str(worked), "--controller", "consensus", "--out", str(tmp_path / "w")]) == 2
     assert "graph: missing table [graph]" in capsys.readouterr().err
+
+
+# ---- the stability bounds, by simulation ---------------------------------------------------------
+class _Unchecked(ConsensusController):
+    """The same controller with the construction-time stability check skipped (to fly past it)."""
+
+    def _check_stability(self) -> tuple[float, float]:
+        try:
+            return super()._check_stability()
+        except ValidationError:
+            return float("nan"), float("nan")
+
+
+def _disagreement(factor_position: float, factor_scale: float, check: bool) -> tuple[float, float]:
+    """Final/initial ratio of the position and scale disagreement after 300 steps on a ring of 8
+    (lambda_max(L) = 4) whose two discrete loop factors are ``dt k lambda_max(L)`` and
+    ``dt lambda_max(gamma L + lambda E)`` = the given values. When the position factor is probed,
+    the estimates start at the commanded scale (2), so only the position loop is tested."""
+    tpl, ref = ring_doubling(8)
+    graph, dt = Graph.ring(8), 0.05
+    gamma, leader = 2.0, 1.0
+    m = gamma * graph.laplacian.toarray() + np.diag(np.eye(8)[0] * leader)
+    scale = factor_scale / (dt * float(np.linalg.eigvalsh(m)[-1]))
+    settings = ConsensusSettings(
+        gain_per_s=factor_position / (dt * 4.0), gamma_per_s=gamma * scale, leader_gain_per_s=leader * scale,
+        leaders=(0,), law="centroid_preserving", initial_scale=1.0 if factor_position == 1.0 else 2.0,
+    )  # fmt: skip
+    ctrl = (ConsensusController if check else _Unchecked)(ref, graph, dt, settings)
+    rng = np.random.default_rng(3)
+    start = forward_kinematics(tpl, FormationState.from_param([0.0, 0.0], 0.0, 1.0))
+    start = start + 0.05 * rng.normal(size=(8, 2))
+    sim = simulate(ctrl, start, 300 * dt)
+    s_hat = ctrl.scale_estimates
+    s_shape = 2.0 if settings.initial_scale == 2.0 else float(np.clip(s_hat.mean(), 0.0, 4.0))
+    first = relative_position_error(tpl, sim.positions_m[0], s_shape, np.eye(2))
+    last = relative_position_error(tpl, sim.positions_m[-1], s_shape, np.eye(2))
+    return last / first, float(np.abs(s_hat - 2.0).max())  # scale: the estimates start 1.0 from s* = 2
+
+
+@pytest.mark.parametrize("which", ["position", "scale"])
+def test_consensus_converges_just_inside_and_diverges_just_outside_each_bound(which: str) -> None:
+    inside = (1.96, 1.0) if which == "position" else (1.0, 1.96)
+    outside = (2.04, 1.0) if which == "position" else (1.0, 2.04)
+    pos, sc = _disagreement(*inside, check=True)
+    assert (pos if which == "position" else sc) < 1e-2
+    with pytest.raises(ValidationError, match="gain" if which == "position" else "gamma"):
+        _disagreement(*outside, check=True)
+    pos, sc = _disagreement(*outside, check=False)  # flown anyway: the refusal was right
+    assert (pos if which == "position" else sc) > 10.0

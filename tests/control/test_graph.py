@@ -14,7 +14,8 @@ from hypothesis import strategies as st
 
 from mpcform import Graph, ScenarioError, Template, ValidationError
 from mpcform.control.graph import DisconnectedGraphWarning, describe_components
-from mpcform.scenario.spec import build_controller, scenario_from_dict
+from mpcform.scenario.build import build_controller
+from mpcform.scenario.load import scenario_from_dict
 
 ROOT = Path(__file__).resolve().parents[2]
 RING = ROOT / "scenarios" / "consensus_ring.toml"

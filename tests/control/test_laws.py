@@ -10,6 +10,7 @@ from hypothesis.extra.numpy import arrays
 
 from mpcform.control.laws import (
     check_gain_dt,
+    count_saturated,
     go_to_goal_closed_form,
     go_to_goal_discrete,
     saturate,
@@ -49,6 +50,12 @@ def test_saturation_edge_cases():
     u = np.array([[0.0, 0.0], [3.0, 4.0], [0.6, 0.8]])
     np.testing.assert_array_equal(saturate(u, None), u)
     np.testing.assert_allclose(saturate(u, 1.0), [[0.0, 0.0], [0.6, 0.8], [0.6, 0.8]])
+
+
+def test_count_saturated_counts_the_drones_whose_command_changed():
+    u = np.array([[0.0, 0.0], [3.0, 4.0], [0.6, 0.8], [0.0, -2.0]])
+    assert count_saturated(u, saturate(u, 1.0)) == 2
+    assert count_saturated(u, saturate(u, None)) == 0
 
 
 @pytest.mark.parametrize("v_max", [1.0, 10.0, 100.0])

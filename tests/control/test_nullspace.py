@@ -25,7 +25,9 @@ from mpcform import (
 from mpcform.control.nullspace import project_secondary, repulsion_velocity
 from mpcform.formation.geometry import min_pair_distance
 from mpcform.formation.kinematics import fit_formation, formation_jacobian, forward_kinematics, jacobian_pinv
-from mpcform.scenario.spec import build_controller, load_scenario, run_scenario, scenario_from_dict
+from mpcform.run.runner import run_scenario
+from mpcform.scenario.build import build_controller
+from mpcform.scenario.load import load_scenario, scenario_from_dict
 from tests.helpers import random_state, random_template
 
 ROOT = Path(__file__).resolve().parents[2]

@@ -8,8 +8,10 @@ from hypothesis import given
 from hypothesis import strategies as st
 from scipy.linalg import expm
 
+from mpcform._validate import Array
 from mpcform.errors import ValidationError
 from mpcform.formation.kinematics import (
+    PINV_RTOL,
     drone_velocities,
     fit_formation,
     formation_jacobian,
@@ -217,3 +219,71 @@ def test_pinv_of_full_rank_jacobian_is_the_normal_equation_inverse():
     jac = formation_jacobian(tpl, state)
     expected = np.linalg.solve(jac.T @ jac, jac.T)  # (J^T J)^{-1} J^T, full column rank
     np.testing.assert_allclose(jacobian_pinv(jac).matrix, expected, atol=1e-10)
+
+
+ISOTROPIC = [Template.polygon(6, radius=1.2), Template.polygon(3), Template.centred(
+    [[s0, s1, s2] for s0 in (-1, 1) for s1 in (-1, 1) for s2 in (-1, 1)])[0]]
+
+
+@pytest.mark.parametrize("tpl", ISOTROPIC, ids=lambda t: f"{t.n}x{t.dim}")
+@pytest.mark.parametrize("seed", range(3))
+def test_fit_of_a_mirrored_start_falls_back_instead_of_failing(tpl: Template, seed: int) -> None:
+    """A reflection of an isotropic template, permuted: no proper rotation with s > 0 fits it (such
+    starts were rejected as 'all drones coincide'); the fit says so and falls back."""
+    rng = np.random.default_rng(seed)
+    mirror = np.diag([-1.0] + [1.0] * (tpl.dim - 1))
+    positions = 3.0 + 2.0 * tpl.offsets[rng.permutation(tpl.n)] @ mirror.T
+    positions = positions if seed else 3.0 + 2.0 * tpl.offsets @ mirror.T  # seed 0: the exact mirror
+    fit = fit_formation(tpl, positions)
+    spread = np.sqrt(((positions - positions.mean(0)) ** 2).sum() / (tpl.offsets**2).sum())
+    assert fit.state.scale > 0 and np.isfinite(fit.residual_rms_m)
+    np.testing.assert_allclose(fit.state.centroid_m, positions.mean(0), atol=1e-12)
+    if not fit.scale_identifiable:
+        assert fit.state.scale == pytest.approx(spread)
+    if seed == 0:  # planar: s = sv1 - sv2 = 0; spatial: s = sv1 + sv2 - sv3 = 1/3 of the mirror's
+        assert fit.scale_identifiable == (tpl.dim == 3)
+    proper = fit_formation(tpl, 3.0 + 2.0 * tpl.offsets)
+    assert proper.scale_identifiable and proper.state.scale == pytest.approx(2.0)
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_fit_of_a_mirrored_random_template_has_a_positive_scale(dim: int) -> None:
+    rng = np.random.default_rng(dim)
+    for _ in range(50):
+        tpl = Template.centred(rng.normal(size=(int(rng.integers(2, 12)), dim)))[0]
+        positions = tpl.offsets[rng.permutation(tpl.n)] * np.r_[-1.0, np.ones(dim - 1)]
+        assert fit_formation(tpl, positions).state.scale > 0
+
+
+def test_fit_keeps_the_coincide_message_for_zero_spread() -> None:
+    with pytest.raises(ValidationError, match="all drones coincide"):
+        fit_formation(Template.polygon(4), np.full((4, 2), 2.5))
+
+
+def _bent_line_jacobian(eps: float) -> Array:
+    """J of a spatial line of 5 drones bent by ``eps`` [m] in y (eps = 0: rank 6, the turn about
+    the line is invisible; its singular value grows linearly with eps)."""
+    x = np.linspace(-1.0, 1.0, 5)
+    offsets = np.column_stack([x, eps * (x**2 - (x**2).mean()), np.zeros(5)])
+    return formation_jacobian(Template.centred(offsets)[0], FormationState.from_param(np.zeros(3)))
+
+
+@pytest.mark.parametrize("factor", [0.3, 0.9, 0.99, 1.01, 1.1, 3.0])
+def test_projected_motion_keeps_the_formation_velocity_near_the_rank_threshold(factor: float) -> None:
+    """``J^+ N u = 0`` while the smallest singular value of J sits at ``factor`` x the cut
+    ``PINV_RTOL * sigma_max`` of the pseudo-inverse, on either side of it: the drone velocities
+    ``J J^+ N u`` and the centroid, scale and well-seen rotation rates stay at roundoff; only the
+    rate about the weakest direction (the turn about the nearly straight line) carries roundoff
+    amplified by ``sigma_max / sigma_min`` (at most ``1 / PINV_RTOL``), as any pseudo-inverse does."""
+    s = np.linalg.svd(_bent_line_jacobian(1e-6), compute_uv=False)
+    jac = _bent_line_jacobian(1e-6 * factor * PINV_RTOL * s[0] / s[-1])
+    s = np.linalg.svd(jac, compute_uv=False)
+    assert s[-1] / (PINV_RTOL * s[0]) == pytest.approx(factor, rel=1e-3)
+    pinv, proj = jacobian_pinv(jac), nullspace_projector(jac)
+    u = np.random.default_rng(7).normal(size=(jac.shape[0], 20))
+    xi_dot = pinv.matrix @ proj @ u  # rows: c_dot (3), omega (3; omega_x about the line), s_dot
+    eps = np.finfo(float).eps * np.abs(u).max()
+    assert np.abs(jac @ xi_dot).max() <= 100 * eps
+    assert np.abs(np.delete(xi_dot, 3, axis=0)).max() <= 100 * eps
+    assert np.abs(xi_dot[3]).max() <= 100 * eps * s[0] / s[-1]
+    assert pinv.rank == (7 if factor > 1 else 6)

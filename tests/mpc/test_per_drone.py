@@ -18,7 +18,8 @@ from mpcform.mpc.planner import MPCPlanner
 from mpcform.mpc.settings import MPCSettings
 from mpcform.reference.base import ConstantReference
 from mpcform.sim.simulation import simulate
-from mpcform.solvers.base import QPBackend, QPSolution, SolverOptions, make_backend
+from mpcform.solvers.base import QPBackend, QPSolution, SolverOptions
+from mpcform.solvers.registry import make_backend
 
 # The sparse reference: Clarabel at tight tolerances (PIQP stops ~3e-6 away at any tolerance here).
 # Where plans differ by more than ~1e-6 (an optimum at a vertex of the velocity polygon), the

@@ -7,7 +7,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from mpcform.control.base import ControlStep, TrackingController
+from mpcform.control.base import ControlStep
+from mpcform.control.tracking import TrackingController
 from mpcform.errors import ValidationError
 from mpcform.formation.geometry import closest_on_segments, min_segment_distance
 from mpcform.formation.kinematics import forward_kinematics

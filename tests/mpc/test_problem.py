@@ -14,7 +14,8 @@ from mpcform.mpc.rows import limit_rows
 from mpcform.mpc.separation import Separation
 from mpcform.mpc.settings import MPCSettings
 from mpcform.mpc.sparse import SparseSolver
-from mpcform.solvers.base import SolverOptions, make_backend
+from mpcform.solvers.base import SolverOptions
+from mpcform.solvers.registry import make_backend
 
 DT = 0.1
 

@@ -3,7 +3,7 @@
 import pytest
 
 from mpcform.errors import ValidationError
-from mpcform.mpc.settings import MPCSettings
+from mpcform.mpc.settings import GROUPED_MODES, PLANNER_MODES, MPCSettings, mode_settings
 
 
 def test_defaults_are_valid():
@@ -34,3 +34,16 @@ def test_defaults_are_valid():
 def test_bad_settings_are_rejected(field, value, match):
     with pytest.raises(ValidationError, match=match):
         MPCSettings(**{field: value})
+
+
+def test_mode_settings():
+    monolithic = mode_settings("monolithic", 4)
+    assert monolithic.grouping is False and monolithic.coupling == "joint"
+    assert mode_settings("decoupled", 4).grouping and mode_settings("decoupled", 4).horizon == 4
+    assert mode_settings("decoupled", 4).solves_per_drone
+    sparse = mode_settings("decoupled-sparse", 4)
+    assert sparse.coupling == "decoupled" and sparse.grouping and not sparse.solves_per_drone
+    assert mode_settings("joint", 4).coupling == "joint" and mode_settings("joint", 4).grouping
+    assert set(GROUPED_MODES) == set(PLANNER_MODES) - {"monolithic"}
+    with pytest.raises(ValidationError, match="mode"):
+        mode_settings("nope", 4)

@@ -26,7 +26,8 @@ from mpcform.outputs.export import (
     read_setpoints,
 )
 from mpcform.outputs.rundata import load_run
-from mpcform.scenario.spec import load_scenario, run_scenario
+from mpcform.run.runner import run_scenario
+from mpcform.scenario.load import load_scenario
 
 TOLERANCE_M = 0.02  # the stated tolerance: every planned sample within 2 cm of the pieces
 

@@ -20,7 +20,8 @@ from mpcform.outputs.files import (
     json_safe,
     write_summary_json,
 )
-from mpcform.scenario.spec import RunResult, load_scenario, run_scenario
+from mpcform.run.runner import RunResult, run_scenario
+from mpcform.scenario.load import load_scenario
 
 ROOT = Path(__file__).resolve().parents[2]
 METRIC_KEYS = {

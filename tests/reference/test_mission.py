@@ -1,4 +1,4 @@
-"""Keyframe missions (ruckig): keyframes hit exactly, limits held, derivatives, switches, bad input."""
+"""Keyframe missions: keyframes hit exactly, limits held, derivatives, switches, bad input, scenarios."""
 
 from __future__ import annotations
 
@@ -10,18 +10,18 @@ from typing import Any
 
 import numpy as np
 import pytest
-from helpers import random_state, random_template
 from hypothesis import given
 from hypothesis import strategies as st
-from scipy.spatial.transform import Rotation
 
 from mpcform.errors import MPCFormError, ScenarioError, ValidationError
 from mpcform.formation.kinematics import drone_velocities
 from mpcform.formation.rotation import rotation_matrix
 from mpcform.formation.state import FormationState
 from mpcform.formation.template import Template
-from mpcform.reference.mission import CAPTWarning, Keyframe, MissionLimits, MissionReference, SpeedBudget
-from mpcform.scenario.spec import load_scenario, run_scenario, scenario_from_dict
+from mpcform.reference.keyframes import Keyframe, MissionLimits, SpeedBudget
+from mpcform.reference.mission import CAPTWarning, MissionReference
+from mpcform.run.runner import run_scenario
+from mpcform.scenario.load import load_scenario, scenario_from_dict
 
 ROOT = Path(__file__).resolve().parents[2]
 H = 1e-6
@@ -133,17 +133,6 @@ def test_velocities_accelerations_and_jerk_respect_the_explicit_limits(dim: int)
     assert np.abs(v[:, -1]).max() > 0.0
 
 
-def test_centroid_limit_bounds_the_norm_not_each_axis() -> None:
-    """A diagonal move reaches the centroid speed limit in norm, not sqrt(3) times it."""
-    limits = MissionLimits({"centroid": 2.0}, {"centroid": 1.0}, {"centroid": 1.0})
-    start = FormationState.from_param(np.zeros(3))
-    ref = MissionReference(
-        Template.sphere(4), start, [Keyframe(centroid_m=[20.0, 20.0, 20.0])], limits=limits
-    )
-    speed = np.linalg.norm(ref.profile(dense(ref)).centroid_velocity_mps, axis=1)
-    assert speed.max() == pytest.approx(2.0, rel=1e-9)
-
-
 @pytest.mark.parametrize("dim", [2, 3])
 @pytest.mark.parametrize("fraction", [0.8, 0.5])
 def test_derived_limits_keep_every_drone_below_the_fraction_of_v_max(dim: int, fraction: float) -> None:
@@ -168,23 +157,6 @@ def test_derived_limits_keep_every_drone_below_the_fraction_of_v_max(dim: int, f
     frames = [Keyframe(centroid_m=np.full(dim, 30.0))]
     far = MissionReference(ref.template, ref.start, frames, budget=budget)
     assert np.linalg.norm(far.targets(dense(far))[1], axis=-1).max() == pytest.approx(bound, rel=1e-9)
-
-
-@pytest.mark.parametrize("seed", range(8))
-def test_random_missions_with_derived_limits_stay_below_the_budget(seed: int) -> None:
-    rng = np.random.default_rng(seed)
-    dim, n = (2, 3)[seed % 2], 3 + seed % 4
-    tpl = random_template(rng, n, dim)
-    start = random_state(rng, dim)
-    frames = []
-    for _ in range(3):
-        state = random_state(rng, dim)
-        switch = random_template(rng, n, dim) if rng.random() < 0.4 else None
-        frames.append(Keyframe(state.centroid_m, state.rotation_param, state.scale, template=switch))
-    budget = SpeedBudget(rng.uniform(0.5, 5.0), rng.uniform(0.2, 1.0))
-    ref = MissionReference(tpl, start, frames, budget=budget, d_min_m=None)
-    speed = np.linalg.norm(ref.targets(dense(ref, 4000))[1], axis=-1)
-    assert speed.max() <= budget.budgets[0] * (1 + 1e-9)
 
 
 # ---- derivatives -------------------------------------------------------------------------------
@@ -232,7 +204,7 @@ def test_formation_acceleration_matches_finite_differences(dim: int) -> None:
         np.testing.assert_allclose(ref.acceleration(t), fd, atol=1e-6)
 
 
-# ---- switching, half turns, degenerate segments --------------------------------------------------
+# ---- switching, degenerate segments ------------------------------------------------------------
 def test_switch_assignment_is_optimal_and_capt_is_checked() -> None:
     rng = np.random.default_rng(3)
     tpl = Template.centred(rng.uniform(-2, 2, (5, 2)))[0]
@@ -252,27 +224,6 @@ def test_switch_assignment_is_optimal_and_capt_is_checked() -> None:
     assert ok.warnings == () and ok.assignments[0] is not None
     end = ok.targets(ok.duration_s)[0][0]
     np.testing.assert_allclose(np.sort(end[:, 0]), line.offsets[:, 0], atol=1e-12)
-
-
-@pytest.mark.parametrize("angle", [np.pi, -np.pi])
-def test_half_turns_pick_a_deterministic_axis(angle: float) -> None:
-    planar = MissionReference(
-        Template.polygon(3), FormationState.from_param([0.0, 0.0]), [Keyframe(rotation=angle)], limits=LIMITS
-    )
-    omega = planar.profile(dense(planar)).omega_world_radps
-    assert omega.min() >= 0.0 and omega.max() > 0.0  # counter-clockwise either way
-    for start in ([0.0, 0.0, 0.0], [0.3, -0.2, 0.1]):
-        s0 = FormationState.from_param([0.0, 0.0, 0.0], start)
-        goal = (Rotation.from_rotvec(start) * Rotation.from_rotvec([0.0, angle, 0.0])).as_rotvec()
-        ref = MissionReference(Template.sphere(5), s0, [Keyframe(rotation=goal)], limits=LIMITS)
-        w = ref.profile(dense(ref)).omega_world_radps
-        body_axis = s0.rotation_body_to_world.T @ w[np.argmax(np.linalg.norm(w, axis=1))]
-        np.testing.assert_allclose(body_axis / np.linalg.norm(body_axis), [0.0, 1.0, 0.0], atol=1e-6)
-        np.testing.assert_allclose(
-            ref.state(ref.duration_s).rotation_body_to_world,
-            Rotation.from_rotvec(goal).as_matrix(),
-            atol=1e-12,
-        )
 
 
 def test_zero_length_segments_and_tiny_moves() -> None:
@@ -365,36 +316,6 @@ def test_bad_input_names_the_keyframe_field(
     args.update(kw)
     with pytest.raises(ValidationError, match=field):
         MissionReference(TPL3, START3, frames, **args)
-
-
-@pytest.mark.parametrize(
-    ("build", "field"),
-    [
-        (lambda: MissionLimits({"scale": 0.0}), r"reference\.max_velocity\.scale"),
-        (lambda: MissionLimits(max_jerk={"rotation": -1.0}), r"reference\.max_jerk\.rotation"),
-        (lambda: MissionLimits(max_acceleration={"blend": np.inf}), r"reference\.max_acceleration\.blend"),
-        (lambda: MissionLimits({"spin": 1.0}), r"reference\.max_velocity\.spin: unknown DOF group"),
-        (lambda: MissionLimits({"scale": True}), r"reference\.max_velocity\.scale"),
-        (lambda: SpeedBudget(0.0), r"limits\.v_max"),
-        (lambda: SpeedBudget(2.0, 1.5), r"reference\.speed_fraction"),
-        (lambda: SpeedBudget(2.0, 0.8, -1.0), r"reference\.drone_acceleration"),
-        (lambda: SpeedBudget(2.0, 0.8, 1.0, np.nan), r"reference\.drone_jerk"),
-        (lambda: Keyframe(centroid_m=[np.nan, 0.0]), r"keyframe\.centroid"),
-        (lambda: Keyframe(rotation=[[0.0]]), r"keyframe\.rotation"),
-    ],
-)
-def test_bad_limits_and_keyframes_raise_validation_errors(build: Any, field: str) -> None:
-    with pytest.raises(ValidationError, match=field):
-        build()
-
-
-def test_ruckig_failures_become_validation_errors() -> None:
-    tiny = MissionLimits({"scale": 1e-300}, {"scale": 1e-300}, {"scale": 1e-300})
-    start = FormationState.from_param([0.0, 0.0])
-    with pytest.raises(ValidationError, match=r"reference\.keyframes\[1\]\.scale"):
-        MissionReference(
-            Template.polygon(3), start, [Keyframe(hold_s=1.0), Keyframe(scale=1e300)], limits=tiny
-        )
 
 
 # ---- scenarios ------------------------------------------------------------------------------------

@@ -3,8 +3,9 @@
 import numpy as np
 import pytest
 
-from mpcform.control.base import Controller, ControlStep, ProportionalController, StepInfo
+from mpcform.control.base import Controller, ControlStep, StepInfo
 from mpcform.control.laws import go_to_goal_closed_form, go_to_goal_discrete
+from mpcform.control.tracking import ProportionalController
 from mpcform.errors import MPCFormError, ValidationError
 from mpcform.formation.state import FormationState
 from mpcform.formation.template import Template

@@ -1,0 +1,75 @@
+"""One whole run of a scenario: build its controller, simulate, compute the metrics, write the files."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from mpcform.outputs.files import build_summary, write_outputs
+from mpcform.scenario.build import build_controller
+from mpcform.scenario.spec import Scenario
+from mpcform.sim.metrics import run_metrics
+from mpcform.sim.simulation import SimulationResult, simulate
+from mpcform.solvers.base import QPBackend
+
+
+@dataclass(frozen=True)
+class RunResult:
+    """Outcome of :func:`run_scenario`: the time series, the summary dict, the output dir."""
+
+    simulation: SimulationResult
+    summary: dict[str, Any]
+    out_dir: Path | None
+
+
+def run_scenario(
+    scenario: Scenario,
+    out_dir: str | Path | None = None,
+    controller: str | None = None,
+    solver: str | QPBackend | None = None,
+    progress: Callable[[int, int], None] | None = None,
+) -> RunResult:
+    """Simulate, compute the metrics and, when ``out_dir`` is given, write the output files.
+
+    ``controller`` and ``solver`` override the scenario's controller kind and QP backend (a name or
+    a :class:`~mpcform.solvers.base.QPBackend` instance: :func:`mpcform.scenario.build.build_controller`);
+    ``progress(step, steps)`` is called after every step (e.g. :class:`mpcform.cli.progress.ProgressBar`).
+    """
+    ctrl = build_controller(scenario, controller, solver)
+    sim = scenario.simulation
+    result = simulate(
+        ctrl, scenario.initial_positions_m, sim.duration_s,
+        lag_s=sim.lag_s, noise_std_m=sim.noise_std_m, seed=scenario.seed, progress=progress,
+    )  # fmt: skip
+    limits = scenario.limits
+    is_mpc = (controller or scenario.controller.kind) == "mpc"
+    summary = build_summary(
+        scenario=scenario.name,
+        n=scenario.n,
+        dim=scenario.dim,
+        dt_s=sim.dt_s,
+        controller=ctrl.name,
+        solver=getattr(ctrl, "solver_name", None) if is_mpc else None,  # "daqp (per drone)" if so
+        v_max_mps=limits.v_max_mps,
+        d_min_m=limits.d_min_m,
+        seed=scenario.seed,
+        scenario_file=scenario.source,
+        scenario_sha256=scenario.source_sha256,
+        metrics=run_metrics(result, limits.v_max_mps, limits.d_min_m),
+        steps=result.commands_mps.shape[0],
+    )
+    path = None if out_dir is None else write_outputs(Path(out_dir), result, summary)
+    return RunResult(result, summary, path)
+
+
+def describe(scenario: Scenario) -> str:
+    """One line: drones, template, reference, controller, steps."""
+    space = "planar" if scenario.dim == 2 else "spatial"
+    sim = scenario.simulation
+    return (
+        f"{scenario.name}: {scenario.n} drone{'s' * (scenario.n != 1)}, {space} "
+        f"{scenario.template.name} template, {type(scenario.reference).__name__}, "
+        f"{scenario.controller.kind} controller, {scenario.steps} steps of {sim.dt_s:g} s"
+    )

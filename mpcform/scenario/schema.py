@@ -1,0 +1,329 @@
+"""The scenario key schema: every table and key of a scenario file with its type, default, unit
+and meaning.
+
+:data:`SCHEMA` is the one place that lists them: :mod:`mpcform.scenario.parse` checks a file
+against it and :mod:`mpcform.scenario.keys` renders it (``mpcform keys``, ``scenarios/README.md``).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import difflib
+from dataclasses import dataclass
+from typing import Any
+
+from mpcform.control.base import FEEDFORWARDS
+from mpcform.control.consensus import CONSENSUS_LAWS, RELATIVE_POSITIONS, ConsensusSettings
+from mpcform.control.graph import GRAPH_KINDS
+from mpcform.control.nullspace import OBJECTIVES, NullSpaceSettings
+from mpcform.mpc.settings import COUPLINGS, VELOCITY_SETS, MPCSettings
+from mpcform.reference.keyframes import DEFAULT_SPEED_FRACTION
+from mpcform.solvers.registry import DEFAULT_SOLVER
+
+FORMAT_VERSION = 1
+SHAPES = ("polygon", "ring", "line", "grid", "sphere", "explicit")
+REFERENCE_KINDS = ("constant", "exponential", "mission")
+CONTROLLER_KINDS = ("proportional", "tracking", "mpc", "consensus", "nullspace")
+GRAPH_POINTS = ("template", "initial")
+
+
+@dataclass(frozen=True)
+class Key:
+    """One scenario key.
+
+    ``type``: ``int``, ``float``, ``bool``, ``string``, ``vector`` (d numbers), ``bounds``
+    (d numbers, +-inf allowed), ``rotation`` (an angle for d = 2, a rotation vector for
+    d = 3), ``points`` (rows of d numbers), ``indices`` (drone indices) or ``pairs`` (pairs
+    of drone indices), ``table`` (an inline table, checked by its user) or ``tables`` (an
+    array of tables). ``when`` lists the values of the table's
+    selector key (``shape`` or ``kind``) the key applies to (empty: always). ``bound`` is a
+    lower bound of numbers (``"> 0"``, ``">= 1"``). ``shown_default`` replaces the default in
+    the docs.
+    """
+
+    name: str
+    type: str
+    doc: str
+    unit: str = ""
+    default: Any = None
+    required: bool = False
+    when: tuple[str, ...] = ()
+    choices: tuple[Any, ...] = ()
+    bound: str = ""
+    shown_default: str | None = None
+
+    @property
+    def bound_text(self) -> str:
+        """The bound as a suffix of a type's text (``" > 0"``), or ``""``."""
+        return f" {self.bound}" if self.bound else ""
+
+    def within_bound(self, x: float) -> bool:
+        """Whether the number ``x`` meets ``bound`` (always, when there is none)."""
+        if not self.bound:
+            return True
+        op, low = self.bound.split()
+        return x > float(low) if op == ">" else x >= float(low)
+
+
+@dataclass(frozen=True)
+class Table:
+    """A scenario table (``""``: the top level); ``selector`` names the key choosing a variant."""
+
+    name: str
+    doc: str
+    keys: tuple[Key, ...]
+    required: bool = True
+    selector: str | None = None
+    array: bool = False
+
+    def key(self, name: str) -> Key:
+        return next(k for k in self.keys if k.name == name)
+
+    @property
+    def title(self) -> str:
+        if not self.name:
+            return "Top level"
+        return f"[[{self.name}]]" if self.array else f"[{self.name}]"
+
+
+_MPC_DEFAULTS = {f.name: f.default for f in dataclasses.fields(MPCSettings)}
+_MPC = ("mpc",)
+_GOAL = ("constant", "exponential")
+_MISSION = ("mission",)
+# scenario key -> MPCSettings field (the remaining mpc keys share their name with the field)
+MPC_FIELDS = {"gain": "gain_per_s", "margin": "margin_m", "tie_break": "tie_break_rad",
+              "time_limit": "time_limit_s"}  # fmt: skip
+
+
+def _mpc_key(name: str, type_: str, doc: str, unit: str = "", **kw: Any) -> Key:
+    default = _MPC_DEFAULTS[MPC_FIELDS.get(name, name)]
+    return Key(name, type_, doc, unit, default, when=_MPC, **kw)
+
+
+# scenario key -> ConsensusSettings / NullSpaceSettings field (others share the field's name)
+CONSENSUS_FIELDS = {"gamma": "gamma_per_s", "leader_gain": "leader_gain_per_s"}
+NULLSPACE_FIELDS = {"repulsion_radius": "repulsion_radius_m", "repulsion_gain": "repulsion_gain_per_s"}
+_CONSENSUS_DEFAULTS = {f.name: f.default for f in dataclasses.fields(ConsensusSettings)}
+_NULLSPACE_DEFAULTS = {f.name: f.default for f in dataclasses.fields(NullSpaceSettings)}
+
+
+def _consensus_key(name: str, type_: str, doc: str, unit: str = "", **kw: Any) -> Key:
+    default = _CONSENSUS_DEFAULTS[CONSENSUS_FIELDS.get(name, name)]
+    return Key(name, type_, doc, unit, default, when=("consensus",), **kw)
+
+
+def _nullspace_key(name: str, type_: str, doc: str, unit: str = "", **kw: Any) -> Key:
+    default = _NULLSPACE_DEFAULTS[NULLSPACE_FIELDS.get(name, name)]
+    return Key(name, type_, doc, unit, default, when=("nullspace",), **kw)
+
+
+SCHEMA: tuple[Table, ...] = (
+    Table("", "Scenario identity.", (
+        Key("version", "int", "Scenario format version.", required=True, choices=(FORMAT_VERSION,)),
+        Key("name", "string", "Run name; default output directory is `results/<name>/`.",
+            shown_default="file name without .toml"),
+        Key("dim", "int", "Spatial dimension: 2 (planar) or 3 (spatial).", required=True,
+            choices=(2, 3)),
+        Key("seed", "int", "Seed of the initial perturbation, the simulation noise and the "
+            "packet losses of [graph].",
+            default=0, bound=">= 0"),
+    )),
+    Table("template", "Formation shape: centred offsets r_i (seed eq. 10).", (
+        Key("shape", "string", "Template family; `explicit` takes `offsets`.", required=True,
+            choices=SHAPES),
+        Key("n", "int", "Number of drones.", required=True,
+            when=("polygon", "ring", "line", "sphere"), bound=">= 1"),
+        Key("radius", "float", "Circumradius.", "m", 1.0, when=("polygon", "ring", "sphere"),
+            bound="> 0"),
+        Key("phase", "float", "Angle of the first vertex about z.", "rad", 0.0,
+            when=("polygon", "ring")),
+        Key("spacing", "float", "Distance between neighbours.", "m", 1.0, when=("line", "grid"),
+            bound="> 0"),
+        Key("rows", "int", "Grid rows (along x).", required=True, when=("grid",), bound=">= 1"),
+        Key("cols", "int", "Grid columns (along y).", required=True, when=("grid",), bound=">= 1"),
+        Key("layers", "int", "Grid layers (along z, spatial only).", default=1, when=("grid",),
+            bound=">= 1"),
+        Key("offsets", "points", "Offsets r_i, one row per drone; their mean must be zero.", "m",
+            required=True, when=("explicit",)),
+    ), selector="shape"),
+    Table("initial", "Start: a formation state, or explicit `positions` (not both).", (
+        Key("centroid", "vector", "Start centroid c.", "m",
+            shown_default="required unless `positions`"),
+        Key("rotation", "rotation", "Start rotation: angle (d = 2) or rotation vector (d = 3).",
+            "rad", shown_default="0 (identity)"),
+        Key("scale", "float", "Start scale s.", shown_default="1", bound="> 0"),
+        Key("positions", "points", "Explicit start positions, one row per drone (n x d).", "m"),
+        Key("perturbation", "float", "Std of seeded Gaussian offsets added to the start.", "m",
+            0.0, bound=">= 0"),
+    )),
+    Table("reference", "Desired formation trajectory, starting at the initial formation state "
+          "(or the best fit of explicit positions).", (
+        Key("kind", "string", "`constant`: hold the goal; `exponential`: eq. 16 towards it; "
+            "`mission`: keyframes smoothed by ruckig (jerk-limited, time-optimal per move).",
+            required=True, choices=REFERENCE_KINDS),
+        Key("centroid", "vector", "Goal centroid.", "m", shown_default="start centroid",
+            when=_GOAL),
+        Key("rotation", "rotation", "Goal rotation: angle (d = 2) or rotation vector (d = 3).",
+            "rad", shown_default="start rotation", when=_GOAL),
+        Key("scale", "float", "Goal scale s*.", "", shown_default="start scale", bound="> 0",
+            when=_GOAL),
+        Key("rate", "float", "Convergence rate lambda of eq. 16.", "1/s", required=True,
+            when=("exponential",), bound="> 0"),
+        Key("keyframes", "tables", "The mission's keyframes in order: `[[reference.keyframes]]` "
+            "tables (keys below).", required=True, when=_MISSION),
+        Key("speed_fraction", "float", "With `limits.v_max`: limits derived so that every "
+            "drone's reference speed stays below speed_fraction * v_max (at most 1).",
+            shown_default=f"{DEFAULT_SPEED_FRACTION:g} (with v_max)", when=_MISSION, bound="> 0"),
+        Key("drone_acceleration", "float", "With `limits.v_max`: budget of the drones' "
+            "along-path reference acceleration.", "m/s^2",
+            shown_default="speed_fraction * limits.a_max, else speed budget per 1 s",
+            when=_MISSION, bound="> 0"),
+        Key("drone_jerk", "float", "With `limits.v_max`: budget of the drones' along-path "
+            "reference jerk.", "m/s^3", shown_default="drone_acceleration per 0.5 s",
+            when=_MISSION, bound="> 0"),
+        Key("max_velocity", "table", "Explicit bounds per DOF group, e.g. `{ centroid = 2.0, "
+            "scale = 0.5 }`: `centroid` [m/s] (on the norm), `rotation` [rad/s], `scale` and "
+            "`blend` [1/s]; the smaller of these and the derived limits applies.",
+            "per group", when=_MISSION),
+        Key("max_acceleration", "table", "Explicit bounds per DOF group, as `max_velocity` "
+            "(units per s^2).", "per group", when=_MISSION),
+        Key("max_jerk", "table", "Explicit bounds per DOF group, as `max_velocity` (units "
+            "per s^3).", "per group", when=_MISSION),
+    ), selector="kind"),
+    Table("reference.keyframes", "Mission keyframes (`kind = \"mission\"`), reached one after "
+          "the other at rest; unset keys keep the previous keyframe's value.", (
+        Key("centroid", "vector", "Centroid c.", "m", shown_default="previous"),
+        Key("rotation", "rotation", "Orientation: angle (d = 2) or rotation vector (d = 3); "
+            "the turn takes the shortest way (at most half a turn per keyframe).", "rad",
+            shown_default="previous"),
+        Key("scale", "float", "Scale s.", shown_default="previous", bound="> 0"),
+        Key("hold", "float", "Time to stay at the keyframe after reaching it.", "s", 0.0,
+            bound=">= 0"),
+        Key("template", "table", "Switch to this template (same n; keys of [template], e.g. "
+            "`{ shape = \"line\", n = 6 }`): drones are assigned optimally and blended during "
+            "the move; warns when the ends are closer than sqrt(2) * d_min (CAPT)."),
+    ), required=False, array=True),
+    Table("limits", "Physical limits; each unset one is not enforced.", (
+        Key("v_max", "float", "Speed bound per drone.", "m/s", bound="> 0"),
+        Key("d_min", "float", "Minimum distance between two drones.", "m", bound="> 0"),
+        Key("a_max", "float", "Componentwise bound on command changes (mpc).", "m/s^2",
+            bound="> 0"),
+        Key("geofence_min", "bounds", "Lower corner of the allowed box (mpc; -inf: open).", "m"),
+        Key("geofence_max", "bounds", "Upper corner of the allowed box (mpc; inf: open).", "m"),
+        Key("downwash", "float", "Vertical separation factor kappa (spatial, mpc).", "",
+            bound=">= 1"),
+    ), required=False),
+    Table("controller", "Controller and its parameters; `mpcform run --controller` overrides "
+          "`kind`, then keys of other kinds take their defaults.", (
+        Key("kind", "string", "Controller.", required=True, choices=CONTROLLER_KINDS),
+        Key("gain", "float", "Feedback gain k (eq. 4, 14; the formation gain of eq. 20 for "
+            "consensus); gain * dt must be <= 1.", "1/s", 1.0,
+            bound="> 0"),
+        Key("feedforward", "string", "`jacobian` (J xi_dot, eq. 14) or `secant` "
+            "((p*(t+dt) - p*(t))/dt, exact in discrete time).", default="jacobian",
+            when=("tracking", "mpc", "nullspace"), choices=FEEDFORWARDS),
+        Key("saturate", "bool", "Saturate commands at limits.v_max (eq. 7) when it is set.",
+            default=True, when=("proportional", "tracking", "consensus", "nullspace")),
+        _consensus_key("law", "string", "`eq20`: seed eq. 20 as printed (the centroid drifts "
+                       "during scale transients); `centroid_preserving`: u_i = -k sum_j [(p_i - "
+                       "p_j) - R (s_i r_i - s_j r_j)] (sum_i u_i = 0).", choices=CONSENSUS_LAWS),
+        _consensus_key("gamma", "float", "Scale-estimate consensus gain gamma (eq. 20).", "1/s",
+                       bound="> 0"),
+        _consensus_key("leader_gain", "float", "Leader input lambda (s*(t) - s_hat_L), s*(t) "
+                       "the reference's scale.", "1/s", bound="> 0"),
+        _consensus_key("leaders", "indices", "Drones whose estimate follows the commanded scale.",
+                       shown_default="[0]"),
+        _consensus_key("initial_scale", "float", "Every scale estimate's start value.",
+                       shown_default="best-fit scale of the start positions", bound="> 0"),
+        _nullspace_key("objective", "string", "Secondary objective projected by N = I - J J^+ "
+                       "(corrected eq. 15): `repulsion`, `energy` (smallest command with the "
+                       "same formation velocity) or `none`.", choices=OBJECTIVES),
+        _nullspace_key("repulsion_radius", "float", "Pairs closer than this repel.", "m",
+                       shown_default="1.5 * limits.d_min", bound="> 0"),
+        _nullspace_key("repulsion_gain", "float", "Repulsion gain c: push c (radius - d).", "1/s",
+                       bound="> 0"),
+        _nullspace_key("energy_weight", "float", "Weight w in [0, 1] of the energy objective "
+                       "(1: minimum norm; shape errors are then not corrected).", bound=">= 0"),
+        _mpc_key("horizon", "int", "Plan length H in steps.", bound=">= 1"),
+        _mpc_key("velocity_set", "string", "Speed constraint set inscribed in the ball.",
+                 choices=VELOCITY_SETS),
+        _mpc_key("facets", "int", "Half-spaces of the velocity polytope (auto: 16 planar, "
+                 "32 spatial).", bound=">= 4", shown_default="auto"),
+        _mpc_key("slack_weight", "float", "Exact L1 penalty on separation slack.", "1/m",
+                 bound="> 0"),
+        _mpc_key("slack_quadratic", "float", "Quadratic slack penalty (conditioning).", "1/m^2",
+                 bound=">= 0"),
+        _mpc_key("margin", "float", "Tightening of separation and obstacle rows.", "m",
+                 bound=">= 0"),
+        _mpc_key("tie_break", "float", "Right turn of conflicted drones' desired velocities, "
+                 "so symmetric swaps circulate; grows while a drone stays stalled (0: off).", "rad",
+                 bound=">= 0"),
+        _mpc_key("coupling", "string", "`joint` pair rows, or `decoupled` per-drone rows about "
+                 "the pair midpoint (block-diagonal QP, for large swarms).", choices=COUPLINGS),
+        _mpc_key("per_drone", "bool", "With `decoupled`: solve each conflicted drone's QP with DAQP "
+                 "(small dense QPs, the fast way; of the solver keys only `max_iter` applies) instead "
+                 "of one sparse QP with `solver`."),
+        _mpc_key("grouping", "bool", "Solve only the groups of drones that hold a conflict; the others "
+                 "take their eq. 14 rollout (exact)."),
+        _mpc_key("fast_path", "bool", "Skip the solver when the eq. 14 rollout meets every row."),
+        _mpc_key("eps_abs", "float", "Solver absolute tolerance.", bound="> 0"),
+        _mpc_key("eps_rel", "float", "Solver relative tolerance.", bound=">= 0"),
+        _mpc_key("max_iter", "int", "Solver iteration limit.", bound=">= 1"),
+        _mpc_key("time_limit", "float", "Solver time limit per QP (0: none).", "s", bound=">= 0"),
+        Key("solver", "string", "QP backend: `osqp`, `piqp`, `qpsolvers:<name>`, "
+            "`casadi:<plugin>` (see `mpcform solvers`); `--solver` overrides it. Not with "
+            "`decoupled` and `per_drone`.",
+            when=_MPC, shown_default=f'"{DEFAULT_SOLVER}"'),
+    ), selector="kind"),
+    Table("graph", "Communication graph of the consensus controller, undirected, and its link "
+          "effects; other controllers ignore it.", (
+        Key("kind", "string", "`complete`, `ring` (i talks to i +- 1), `path`, `k_nearest`, "
+            "`disk` (within `radius`) or `explicit` (`edges`).", required=True,
+            choices=GRAPH_KINDS),
+        Key("k", "int", "Neighbours per drone (the graph is symmetrised).", required=True,
+            when=("k_nearest",), bound=">= 1"),
+        Key("radius", "float", "Communication range.", "m", required=True, when=("disk",),
+            bound="> 0"),
+        Key("on", "string", "Positions the geometric graph is built on: template offsets r_i or "
+            "the initial positions.", default="template", when=("k_nearest", "disk"),
+            choices=GRAPH_POINTS),
+        Key("edges", "pairs", "Undirected edges [i, j] (drone indices from 0).", required=True,
+            when=("explicit",)),
+        Key("allow_disconnected", "bool", "Run on a disconnected graph with a warning instead "
+            "of an error (consensus cannot be reached).", default=False),
+        Key("delay_steps", "int", "Whole control steps between a broadcast and its delivery.",
+            default=0, bound=">= 0"),
+        Key("loss_probability", "float", "Chance that one message on one directed link is lost "
+            "(seeded by `seed`; a drone keeps the last value it received); below 1.",
+            default=0.0, bound=">= 0"),
+        Key("relative_positions", "string", "`communicated`: neighbours' positions are delayed "
+            "and lost like the scale estimates; `sensed`: measured on board, always current.",
+            default="communicated", choices=RELATIVE_POSITIONS),
+    ), required=False, selector="kind"),
+    Table("simulation", "Closed-loop simulation (zero-order hold, exact single integrator).", (
+        Key("dt", "float", "Control period.", "s", required=True, bound="> 0"),
+        Key("duration", "float", "Simulated time.", "s", required=True, bound="> 0"),
+        Key("lag", "float", "Time constant of a first-order velocity lag (0: none).", "s", 0.0,
+            bound=">= 0"),
+        Key("noise", "float", "Std of seeded Gaussian position disturbances per step.", "m", 0.0,
+            bound=">= 0"),
+    )),
+    Table("obstacles", "Static spheres (discs when planar); repeat the table for more.", (
+        Key("center", "vector", "Centre.", "m", required=True),
+        Key("radius", "float", "Radius.", "m", required=True, bound="> 0"),
+        Key("clearance", "float", "Distance kept from the surface.", "m",
+            shown_default="d_min / 2", bound=">= 0"),
+    ), required=False, array=True),
+)  # fmt: skip
+TABLES = {t.name: t for t in SCHEMA}
+
+
+def listing(values: tuple[Any, ...], quote: str = "'") -> str:
+    """``values`` as a comma-separated list, each quoted (for messages and the key reference)."""
+    return ", ".join(f"{quote}{v}{quote}" for v in values)
+
+
+def did_you_mean(word: str, choices: Any) -> str:
+    """``"; did you mean 'x'?"`` for the closest of ``choices`` to a misspelt ``word``, else ``""``."""
+    close = difflib.get_close_matches(word, [str(c) for c in choices], n=1)
+    return f"; did you mean {close[0]!r}?" if close else ""

@@ -1,0 +1,141 @@
+"""Seeded random scenario families (scenario dicts, as parsed TOML) for the closed-loop invariants.
+
+Parts: planar swaps (antipodal rings and random permutations, n 2-32), spatial swaps (n 4-24),
+fields of 1-6 spheres between start and goal, and close starts (1-3 pairs at 0.2-0.9 d_min).
+v_max 0.5-2 m/s, d_min 0.3-0.7 m, dt 0.1 s, horizon 8-15, both couplings; the duration is
+2 x (longest straight-line distance / v_max) + 10 s.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from typing import Any
+
+import numpy as np
+from scipy.spatial.distance import pdist
+
+KINDS = ("swap_planar", "swap_spatial", "spheres", "close_start")
+DT_S = 0.1
+
+
+def _spread(rng: np.random.Generator, n: int, dim: int, d_min: float) -> np.ndarray:
+    """n centred random offsets at least 1.5 d_min apart (rejection sampling in a growing box)."""
+    side = max(1.0, 1.6 * d_min * n ** (1.0 / dim))
+    while True:
+        pts = rng.uniform(-side, side, (n, dim))
+        if n < 2 or pdist(pts).min() >= 1.5 * d_min:
+            return pts - pts.mean(axis=0)
+        side *= 1.05
+
+
+def _base(rng: np.random.Generator, name: str, dim: int, offsets: np.ndarray, d_min: float) -> dict[str, Any]:
+    return {
+        "version": 1,
+        "name": name,
+        "dim": dim,
+        "seed": int(rng.integers(1000)),
+        "template": {"shape": "explicit", "offsets": offsets.tolist()},
+        "limits": {"v_max": float(rng.uniform(0.5, 2.0)), "d_min": d_min},
+        "controller": {
+            "kind": "mpc",
+            "gain": 1.0,
+            "horizon": int(rng.integers(8, 16)),
+            "coupling": str(rng.choice(["joint", "decoupled"])),
+        },
+        "simulation": {"dt": DT_S},
+    }
+
+
+def _finish(sc: dict[str, Any], start: np.ndarray, goal: np.ndarray) -> dict[str, Any]:
+    sc["initial"] = {"positions": start.tolist()}
+    far = float(np.linalg.norm(goal - start, axis=1).max())
+    sc["simulation"]["duration"] = round(2.0 * far / sc["limits"]["v_max"] + 10.0, 3)
+    return sc
+
+
+def swap_planar(rng: np.random.Generator, index: int) -> dict[str, Any]:
+    n, d_min = int(rng.integers(2, 33)), float(rng.uniform(0.3, 0.7))
+    if rng.random() < 0.5:  # antipodal ring: every path crosses the centre
+        radius = max(1.5, 0.8 * d_min * n / np.pi)
+        angle = 2 * np.pi * np.arange(n) / n
+        offsets = radius * np.column_stack([np.cos(angle), np.sin(angle)])
+        start = -offsets
+    else:
+        offsets = _spread(rng, n, 2, d_min)
+        start = offsets[rng.permutation(n)]
+    sc = _base(rng, f"swap_planar_{index}", 2, offsets, d_min)
+    sc["reference"] = {"kind": "constant", "centroid": [0.0, 0.0], "rotation": 0.0, "scale": 1.0}
+    return _finish(sc, start, offsets)
+
+
+def swap_spatial(rng: np.random.Generator, index: int) -> dict[str, Any]:
+    n, d_min = int(rng.integers(4, 25)), float(rng.uniform(0.3, 0.7))
+    offsets = _spread(rng, n, 3, d_min)
+    start = -offsets if rng.random() < 0.5 else offsets[rng.permutation(n)]
+    sc = _base(rng, f"swap_spatial_{index}", 3, offsets, d_min)
+    sc["reference"] = {
+        "kind": "constant",
+        "centroid": [0.0, 0.0, 0.0],
+        "rotation": [0.0, 0.0, 0.0],
+        "scale": 1.0,
+    }
+    return _finish(sc, start, offsets)
+
+
+def spheres(rng: np.random.Generator, index: int) -> dict[str, Any] | None:
+    """A formation flying 8-16 m through 1-6 spheres; None when a draw breaks the family's rules."""
+    dim = int(rng.choice([2, 3]))
+    n, d_min = int(rng.integers(2, 9)), float(rng.uniform(0.3, 0.7))
+    offsets = _spread(rng, n, dim, d_min)
+    direction = rng.normal(size=dim)
+    direction /= np.linalg.norm(direction)
+    length = float(rng.uniform(8.0, 16.0))
+    goal_c, start_c = 0.5 * length * direction, -0.5 * length * direction
+    start, goal = start_c + offsets, goal_c + offsets
+    obstacles = []
+    for _ in range(int(rng.integers(1, 7))):
+        center = rng.uniform(-0.35, 0.35) * length * direction + rng.uniform(-2.0, 2.0, dim)
+        radius, clearance = float(rng.uniform(0.3, 1.2)), float(rng.uniform(0.1, 0.3))
+        keep_out = radius + clearance + d_min
+        if (
+            min(np.linalg.norm(start - center, axis=1).min(), np.linalg.norm(goal - center, axis=1).min())
+            < keep_out
+        ):
+            return None
+        obstacles.append({"center": center.tolist(), "radius": radius, "clearance": clearance})
+    sc = _base(rng, f"spheres_{index}", dim, offsets, d_min)
+    zero = 0.0 if dim == 2 else [0.0, 0.0, 0.0]
+    sc["reference"] = {"kind": "constant", "centroid": goal_c.tolist(), "rotation": zero, "scale": 1.0}
+    sc["obstacles"] = obstacles
+    return _finish(sc, start, goal)
+
+
+def close_start(rng: np.random.Generator, index: int) -> dict[str, Any]:
+    """A formation (planar or spatial) whose start holds 1-3 pairs at 0.2-0.9 d_min."""
+    dim = int(rng.choice([2, 3]))
+    n, d_min = int(rng.integers(3, 13)), float(rng.uniform(0.3, 0.7))
+    offsets = _spread(rng, n, dim, d_min)
+    start = offsets.copy()
+    movers = rng.choice(n, size=2 * min(int(rng.integers(1, 4)), n // 2), replace=False).reshape(-1, 2)
+    for i, k in movers:
+        direction = rng.normal(size=dim)
+        start[i] = start[k] + rng.uniform(0.2, 0.9) * d_min * direction / np.linalg.norm(direction)
+    shift = rng.uniform(-3.0, 3.0, dim)
+    sc = _base(rng, f"close_start_{index}", dim, offsets, d_min)
+    zero = 0.0 if dim == 2 else [0.0, 0.0, 0.0]
+    sc["reference"] = {"kind": "constant", "centroid": shift.tolist(), "rotation": zero, "scale": 1.0}
+    return _finish(sc, start, offsets + shift)
+
+
+def family(seed: int, count: int) -> Iterator[dict[str, Any]]:
+    """``count`` scenarios cycling through the parts (sphere draws that break the rules redrawn)."""
+    rng = np.random.default_rng(seed)
+    makers = {"swap_planar": swap_planar, "swap_spatial": swap_spatial, "spheres": spheres,
+              "close_start": close_start}  # fmt: skip
+    made = 0
+    while made < count:
+        kind = KINDS[made % len(KINDS)]
+        sc = makers[kind](rng, made)
+        if sc is not None:
+            made += 1
+            yield sc

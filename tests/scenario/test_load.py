@@ -1,0 +1,161 @@
+"""Loading scenario files: defaults and objects, seeded perturbation, every bad input names its key."""
+
+from __future__ import annotations
+
+import copy
+import tomllib
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+from saved_runs import SCENARIOS
+
+from mpcform import MPCSettings, ScenarioError
+from mpcform.formation.kinematics import forward_kinematics
+from mpcform.formation.state import FormationState
+from mpcform.scenario.load import load_scenario, scenario_from_dict
+from mpcform.solvers.registry import DEFAULT_SOLVER
+
+WORKED = SCENARIOS / "worked_example.toml"
+DELETE = object()
+
+
+def worked_dict() -> dict[str, Any]:
+    return tomllib.loads(WORKED.read_text())
+
+
+def mutated(changes: dict[str, Any]) -> dict[str, Any]:
+    """The worked example with ``{"table.key": value}`` changes (DELETE removes the entry)."""
+    data = copy.deepcopy(worked_dict())
+    for dotted, value in changes.items():
+        *tables, key = dotted.split(".")
+        node = data
+        for t in tables:
+            node = node.setdefault(t, {})
+        if value is DELETE:
+            del node[key]
+        else:
+            node[key] = value
+    return data
+
+
+def test_defaults_and_objects() -> None:
+    s = scenario_from_dict(mutated({"seed": DELETE, "name": DELETE}), default_name="fallback")
+    assert s.name == "fallback" and s.seed == 0 and s.dim == 2 and s.n == 3
+    assert s.controller.kind == "tracking" and s.controller.gain_per_s == 2.0
+    assert s.controller.saturate is True and s.controller.solver == DEFAULT_SOLVER
+    assert s.controller.mpc == MPCSettings(gain_per_s=2.0)
+    assert s.limits.v_max_mps == 3.0 and s.limits.a_max_mps2 is None and s.obstacles == ()
+    assert s.simulation.lag_s == 0.0 and s.steps == 500
+    assert np.allclose(s.initial_positions_m, forward_kinematics(s.template, s.start))
+
+
+def test_explicit_positions_start_from_their_best_fit() -> None:
+    state = FormationState.from_param([1.0, -2.0], 0.3, 1.5)
+    s0 = scenario_from_dict(worked_dict())
+    positions = forward_kinematics(s0.template, state).tolist()
+    s = scenario_from_dict(mutated({"initial": {"positions": positions}}))
+    assert np.allclose(s.initial_positions_m, positions)
+    assert np.allclose(s.start.centroid_m, [1.0, -2.0]) and s.start.scale == pytest.approx(1.5)
+    assert np.allclose(s.reference.state(0.0).centroid_m, [1.0, -2.0])
+
+
+def test_perturbation_is_seeded() -> None:
+    a = scenario_from_dict(mutated({"initial.perturbation": 0.1, "seed": 7}))
+    b = scenario_from_dict(mutated({"initial.perturbation": 0.1, "seed": 7}))
+    c = scenario_from_dict(mutated({"initial.perturbation": 0.1, "seed": 8}))
+    base = scenario_from_dict(worked_dict())
+    assert np.array_equal(a.initial_positions_m, b.initial_positions_m)
+    assert not np.array_equal(a.initial_positions_m, c.initial_positions_m)
+    assert 0 < np.abs(a.initial_positions_m - base.initial_positions_m).max() < 1.0
+    assert np.allclose(a.start.centroid_m, base.start.centroid_m)  # the reference is unperturbed
+
+
+def test_templates_and_obstacles() -> None:
+    grid = scenario_from_dict(mutated({"template": {"shape": "grid", "rows": 2, "cols": 3}}))
+    assert grid.n == 6 and grid.template.name == "grid"
+    data = mutated({"template": {"shape": "explicit", "offsets": [[1.0, 0.0], [-1.0, 0.0]]}})
+    data["obstacles"] = [{"center": [0.0, 9.0], "radius": 0.5}, {"center": [9.0, 0.0], "radius": 1}]
+    s = scenario_from_dict(data)
+    assert s.n == 2 and len(s.obstacles) == 2 and s.obstacles[1].radius_m == 1.0
+
+
+NOT_CENTRED = {"shape": "explicit", "offsets": [[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]]}
+BAD_INPUTS: list[tuple[str, dict[str, Any], str, str]] = [
+    ("unknown key", {"controller.gian": 2.0}, "controller.gian", "did you mean 'gain'"),
+    ("unknown top key", {"sed": 1}, "sed", "did you mean 'seed'"),
+    ("unknown table", {"controler": {"kind": "tracking"}}, "controler", "mean 'controller'"),
+    ("wrong type", {"controller.gain": "fast"}, "controller.gain", "got 'fast'"),
+    ("bool as number", {"template.n": True}, "template.n", "integer"),
+    ("float as integer", {"template.n": 3.0}, "template.n", "integer"),
+    ("nan", {"controller.gain": float("nan")}, "controller.gain", "finite"),
+    ("inf", {"initial.centroid": [5.0, float("inf")]}, "initial.centroid", "finite"),
+    ("zero scale", {"initial.scale": 0.0}, "initial.scale", "> 0"),
+    ("negative goal scale", {"reference.scale": -1.0}, "reference.scale", "> 0"),
+    ("uncentred offsets", {"template": NOT_CENTRED}, "template.offsets", "off by 0.471405"),
+    ("gain * dt > 1", {"controller.gain": 100.0}, "controller.gain", "gain * dt"),
+    ("missing key", {"simulation.dt": DELETE}, "simulation.dt", "missing"),
+    ("missing table", {"simulation": DELETE}, "simulation", "missing table"),
+    ("missing version", {"version": DELETE}, "version", "missing"),
+    ("bad version", {"version": 2}, "version", "got 2"),
+    ("bad dim", {"dim": 4}, "dim", "got 4"),
+    ("bad choice", {"controller.kind": "trackng"}, "controller.kind", "did you mean 'tracking'"),
+    ("key of another kind", {"reference.kind": "constant"}, "reference.rate", "only to"),
+    ("mpc key on tracking", {"controller.horizon": 5}, "controller.horizon", "'mpc'"),
+    ("short vector", {"initial.centroid": [5.0]}, "initial.centroid", "2 numbers"),
+    ("too few positions", {"initial": {"positions": [[0.0, 0.0]]}}, "initial.positions", "3 rows"),
+    ("positions and state", {"initial.positions": [[0, 0], [1, 0], [2, 0]]}, "initial.positions",
+     "not both"),
+    ("no initial state", {"initial": {"scale": 1.0}}, "initial.centroid", "missing"),
+    ("sphere in 2D", {"template": {"shape": "sphere", "n": 4}}, "template.shape", "dim = 3"),
+    ("grid layers in 2D", {"template": {"shape": "grid", "rows": 2, "cols": 2, "layers": 2}},
+     "template.layers", "one layer"),
+    ("obstacles not an array", {"obstacles": {"center": [0, 0], "radius": 1}}, "obstacles",
+     "[[obstacles]]"),
+    ("bad obstacle", {"obstacles": [{"center": [0, 0], "radius": 0}]}, "obstacles[0].radius",
+     "> 0"),
+    ("downwash in 2D", {"limits.downwash": 2.0}, "limits.downwash", "dim = 3"),
+    ("geofence order", {"limits.geofence_min": [0, 0], "limits.geofence_max": [0, 1]},
+     "limits.geofence_max", "geofence_min < geofence_max"),
+    ("unknown solver", {"controller.kind": "mpc", "controller.solver": "osqq"},
+     "controller.solver", "did you mean 'osqp'"),
+    ("solver ignored per drone", {"controller.kind": "mpc", "controller.coupling": "decoupled",
+                                  "controller.solver": "osqp"}, "controller.solver", "per_drone = false"),
+    ("shorter than a step", {"simulation.duration": 0.01}, "simulation.duration", "one step"),
+    ("path in name", {"name": "../x"}, "name", "directory"),
+]  # fmt: skip
+
+
+@pytest.mark.parametrize(("changes", "field", "fragment"), [c[1:] for c in BAD_INPUTS],
+                         ids=[c[0] for c in BAD_INPUTS])  # fmt: skip
+def test_bad_input_names_the_field(changes: dict[str, Any], field: str, fragment: str) -> None:
+    with pytest.raises(ScenarioError) as err:
+        scenario_from_dict(mutated(changes))
+    assert err.value.field == field
+    assert str(err.value).startswith(f"{field}: ")
+    assert fragment in str(err.value)
+    assert "\n" not in str(err.value)
+
+
+def test_missing_file(tmp_path: Path) -> None:
+    path = tmp_path / "nope.toml"
+    with pytest.raises(ScenarioError, match="no such scenario file") as err:
+        load_scenario(path)
+    assert err.value.field == str(path)
+
+
+def test_toml_syntax_error_gives_the_line(tmp_path: Path) -> None:
+    path = tmp_path / "broken.toml"
+    path.write_text("version = 1\ndim = 2\n[controller]\ngain = \n")
+    with pytest.raises(ScenarioError, match="line 4") as err:
+        load_scenario(path)
+    assert "TOML syntax error" in str(err.value) and "'gain ='" in str(err.value)
+
+
+def test_toml_nan_literal(tmp_path: Path) -> None:
+    path = tmp_path / "nan.toml"
+    path.write_text(WORKED.read_text().replace("gain = 2.0", "gain = nan"))
+    with pytest.raises(ScenarioError, match="expected a finite number > 0") as err:
+        load_scenario(path)
+    assert err.value.field == "controller.gain"

@@ -1,0 +1,43 @@
+"""The key schema: every key documented, every MPC setting reachable, bounds, listings and hints."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import pytest
+
+from mpcform import MPCSettings
+from mpcform.scenario.schema import MPC_FIELDS, SCHEMA, TABLES, Key, did_you_mean, listing
+
+
+def test_every_key_is_documented_and_every_mpc_setting_has_a_key() -> None:
+    for table in SCHEMA:
+        for key in table.keys:
+            assert key.doc and key.type, (table.name, key.name)
+    mpc_keys = {k.name for k in TABLES["controller"].keys if "mpc" in k.when or not k.when}
+    settings = {MPC_FIELDS.get(k, k) for k in mpc_keys} - {"kind", "solver"}
+    assert settings == {f.name for f in dataclasses.fields(MPCSettings)}
+
+
+def test_tables_are_found_by_name_and_selectors_are_keys() -> None:
+    assert list(TABLES) == [t.name for t in SCHEMA] and TABLES[""].title == "Top level"
+    assert TABLES["obstacles"].title == "[[obstacles]]" and TABLES["limits"].title == "[limits]"
+    for table in SCHEMA:
+        if table.selector is not None:
+            assert table.key(table.selector).choices, table.name
+
+
+@pytest.mark.parametrize(
+    ("bound", "text", "inside", "outside"),
+    [("> 0", " > 0", 1e-9, 0.0), (">= 1", " >= 1", 1.0, 0.999), ("", "", -1e9, None)],
+)
+def test_key_bounds(bound: str, text: str, inside: float, outside: float | None) -> None:
+    key = Key("x", "float", "A number.", bound=bound)
+    assert key.bound_text == text and key.within_bound(inside)
+    assert outside is None or not key.within_bound(outside)
+
+
+def test_listing_and_did_you_mean() -> None:
+    assert listing(("a", 2)) == "'a', '2'" and listing((2, 3), "") == "2, 3"
+    assert did_you_mean("trackng", ("proportional", "tracking")) == "; did you mean 'tracking'?"
+    assert did_you_mean("zzz", ("proportional", "tracking")) == ""

@@ -1,0 +1,58 @@
+"""casadi conic backends: they solve the recorded problems to the reference, the planner gives
+piqp's first input with each, and hpipm reports a QP it cannot put in stage order."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+import pytest
+
+from mpcform.mpc.limits import Limits
+from mpcform.mpc.planner import MPCPlanner
+from mpcform.mpc.settings import MPCSettings
+
+RECORDED: dict[str, dict[str, Any]] = {
+    "casadi:osqp": dict(objective=1e-5, residual=1e-5, eps=1e-6),
+    "casadi:proxqp": dict(objective=1e-4, residual=1e-4, eps=1e-6, problems=1),
+    "casadi:daqp": dict(objective=1e-5, residual=1e-6, problems=1),
+    "casadi:piqp": dict(objective=1e-8, residual=1e-8),
+    "casadi:ipqp": dict(objective=1e-7, residual=1e-7, problems=1),
+    "casadi:hpipm": dict(objective=1e-6, residual=1e-6),
+}
+"""Tolerances on the relative objective gap and the primal residual, the eps given, and how many
+of the small swap's problems (slow backends take one). qpOASES takes seconds per recorded QP here
+(see ``mpcform bench solvers``): it is checked by the planner test only."""
+FIRST_INPUT: dict[str, dict[str, Any]] = {
+    "casadi:osqp": dict(tolerance_mps=2e-3, eps=1e-6),
+    "casadi:qpoases": dict(tolerance_mps=1e-5),
+    "casadi:proxqp": dict(tolerance_mps=1e-3, eps=1e-6),
+    "casadi:daqp": dict(tolerance_mps=1e-4),
+    "casadi:piqp": dict(tolerance_mps=1e-5),
+    "casadi:ipqp": dict(tolerance_mps=1e-5),
+    "casadi:hpipm": dict(tolerance_mps=1e-4),
+}
+
+
+@pytest.mark.parametrize("name", RECORDED)
+def test_backend_solves_recorded_problems(name: str, solves_recorded: Callable[..., None]) -> None:
+    solves_recorded(name, **RECORDED[name])
+
+
+@pytest.mark.parametrize("name", FIRST_INPUT)
+def test_planner_first_input_agrees(name: str, first_input_agrees: Callable[..., None]) -> None:
+    first_input_agrees(name, **FIRST_INPUT[name])
+
+
+def test_hpipm_reports_a_structure_it_cannot_take_and_the_planner_falls_back(
+    active_start: Any, require_usable: Callable[[str], None]
+) -> None:
+    require_usable("casadi:hpipm")
+    ref, p, t = active_start
+    limits = Limits(v_max_mps=1.0, d_min_m=0.5, a_max_mps2=5.0)  # acceleration rows couple stages
+    planner = MPCPlanner(ref, 0.1, limits, MPCSettings(horizon=6, fast_path=False), solver="casadi:hpipm")
+    planner.reset(t, p)
+    out = planner.step(t, p)
+    assert out.info.mode == "fallback" and "optimal-control" in out.info.status
+    assert np.all(np.isfinite(out.command_mps))
