@@ -5,7 +5,7 @@ from __future__ import annotations
 import dataclasses
 from pathlib import Path
 
-from mpcform.outputs.rundata import write_formation_npz
+from mpcform.outputs.rundata import formation_data, write_formation_npz
 from mpcform.run.runner import RunResult, run_scenario
 from mpcform.scenario.load import load_scenario
 from mpcform.scenario.spec import Scenario
@@ -25,5 +25,5 @@ def short_run(name: str, out_dir: Path, steps: int = 40, formation: bool = True)
     scenario = shortened(load_scenario(SCENARIOS / f"{name}.toml"), steps)
     run = run_scenario(scenario, out_dir)
     if formation:
-        write_formation_npz(out_dir, scenario, run.simulation.t_s)
+        write_formation_npz(out_dir, formation_data(scenario, run.simulation.t_s))
     return run

@@ -10,7 +10,7 @@ import pytest
 from saved_runs import SCENARIOS, shortened
 
 from mpcform.outputs.export import export_run
-from mpcform.outputs.rundata import load_run, write_formation_npz
+from mpcform.outputs.rundata import formation_data, load_run, write_formation_npz
 from mpcform.run.runner import run_scenario
 from mpcform.scenario.load import load_scenario
 
@@ -55,10 +55,10 @@ def test_the_100_drone_flight_has_100_drones() -> None:
 def test_every_scenario_runs_writes_and_exports(tmp_path: Path, path: Path) -> None:
     scenario = shortened(load_scenario(path), STEPS)
     run = run_scenario(scenario, tmp_path)
-    write_formation_npz(tmp_path, scenario, run.simulation.t_s)
+    write_formation_npz(tmp_path, formation_data(scenario, run.simulation.t_s))
     data = load_run(tmp_path)
-    assert data.positions_m.shape == (STEPS + 1, scenario.n, scenario.dim)
-    assert np.all(np.isfinite(data.positions_m)) and not data.scale_is_relative
+    assert data.trajectory.positions_m.shape == (STEPS + 1, scenario.n, scenario.dim)
+    assert np.all(np.isfinite(data.trajectory.positions_m)) and not data.formation.scale_is_relative
     result = export_run(data, tmp_path / "export", tolerance_m=0.05)
     assert result.fit.within_tolerance
     assert len(list((tmp_path / "export").glob("drone*_setpoints.csv"))) == scenario.n

@@ -1,9 +1,11 @@
 """The scenario runner's commands beyond ``run``: figures, animation, comparison, export, checks.
 
 ``mpcform.cli.main`` wires these in; each command is a thin layer over library functions
-(:mod:`mpcform.outputs.rundata`, :mod:`mpcform.outputs.plotting`, :mod:`mpcform.outputs.export`,
-:mod:`mpcform.outputs.compare`, :mod:`mpcform.scenario.check`). Plotting is imported only when a figure is
-asked for, after checking that matplotlib is installed (else exit 2 with the install hint).
+(:mod:`mpcform.outputs.rundata`, :mod:`mpcform.outputs.figures`, :mod:`mpcform.outputs.animation`,
+:mod:`mpcform.outputs.export`, :mod:`mpcform.outputs.compare`, :mod:`mpcform.scenario.check`).
+``run --plot/--animate/--export`` draws and exports the run in memory; ``plot``, ``compare`` and
+``export`` read saved runs. Plotting is imported only when a figure is asked for, after checking
+that matplotlib is installed (else exit 2 with the install hint).
 """
 
 from __future__ import annotations
@@ -17,8 +19,9 @@ from typing import Any
 
 from mpcform.cli.progress import ProgressBar
 from mpcform.errors import MPCFormError, ValidationError
-from mpcform.outputs.export import CRAZYFLIE_MAX_PIECES, DEFAULT_TOLERANCE_M, ExportResult, export_run
-from mpcform.outputs.rundata import RunData, load_run, write_formation_npz
+from mpcform.outputs.export import CRAZYFLIE_MAX_PIECES, ExportResult, export_run
+from mpcform.outputs.polynomial import DEFAULT_TOLERANCE_M
+from mpcform.outputs.rundata import RunData, formation_data, load_run, write_formation_npz
 from mpcform.run.runner import RunResult, describe
 from mpcform.scenario.check import check_scenario_file
 from mpcform.scenario.spec import Scenario
@@ -65,11 +68,12 @@ def check_run_options(args: argparse.Namespace, scenario: Scenario) -> None:
 
 
 def finish_run(args: argparse.Namespace, scenario: Scenario, run: RunResult) -> None:
-    """After ``run`` wrote its files: formation data, figures, animation and export as asked."""
+    """After ``run`` wrote its files: ``formation.npz``, figures, animation and export as asked,
+    all from the run and the scenario in memory (nothing is read back)."""
     if run.out_dir is None or not (args.plot or args.animate or args.export):
         return
-    write_formation_npz(run.out_dir, scenario, run.simulation.t_s)
-    data = load_run(run.out_dir)
+    data = RunData(run.simulation, formation_data(scenario, run.simulation.t_s), run.summary, run.out_dir)
+    write_formation_npz(run.out_dir, data.formation)
     _figures(data, run.out_dir / PLOTS_DIR, args.plot, args.animate)
     if args.export:
         _report_export(export_run(data, run.out_dir / EXPORT_DIR, altitude_m=args.altitude,
@@ -96,7 +100,7 @@ def _compare(args: argparse.Namespace) -> int:
     if args.json:
         Path(args.json).write_text(json.dumps(records, indent=2) + "\n")
     if not args.no_figure:
-        from mpcform.outputs.plotting import compare_runs
+        from mpcform.outputs.figures import compare_runs
 
         path = compare_runs(runs, args.figure, run_labels(runs))
         print(f"wrote {path}")
@@ -176,13 +180,15 @@ def _add_export_options(cmd: argparse.ArgumentParser) -> None:
 def _figures(data: RunData, out: Path, plot: bool, animate: bool) -> None:
     if not (plot or animate):
         return
-    from mpcform.outputs import plotting  # imported only when figures are asked for
-
     if plot:
-        paths = plotting.plot_run(data, out)
+        from mpcform.outputs.figures import plot_run  # imported only when figures are asked for
+
+        paths = plot_run(data, out)
         print(f"wrote {len(paths)} figures ({', '.join(p.name for p in paths)}) to {out}")
     if animate:
-        print(f"wrote {plotting.animate_run(data, out / plotting.ANIMATION_FILE)}")
+        from mpcform.outputs.animation import ANIMATION_FILE, animate_run
+
+        print(f"wrote {animate_run(data, out / ANIMATION_FILE)}")
 
 
 def _report_export(result: ExportResult) -> None:

@@ -5,9 +5,8 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Any
 
-import numpy as np
-
 from mpcform.outputs.rundata import RunData
+from mpcform.sim.metrics import tracking_cost_m2s
 
 COLUMNS = (
     ("run", "run"),
@@ -54,7 +53,7 @@ def comparison_records(runs: Sequence[RunData]) -> list[dict[str, Any]]:
             "solver": s.get("solver"),
             "final_tracking_error": m.get("final_tracking_error"),
             "max_tracking_error": m.get("max_tracking_error"),
-            "tracking_cost": tracking_cost(run),
+            "tracking_cost": tracking_cost_m2s(run.trajectory),
             "min_separation_segments": m.get("min_separation_segments"),
             "max_speed": m.get("max_speed"),
             "violations": f"{m.get('separation_violations', '-')}/{m.get('speed_violations', '-')}",
@@ -66,13 +65,6 @@ def comparison_records(runs: Sequence[RunData]) -> list[dict[str, Any]]:
             "step_ms_p90": stats.get("p90"),
         })  # fmt: skip
     return records
-
-
-def tracking_cost(run: RunData) -> float:
-    """``integral of sum_i ||p_i - p*_i||^2 dt`` over the run [m^2 s] (trapezoidal rule over the
-    samples): one number for how closely a whole run followed its reference."""
-    err2 = ((run.positions_m - run.reference_m) ** 2).sum(axis=(1, 2))
-    return float(np.sum(0.5 * (err2[1:] + err2[:-1]) * np.diff(run.t_s)))
 
 
 def markdown_table(records: Sequence[dict[str, Any]]) -> str:

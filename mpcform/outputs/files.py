@@ -1,5 +1,16 @@
-"""Output files of a run (DESIGN.md section 5): ``trajectory.npz``, ``trajectory.csv``,
-``summary.json``, and a short readable summary for the terminal."""
+"""The output files of a run, and a short readable summary for the terminal.
+
+``mpcform run`` writes into its directory (these names and columns are a contract):
+
+- ``trajectory.npz``: ``t`` (T,) [s], ``p`` (T, n, d) positions [m], ``u`` (T-1, n, d) the
+  command [m/s] applied over ``[t_j, t_{j+1})``, ``p_ref`` (T, n, d) desired positions [m];
+- ``trajectory.csv``: one row per time and drone, ``t, drone, x, y[, z], vx, vy[, vz],
+  x_ref, y_ref[, z_ref]`` (the command columns are empty at the final time);
+- ``summary.json``: ``scenario, n, dim, dt, steps, controller, solver``, ``limits``
+  (``v_max``, ``d_min``; null where unset), ``provenance`` (mpcform, Python and dependency
+  versions, seed, scenario file and hash) and ``metrics`` (:func:`mpcform.sim.metrics.run_metrics`);
+  strict JSON, non-finite numbers written as null.
+"""
 
 from __future__ import annotations
 
@@ -13,7 +24,7 @@ from typing import Any
 
 import numpy as np
 
-from mpcform.sim.simulation import SimulationResult
+from mpcform.sim.trajectory import Trajectory
 
 TRAJECTORY_NPZ = "trajectory.npz"
 TRAJECTORY_CSV = "trajectory.csv"
@@ -31,18 +42,18 @@ def csv_header(dim: int) -> list[str]:
     return ["t", "drone", *axes, *(f"v{a}" for a in axes), *(f"{a}_ref" for a in axes)]
 
 
-def write_trajectory_npz(path: Path, result: SimulationResult) -> None:
+def write_trajectory_npz(path: Path, trajectory: Trajectory) -> None:
     """Arrays ``t`` (T,) [s], ``p`` (T, n, d) [m], ``u`` (T-1, n, d) [m/s], ``p_ref`` (T, n, d)."""
-    np.savez_compressed(
-        path, t=result.t_s, p=result.positions_m, u=result.commands_mps, p_ref=result.reference_m
-    )
+    traj = trajectory
+    np.savez_compressed(path, t=traj.t_s, p=traj.positions_m, u=traj.commands_mps, p_ref=traj.reference_m)
 
 
-def write_trajectory_csv(path: Path, result: SimulationResult) -> None:
+def write_trajectory_csv(path: Path, trajectory: Trajectory) -> None:
     """One row per time and drone; the command columns are empty at the final time."""
-    steps, n, dim = result.commands_mps.shape
-    t = result.t_s.tolist()
-    p, u, ref = (a.tolist() for a in (result.positions_m, result.commands_mps, result.reference_m))
+    traj = trajectory
+    steps, n, dim = traj.commands_mps.shape
+    t = traj.t_s.tolist()
+    p, u, ref = (a.tolist() for a in (traj.positions_m, traj.commands_mps, traj.reference_m))
     empty = [""] * dim
     with path.open("w", newline="") as f:
         writer = csv.writer(f, lineterminator="\n")
@@ -118,11 +129,11 @@ def write_summary_json(path: Path, summary: dict[str, Any]) -> None:
     path.write_text(json.dumps(json_safe(summary), indent=2, allow_nan=False) + "\n")
 
 
-def write_outputs(out_dir: Path, result: SimulationResult, summary: dict[str, Any]) -> Path:
+def write_outputs(out_dir: Path, trajectory: Trajectory, summary: dict[str, Any]) -> Path:
     """Create ``out_dir`` (with parents) and write the three output files into it."""
     out_dir.mkdir(parents=True, exist_ok=True)
-    write_trajectory_npz(out_dir / TRAJECTORY_NPZ, result)
-    write_trajectory_csv(out_dir / TRAJECTORY_CSV, result)
+    write_trajectory_npz(out_dir / TRAJECTORY_NPZ, trajectory)
+    write_trajectory_csv(out_dir / TRAJECTORY_CSV, trajectory)
     write_summary_json(out_dir / SUMMARY_JSON, summary)
     return out_dir
 

@@ -1,11 +1,13 @@
-"""A saved run read back from its output directory, plus the formation data the figures need.
+"""A finished run as the figures and the exports see it: its trajectory, formation data and summary.
 
-``mpcform run`` writes ``trajectory.npz`` and ``summary.json`` (DESIGN.md section 5). The
-figures and the exports also need what only the scenario knows: the template offsets (for
+A run directory holds ``trajectory.npz`` and ``summary.json`` (:mod:`mpcform.outputs.files`).
+The figures and the exports also need what only the scenario knows: the template offsets (for
 the best-fit scale and the formation's edges), the reference's scale and the obstacles.
-:func:`write_formation_npz` saves them as ``formation.npz`` beside the contract's files;
-without it :func:`load_run` falls back to the reference's start shape (scale then relative to
-the start).
+``mpcform run --plot/--export`` takes them from the scenario in memory (:func:`formation_data`)
+and saves them as ``formation.npz`` beside the other files: ``offsets`` (n, d) [m],
+``scale_ref`` (T,), ``obstacles`` (k, d + 2) [m] (centre, radius, clearance; NaN clearance:
+d_min / 2). :func:`load_run` reads a directory back into the same :class:`RunData`; without
+``formation.npz`` it falls back to the reference's start shape (scale then relative to the start).
 """
 
 from __future__ import annotations
@@ -20,6 +22,7 @@ import numpy as np
 from mpcform._validate import Array
 from mpcform.errors import ValidationError
 from mpcform.outputs.files import SUMMARY_JSON, TRAJECTORY_NPZ
+from mpcform.sim.trajectory import Trajectory
 
 if TYPE_CHECKING:
     from mpcform.scenario.spec import Scenario
@@ -32,33 +35,38 @@ class RunDirError(ValidationError):
 
 
 @dataclass(frozen=True, eq=False)
-class RunData:
-    """The arrays and summary of one saved run.
+class FormationData:
+    """The scenario's side of a run: ``offsets_m`` (n, d), the template (or, without
+    ``formation.npz``, the reference's start shape ``s0 R0 r_i``); ``scale_ref`` (T,), the
+    reference's scale, or None when unknown; ``obstacles`` (k, d + 2): centre, radius,
+    clearance (NaN: d_min / 2) of each sphere."""
 
-    ``offsets_m`` (n, d): the template (or, without ``formation.npz``, the reference's start
-    shape ``s0 R0 r_i``); ``scale_ref`` (T,): the reference's scale, or None when unknown;
-    ``obstacles`` (k, d + 2): centre, radius, clearance (NaN: d_min / 2) of each sphere;
-    ``scale_is_relative``: True when the scale is measured relative to the start.
-    """
-
-    directory: Path
-    t_s: Array  # (T,)
-    positions_m: Array  # (T, n, d)
-    commands_mps: Array  # (T - 1, n, d)
-    reference_m: Array  # (T, n, d)
-    summary: dict[str, Any]
     offsets_m: Array
     scale_ref: Array | None
     obstacles: Array
-    scale_is_relative: bool
+
+    @property
+    def scale_is_relative(self) -> bool:
+        """True when the scale is measured relative to the start (no reference scale known)."""
+        return self.scale_ref is None
+
+
+@dataclass(frozen=True, eq=False)
+class RunData:
+    """One run: its trajectory, formation data, ``summary.json`` record and output directory."""
+
+    trajectory: Trajectory
+    formation: FormationData
+    summary: dict[str, Any]
+    directory: Path
 
     @property
     def n(self) -> int:
-        return int(self.positions_m.shape[1])
+        return self.trajectory.n
 
     @property
     def dim(self) -> int:
-        return int(self.positions_m.shape[2])
+        return self.trajectory.dim
 
     @property
     def name(self) -> str:
@@ -80,27 +88,28 @@ class RunData:
         return f"{self.name} ({ctrl})"
 
 
-def formation_arrays(scenario: Scenario, t_s: Array) -> dict[str, Array]:
-    """The ``formation.npz`` arrays of ``scenario`` sampled at ``t_s``."""
+def formation_data(scenario: Scenario, t_s: Array) -> FormationData:
+    """The formation data of ``scenario`` with the reference's scale sampled at ``t_s``."""
     k, d = len(scenario.obstacles), scenario.dim
     obstacles = np.full((k, d + 2), np.nan)
     for row, obstacle in zip(obstacles, scenario.obstacles, strict=True):
         row[:d], row[d] = obstacle.center_m, obstacle.radius_m
         if obstacle.clearance_m is not None:
             row[d + 1] = obstacle.clearance_m
-    return {
-        "offsets": np.array(scenario.template.offsets),
-        "scale_ref": np.asarray(scenario.reference.profile(np.asarray(t_s, dtype=float)).scale, dtype=float),
-        "obstacles": obstacles,
-    }
+    return FormationData(
+        offsets_m=np.array(scenario.template.offsets),
+        scale_ref=np.asarray(scenario.reference.profile(np.asarray(t_s, dtype=float)).scale, dtype=float),
+        obstacles=obstacles,
+    )
 
 
-def write_formation_npz(out_dir: str | Path, scenario: Scenario, t_s: Array) -> Path:
+def write_formation_npz(out_dir: str | Path, formation: FormationData) -> Path:
     """Write ``formation.npz`` (offsets (n, d) [m], scale_ref (T,), obstacles (k, d + 2) [m])."""
+    if formation.scale_ref is None:
+        raise ValidationError("formation.scale_ref", "unknown (a run read back without formation.npz)")
     path = Path(out_dir) / FORMATION_NPZ
-    arrays = formation_arrays(scenario, t_s)
     np.savez_compressed(
-        path, offsets=arrays["offsets"], scale_ref=arrays["scale_ref"], obstacles=arrays["obstacles"]
+        path, offsets=formation.offsets_m, scale_ref=formation.scale_ref, obstacles=formation.obstacles
     )
     return path
 
@@ -111,13 +120,10 @@ def load_run(directory: str | Path) -> RunData:
     if not root.is_dir():
         raise RunDirError(str(root), "no such run directory (write one with `mpcform run --out DIR`)")
     arrays = _npz(root / TRAJECTORY_NPZ, ("t", "p", "u", "p_ref"))
-    t, p, u, ref = (arrays[k] for k in ("t", "p", "u", "p_ref"))
-    if p.ndim != 3 or p.shape[2] not in (2, 3) or t.shape != (p.shape[0],) or p.shape[0] < 2:
-        raise RunDirError(str(root / TRAJECTORY_NPZ), f"expected t (T,) and p (T, n, 2 or 3) with "
-                          f"T >= 2, got shapes {t.shape} and {p.shape}")  # fmt: skip
-    if u.shape != (p.shape[0] - 1, *p.shape[1:]) or ref.shape != p.shape:
-        raise RunDirError(str(root / TRAJECTORY_NPZ), f"expected u (T-1, n, d) and p_ref (T, n, d) for "
-                          f"p {p.shape}, got {u.shape} and {ref.shape}")  # fmt: skip
+    try:
+        trajectory = Trajectory(arrays["t"], arrays["p"], arrays["u"], arrays["p_ref"])
+    except ValidationError as exc:
+        raise RunDirError(str(root / TRAJECTORY_NPZ), str(exc)) from None
     summary_path = root / SUMMARY_JSON
     try:
         summary = json.loads(summary_path.read_text())
@@ -127,17 +133,19 @@ def load_run(directory: str | Path) -> RunData:
         raise RunDirError(str(summary_path), f"cannot read it as JSON: {exc}") from None
     if not isinstance(summary, dict):
         raise RunDirError(str(summary_path), "expected a JSON object")
-    n, d = p.shape[1:]
-    formation_path = root / FORMATION_NPZ
-    if formation_path.exists():
-        extra = _npz(formation_path, ("offsets", "scale_ref", "obstacles"))
-        if extra["offsets"].shape != (n, d) or extra["scale_ref"].shape != t.shape:
-            raise RunDirError(str(formation_path), f"offsets {extra['offsets'].shape} or scale_ref "
-                              f"{extra['scale_ref'].shape} do not match p {p.shape}")  # fmt: skip
-        return RunData(root, t, p, u, ref, summary, extra["offsets"], extra["scale_ref"],
-                       extra["obstacles"].reshape(-1, d + 2), False)  # fmt: skip
-    start_shape = ref[0] - ref[0].mean(axis=0)
-    return RunData(root, t, p, u, ref, summary, start_shape, None, np.empty((0, d + 2)), True)
+    return RunData(trajectory, _load_formation(root / FORMATION_NPZ, trajectory), summary, root)
+
+
+def _load_formation(path: Path, trajectory: Trajectory) -> FormationData:
+    n, d = trajectory.n, trajectory.dim
+    if not path.exists():
+        ref0 = trajectory.reference_m[0]
+        return FormationData(ref0 - ref0.mean(axis=0), None, np.empty((0, d + 2)))
+    extra = _npz(path, ("offsets", "scale_ref", "obstacles"))
+    if extra["offsets"].shape != (n, d) or extra["scale_ref"].shape != trajectory.t_s.shape:
+        shapes = f"offsets {extra['offsets'].shape} or scale_ref {extra['scale_ref'].shape}"
+        raise RunDirError(str(path), f"{shapes} do not match p {trajectory.positions_m.shape}")
+    return FormationData(extra["offsets"], extra["scale_ref"], extra["obstacles"].reshape(-1, d + 2))
 
 
 def _npz(path: Path, keys: tuple[str, ...]) -> dict[str, Array]:
@@ -147,6 +155,8 @@ def _npz(path: Path, keys: tuple[str, ...]) -> dict[str, Array]:
             if missing:
                 raise RunDirError(str(path), f"missing arrays {missing} (has {sorted(npz.files)})")
             return {k: np.asarray(npz[k], dtype=float) for k in keys}
+    except RunDirError:
+        raise
     except FileNotFoundError:
         raise RunDirError(str(path), "missing (write it with `mpcform run --out DIR`)") from None
     except (OSError, ValueError) as exc:

@@ -1,4 +1,16 @@
-"""The run metrics of DESIGN.md section 5, computed from a :class:`SimulationResult`."""
+"""Metrics of a run: per-sample series of a :class:`Trajectory` and the summary's ``metrics`` record.
+
+:func:`run_metrics` gives the ``metrics`` of ``summary.json``: ``final_tracking_error`` and
+``max_tracking_error`` (max over drones of ``||p_i - p*_i||`` [m], at the end / over time),
+``min_separation`` (smallest distance between two drones over the samples [m]) and
+``min_separation_segments`` (along the straight segments between samples; both null for one
+drone), ``max_speed`` (largest ``||u_i||`` [m/s]), ``separation_violations`` (count of
+(sample, pair) closer than d_min) and ``speed_violations`` (count of (step, drone) faster than
+v_max), ``qp_solves``, ``fast_path_steps``, ``solver_failures``, ``max_slack`` [m], and
+``step_time_ms`` (median, p90 and max of the controller's wall-clock time per step mode). The
+figures draw the same series (:func:`tracking_errors_m`, :func:`min_separations_m`,
+:func:`command_speeds_mps`).
+"""
 
 from __future__ import annotations
 
@@ -6,18 +18,53 @@ from typing import Any
 
 import numpy as np
 
+from mpcform._validate import Array
 from mpcform.formation.geometry import min_pair_distance, min_segment_distance, pairs_within
+from mpcform.formation.kinematics import fit_formation
+from mpcform.formation.template import Template
 from mpcform.sim.simulation import SimulationResult
+from mpcform.sim.trajectory import Trajectory
 
 REL_TOL = 1e-9  # violations are counted beyond this relative tolerance
 
 
+# ---- series ------------------------------------------------------------------------------
+def tracking_errors_m(trajectory: Trajectory) -> Array:
+    """``||p_i - p*_i||`` [m] at every sample, (T, n)."""
+    return np.asarray(np.linalg.norm(trajectory.positions_m - trajectory.reference_m, axis=-1))
+
+
+def min_separations_m(trajectory: Trajectory) -> Array:
+    """Smallest distance between two drones at every sample [m], (T,); inf for one drone."""
+    return np.array([min_pair_distance(p) for p in trajectory.positions_m])
+
+
+def command_speeds_mps(trajectory: Trajectory) -> Array:
+    """``||u_i||`` [m/s] of every command (held over its step), (T - 1, n)."""
+    return np.asarray(np.linalg.norm(trajectory.commands_mps, axis=-1))
+
+
+def fitted_scales(offsets_m: Array, positions_m: Array) -> Array:
+    """Best-fit (Umeyama, eq. 13 inverted) scale of ``positions_m`` (T, n, d) over the template
+    ``offsets_m`` (n, d), centred here, at every sample, (T,)."""
+    template = Template(offsets_m - offsets_m.mean(axis=0))
+    return np.array([fit_formation(template, p).state.scale for p in positions_m])
+
+
+def tracking_cost_m2s(trajectory: Trajectory) -> float:
+    """``integral of sum_i ||p_i - p*_i||^2 dt`` over the run [m^2 s] (trapezoidal rule over the
+    samples): one number for how closely a whole run followed its reference."""
+    err2 = ((trajectory.positions_m - trajectory.reference_m) ** 2).sum(axis=(1, 2))
+    return float(np.sum(0.5 * (err2[1:] + err2[:-1]) * np.diff(trajectory.t_s)))
+
+
+# ---- the summary's metrics ---------------------------------------------------------------
 def run_metrics(result: SimulationResult, v_max_mps: float | None, d_min_m: float | None) -> dict[str, Any]:
     """Tracking, separation, speed, solver and timing metrics of one run (JSON-ready)."""
-    err = np.linalg.norm(result.positions_m - result.reference_m, axis=-1).max(axis=1)
-    speed = np.linalg.norm(result.commands_mps, axis=-1)
+    err = tracking_errors_m(result).max(axis=1)
+    speed = command_speeds_mps(result)
     pos = result.positions_m
-    sample_min = min(min_pair_distance(p) for p in pos)
+    sample_min = float(min_separations_m(result).min())
     seg_min = min(min_segment_distance(a, b) for a, b in zip(pos[:-1], pos[1:], strict=True))
     sep_viol = 0
     if d_min_m is not None:

@@ -287,18 +287,3 @@ def second_order_plant(
     plant = LinearPlant(n, dim, [group(z, w, (0, 1)), group(zz, wz, (2,))], **kwargs)
     plant.kind = "second_order"
     return plant
-
-
-def make_plant(kind: str, n: int, dim: int, **options: object) -> Plant:
-    """Build a plant by kind; ``options`` go to its constructor (e.g. ``tau_s`` for ``lag``)."""
-    if kind == "ideal":
-        return IdealPlant(n, dim, **options)
-    if kind == "lag":
-        return lag_plant(n, dim, **options)  # type: ignore[arg-type]
-    if kind == "second_order":
-        return second_order_plant(n, dim, **options)  # type: ignore[arg-type]
-    if kind == "quadrotor":
-        from mpcform.sim.quadrotor import QuadrotorPlant
-
-        return QuadrotorPlant(n, dim, **options)  # type: ignore[arg-type]
-    raise ValidationError("plant.kind", f"expected one of {KINDS}, got {kind!r}")

@@ -14,20 +14,25 @@ import numpy as np
 
 from mpcform._validate import Array, finite_array, positive
 from mpcform.control.base import Controller, StepInfo
-from mpcform.errors import MPCFormError
+from mpcform.errors import MPCFormError, ValidationError
+from mpcform.sim.trajectory import Trajectory
 
 
-@dataclass(frozen=True)
-class SimulationResult:
-    """Time series of one run: T samples, T - 1 commands."""
+@dataclass(frozen=True, eq=False)
+class SimulationResult(Trajectory):
+    """A simulated :class:`~mpcform.sim.trajectory.Trajectory` and the controller's record of its
+    T - 1 steps (fields ``t_s, positions_m, commands_mps, reference_m, infos, step_times_s,
+    controller``, in this order)."""
 
-    t_s: Array  # (T,)
-    positions_m: Array  # (T, n, d)
-    commands_mps: Array  # (T - 1, n, d), applied over [t_j, t_{j+1})
-    reference_m: Array  # (T, n, d) desired positions p*(t)
     infos: tuple[StepInfo, ...]
     step_times_s: Array  # (T - 1,) wall-clock time of each controller call
     controller: str
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        if len(self.infos) != self.steps or self.step_times_s.shape != (self.steps,):
+            raise ValidationError("simulation result", f"expected {self.steps} step infos and step times, "
+                                  f"got {len(self.infos)} and shape {self.step_times_s.shape}")  # fmt: skip
 
 
 def simulate(

@@ -12,6 +12,7 @@ from saved_runs import short_run
 
 from mpcform.cli import handlers as cli_runner
 from mpcform.cli.main import main
+from mpcform.outputs import rundata
 from mpcform.outputs.rundata import load_run
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -64,6 +65,33 @@ def test_run_with_plot_animate_export(tmp_path: Path, capsys: pytest.CaptureFixt
     export = {p.name for p in (out / "export").iterdir()}
     assert {"drone000_setpoints.csv", "drone002_poly7.csv", "provenance.json"} <= export
     assert json.loads((out / "export" / "provenance.json").read_text())["altitude_m"] == 1.5
+
+
+@needs_plot
+def test_run_draws_and_exports_from_memory(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """`run --plot --export` reads none of the run's files back, and draws and exports exactly
+    what `plot DIR` and `export DIR` make of the files it wrote."""
+    out = tmp_path / "out"
+    scenario = ROOT / "scenarios" / "obstacles_planar.toml"
+    path = short_copy(tmp_path, scenario, ("duration = ", "duration = 1.5 #"))
+
+    def no_read_back(*args: object, **kwargs: object) -> None:
+        raise AssertionError(f"read back: {args}")
+
+    with monkeypatch.context() as patch:
+        for module, name in ((cli_runner, "load_run"), (rundata, "load_run"), (np, "load")):
+            patch.setattr(module, name, no_read_back)
+        assert main(["run", path, "--out", str(out), "--plot", "--export"]) == 0
+    assert "wrote 5 figures" in capsys.readouterr().out
+    assert main(["plot", str(out), "--out", str(tmp_path / "plots")]) == 0
+    assert main(["export", str(out), "--out", str(tmp_path / "export")]) == 0
+    for name in ("plots", "export"):
+        memory = sorted((out / name).iterdir())
+        assert [p.name for p in memory] == sorted(p.name for p in (tmp_path / name).iterdir())
+        for file in memory:
+            assert file.read_bytes() == (tmp_path / name / file.name).read_bytes(), file.name
 
 
 def test_run_export_without_plotting(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
@@ -146,7 +174,7 @@ def test_compare(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     assert len([line for line in table if line.startswith("| worked_example")]) == 3
     assert figure.stat().st_size > 5_000
     rows = json.loads(records.read_text())
-    run = load_run(tmp_path / "tracking")
+    run = load_run(tmp_path / "tracking").trajectory
     err2 = np.sum((run.positions_m - run.reference_m) ** 2, axis=(1, 2))  # trapezoid by hand
     steps = zip(err2[:-1], err2[1:], run.t_s[:-1], run.t_s[1:], strict=True)
     want = sum(0.5 * (a + b) * (t1 - t0) for a, b, t0, t1 in steps)

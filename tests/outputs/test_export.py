@@ -8,20 +8,15 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from hypothesis import given
-from hypothesis import strategies as st
 from saved_runs import SCENARIOS, short_run, shortened
 
 from mpcform.errors import ValidationError
 from mpcform.outputs.export import (
-    CONTINUITY,
     CRAZYFLIE_MAX_PIECES,
     POLY_HEADER,
     PROVENANCE_JSON,
     SETPOINT_COLUMNS,
     export_run,
-    fit_piecewise_polynomial,
-    fit_positions,
     read_poly,
     read_setpoints,
 )
@@ -119,36 +114,6 @@ def test_altitude_applies_to_planar_runs_only(tmp_path: Path) -> None:
         export_run(load_run(tmp_path / "run"), tmp_path / "export", altitude_m=1.0)
     result = export_run(load_run(tmp_path / "run"), tmp_path / "export")
     assert any("below the floor" in w for w in result.warnings)  # the swap is centred at z = 0
-
-
-@given(st.lists(st.floats(-3.0, 3.0), min_size=8, max_size=8), st.floats(0.5, 5.0))
-def test_one_piece_reproduces_a_degree_7_polynomial(coef: list[float], span: float) -> None:
-    t = np.linspace(0.0, span, 60)
-    y = np.polynomial.polynomial.polyval(t / span, coef)
-    poly = fit_piecewise_polynomial(t, y[:, None], 1)
-    assert np.allclose(poly.evaluate(t)[:, 0], y, atol=1e-6 * (1 + np.abs(coef).sum()))
-
-
-@given(st.integers(2, 12), st.integers(0, 2**32 - 1))
-def test_pieces_join_up_to_the_jerk(pieces: int, seed: int) -> None:
-    rng = np.random.default_rng(seed)
-    t = np.linspace(0.0, 10.0, 201)
-    y = np.cumsum(rng.normal(0.0, 0.1, (201, 2)), axis=0)  # a rough path
-    poly = fit_piecewise_polynomial(t, y, pieces)
-    joints = poly.breaks_s[1:-1]
-    for derivative in range(CONTINUITY):
-        before = poly.evaluate(joints - 1e-9, derivative)
-        after = poly.evaluate(joints + 1e-9, derivative)
-        scale = 1.0 + np.abs(before).max()
-        assert np.allclose(before, after, atol=1e-5 * scale)
-
-
-def test_fit_stops_at_two_samples_per_piece() -> None:
-    t = np.linspace(0.0, 1.0, 11)
-    p = np.zeros((11, 1, 2))
-    p[::2, 0, 0] = 1.0  # a zigzag no smooth curve follows
-    fit = fit_positions(t, p, tolerance_m=1e-6)
-    assert not fit.within_tolerance and fit.polynomial.pieces == 5
 
 
 def test_a_colliding_plan_is_flagged(tmp_path: Path) -> None:

@@ -1,4 +1,4 @@
-"""Saved runs read back: the contract's files, the formation data, and clear errors."""
+"""Runs in memory and read back: the same trajectory, formation data and summary; clear errors."""
 
 from __future__ import annotations
 
@@ -7,34 +7,68 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from saved_runs import short_run
+from saved_runs import SCENARIOS, short_run, shortened
 
-from mpcform.outputs.rundata import FORMATION_NPZ, RunDirError, load_run
+from mpcform.errors import ValidationError
+from mpcform.outputs.rundata import (
+    FORMATION_NPZ,
+    FormationData,
+    RunData,
+    RunDirError,
+    formation_data,
+    load_run,
+    write_formation_npz,
+)
+from mpcform.run.runner import run_scenario
+from mpcform.scenario.load import load_scenario
 
 
 def test_round_trip_with_formation_data(tmp_path: Path) -> None:
     run = short_run("obstacles_planar", tmp_path, steps=10)
     data = load_run(tmp_path)
-    sim = run.simulation
-    assert np.array_equal(data.t_s, sim.t_s) and np.array_equal(data.positions_m, sim.positions_m)
-    assert np.array_equal(data.commands_mps, sim.commands_mps)
-    assert np.array_equal(data.reference_m, sim.reference_m)
+    sim, traj = run.simulation, data.trajectory
+    assert np.array_equal(traj.t_s, sim.t_s) and np.array_equal(traj.positions_m, sim.positions_m)
+    assert np.array_equal(traj.commands_mps, sim.commands_mps)
+    assert np.array_equal(traj.reference_m, sim.reference_m)
     assert (data.n, data.dim, data.name) == (5, 2, "obstacles_planar")
     assert data.d_min_m == 0.5 and data.v_max_mps == 1.5
     assert data.label.startswith("obstacles_planar (mpc, ")
-    assert not data.scale_is_relative and data.scale_ref is not None
-    assert np.allclose(data.scale_ref, 1.0)
-    assert data.obstacles.shape == (2, 4)  # centre (2), radius, clearance
-    assert np.allclose(data.obstacles[:, 2:], [[1.0, 0.25], [1.0, 0.25]])
-    assert np.allclose(data.offsets_m.mean(axis=0), 0.0)
+    formation = data.formation
+    assert not formation.scale_is_relative and formation.scale_ref is not None
+    assert np.allclose(formation.scale_ref, 1.0)
+    assert formation.obstacles.shape == (2, 4)  # centre (2), radius, clearance
+    assert np.allclose(formation.obstacles[:, 2:], [[1.0, 0.25], [1.0, 0.25]])
+    assert np.allclose(formation.offsets_m.mean(axis=0), 0.0)
+
+
+def test_the_run_in_memory_is_the_run_read_back(tmp_path: Path) -> None:
+    scenario = shortened(load_scenario(SCENARIOS / "mission_obstacle_gap.toml"), 12)
+    run = run_scenario(scenario, tmp_path)
+    assert run.out_dir is not None
+    memory = RunData(run.simulation, formation_data(scenario, run.simulation.t_s), run.summary, run.out_dir)
+    write_formation_npz(tmp_path, memory.formation)
+    saved = load_run(tmp_path)
+    for key in ("t_s", "positions_m", "commands_mps", "reference_m"):
+        assert np.array_equal(getattr(memory.trajectory, key), getattr(saved.trajectory, key)), key
+    for key in ("offsets_m", "scale_ref", "obstacles"):
+        assert np.array_equal(getattr(memory.formation, key), getattr(saved.formation, key), equal_nan=True)
+    assert memory.summary == saved.summary and memory.directory == saved.directory
+    assert memory.label == saved.label
+    limits = (scenario.limits.d_min_m, scenario.limits.v_max_mps)
+    assert (memory.d_min_m, memory.v_max_mps) == (saved.d_min_m, saved.v_max_mps) == limits
+    assert np.ptp(memory.formation.scale_ref) > 0  # the mission starts shrinking the formation for the gap
+    assert np.isnan(memory.formation.obstacles[:, 3]).all()  # clearance unset: d_min / 2
 
 
 def test_without_formation_data_the_start_shape_is_used(tmp_path: Path) -> None:
     short_run("worked_example", tmp_path, steps=5, formation=False)
     assert not (tmp_path / FORMATION_NPZ).exists()
     data = load_run(tmp_path)
-    assert data.scale_is_relative and data.scale_ref is None and data.obstacles.shape == (0, 4)
-    assert np.allclose(data.offsets_m, data.reference_m[0] - data.reference_m[0].mean(axis=0))
+    formation, ref = data.formation, data.trajectory.reference_m
+    assert formation.scale_is_relative and formation.scale_ref is None and formation.obstacles.shape == (0, 4)
+    assert np.allclose(formation.offsets_m, ref[0] - ref[0].mean(axis=0))
+    with pytest.raises(ValidationError, match="formation.scale_ref: unknown"):
+        write_formation_npz(tmp_path, formation)
 
 
 def test_errors_name_the_file(tmp_path: Path) -> None:
@@ -49,6 +83,22 @@ def test_errors_name_the_file(tmp_path: Path) -> None:
     (tmp_path / "summary.json").write_text(json.dumps([1, 2]))
     with pytest.raises(RunDirError, match="expected a JSON object"):
         load_run(tmp_path)
-    np.savez(tmp_path / "trajectory.npz", t=np.arange(3.0))
-    with pytest.raises(RunDirError, match="missing arrays"):
+    np.savez(tmp_path / FORMATION_NPZ, offsets=np.zeros((2, 2)), scale_ref=np.ones(6), obstacles=np.zeros(0))
+    (tmp_path / "summary.json").write_text("{}")
+    with pytest.raises(RunDirError, match=r"formation.npz: offsets \(2, 2\) or scale_ref \(6,\) do not"):
         load_run(tmp_path)
+    np.savez(tmp_path / "trajectory.npz", t=np.arange(3.0), p=np.zeros((3, 2, 2)), u=np.zeros((3, 2, 2)),
+             p_ref=np.zeros((3, 2, 2)))  # fmt: skip
+    with pytest.raises(RunDirError, match=r"trajectory.npz: trajectory: expected commands_mps \(T-1, n, d\)"):
+        load_run(tmp_path)
+    np.savez(tmp_path / "trajectory.npz", t=np.arange(3.0))
+    with pytest.raises(RunDirError, match=r"trajectory.npz: missing arrays \['p', 'u', 'p_ref'\]"):
+        load_run(tmp_path)
+
+
+def test_formation_data_of_a_scenario_without_obstacles() -> None:
+    scenario = load_scenario(SCENARIOS / "swap_spatial_12.toml")
+    formation = formation_data(scenario, np.linspace(0.0, 1.0, 3))
+    assert isinstance(formation, FormationData) and not formation.scale_is_relative
+    assert formation.offsets_m.shape == (12, 3) and formation.obstacles.shape == (0, 5)
+    assert formation.scale_ref is not None and formation.scale_ref.shape == (3,)

@@ -8,7 +8,8 @@ import pytest
 from mpcform.errors import ValidationError
 from mpcform.sim import so_rpy
 from mpcform.sim.margin import default_a_max, plant_margin, worst_case_commands
-from mpcform.sim.plants import DRAG_PER_S, lag_plant, make_plant, second_order_plant
+from mpcform.sim.plant_spec import PlantSpec
+from mpcform.sim.plants import DRAG_PER_S, lag_plant, second_order_plant
 from mpcform.sim.wind import Wind
 
 DT = 0.1
@@ -72,11 +73,11 @@ def test_lag_margin_is_a_dt_tau_plus_the_wind_term(tau):
 def test_margin_grows_with_a_max():
     plants = [lag_plant(1, 3, 0.2), second_order_plant(1, 3, 0.7, 6.0, wind=GUSTY)]
     if FLIGHT:
-        plants.append(make_plant("quadrotor", 1, 3, wind=GUSTY))
+        plants.append(PlantSpec("quadrotor", wind=GUSTY).build(1, 3))
     for plant in plants:
         norms = [plant_margin(plant, DT, a).norm_m for a in (0.5, 1.0, 2.0, 4.0)]
         assert all(x < y for x, y in zip(norms, norms[1:], strict=False)), plant.kind
-    assert plant_margin(make_plant("ideal", 2, 3), DT, 3.0).norm_m == 0.0
+    assert plant_margin(PlantSpec("ideal").build(2, 3), DT, 3.0).norm_m == 0.0
 
 
 def test_unbounded_gusts_give_an_infinite_margin():
@@ -92,7 +93,7 @@ def test_default_a_max_comes_from_the_airframe():
     g_tan = 9.81 * np.tan(np.radians(20.0))
     assert default_a_max(lag_plant(1, 2, 0.2)) == pytest.approx(0.5 * g_tan)
     if FLIGHT:
-        assert default_a_max(make_plant("quadrotor", 1, 3)) == pytest.approx(0.5 * g_tan)  # tilt binds
+        assert default_a_max(PlantSpec("quadrotor").build(1, 3)) == pytest.approx(0.5 * g_tan)  # tilt binds
     with pytest.raises(ValidationError, match="margin.steps"):
         plant_margin(lag_plant(1, 2, 0.2), DT, steps=0)
     with pytest.raises(ValidationError, match="margin.a_max"):
@@ -100,10 +101,14 @@ def test_default_a_max_comes_from_the_airframe():
 
 
 LINEAR = [
-    ("lag", {"tau_s": 0.2}),
-    ("lag", {"tau_s": 0.3, "wind": GUSTY}),
-    ("second_order", {"zeta": 0.7, "omega_rad_s": 6.0}),
-    ("second_order", {"zeta": 0.5, "omega_rad_s": 8.0, "zeta_z": 0.9, "omega_z_rad_s": 4.0, "wind": GUSTY}),
+    ("lag", {"time_constant_s": 0.2}),
+    ("lag", {"time_constant_s": 0.3, "wind": GUSTY}),
+    ("second_order", {"damping": 0.7, "natural_frequency_rad_s": 6.0}),
+    (
+        "second_order",
+        {"damping": 0.5, "natural_frequency_rad_s": 8.0, "damping_z": 0.9, "natural_frequency_z_rad_s": 4.0,
+         "wind": GUSTY},
+    ),
 ]
 QUAD = [("quadrotor", {}), ("quadrotor", {"wind": GUSTY})]
 
@@ -111,7 +116,7 @@ QUAD = [("quadrotor", {}), ("quadrotor", {"wind": GUSTY})]
 @pytest.mark.parametrize(("kind", "options"), LINEAR + [pytest.param(*q, marks=needs_flight) for q in QUAD])
 def test_measured_deviation_never_exceeds_the_margin(kind, options):
     rng = np.random.default_rng(len(options) + len(kind))
-    plant = make_plant(kind, 8, 3, seed=5, **options)
+    plant = PlantSpec(kind, **options).build(8, 3, seed=5)
     a = default_a_max(plant)
     margin = plant_margin(plant, DT, a)
     v_max = min(2.0, margin.valid_speed_mps)
@@ -122,7 +127,7 @@ def test_measured_deviation_never_exceeds_the_margin(kind, options):
 
 @pytest.mark.parametrize(("kind", "options"), LINEAR[::2] + [pytest.param(*QUAD[0], marks=needs_flight)])
 def test_worst_case_sequence_meets_the_margin(kind, options):
-    one = make_plant(kind, 1, 3, **options)
+    one = PlantSpec(kind, **options).build(1, 3)
     a = default_a_max(one)
     margin = plant_margin(one, DT, a)
     levels = within_speed(worst_case_commands(one, DT, a, 40), min(3.0, margin.valid_speed_mps))

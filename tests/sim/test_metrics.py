@@ -1,10 +1,25 @@
-"""Run metrics on a hand-built run whose distances, speeds and errors are known by hand."""
+"""Run metrics on a hand-built run whose distances, speeds and errors are known by hand; the
+best-fit scale on exact formations and on the worked example."""
+
+import dataclasses
 
 import numpy as np
 import pytest
+from helpers import random_state, random_template
+from saved_runs import SCENARIOS, shortened
 
 from mpcform.control.base import StepInfo
-from mpcform.sim.metrics import run_metrics
+from mpcform.formation.kinematics import forward_kinematics
+from mpcform.run.runner import run_scenario
+from mpcform.scenario.load import load_scenario
+from mpcform.sim.metrics import (
+    command_speeds_mps,
+    fitted_scales,
+    min_separations_m,
+    run_metrics,
+    tracking_cost_m2s,
+    tracking_errors_m,
+)
 from mpcform.sim.simulation import SimulationResult
 
 # Three planar drones A, B, C over four samples (dt = 1 s).
@@ -89,3 +104,42 @@ def test_single_drone_has_no_separation():
     m = run_metrics(single, 1.0, 0.5)
     assert m["min_separation"] is None and m["min_separation_segments"] is None
     assert m["separation_violations"] == 0 and m["qp_solves"] == 0
+
+
+def test_series_are_the_per_sample_values_behind_the_metrics():
+    errors = np.zeros((4, 3))
+    errors[0, 0], errors[3, 2] = 0.5, 0.1
+    np.testing.assert_allclose(tracking_errors_m(RESULT), errors, atol=1e-15)
+    np.testing.assert_allclose(min_separations_m(RESULT), [2.0, np.sqrt(5.0), 0.6, 0.6])
+    speeds = [[np.sqrt(5.0), 2.0, 0.0], [0.0, 0.0, 2.4], [0.0, 0.0, 0.0]]
+    np.testing.assert_allclose(command_speeds_mps(RESULT), speeds)
+    m = run_metrics(RESULT, None, None)
+    assert m["max_tracking_error"] == tracking_errors_m(RESULT).max()
+    assert m["min_separation"] == min_separations_m(RESULT).min()
+    assert m["max_speed"] == command_speeds_mps(RESULT).max()
+
+
+def test_tracking_cost_is_the_trapezoid_of_the_squared_errors():
+    # squared errors 0.25, 0, 0, 0.01 at t = 0, 1, 2, 3 s
+    assert tracking_cost_m2s(RESULT) == pytest.approx(0.5 * 0.25 + 0.5 * 0.01, rel=1e-12)
+    slower = dataclasses.replace(RESULT, t_s=2.0 * RESULT.t_s)
+    assert tracking_cost_m2s(slower) == pytest.approx(2.0 * tracking_cost_m2s(RESULT), rel=1e-12)
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_fitted_scales_recover_exact_formations(dim):
+    rng = np.random.default_rng(dim)
+    template = random_template(rng, 5, dim)
+    states = [random_state(rng, dim) for _ in range(4)]
+    positions = np.stack([forward_kinematics(template, s) for s in states])
+    shifted = template.offsets + 3.0  # offsets are centred before the fit
+    np.testing.assert_allclose(fitted_scales(shifted, positions), [s.scale for s in states], rtol=1e-9)
+
+
+def test_scale_follows_the_worked_example():
+    scenario = shortened(load_scenario(SCENARIOS / "worked_example.toml"), 200)
+    sim = run_scenario(scenario).simulation
+    fitted = fitted_scales(np.asarray(scenario.template.offsets), sim.positions_m)
+    scale_ref = scenario.reference.profile(sim.t_s).scale
+    assert np.allclose(fitted, scale_ref, atol=0.02)  # s(t) = 2 - e^-t, tracked within O(dt)
+    assert fitted[-1] == pytest.approx(2.0 - np.exp(-sim.t_s[-1]), abs=1e-2)

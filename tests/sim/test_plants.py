@@ -7,10 +7,9 @@ import pytest
 from mpcform.errors import ValidationError
 from mpcform.sim.plants import (
     DRAG_PER_S,
-    PlantSamples,
+    IdealPlant,
     concat_samples,
     lag_plant,
-    make_plant,
     second_order_plant,
 )
 from mpcform.sim.wind import Wind
@@ -103,7 +102,7 @@ def test_steady_wind_offsets_the_linear_plants_by_their_mean_delay():
 
 
 def test_ideal_plant_is_straight_segments_bitwise():
-    plant = make_plant("ideal", 4, 3)
+    plant = IdealPlant(4, 3)
     samples = drive(plant, dt=0.05)
     p = P0
     for u, s in zip(COMMANDS, samples, strict=True):
@@ -165,10 +164,5 @@ def test_plant_checks_its_inputs():
         lag_plant(2, 2, 0.1, samples_per_step=5)
     with pytest.raises(ValidationError, match="wind.mean"):
         lag_plant(2, 2, 0.1, wind=Wind([1.0, 0.0, 0.0]))
-    with pytest.raises(ValidationError, match="wind"):
-        make_plant("ideal", 2, 2, wind=Wind([1.0, 0.0]))
-    with pytest.raises(ValidationError, match="plant.kind"):
-        make_plant("rocket", 2, 2)
     with pytest.raises(ValidationError, match="plant.dim"):
-        make_plant("ideal", 2, 4)
-    assert isinstance(drive(make_plant("second_order", 4, 3, zeta=0.7, omega_rad_s=6.0))[0], PlantSamples)
+        lag_plant(2, 4, 0.1)

@@ -10,7 +10,8 @@ from mpcform.errors import MPCFormError, ValidationError
 from mpcform.formation.state import FormationState
 from mpcform.formation.template import Template
 from mpcform.reference.base import ConstantReference
-from mpcform.sim.simulation import simulate
+from mpcform.sim.simulation import SimulationResult, simulate
+from mpcform.sim.trajectory import Trajectory
 
 P0, GOAL, GAIN = np.array([1.0, -2.0, 0.5]), np.array([4.0, 2.0, -1.0]), 1.5
 SINGLE = Template(np.zeros((1, 3)))
@@ -83,6 +84,18 @@ def test_result_shapes_and_progress():
     np.testing.assert_allclose(run.t_s, 2.0 + 0.1 * np.arange(11))
     np.testing.assert_allclose(run.reference_m, np.broadcast_to(GOAL, (11, 1, 3)))
     assert calls == [(j, 10) for j in range(1, 11)]
+    assert isinstance(run, Trajectory) and (run.n, run.dim, run.steps) == (1, 3, 10)
+
+
+def test_result_keeps_one_record_per_step():
+    run = go_to_goal(0.1, duration=0.3)
+    fields = (run.t_s, run.positions_m, run.commands_mps, run.reference_m)
+    with pytest.raises(ValidationError, match="3 step infos and step times, got 2"):
+        SimulationResult(*fields, run.infos[:2], run.step_times_s, run.controller)
+    with pytest.raises(ValidationError, match=r"got 3 and shape \(2,\)"):
+        SimulationResult(*fields, run.infos, run.step_times_s[:2], run.controller)
+    with pytest.raises(ValidationError, match="trajectory"):
+        SimulationResult(run.t_s[:-1], *fields[1:], run.infos, run.step_times_s, run.controller)
 
 
 def test_lag_is_the_exact_first_order_response():

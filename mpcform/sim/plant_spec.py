@@ -1,0 +1,95 @@
+"""What a scenario's ``[plant]`` table declares, and the one factory that builds the plant from it.
+
+A :class:`PlantSpec` holds the plant's kind and parameters, the wind and the measurement noise;
+:meth:`PlantSpec.build` makes the vectorised plant for n drones in d dimensions (see
+:mod:`mpcform.sim.plants` and :mod:`mpcform.sim.quadrotor`), and :meth:`PlantSpec.margin` the
+robust margin the planner tightens its rows by (:mod:`mpcform.sim.margin`).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from mpcform._validate import positive
+from mpcform.errors import ValidationError
+from mpcform.sim.plants import KINDS, SAMPLES_PER_STEP, IdealPlant, Plant, lag_plant, second_order_plant
+from mpcform.sim.wind import Wind
+
+DEFAULT_TIME_CONSTANT_S = 0.1
+DEFAULT_DAMPING = 0.7
+DEFAULT_NATURAL_FREQUENCY_RAD_S = 6.0
+DEFAULT_RATE_HZ = 500.0
+DEFAULT_ALTITUDE_M = 1.0
+
+
+@dataclass(frozen=True, eq=False)
+class PlantSpec:
+    """A plant as declared: ``kind`` and its parameters (the others are ignored), wind, noise.
+
+    ``margin_m``: the robust margin per drone [m] the planner tightens its rows by; None computes
+    it from the plant (:func:`mpcform.sim.margin.plant_margin`), a number overrides it.
+    """
+
+    kind: str = "ideal"
+    time_constant_s: float = DEFAULT_TIME_CONSTANT_S
+    damping: float = DEFAULT_DAMPING
+    natural_frequency_rad_s: float = DEFAULT_NATURAL_FREQUENCY_RAD_S
+    damping_z: float | None = None
+    natural_frequency_z_rad_s: float | None = None
+    platform: str = "cf2x_L250"
+    model: str = "so_rpy_rotor_drag"
+    rate_hz: float = DEFAULT_RATE_HZ
+    altitude_m: float = DEFAULT_ALTITUDE_M
+    wind: Wind | None = None
+    measurement_noise_m: float = 0.0
+    margin_m: float | None = None
+    samples_per_step: int = SAMPLES_PER_STEP
+
+    def __post_init__(self) -> None:
+        if self.kind not in KINDS:
+            raise ValidationError("plant.kind", f"expected one of {', '.join(KINDS)}, got {self.kind!r}")
+        positive("plant.time_constant", self.time_constant_s)
+        positive("plant.damping", self.damping)
+        positive("plant.natural_frequency", self.natural_frequency_rad_s)
+        for name in ("damping_z", "natural_frequency_z_rad_s"):
+            if getattr(self, name) is not None:
+                positive(f"plant.{name.removesuffix('_rad_s')}", getattr(self, name))
+        positive("plant.rate", self.rate_hz)
+        if not math.isfinite(self.altitude_m):
+            raise ValidationError("plant.altitude", f"expected a finite height [m], got {self.altitude_m!r}")
+        positive("plant.measurement_noise", self.measurement_noise_m, allow_zero=True)
+        if self.margin_m is not None:
+            positive("plant.margin", self.margin_m, allow_zero=True)
+        if self.kind == "ideal" and self.wind is not None:
+            raise ValidationError(
+                "plant.wind", "the ideal plant is the planner's own model and takes no wind: choose "
+                "plant.kind = lag, second_order or quadrotor"
+            )  # fmt: skip
+
+    @property
+    def ideal(self) -> bool:
+        """True for the exact single integrator without measurement noise (the planner's model)."""
+        return self.kind == "ideal" and self.measurement_noise_m == 0.0
+
+    def build(self, n: int, dim: int, seed: int | np.random.SeedSequence = 0) -> Plant:
+        """The plant for ``n`` drones in ``dim`` dimensions; ``seed`` feeds its wind and noise."""
+        common: dict[str, object] = {
+            "wind": self.wind, "noise_std_m": self.measurement_noise_m, "seed": seed,
+            "samples_per_step": self.samples_per_step,
+        }  # fmt: skip
+        if self.kind == "ideal":
+            return IdealPlant(n, dim, **common)
+        if self.kind == "lag":
+            return lag_plant(n, dim, self.time_constant_s, **common)  # type: ignore[arg-type]
+        if self.kind == "second_order":
+            return second_order_plant(
+                n, dim, self.damping, self.natural_frequency_rad_s, zeta_z=self.damping_z,
+                omega_z_rad_s=self.natural_frequency_z_rad_s, **common,  # type: ignore[arg-type]
+            )  # fmt: skip
+        from mpcform.sim.quadrotor import QuadrotorPlant, QuadrotorSpec
+
+        spec = QuadrotorSpec(self.platform, self.model, self.rate_hz, altitude_m=self.altitude_m)
+        return QuadrotorPlant(n, dim, spec, **common)

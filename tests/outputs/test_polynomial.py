@@ -1,0 +1,74 @@
+"""Piecewise degree-7 polynomials: exact on polynomials, continuous up to the jerk, fewest pieces."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+from mpcform.errors import ValidationError
+from mpcform.outputs.polynomial import (
+    CONTINUITY,
+    PiecewisePolynomial,
+    fit_piecewise_polynomial,
+    fit_positions,
+    max_speed,
+)
+
+
+@given(st.lists(st.floats(-3.0, 3.0), min_size=8, max_size=8), st.floats(0.5, 5.0))
+def test_one_piece_reproduces_a_degree_7_polynomial(coef: list[float], span: float) -> None:
+    t = np.linspace(0.0, span, 60)
+    y = np.polynomial.polynomial.polyval(t / span, coef)
+    poly = fit_piecewise_polynomial(t, y[:, None], 1)
+    assert np.allclose(poly.evaluate(t)[:, 0], y, atol=1e-6 * (1 + np.abs(coef).sum()))
+
+
+@given(st.integers(2, 12), st.integers(0, 2**32 - 1))
+def test_pieces_join_up_to_the_jerk(pieces: int, seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    t = np.linspace(0.0, 10.0, 201)
+    y = np.cumsum(rng.normal(0.0, 0.1, (201, 2)), axis=0)  # a rough path
+    poly = fit_piecewise_polynomial(t, y, pieces)
+    joints = poly.breaks_s[1:-1]
+    for derivative in range(CONTINUITY):
+        before = poly.evaluate(joints - 1e-9, derivative)
+        after = poly.evaluate(joints + 1e-9, derivative)
+        scale = 1.0 + np.abs(before).max()
+        assert np.allclose(before, after, atol=1e-5 * scale)
+
+
+def test_fit_stops_at_two_samples_per_piece() -> None:
+    t = np.linspace(0.0, 1.0, 11)
+    p = np.zeros((11, 1, 2))
+    p[::2, 0, 0] = 1.0  # a zigzag no smooth curve follows
+    fit = fit_positions(t, p, tolerance_m=1e-6)
+    assert not fit.within_tolerance and fit.polynomial.pieces == 5
+
+
+def test_fewest_pieces_within_tolerance() -> None:
+    t = np.linspace(0.0, 8.0, 161)
+    p = np.stack([np.sin(t), np.cos(2.0 * t)], axis=-1)[:, None, :]  # one drone, planar
+    fit = fit_positions(t, p, tolerance_m=1e-5)
+    assert fit.within_tolerance and fit.max_error_m <= 1e-5
+    assert fit.polynomial.pieces > 4  # more than the 2 s pieces tried first: the count was searched
+    fewer = fit_piecewise_polynomial(t, p.reshape(161, -1), fit.polynomial.pieces - 1)
+    err = fewer.as_float32().evaluate(t).reshape(p.shape) - p
+    assert np.linalg.norm(err, axis=-1).max() > 1e-5  # one piece less misses the tolerance
+
+
+def test_evaluation_clamps_to_the_span_and_speed_is_sampled() -> None:
+    # x = t, y = 0 over two pieces of 1 s from t0 = 2 s: speed 1 m/s everywhere
+    coef = np.zeros((2, 2, 8))
+    coef[0, 0, :2] = [0.0, 1.0]
+    coef[1, 0, :2] = [1.0, 1.0]
+    poly = PiecewisePolynomial(2.0, np.array([1.0, 1.0]), coef)
+    assert np.allclose(poly.breaks_s, [2.0, 3.0, 4.0])
+    assert np.allclose(poly.evaluate([1.0, 2.5, 3.5, 9.0])[:, 0], [0.0, 0.5, 1.5, 2.0])
+    assert max_speed(poly, 1) == pytest.approx(1.0)
+
+
+def test_bad_piece_counts_are_rejected() -> None:
+    with pytest.raises(ValidationError, match="pieces"):
+        fit_piecewise_polynomial(np.arange(3.0), np.zeros((3, 1)), 0)
