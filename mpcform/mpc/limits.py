@@ -72,6 +72,15 @@ class SphereObstacle:
             )
 
 
+def obstacle_arrays(obstacles: tuple[SphereObstacle, ...], d_min_m: float | None) -> tuple[Array, Array]:
+    """Centres (m, d) [m] and the distance (m,) [m] drones keep from each centre: the radius plus
+    the clearance (half of ``d_min`` when unset)."""
+    half = 0.5 * (d_min_m or 0.0)
+    center = np.array([o.center_m for o in obstacles])
+    required = np.array([o.radius_m + (half if o.clearance_m is None else o.clearance_m) for o in obstacles])
+    return center, required
+
+
 def _key(attr: str) -> str:
     return attr.rsplit("_", 1)[0].replace("_kappa", "") if attr != "downwash_kappa" else "downwash"
 

@@ -29,42 +29,42 @@ from scipy.linalg import solve_triangular
 
 from mpcform._validate import Array
 from mpcform.mpc.limits import Limits
-from mpcform.mpc.qp import row_ends, velocity_set
+from mpcform.mpc.problem import ACTIVE_TOL, StepQP, StepSolver
+from mpcform.mpc.rows import LimitRows, positions_of_inputs, row_ends
 from mpcform.mpc.settings import MPCSettings
 from mpcform.solvers.base import QPSolution, failed
+
+PER_DRONE_SOLVER = "daqp (per drone)"  # the planner's solver_name in decoupled mode with per_drone
 
 DAQP_INF = 1e30  # DAQP's "no bound"
 DAQP_OK = 1
 PRIMAL_TOL = 1e-9  # DAQP row feasibility tolerance (its default 1e-6 shows in the plans)
 MIN_SLACK_QUADRATIC = 1e-6  # keeps the soft QP's Hessian positive definite when w2 = 0
-ACTIVE_TOL = 1e-6  # a row with a multiplier above this is reported active (as for the sparse QP)
 
 
-class PerDroneQP:
-    """The per-drone condensed QPs of the decoupled planner: everything constant built once."""
+class PerDroneQP(StepSolver):
+    """The per-drone condensed QPs of the decoupled planner: everything constant built once.
 
-    def __init__(self, dim: int, dt_s: float, limits: Limits, settings: MPCSettings) -> None:
+    ``families`` are the limits' rows (:func:`mpcform.mpc.rows.limit_rows`).
+    """
+
+    name = PER_DRONE_SOLVER
+    warm_starts = True  # nearly active rows of the warm start start DAQP's active set
+
+    def __init__(
+        self, dim: int, dt_s: float, limits: Limits, settings: MPCSettings, families: tuple[LimitRows, ...]
+    ) -> None:
         import daqp
 
         self._daqp = daqp
         self.dim, self.dt_s, self.limits, self.settings = dim, dt_s, limits, settings
         h, k = settings.horizon, settings.gain_per_s
         self._nu = nu = h * dim
-        eye_d = np.eye(dim)
-        self._x_of_u = dt_s * np.kron(np.tril(np.ones((h, h))), eye_d)  # x_1..x_H from u
-        self._m = np.eye(nu) + k * dt_s * np.kron(np.tril(np.ones((h, h)), -1), eye_d)  # v = M u
+        self.families = families
+        self._x_of_u = positions_of_inputs(h, dim, dt_s)  # x_1..x_H from u
+        self._m = np.eye(nu) + k * dt_s * np.kron(np.tril(np.ones((h, h)), -1), np.eye(dim))  # v = M u
         self._m_inv = solve_triangular(self._m, np.eye(nu), lower=True)  # u = M^-1 v
-        rows: list[Array] = []  # constant rows over u; bounds per drone from _bounds
-        self._vel_h: float | None = None
-        self._n_vel = 0
-        if limits.v_max_mps is not None:
-            normals, self._vel_h = velocity_set(dim, settings, limits.v_max_mps)
-            rows.append(np.kron(np.eye(h), normals))
-            self._n_vel = h * normals.shape[0]
-        if limits.a_max_mps2 is not None:
-            rows.append(np.kron(np.eye(h) - np.eye(h, k=-1), eye_d))
-        if limits.geofence_min_m is not None:
-            rows.append(self._x_of_u)
+        rows = [family.dense() for family in families]  # constant rows over u; bounds per drone from _bounds
         self._const_v = (np.vstack(rows) if rows else np.zeros((0, nu))) @ self._m_inv
         self._ends = row_ends(h)
         # x_e = dt sum_{j<e} u_j, so a^T x_e = a^T (sum_{j<e} dt M^-1[(j, .), :]) v: (H, d, H d) per end e
@@ -75,7 +75,16 @@ class PerDroneQP:
         self._options: dict[str, Any] = {"iter_limit": settings.max_iter, "primal_tol": PRIMAL_TOL}
         self._a, self._lo, self._hi = np.zeros((0, nu)), np.zeros(0), np.zeros(0)
 
-    def solve(
+    def solve(self, qp: StepQP) -> tuple[QPSolution, int]:
+        """Solve every drone's QP (the one-drone separation rows within reach of ``qp.rows``)."""
+        rows, on = qp.rows, qp.rows.single_on
+        warm_u = np.zeros_like(qp.targets_mps) if qp.warm is None else qp.warm[0]  # inputs only
+        return self.solve_drones(
+            qp.start_m, qp.targets_mps, qp.u_prev_mps, rows.singles[on], rows.single_coeffs[on],
+            rows.single_lower[on], warm_u,
+        )  # fmt: skip
+
+    def solve_drones(
         self, p0: Array, c: Array, u_prev: Array, singles: Array, coeffs: Array, lower: Array, warm_u: Array
     ) -> tuple[QPSolution, int]:
         """Solve every drone's QP.
@@ -192,25 +201,8 @@ class PerDroneQP:
 
     def _bounds(self, p0: Array, u_prev: Array) -> tuple[Array, Array]:
         """Lower and upper bounds (n, rows) of the constant rows for each drone."""
-        lim, st, dt = self.limits, self.settings, self.dt_s
-        h, n, d = st.horizon, p0.shape[0], self.dim
-        lo: list[Array] = []
-        hi: list[Array] = []
-        if self._vel_h is not None:
-            lo.append(np.full((n, self._n_vel), -DAQP_INF))
-            hi.append(np.full((n, self._n_vel), self._vel_h))
-        if lim.a_max_mps2 is not None:
-            da = np.full((n, h, d), lim.a_max_mps2 * dt)
-            shift = np.zeros((n, h, d))
-            shift[:, 0] = u_prev
-            lo.append((shift - da).reshape(n, -1))
-            hi.append((shift + da).reshape(n, -1))
-        if lim.geofence_min_m is not None and lim.geofence_max_m is not None:
-            margin = st.margin_m
-            f_lo = np.minimum(lim.geofence_min_m + margin - p0, 0.0)  # may stay or move inwards
-            f_hi = np.maximum(lim.geofence_max_m - margin - p0, 0.0)
-            lo.append(np.repeat(f_lo[:, None], h, axis=1).reshape(n, -1))
-            hi.append(np.repeat(f_hi[:, None], h, axis=1).reshape(n, -1))
-        if not lo:
+        n = p0.shape[0]
+        if not self.families:
             return np.zeros((n, 0)), np.zeros((n, 0))
+        lo, hi = zip(*(family.dense_bounds(p0, u_prev, DAQP_INF) for family in self.families), strict=True)
         return np.hstack(lo), np.hstack(hi)

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from mpcform.errors import ValidationError
-from mpcform.mpc.limits import Limits, SphereObstacle
+from mpcform.mpc.limits import Limits, SphereObstacle, obstacle_arrays
 
 
 def test_limits_store_validated_values():
@@ -44,6 +44,15 @@ def test_sphere_obstacle():
     np.testing.assert_array_equal(obs.center_m, [1.0, 2.0, 3.0])
     assert obs.radius_m == 0.5 and obs.clearance_m is None
     assert SphereObstacle([0.0, 0.0], 1.0, clearance_m=0.0).clearance_m == 0.0
+
+
+def test_obstacle_arrays_keep_radius_plus_clearance():
+    obstacles = (SphereObstacle([1.0, 2.0], 0.5), SphereObstacle([3.0, 4.0], 1.0, clearance_m=0.1))
+    center, required = obstacle_arrays(obstacles, d_min_m=0.6)
+    np.testing.assert_array_equal(center, [[1.0, 2.0], [3.0, 4.0]])
+    np.testing.assert_allclose(required, [0.5 + 0.3, 1.0 + 0.1])  # unset clearance: half of d_min
+    np.testing.assert_allclose(obstacle_arrays(obstacles[:1], None)[1], [0.5])
+    assert obstacle_arrays((), 0.5)[1].shape == (0,)
 
 
 @pytest.mark.parametrize(

@@ -13,11 +13,13 @@ from hypothesis import strategies as st
 from mpcform.formation.state import FormationState
 from mpcform.formation.template import Template
 from mpcform.mpc.limits import Limits, SphereObstacle
-from mpcform.mpc.per_drone import PerDroneQP
-from mpcform.mpc.planner import PER_DRONE_SOLVER, MPCPlanner
+from mpcform.mpc.per_drone import PER_DRONE_SOLVER, PerDroneQP
+from mpcform.mpc.planner import MPCPlanner
 from mpcform.mpc.settings import MPCSettings
 from mpcform.reference.base import ConstantReference
 from mpcform.sim.simulation import simulate
+from mpcform.solvers.base import QPBackend, QPSolution, SolverOptions
+from mpcform.solvers.registry import make_backend
 
 # The sparse reference: Clarabel at tight tolerances (PIQP stops ~3e-6 away at any tolerance here).
 # Where plans differ by more than ~1e-6 (an optimum at a vertex of the velocity polygon), the
@@ -56,42 +58,43 @@ def crowd(seed: int, n: int, dim: int) -> tuple[ConstantReference, np.ndarray]:
     return ConstantReference(tpl, FormationState.from_param(-start.mean(axis=0))), start
 
 
-def pair(
-    ref: ConstantReference, lim: Limits, obstacles: Any = (), **kw: Any
-) -> tuple[MPCPlanner, MPCPlanner]:
-    """The planner per drone, and the same decoupled QP solved as one sparse QP to high accuracy."""
-    per = MPCPlanner(ref, 0.1, lim, MPCSettings(coupling="decoupled", **kw), obstacles)
-    sparse = MPCSettings(coupling="decoupled", per_drone=False, **kw, **ACCURATE)
-    return per, MPCPlanner(ref, 0.1, lim, sparse, obstacles, solver=REFERENCE)
+class SparseQPs(QPBackend):
+    """A backend that keeps the last sparse QP it solved, and its solution (around ``inner``)."""
 
+    def __init__(self, inner: QPBackend) -> None:
+        super().__init__(inner.options)
+        self.inner, self.name, self.warm_starts = inner, inner.name, inner.warm_starts
 
-class SparseQPs:
-    """Keeps the last sparse QP a planner's backend solved, and its solution."""
+    def setup(self, P: Any, q: Any, A: Any, lo: Any, hi: Any) -> None:
+        self.P, self.A = (P + sp.triu(P, 1).T).toarray(), A.copy()
+        self.q, self.lo, self.hi = q, lo, hi
+        self.inner.setup(P, q, A, lo, hi)
 
-    def __init__(self, planner: MPCPlanner) -> None:
-        be = planner._solver
-        setup, update, solve = be.setup, be.update, be.solve
+    def update(self, q: Any, lo: Any, hi: Any, A_data: Any) -> None:
+        self.q, self.lo, self.hi = q, lo, hi
+        self.A.data = A_data.copy()
+        self.inner.update(q, lo, hi, A_data)
 
-        def on_setup(P: Any, q: Any, A: Any, lo: Any, hi: Any) -> None:
-            self.P, self.A = (P + sp.triu(P, 1).T).toarray(), A.copy()
-            self.q, self.lo, self.hi = q, lo, hi
-            setup(P, q, A, lo, hi)
-
-        def on_update(q: Any, lo: Any, hi: Any, a_data: Any) -> None:
-            self.q, self.lo, self.hi = q, lo, hi
-            self.A.data = a_data.copy()
-            update(q, lo, hi, a_data)
-
-        def on_solve(x0: Any = None) -> Any:
-            out = solve(x0)
-            self.x = out.x
-            return out
-
-        be.setup, be.update, be.solve = on_setup, on_update, on_solve  # type: ignore[method-assign]
+    def solve(self, x0: Any = None) -> QPSolution:
+        out = self.inner.solve(x0)
+        self.x = out.x
+        return out
 
     def cost_and_violation(self, z: np.ndarray) -> tuple[float, float]:
         r = self.A @ z
         return float(0.5 * z @ self.P @ z + self.q @ z), float(max(np.max(self.lo - r), np.max(r - self.hi)))
+
+
+def pair(
+    ref: ConstantReference, lim: Limits, obstacles: Any = (), **kw: Any
+) -> tuple[MPCPlanner, MPCPlanner, SparseQPs]:
+    """The planner per drone, and the same decoupled QP solved as one sparse QP to high accuracy
+    (with the backend that records its QPs)."""
+    per = MPCPlanner(ref, 0.1, lim, MPCSettings(coupling="decoupled", **kw), obstacles)
+    sparse = MPCSettings(coupling="decoupled", per_drone=False, **kw, **ACCURATE)
+    options = SolverOptions(sparse.eps_abs, sparse.eps_rel, sparse.max_iter, sparse.time_limit_s)
+    qps = SparseQPs(make_backend(REFERENCE, options))
+    return per, MPCPlanner(ref, 0.1, lim, sparse, obstacles, solver=qps), qps
 
 
 @settings(max_examples=16, deadline=None)
@@ -101,9 +104,9 @@ def test_per_drone_solves_the_sparse_qp(seed: int, variant: str, n: int) -> None
     at least as good as a high-accuracy interior point on it (so it is its optimum)."""
     dim, lim, obstacles, kw = VARIANTS[variant]
     ref, p = crowd(seed, n, dim)
-    per, sparse = pair(ref, lim, obstacles, **kw)
+    per, sparse, qps = pair(ref, lim, obstacles, **kw)
     assert per.solver_name == PER_DRONE_SOLVER and sparse.solver_name == REFERENCE
-    qps, mine = SparseQPs(sparse), {}
+    mine = {}
     assert isinstance(per._solver, PerDroneQP)
     solve = per._solver.solve
 
@@ -136,7 +139,7 @@ def test_soft_qp_when_the_hard_optimum_is_not_the_penalised_one() -> None:
     ref = ConstantReference(tpl, FormationState.from_param([0.0, 0.0], 0.0))
     start = np.array([[0.45, 0.0], [-0.45, 0.0]])  # separated; each wants the other's side
     lim = Limits(v_max_mps=1.0, d_min_m=0.4)
-    per, sparse = pair(ref, lim, slack_weight=0.05, tie_break_rad=0.0)
+    per, sparse, _ = pair(ref, lim, slack_weight=0.05, tie_break_rad=0.0)
     a, b = per.step(0.0, start), sparse.step(0.0, start)
     assert a.info.max_slack_m > 1e-3 and a.info.slack_pairs == ((0, 1), (1, 0))
     assert a.info.max_slack_m == pytest.approx(b.info.max_slack_m, abs=1e-6)

@@ -19,7 +19,7 @@ from mpcform.mpc.planner import MPCPlanner
 from mpcform.mpc.settings import MPCSettings
 from mpcform.reference.base import ConstantReference, ExponentialReference
 from mpcform.sim.simulation import SimulationResult, simulate
-from mpcform.solvers.base import QPSolution
+from mpcform.solvers.base import QPBackend, QPSolution, SolverOptions
 
 SOLVERS = ["osqp", "piqp"]
 
@@ -175,11 +175,28 @@ def test_acceleration_limit_and_downwash() -> None:
     assert abs(rel[-1, 2]) * 3.0 >= 1.5 - 1e-6  # ends stacked 2 m apart in z, metric distance >= d_min
 
 
-def test_solver_failure_falls_back_to_a_certified_command(monkeypatch: pytest.MonkeyPatch) -> None:
+class FailingBackend(QPBackend):
+    """A backend whose every solve fails."""
+
+    name = "failing"
+
+    def __init__(self) -> None:
+        super().__init__(SolverOptions())
+
+    def setup(self, P: object, q: object, A: object, lo: object, hi: object) -> None:
+        pass
+
+    def update(self, q: object, lo: object, hi: object, A_data: object) -> None:
+        pass
+
+    def solve(self, x0: object = None) -> QPSolution:
+        return QPSolution(None, None, False, "forced failure", 7, 0.0)
+
+
+def test_solver_failure_falls_back_to_a_certified_command() -> None:
     ref, start = swap(6, 2)
-    planner = MPCPlanner(ref, 0.1, Limits(v_max_mps=1.0, d_min_m=0.5))
-    fail = QPSolution(None, None, False, "forced failure", 7, 0.0)
-    monkeypatch.setattr(planner._solver, "solve", lambda x0=None: fail)
+    planner = MPCPlanner(ref, 0.1, Limits(v_max_mps=1.0, d_min_m=0.5), solver=FailingBackend())
+    assert planner.solver_name == "failing"
     res = simulate(planner, start, 2.0)
     assert {i.mode for i in res.infos} <= {"fallback", "fast_path"}
     assert any("forced failure" in i.status for i in res.infos)

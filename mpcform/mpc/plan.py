@@ -1,0 +1,59 @@
+"""The plan and what the next step takes from it: the eq. 14 rollout, the guess, the warm start.
+
+Positions ``x`` are relative to the step's start ``p0``; a :class:`Plan` keeps absolute ones.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from mpcform._validate import Array
+
+
+@dataclass(frozen=True)
+class Plan:
+    """Predicted inputs (H, n, d) [m/s] and positions (H + 1, n, d) [m], row 0 the start."""
+
+    inputs_mps: Array
+    positions_m: Array
+
+    @classmethod
+    def from_relative(cls, p0: Array, u: Array, x: Array) -> Plan:
+        """The plan of inputs ``u`` and positions ``x`` (H, n, d) relative to the start ``p0`` (n, d)."""
+        return cls(u, np.concatenate([p0[None], p0 + x]))
+
+    def shifted_inputs(self) -> Array:
+        """Inputs (H, n, d) shifted one step, ending in a hold."""
+        return np.concatenate([self.inputs_mps[1:], np.zeros((1,) + self.inputs_mps.shape[1:])])
+
+
+def rollout(c: Array, k: float, dt: float) -> tuple[Array, Array]:
+    """Eq. 14 over the horizon in relative coordinates: ``u_j = c_j - k x_j``, ``x_{j+1} = x_j + dt u_j``."""
+    u = np.empty_like(c)
+    x = np.empty_like(c)
+    xj = np.zeros(c.shape[1:])
+    for j in range(c.shape[0]):
+        u[j] = c[j] - k * xj
+        xj = xj + dt * u[j]
+        x[j] = xj
+    return u, x
+
+
+def guess(plan: Plan | None, p0: Array, horizon: int) -> Array:
+    """Absolute guess positions (H + 1, n, d) about which the separation rows are linearised: the
+    previous plan shifted one step, ending in a hold (at the first step every drone holding)."""
+    if plan is None:
+        return np.broadcast_to(p0, (horizon + 1,) + p0.shape)
+    prev = plan.positions_m
+    return np.concatenate([p0[None], prev[2:], prev[-1:]])
+
+
+def warm_start(plan: Plan | None, p0: Array, u_nom: Array, x_nom: Array) -> Array:
+    """Primal warm start (2, H, n, d): inputs and relative positions of the previous plan shifted
+    one step (or of the rollout ``u_nom``, ``x_nom`` at the first step)."""
+    if plan is None:
+        return np.stack([u_nom, x_nom])
+    x = np.concatenate([plan.positions_m[2:], plan.positions_m[-1:]]) - p0
+    return np.stack([plan.shifted_inputs(), x])

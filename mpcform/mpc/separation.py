@@ -1,0 +1,251 @@
+"""Separation rows linearised about the guess: one unit for drone pairs, one for obstacles.
+
+The exact separation is non-convex: ``||W (p_i - p_k)|| >= d_min`` for a pair (``W = diag(1, 1,
+1/kappa)`` with downwash, else the identity) and ``||p_i - c_o|| >= required_o`` for a drone and
+obstacle o. The guess is the previous plan shifted one step. For segment j of an item's relative
+guess path, ``c`` is the unit vector towards the segment's point closest to the origin; the row
+``c^T rel >= required + margin`` (a half-space that excludes the forbidden ball) is placed at both
+segment ends (position steps of :func:`mpcform.mpc.rows.row_ends`), with a slack:
+
+- joint pair: ``c^T W (x_{e,i} - x_{e,k}) + s_{e,i} + s_{e,k} >= d_min + margin - c^T W (p0_i - p0_k)``;
+- decoupled pair: two one-drone rows about the guess's midpoint ``m_e``, each asking for half,
+  ``+-c^T W (p0_i + x_{e,i} - m_e) + s_{e,i} >= (d_min + margin) / 2``;
+- obstacle: ``c^T (p0_i + x_{e,i} - c_o) + s_{e,i} >= required_o + margin``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from mpcform._validate import Array
+from mpcform.formation.geometry import closest_on_segments, pairs_within
+from mpcform.mpc.candidates import Candidates
+from mpcform.mpc.limits import Limits, SphereObstacle, obstacle_arrays
+from mpcform.mpc.rows import row_ends, row_segments
+from mpcform.mpc.settings import MPCSettings
+
+RowPart = tuple[Array, Array, Array, Array]  # (items or labels, coefficients, lower bounds, on)
+Test = tuple[Array, Array, Array | float]  # (relative guess, relative positions, required distance)
+
+
+@dataclass(frozen=True)
+class SeparationRows:
+    """Linearised separation rows of one step, in QP order (R rows per item).
+
+    Two-drone items (joint pairs) first, then one-drone items (decoupled pair sides, obstacles);
+    ``labels`` (S, 2) names what a one-drone item reports: ``(i, k)`` or ``(i, -1 - obstacle)``.
+    """
+
+    pairs: Array  # (P, 2)
+    pair_coeffs: Array  # (P, R, d)
+    pair_lower: Array  # (P, R)
+    pair_on: Array  # (P,)
+    singles: Array  # (S,) drone index
+    labels: Array  # (S, 2)
+    single_coeffs: Array  # (S, R, d)
+    single_lower: Array  # (S, R)
+    single_on: Array  # (S,)
+
+    def subset(self, drones: Array, n: int, on_only: bool) -> SeparationRows:
+        """The rows of the items within ``drones`` (only those within reach with ``on_only``), with
+        drone indices renumbered 0..len(drones)-1 (``labels`` keep the global ones)."""
+        if drones.shape[0] == n and not on_only:
+            return self
+        local = np.full(n, -1)
+        local[drones] = np.arange(drones.shape[0])
+        keep_p = (local[self.pairs] >= 0).all(axis=1) & (self.pair_on | (not on_only))
+        keep_s = (local[self.singles] >= 0) & (self.single_on | (not on_only))
+        return SeparationRows(
+            local[self.pairs[keep_p]], self.pair_coeffs[keep_p], self.pair_lower[keep_p],
+            self.pair_on[keep_p], local[self.singles[keep_s]], self.labels[keep_s],
+            self.single_coeffs[keep_s], self.single_lower[keep_s], self.single_on[keep_s],
+        )  # fmt: skip
+
+
+def segment_normals(rel: Array, segs: Array) -> Array:
+    """Unit normals (m, R, d) per row: the direction to each guess segment's point closest to the
+    origin (``rel`` (H + 1, m, d) are the guess's relative positions, ``segs`` (R,) each row's segment)."""
+    d = rel.shape[-1]
+    closest = closest_on_segments(rel[:-1].reshape(-1, d), rel[1:].reshape(-1, d))
+    dist = np.linalg.norm(closest, axis=1)
+    normal = np.zeros_like(closest)
+    normal[:, 0] = 1.0  # a coincident guess: any fixed unit vector is a valid normal
+    ok = dist > 1e-9
+    normal[ok] = closest[ok] / dist[ok, None]
+    normal = normal.reshape(rel.shape[0] - 1, rel.shape[1], d)  # (H, m, d)
+    return normal.transpose(1, 0, 2)[:, segs]
+
+
+class PairSeparation:
+    """``d_min`` [m] between drone pairs in the metric ``W = diag(metric)``, joint or decoupled."""
+
+    def __init__(self, d_min_m: float, metric: Array, settings: MPCSettings) -> None:
+        self.d_min_m, self.metric, self.margin_m = d_min_m, metric, settings.margin_m
+        self.joint = settings.coupling == "joint"
+        self.segs, self.ends = row_segments(settings.horizon), row_ends(settings.horizon)
+
+    def relative(self, points: Array, i: Array, k: Array) -> Array:
+        """``W (p_i - p_k)`` for positions (..., n, d): (..., P, d)."""
+        return (points[..., i, :] - points[..., k, :]) * self.metric
+
+    def rows(self, p0: Array, guess: Array, pairs: Array, on: Array) -> tuple[RowPart | None, list[RowPart]]:
+        """The joint rows, or the decoupled one-drone rows, of ``pairs`` (P, 2) about ``guess``."""
+        i, k = pairs[:, 0], pairs[:, 1]
+        rel = self.relative(guess, i, k)  # (H + 1, P, d), metric space
+        coeffs = segment_normals(rel, self.segs) * self.metric  # (P, R, d), world coordinates
+        if self.joint:
+            lower = self.d_min_m + self.margin_m - np.einsum("prd,pd->pr", coeffs, p0[i] - p0[k])
+            return (pairs, coeffs, lower, on), []
+        singles = []  # two per-drone rows about the guess's midpoint at each row's position step
+        mid = 0.5 * (guess[:, i] + guess[:, k])[self.ends].transpose(1, 0, 2)  # (P, R, d)
+        half = 0.5 * (self.d_min_m + self.margin_m)
+        for side, sign in ((i, 1.0), (k, -1.0)):
+            lower = half - np.einsum("prd,prd->pr", sign * coeffs, p0[side][:, None] - mid)
+            labels = np.column_stack([side, i + k - side])
+            singles.append((labels, sign * coeffs, lower, on))
+        return None, singles
+
+    def clear_test(self, p0: Array, guess: Array, pos: Array, spread: Array) -> Test:
+        """The pairs that the per-drone spread bound (see :meth:`Separation.clear`) leaves in doubt."""
+        scaled = p0 * self.metric  # the metric only shrinks lengths: world spreads bound it
+        need = self.d_min_m + self.margin_m
+        i, k = pairs_within(scaled, need + 2.0 * spread.max()).T
+        clearance = np.linalg.norm(scaled[i] - scaled[k], axis=1) - spread[i] - spread[k]
+        near = clearance < need
+        i, k = i[near], k[near]
+        return self.relative(guess, i, k), self.relative(pos, i, k), self.d_min_m
+
+    def first_segment(self, p0: Array, p1: Array, pairs: Array) -> Test:
+        """Relative positions of ``pairs`` at the start and the end of the first segment."""
+        i, k = pairs.T
+        return self.relative(p0, i, k), self.relative(p1, i, k), self.d_min_m
+
+
+class ObstacleSeparation:
+    """Drones keep ``required_m`` (m,) [m] from the obstacles' centres ``center_m`` (m, d)."""
+
+    def __init__(
+        self, obstacles: tuple[SphereObstacle, ...], d_min_m: float | None, settings: MPCSettings
+    ) -> None:
+        self.center_m, self.required_m = obstacle_arrays(obstacles, d_min_m)
+        self.margin_m, self.segs = settings.margin_m, row_segments(settings.horizon)
+
+    def rows(self, p0: Array, guess: Array, items: Array, on: Array) -> RowPart:
+        """One-drone rows of the ``(drone, obstacle)`` items (O, 2) about ``guess``."""
+        drone, ob = items[:, 0], items[:, 1]
+        center, required = self.center_m[ob], self.required_m[ob]
+        coeffs = segment_normals(guess[:, drone] - center, self.segs)
+        lower = required[:, None] + self.margin_m - np.einsum("ord,od->or", coeffs, p0[drone] - center)
+        return np.column_stack([drone, -1 - ob]), coeffs, lower, on
+
+    def clear_test(self, p0: Array, guess: Array, pos: Array, spread: Array) -> Test:
+        """The items that the per-drone spread bound (see :meth:`Separation.clear`) leaves in doubt."""
+        gap = np.linalg.norm(p0[:, None] - self.center_m, axis=-1) - self.required_m - spread[:, None]
+        i, m = np.nonzero(gap < self.margin_m)
+        center = self.center_m[m]
+        return guess[:, i] - center, pos[:, i] - center, self.required_m[m]
+
+    def first_segment(self, p0: Array, p1: Array, items: Array) -> Test:
+        """Positions of the ``items``' drones relative to their obstacle at both ends of the first segment."""
+        i, m = items.T
+        return p0[i] - self.center_m[m], p1[i] - self.center_m[m], self.required_m[m]
+
+
+class Separation:
+    """The pair and obstacle units together: the rows of a candidate set, and the tests on them."""
+
+    def __init__(
+        self, dim: int, limits: Limits, settings: MPCSettings, obstacles: tuple[SphereObstacle, ...]
+    ) -> None:
+        self.dim, self.margin_m = dim, settings.margin_m
+        self.d_min_m = limits.d_min_m
+        self.metric = np.ones(dim)  # W's diagonal
+        if limits.downwash_kappa is not None:
+            self.metric[2] = 1.0 / limits.downwash_kappa
+        self.pairs = None if limits.d_min_m is None else PairSeparation(limits.d_min_m, self.metric, settings)
+        self.obstacles = ObstacleSeparation(obstacles, limits.d_min_m, settings) if obstacles else None
+        self.ends, self.n_rows = row_ends(settings.horizon), row_segments(settings.horizon).shape[0]
+
+    def rows(self, p0: Array, guess: Array, cand: Candidates) -> SeparationRows:
+        """Closest-point rows about ``guess`` (H + 1, n, d) for every candidate item."""
+        r, d = self.n_rows, self.dim
+        none = np.empty((0, 2), dtype=np.intp)
+        empty = (none, np.empty((0, r, d)), np.empty((0, r)), np.empty(0, dtype=bool))
+        joint, singles = empty, [empty]
+        if cand.pairs.shape[0] and self.pairs is not None:
+            two, one = self.pairs.rows(p0, guess, cand.pairs, cand.pair_on)
+            joint = joint if two is None else two
+            singles += one
+        if cand.obstacles.shape[0] and self.obstacles is not None:
+            singles.append(self.obstacles.rows(p0, guess, cand.obstacles, cand.obstacle_on))
+        labels, s_coeffs, s_lower, s_on = (np.concatenate(parts) for parts in zip(*singles, strict=True))
+        return SeparationRows(*joint, labels[:, 0], labels, s_coeffs, s_lower, s_on)
+
+    def clear(self, p0: Array, guess: Array, x: Array) -> bool:
+        """A cheap sufficient test that positions ``x`` (H, n, d) meet every joint pair row and
+        obstacle row (so every pair stays ``d_min`` apart over each step). It does not cover the
+        decoupled pair-side rows: two drones moving side by side can pass it while crossing the
+        guess's midpoint plane.
+
+        A row's normal c is a unit vector with ``c^T g >= |closest point of its guess segment|
+        >= max(|g_j|, |g_j+1|) - |g_j+1 - g_j|``, so ``c^T delta_e >= that - |delta_e - g_e|``.
+        Before that per-segment bound, a per-drone one: drone i's guess stays within ``spread_i``
+        of its start and its positions within ``spread_i`` of the guess, so an item whose start
+        distance clears the requirement by the spreads of its drones is clear. No row is built.
+        """
+        pos = np.concatenate([p0[None], p0 + x])
+        spread = _max_norm(guess - p0) + _max_norm(pos - guess)  # (n,) [m]
+        tests: list[Test] = []
+        if self.pairs is not None and p0.shape[0] > 1:
+            tests.append(self.pairs.clear_test(p0, guess, pos, spread))
+        if self.obstacles is not None:
+            tests.append(self.obstacles.clear_test(p0, guess, pos, spread))
+        for g, delta, required in tests:
+            g_norm = np.linalg.norm(g, axis=-1)
+            seg = np.maximum(g_norm[:-1], g_norm[1:]) - np.linalg.norm(np.diff(g, axis=0), axis=-1)
+            dev = np.linalg.norm(delta - g, axis=-1).max(axis=0, initial=0.0)
+            if np.any(seg.min(axis=0, initial=np.inf) - dev < required + self.margin_m):
+                return False
+        return True
+
+    def shortfall(self, x: Array, rows: SeparationRows, tol: float) -> tuple[float, Array]:
+        """Largest amount [m] by which positions ``x`` (H, n, d) miss an active separation row,
+        and the labels (m, 2) of the items that miss by more than ``tol``."""
+        xe = x[self.ends - 1]  # (R, n, d)
+        worst, missed = -np.inf, [np.empty((0, 2), dtype=np.intp)]
+        pair_rel = xe[:, rows.pairs[:, 0]] - xe[:, rows.pairs[:, 1]]
+        parts = [
+            (rows.pair_coeffs, rows.pair_lower, rows.pair_on, rows.pairs, pair_rel),
+            (rows.single_coeffs, rows.single_lower, rows.single_on, rows.labels, xe[:, rows.singles]),
+        ]
+        for coeffs, lower, on, labels, rel in parts:
+            if not on.any():
+                continue
+            short = np.where(on, (lower - np.einsum("mrd,rmd->mr", coeffs, rel)).max(axis=1), -np.inf)
+            worst = max(worst, float(short.max()))
+            missed.append(labels[short > tol])
+        return worst, np.unique(np.concatenate(missed), axis=0)
+
+    def conflicted(self, x: Array, rows: SeparationRows) -> Array:
+        """Drones (n,) of the items whose rows positions ``x`` (H, n, d) miss (an obstacle item
+        names only its drone)."""
+        conflicted = np.zeros(x.shape[1], dtype=bool)
+        labels = self.shortfall(x, rows, 0.0)[1]
+        conflicted[labels[labels >= 0]] = True
+        return conflicted
+
+    def first_segment(self, p0: Array, p1: Array, cand: Candidates) -> list[Test]:
+        """For the items within reach: relative positions at ``p0`` and ``p1`` and the distance required."""
+        tests = []
+        if cand.pair_on.any() and self.pairs is not None:
+            tests.append(self.pairs.first_segment(p0, p1, cand.pairs[cand.pair_on]))
+        if cand.obstacle_on.any() and self.obstacles is not None:
+            tests.append(self.obstacles.first_segment(p0, p1, cand.obstacles[cand.obstacle_on]))
+        return tests
+
+
+def _max_norm(v: Array) -> Array:
+    """``max_e |v_e,i|`` over the first axis of ``v`` (T, n, d) -> (n,)."""
+    return np.sqrt(np.einsum("tnd,tnd->tn", v, v).max(axis=0))

@@ -1,0 +1,88 @@
+"""Certification: commands scaled into the ball, refused when they close a gap too far; the fallback."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from mpcform.mpc.candidates import Candidates
+from mpcform.mpc.certify import Certifier
+from mpcform.mpc.limits import Limits, SphereObstacle
+from mpcform.mpc.plan import Plan
+from mpcform.mpc.separation import Separation
+from mpcform.mpc.settings import MPCSettings
+
+DT = 0.1
+
+
+def certifier(obstacles: tuple[SphereObstacle, ...] = (), d_min: float = 0.5) -> Certifier:
+    lim = Limits(v_max_mps=1.0, d_min_m=d_min)
+    return Certifier(DT, lim.v_max_mps, Separation(2, lim, MPCSettings(), obstacles))
+
+
+def items(pairs: list[list[int]], obstacles: list[list[int]] | None = None) -> Candidates:
+    p = np.array(pairs, dtype=np.intp).reshape(-1, 2)
+    o = np.array(obstacles or [], dtype=np.intp).reshape(-1, 2)
+    return Candidates(p, np.ones(p.shape[0], bool), o, np.ones(o.shape[0], bool), False)
+
+
+def test_a_command_outside_the_ball_is_scaled_onto_it() -> None:
+    p0 = np.array([[0.0, 0.0], [5.0, 0.0]])
+    u = np.array([[3.0, 4.0], [0.3, 0.0]])  # drone 0 at 5 m/s
+    out = certifier().certify(p0, u, items([[0, 1]]))
+    assert out is not None
+    np.testing.assert_allclose(out, [[0.6, 0.8], [0.3, 0.0]])  # same direction, |u| = v_max
+    assert np.linalg.norm(out, axis=1).max() <= 1.0 + 1e-12
+
+
+def test_a_command_that_breaks_d_min_is_refused() -> None:
+    """0.55 m apart, both flying at 1 m/s towards each other for 0.1 s: 0.35 m < d_min."""
+    p0 = np.array([[0.0, 0.0], [0.55, 0.0]])
+    towards = np.array([[1.0, 0.0], [-1.0, 0.0]])
+    cert = certifier()
+    assert cert.certify(p0, towards, items([[0, 1]])) is None
+    assert cert.certify(p0, -towards, items([[0, 1]])) is not None  # apart
+    off = Candidates(np.array([[0, 1]]), np.array([False]), np.empty((0, 2), int), np.empty(0, bool), False)
+    assert cert.certify(p0, towards, off) is not None  # only items within reach are checked
+
+
+def test_a_pair_already_too_close_may_not_get_closer() -> None:
+    p0 = np.array([[0.0, 0.0], [0.3, 0.0]])  # inside d_min
+    cert = certifier()
+    assert cert.certify(p0, np.array([[0.0, 1.0], [0.0, 1.0]]), items([[0, 1]])) is not None  # parallel
+    assert cert.certify(p0, np.array([[0.5, 0.0], [0.0, 0.0]]), items([[0, 1]])) is None  # closer
+
+
+def test_the_closest_point_of_the_segment_counts() -> None:
+    """Passing each other sideways: 0.141 m apart at both ends of the step, 0.1 m halfway."""
+    p0 = np.array([[0.0, -0.05], [0.1, 0.05]])
+    u = np.array([[1.0, 0.0], [-1.0, 0.0]])
+    assert certifier(d_min=0.05).certify(p0, u, items([[0, 1]])) is not None
+    assert certifier(d_min=0.12).certify(p0, u, items([[0, 1]])) is None
+
+
+def test_obstacle_gap_is_certified() -> None:
+    ob = SphereObstacle(np.array([1.0, 0.0]), 0.5, clearance_m=0.2)  # keep 0.7 m from (1, 0)
+    cert = certifier((ob,))
+    p0 = np.array([[0.25, 0.0]])  # 0.75 m away; 0.65 m after 0.1 s at 1 m/s towards it
+    assert cert.certify(p0, np.array([[1.0, 0.0]]), items([], [[0, 0]])) is None
+    assert cert.certify(p0, np.array([[-1.0, 0.0]]), items([], [[0, 0]])) is not None
+
+
+def test_fallback_takes_the_previous_plans_next_input_scaled() -> None:
+    p0 = np.array([[0.0, 0.0], [5.0, 0.0]])
+    inputs = np.array([[[0.1, 0.0], [0.0, 0.1]], [[2.0, 0.0], [0.0, 0.5]], [[0.3, 0.0], [0.0, 0.3]]])
+    plan = Plan(inputs, np.zeros((4, 2, 2)))
+    u, x, note = certifier().fallback(plan, p0, items([[0, 1]]), 3)
+    assert note == "previous plan"
+    np.testing.assert_allclose(u[0], [[1.0, 0.0], [0.0, 0.5]])  # 2 m/s scaled to v_max
+    np.testing.assert_allclose(u[1], inputs[2])
+    np.testing.assert_allclose(u[2], 0.0)  # ends in a hold
+    np.testing.assert_allclose(x, DT * np.cumsum(u, axis=0))
+
+
+def test_fallback_holds_when_the_previous_plan_does_not_certify() -> None:
+    p0 = np.array([[0.0, 0.0], [0.55, 0.0]])
+    inputs = np.array([[[0.0, 0.0], [0.0, 0.0]], [[1.0, 0.0], [-1.0, 0.0]]])  # next: head-on
+    for plan in (Plan(inputs, np.zeros((3, 2, 2))), None):
+        u, x, note = certifier().fallback(plan, p0, items([[0, 1]]), 2)
+        assert note == "hold" and u.shape == (2, 2, 2) and not u.any() and not x.any()

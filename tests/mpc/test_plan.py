@@ -1,0 +1,45 @@
+"""Plan: the eq. 14 rollout, the shifted guess and warm start, plans from relative positions."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from mpcform.mpc.plan import Plan, guess, rollout, warm_start
+
+
+def test_rollout_is_eq14_step_by_step() -> None:
+    rng = np.random.default_rng(0)
+    c, k, dt = rng.normal(size=(5, 3, 2)), 2.0, 0.1
+    u, x = rollout(c, k, dt)
+    pos = np.zeros((3, 2))
+    for j in range(5):
+        np.testing.assert_allclose(u[j], c[j] - k * pos)  # u_j = ff_j + k (p*_j - p_j) relative to p0
+        pos = pos + dt * u[j]
+        np.testing.assert_allclose(x[j], pos)
+
+
+def test_constant_wish_decays_geometrically() -> None:
+    u, x = rollout(np.ones((4, 1, 1)), 5.0, 0.1)  # u_j = 1 - 5 x_j: (1 - k dt)^j
+    np.testing.assert_allclose(u[:, 0, 0], 0.5 ** np.arange(4))
+
+
+def test_plan_from_relative_positions() -> None:
+    p0 = np.array([[1.0, 2.0]])
+    u = np.array([[[1.0, 0.0]], [[0.0, 1.0]]])
+    plan = Plan.from_relative(p0, u, 0.1 * np.cumsum(u, axis=0))
+    np.testing.assert_allclose(plan.positions_m[:, 0], [[1.0, 2.0], [1.1, 2.0], [1.1, 2.1]])
+    np.testing.assert_allclose(plan.shifted_inputs(), [[[0.0, 1.0]], [[0.0, 0.0]]])
+
+
+def test_guess_and_warm_start_shift_the_previous_plan() -> None:
+    p0 = np.array([[0.0, 0.0]])
+    np.testing.assert_array_equal(guess(None, p0, 2), np.zeros((3, 1, 2)))  # first step: holding
+    u_nom, x_nom = np.full((2, 1, 2), 3.0), np.full((2, 1, 2), 4.0)
+    np.testing.assert_array_equal(warm_start(None, p0, u_nom, x_nom), [u_nom, x_nom])
+    positions = np.array([[[0.0, 0.0]], [[1.0, 0.0]], [[2.0, 0.0]]])
+    plan = Plan(np.array([[[10.0, 0.0]], [[10.0, 0.0]]]), positions)
+    moved = np.array([[0.9, 0.1]])  # measured, not exactly the plan's first position
+    np.testing.assert_array_equal(guess(plan, moved, 2)[:, 0], [[0.9, 0.1], [2.0, 0.0], [2.0, 0.0]])
+    warm = warm_start(plan, moved, u_nom, x_nom)
+    np.testing.assert_array_equal(warm[0, :, 0], [[10.0, 0.0], [0.0, 0.0]])  # ends in a hold
+    np.testing.assert_allclose(warm[1, :, 0], [[1.1, -0.1], [1.1, -0.1]])

@@ -1,0 +1,77 @@
+"""The sparse QP: eq. 14 tracking cost, the rollout meets its rows, separation values land right."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from mpcform.mpc.limits import Limits
+from mpcform.mpc.plan import rollout
+from mpcform.mpc.qp import MPCQP
+from mpcform.mpc.rows import limit_rows, row_ends
+from mpcform.mpc.settings import MPCSettings
+
+DT = 0.1
+FENCE = {"geofence_min_m": [-9.0, -9.0], "geofence_max_m": [9.0, 9.0]}
+LIMITS = Limits(v_max_mps=2.0, d_min_m=0.5, a_max_mps2=50.0, **FENCE)
+
+
+def qp(n: int, settings: MPCSettings, pairs: np.ndarray, singles: np.ndarray) -> MPCQP:
+    return MPCQP(n, 2, DT, LIMITS, settings, pairs, singles, limit_rows(2, DT, LIMITS, settings))
+
+
+def test_cost_is_the_tracking_cost_plus_the_slack_penalty() -> None:
+    st = MPCSettings(horizon=4, gain_per_s=2.0, slack_weight=7.0, slack_quadratic=3.0)
+    m = qp(3, st, np.empty((0, 2), int), np.empty(0, int))
+    rng = np.random.default_rng(1)
+    u, x, c = (rng.normal(size=(4, 3, 2)) for _ in range(3))
+    s = rng.uniform(0, 1, (4, 3))
+    z = np.concatenate([u.ravel(), x.ravel(), s.ravel()])
+    full = m.P + m.P.T - np.diag(m.P.diagonal())
+    qp_cost = 0.5 * z @ full @ z + m.cost_vector(c) @ z + 0.5 * np.sum(c**2)
+    x_from_0 = np.concatenate([np.zeros((1, 3, 2)), x[:-1]])  # x_0 = 0 .. x_{H-1}: x_H is not in the cost
+    want = 0.5 * np.sum((u + 2.0 * x_from_0 - c) ** 2) + 7.0 * s.sum() + 0.5 * 3.0 * np.sum(s**2)
+    assert qp_cost == pytest.approx(want, rel=1e-12)
+
+
+def test_the_rollout_meets_every_row() -> None:
+    st = MPCSettings(horizon=5)
+    m = qp(2, st, np.array([[0, 1]]), np.empty(0, int))
+    p0 = np.array([[0.0, 0.0], [3.0, 0.0]])
+    u, x = rollout(np.full((5, 2, 2), 0.5), st.gain_per_s, DT)
+    z = np.concatenate([u.ravel(), x.ravel(), np.zeros(10)])
+    lo, hi = m.bounds(p0, u[0], np.zeros((1, row_ends(5).shape[0])), np.array([True]))
+    vals = m.separation_values(np.zeros((1, row_ends(5).shape[0], 2)), np.zeros((0, 9, 2)))
+    m.A.data = vals
+    r = m.A @ z
+    assert np.all(r >= lo - 1e-12) and np.all(r <= hi + 1e-12)
+    x[2, 0, 0] += 0.1  # breaks the dynamics
+    r = m.A @ np.concatenate([u.ravel(), x.ravel(), np.zeros(10)])
+    assert np.any(r < lo - 1e-6) or np.any(r > hi + 1e-6)
+
+
+def test_separation_rows_by_hand() -> None:
+    """Horizon 1, a pair (0, 1) and a single (drone 1): ``c^T (x_0 - x_1) + s_0 + s_1``, ``a^T x_1 + s_1``."""
+    st = MPCSettings(horizon=1)
+    m = qp(2, st, np.array([[0, 1]]), np.array([1]))
+    c, a = np.array([[[0.6, 0.8]]]), np.array([[[-1.0, 0.0]]])
+    m.A.data = m.separation_values(c, a)
+    u, x, s = np.zeros((1, 2, 2)), np.array([[[1.0, 2.0], [3.0, 5.0]]]), np.array([0.25, 0.5])
+    r = (m.A @ np.concatenate([u.ravel(), x.ravel(), s]))[m.sep_rows]
+    np.testing.assert_allclose(r, [0.6 * (1 - 3) + 0.8 * (2 - 5) + 0.75, -3.0 + 0.5])
+    lo, _ = m.bounds(np.zeros((2, 2)), np.zeros((2, 2)), np.array([[0.1], [0.2]]), np.array([True, False]))
+    assert lo[m.sep_rows][0] == 0.1
+    assert lo[m.sep_rows][1] == -(2.0 * 2.0 * 1 * DT + 1.0)  # off: a bound no plan reaches
+
+
+def test_limit_bounds_follow_the_start_and_the_last_command() -> None:
+    """a_max dt = 5 m/s, fence +-9 m: the first acceleration rows move with u_prev, the fence rows with p0."""
+    st = MPCSettings(horizon=2, margin_m=0.0)
+    m = qp(1, st, np.empty((0, 2), int), np.empty(0, int))
+    none = np.zeros((0, 3)), np.zeros(0, bool)
+    lo_a, hi_a = m.bounds(np.zeros((1, 2)), np.zeros((1, 2)), *none)
+    lo_b, hi_b = m.bounds(np.array([[1.0, -1.0]]), np.array([[0.5, -0.25]]), *none)
+    changed = np.flatnonzero((lo_a != lo_b) | (hi_a != hi_b))
+    assert changed.size == 2 + 4  # u_0 - u_{-1} (2 components), the fence rows of x_1 and x_2 (2 each)
+    np.testing.assert_allclose(lo_b[changed], [-4.5, -5.25, -10.0, -8.0, -10.0, -8.0])
+    np.testing.assert_allclose(hi_b[changed], [5.5, 4.75, 8.0, 10.0, 8.0, 10.0])

@@ -1,0 +1,171 @@
+"""Separation rows about the guess: pair and obstacle rows by hand, shortfall, subsets, clear test."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from mpcform.mpc.candidates import Candidates
+from mpcform.mpc.limits import Limits, SphereObstacle
+from mpcform.mpc.separation import PairSeparation, Separation, segment_normals
+from mpcform.mpc.settings import MPCSettings
+
+MARGIN = 2e-3  # the default margin
+
+
+def still(p0: np.ndarray, horizon: int) -> np.ndarray:
+    """A guess (H + 1, n, d) that holds at p0."""
+    return np.broadcast_to(p0, (horizon + 1,) + p0.shape)
+
+
+def cand(pairs: list[list[int]], obstacles: list[list[int]] | None = None) -> Candidates:
+    """Every item within reach."""
+    p = np.array(pairs, dtype=np.intp).reshape(-1, 2)
+    o = np.array(obstacles or [], dtype=np.intp).reshape(-1, 2)
+    return Candidates(p, np.ones(p.shape[0], bool), o, np.ones(o.shape[0], bool), False)
+
+
+def test_segment_normals_by_hand() -> None:
+    rel = np.array([[[2.0, 1.0], [0.0, 0.0]], [[2.0, -1.0], [0.0, 0.0]]])  # (H + 1 = 2, m = 2, d)
+    normals = segment_normals(rel, np.array([0]))
+    np.testing.assert_allclose(normals[0, 0], [1.0, 0.0])  # closest point (2, 0)
+    np.testing.assert_allclose(normals[1, 0], [1.0, 0.0])  # coincident: a fixed unit vector
+
+
+def test_joint_pair_row_by_hand() -> None:
+    """Drones at (0, 0) and (1, 0), guess holding: normal (-1, 0),
+    ``-(x_0 - x_1)_x >= d_min + margin - 1``."""
+    p0 = np.array([[0.0, 0.0], [1.0, 0.0]])
+    sep = Separation(2, Limits(v_max_mps=1.0, d_min_m=0.5), MPCSettings(horizon=1), ())
+    rows = sep.rows(p0, still(p0, 1), cand([[0, 1]]))
+    np.testing.assert_allclose(rows.pair_coeffs, [[[-1.0, 0.0]]])
+    np.testing.assert_allclose(rows.pair_lower, [[0.5 + MARGIN - 1.0]])
+    assert rows.singles.shape == (0,)
+
+
+def test_decoupled_pair_rows_by_hand() -> None:
+    """The same pair decoupled: each drone keeps half of d_min from the midpoint (0.5, 0)."""
+    p0 = np.array([[0.0, 0.0], [1.0, 0.0]])
+    sep = Separation(2, Limits(v_max_mps=1.0, d_min_m=0.5), MPCSettings(horizon=1, coupling="decoupled"), ())
+    rows = sep.rows(p0, still(p0, 1), cand([[0, 1]]))
+    assert rows.pairs.shape == (0, 2)
+    np.testing.assert_array_equal(rows.labels, [[0, 1], [1, 0]])
+    np.testing.assert_array_equal(rows.singles, [0, 1])
+    np.testing.assert_allclose(rows.single_coeffs, [[[-1.0, 0.0]], [[1.0, 0.0]]])
+    half = 0.5 * (0.5 + MARGIN)
+    np.testing.assert_allclose(rows.single_lower, [[half - 0.5], [half - 0.5]])
+
+
+def test_downwash_pair_row_by_hand() -> None:
+    """Stacked 1 m apart in z, kappa 2: metric distance 0.5, row ``-0.5 (x_0 - x_1)_z >= 0.502 - 0.5``."""
+    p0 = np.array([[0.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
+    sep = Separation(3, Limits(v_max_mps=1.0, d_min_m=0.5, downwash_kappa=2.0), MPCSettings(horizon=1), ())
+    rows = sep.rows(p0, still(p0, 1), cand([[0, 1]]))
+    np.testing.assert_allclose(rows.pair_coeffs, [[[0.0, 0.0, -0.5]]])
+    np.testing.assert_allclose(rows.pair_lower, [[MARGIN]], atol=1e-15)
+
+
+def test_obstacle_row_by_hand() -> None:
+    """Drone at (3, 0), obstacle radius 1 at the origin, clearance 0.5: ``x_x >= 1.5 + margin - 3``."""
+    p0 = np.array([[3.0, 0.0]])
+    ob = SphereObstacle(np.zeros(2), 1.0, clearance_m=0.5)
+    sep = Separation(2, Limits(v_max_mps=1.0), MPCSettings(horizon=1), (ob,))
+    rows = sep.rows(p0, still(p0, 1), cand([], [[0, 0]]))
+    np.testing.assert_array_equal(rows.labels, [[0, -1]])
+    np.testing.assert_allclose(rows.single_coeffs, [[[1.0, 0.0]]])
+    np.testing.assert_allclose(rows.single_lower, [[1.5 + MARGIN - 3.0]])
+
+
+def test_rows_at_both_segment_ends() -> None:
+    """Horizon 3: R = 5 rows per item, segment j's normal at x_{j+1} and x_j."""
+    p0 = np.array([[0.0, 0.0], [1.0, 0.0]])
+    guess = np.array([p0, p0 + [[0, 0], [0, 1]], p0 + [[0, 0], [0, 2]], p0 + [[0, 0], [0, 2]]])
+    pairs = PairSeparation(0.5, np.ones(2), MPCSettings(horizon=3))
+    (labels, coeffs, lower, on), singles = pairs.rows(p0, guess, np.array([[0, 1]]), np.ones(1, bool))
+    assert coeffs.shape == (1, 5, 2) and lower.shape == (1, 5) and singles == []
+    np.testing.assert_allclose(coeffs[0, 0], [-1.0, 0.0])  # segment 0 starts at the closest point
+    np.testing.assert_allclose(coeffs[0, 1], coeffs[0, 2])  # segment 1's two rows share a normal
+    np.testing.assert_allclose(coeffs[0, 3], coeffs[0, 4])
+
+
+def test_shortfall_and_conflicted_drones() -> None:
+    """Drone 0 moves 0.6 m towards drone 1 (1 m away): its row is missed by 0.6 - 0.498."""
+    p0 = np.array([[0.0, 0.0], [1.0, 0.0], [5.0, 5.0]])
+    sep = Separation(2, Limits(v_max_mps=1.0, d_min_m=0.5), MPCSettings(horizon=1), ())
+    rows = sep.rows(p0, still(p0, 1), cand([[0, 1]]))
+    x = np.zeros((1, 3, 2))
+    x[0, 0] = [0.6, 0.0]
+    worst, missed = sep.shortfall(x, rows, 0.0)
+    assert worst == pytest.approx(0.6 - (1.0 - 0.5 - MARGIN))
+    np.testing.assert_array_equal(missed, [[0, 1]])
+    np.testing.assert_array_equal(sep.conflicted(x, rows), [True, True, False])
+    x[0, 0] = [0.4, 0.0]
+    assert sep.shortfall(x, rows, 0.0)[1].shape == (0, 2) and not sep.conflicted(x, rows).any()
+
+
+def test_subset_renumbers_drones() -> None:
+    p0 = np.array([[0.0, 0.0], [1.0, 0.0], [9.0, 0.0], [9.0, 1.0]])
+    lim, st_ = Limits(v_max_mps=1.0, d_min_m=0.5), MPCSettings(horizon=2, coupling="decoupled")
+    rows = Separation(2, lim, st_, ()).rows(p0, still(p0, 2), cand([[0, 1], [2, 3]]))
+    sub = rows.subset(np.array([2, 3]), 4, on_only=True)
+    np.testing.assert_array_equal(sub.singles, [0, 1])  # drones 2, 3 renumbered
+    np.testing.assert_array_equal(sub.labels, [[2, 3], [3, 2]])  # labels keep the global numbers
+    np.testing.assert_allclose(sub.single_lower, rows.single_lower[[1, 3]])
+    assert rows.subset(np.arange(4), 4, on_only=False) is rows
+
+
+@settings(max_examples=30, deadline=None)
+@given(seed=st.integers(0, 10_000))
+def test_clear_means_no_joint_or_obstacle_row_is_missed(seed: int) -> None:
+    """The cheap clear test is sufficient: when it passes, the joint pair rows and the obstacle rows
+    are all met (so every pair stays d_min apart over each step)."""
+    rng = np.random.default_rng(seed)
+    n, h = 4, 4
+    p0 = rng.uniform(-3.0, 3.0, (n, 2))  # about half of the draws pass the clear test
+    guess = p0 + np.cumsum(np.concatenate([np.zeros((1, n, 2)), rng.uniform(-0.1, 0.1, (h, n, 2))]), axis=0)
+    x = np.cumsum(rng.uniform(-0.1, 0.1, (h, n, 2)), axis=0)
+    ob = SphereObstacle(np.array([0.0, 0.0]), 0.3)
+    sep = Separation(2, Limits(v_max_mps=1.0, d_min_m=0.5), MPCSettings(horizon=h), (ob,))
+    everything = cand([[i, k] for i in range(n) for k in range(i + 1, n)], [[i, 0] for i in range(n)])
+    rows = sep.rows(p0, guess, everything)
+    if sep.clear(p0, guess, x):
+        assert sep.shortfall(x, rows, 0.0)[0] <= 1e-12
+
+
+def test_clear_does_not_cover_the_decoupled_rows() -> None:
+    """Two drones flying side by side, 0.6 m apart: the pair stays clear, but each crosses the
+    guess's midpoint plane (its decoupled row asks for 0.251 m from the holding guess's midpoint)."""
+    p0 = np.array([[0.0, 0.0], [0.6, 0.0]])
+    x = np.broadcast_to([0.1, 0.0], (2, 2, 2)) * np.array([1.0, 2.0])[:, None, None]
+    for coupling, missed in (("joint", False), ("decoupled", True)):
+        sep = Separation(2, Limits(v_max_mps=1.0, d_min_m=0.5), MPCSettings(horizon=2, coupling=coupling), ())
+        assert sep.clear(p0, still(p0, 2), x)
+        rows = sep.rows(p0, still(p0, 2), cand([[0, 1]]))
+        assert (sep.shortfall(x, rows, 0.0)[0] > 0) == missed
+
+
+def test_clear_fails_head_on() -> None:
+    p0 = np.array([[0.0, 0.0], [1.0, 0.0]])
+    sep = Separation(2, Limits(v_max_mps=1.0, d_min_m=0.5), MPCSettings(horizon=2), ())
+    apart = np.zeros((2, 2, 2))
+    assert sep.clear(p0, still(p0, 2), apart)
+    towards = np.array([[[0.2, 0.0], [-0.2, 0.0]], [[0.4, 0.0], [-0.4, 0.0]]])
+    assert not sep.clear(p0, still(p0, 2), towards)
+
+
+def test_first_segment_items_within_reach() -> None:
+    p0 = np.array([[0.0, 0.0], [1.0, 0.0]])
+    ob = SphereObstacle(np.array([0.0, 2.0]), 0.5)
+    sep = Separation(2, Limits(v_max_mps=1.0, d_min_m=0.4), MPCSettings(), (ob,))
+    c = cand([[0, 1]], [[1, 0]])
+    (a, b, d_pair), (oa, ob_, d_ob) = sep.first_segment(p0, p0 + 0.1, c)
+    np.testing.assert_allclose(a, [[-1.0, 0.0]])
+    np.testing.assert_allclose(b, [[-1.0, 0.0]])
+    assert d_pair == 0.4
+    np.testing.assert_allclose(oa, [[1.0, -2.0]])
+    np.testing.assert_allclose(ob_, [[1.1, -1.9]])
+    np.testing.assert_allclose(d_ob, [0.5 + 0.2])  # radius + half of d_min
+    off = Candidates(c.pairs, np.zeros(1, bool), c.obstacles, np.zeros(1, bool), False)
+    assert sep.first_segment(p0, p0, off) == []
