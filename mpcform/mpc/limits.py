@@ -90,3 +90,34 @@ def _bound(field: str, value: object) -> Array:
     if arr.ndim != 1 or arr.shape[0] not in (2, 3) or np.any(np.isnan(arr)):
         raise ValidationError(field, f"expected 2 or 3 numbers (inf allowed), got {value!r}")
     return arr
+
+
+def tightened(
+    limits: Limits, obstacles: tuple[SphereObstacle, ...], tube_m: float, a_max_mps2: float | None
+) -> tuple[Limits, tuple[SphereObstacle, ...]]:
+    """The limits a planner keeps so that a plant within ``tube_m`` [m] of every planned segment
+    keeps the declared ones (tube MPC with a constant tightening): ``d_min + 2 tube`` between two
+    drones (each may be off by the tube; in the downwash metric too, which only shrinks lengths),
+    ``clearance + tube`` from every obstacle, the geofence shrunk by the tube, and ``a_max_mps2``
+    (the bound on command changes the tube assumes) where the limits set none. A zero tube and no
+    new ``a_max`` return the inputs themselves."""
+    tube = positive("plant.margin", tube_m, allow_zero=True)
+    a_max = limits.a_max_mps2 if limits.a_max_mps2 is not None else a_max_mps2
+    if tube == 0.0 and a_max == limits.a_max_mps2:
+        return limits, obstacles
+    half = 0.5 * (limits.d_min_m or 0.0)
+    fence = {}
+    if limits.geofence_min_m is not None and limits.geofence_max_m is not None:
+        fence = {
+            "geofence_min_m": limits.geofence_min_m + tube,
+            "geofence_max_m": limits.geofence_max_m - tube,
+        }
+    planned = Limits(
+        limits.v_max_mps, None if limits.d_min_m is None else limits.d_min_m + 2.0 * tube, a_max,
+        downwash_kappa=limits.downwash_kappa, **fence,
+    )  # fmt: skip
+    inflated = tuple(
+        SphereObstacle(o.center_m, o.radius_m, (half if o.clearance_m is None else o.clearance_m) + tube)
+        for o in obstacles
+    )
+    return planned, inflated

@@ -8,6 +8,7 @@ from mpcform.control.graph import GRAPH_KINDS
 from mpcform.control.nullspace import NullSpaceController, NullSpaceSettings
 from mpcform.control.tracking import ProportionalController, TrackingController
 from mpcform.errors import ScenarioError, SolverError
+from mpcform.mpc.limits import tightened
 from mpcform.mpc.settings import MPCSettings
 from mpcform.scenario.parse import as_scenario_error
 from mpcform.scenario.schema import CONTROLLER_KINDS, did_you_mean, listing
@@ -23,7 +24,8 @@ def build_controller(
 
     ``solver`` is a backend name (checked like the ``controller.solver`` key) or a
     :class:`~mpcform.solvers.base.QPBackend` instance the MPC planner solves with as it is
-    (e.g. a recording wrapper).
+    (e.g. a recording wrapper). The MPC planner keeps the limits tightened by the plant's robust
+    margin (:func:`mpcform.mpc.limits.tightened`; nothing changes for the ideal plant).
     """
     spec = scenario.controller
     kind = spec.kind if kind is None else kind
@@ -57,10 +59,11 @@ def build_controller(
     if solver is not None:
         backend = solver if isinstance(solver, QPBackend) else check_solver_key(solver, "solver")
         check_sparse_solver(spec.mpc, "solver", backend)
+    rob = scenario.robustness
+    with as_scenario_error("plant"):
+        planned, obstacles = tightened(limits, scenario.obstacles, rob.margin_m, rob.a_max_mps2)
     with as_scenario_error("controller"):
-        planner: Controller = MPCPlanner(
-            ref, dt, limits, spec.mpc, obstacles=scenario.obstacles, solver=backend
-        )
+        planner: Controller = MPCPlanner(ref, dt, planned, spec.mpc, obstacles=obstacles, solver=backend)
     return planner
 
 

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from mpcform.errors import ValidationError
-from mpcform.mpc.limits import Limits, SphereObstacle, obstacle_arrays
+from mpcform.mpc.limits import Limits, SphereObstacle, obstacle_arrays, tightened
 
 
 def test_limits_store_validated_values():
@@ -67,3 +67,18 @@ def test_obstacle_arrays_keep_radius_plus_clearance():
 def test_bad_obstacles_are_rejected(args, match):
     with pytest.raises(ValidationError, match=match):
         SphereObstacle(*args)
+
+
+def test_tightened_limits_inflate_separation_obstacles_and_the_fence_by_the_tube():
+
+    lim = Limits(1.0, 0.5, geofence_min_m=[-5.0, -5.0], geofence_max_m=[5.0, 5.0])
+    obstacles = (SphereObstacle([1.0, 0.0], 0.5), SphereObstacle([3.0, 0.0], 0.5, clearance_m=0.1))
+    same = tightened(lim, obstacles, 0.0, None)
+    assert same[0] is lim and same[1] is obstacles  # the ideal plant: the very same objects
+    planned, inflated = tightened(lim, obstacles, 0.05, 2.0)
+    assert planned.d_min_m == pytest.approx(0.6) and planned.a_max_mps2 == 2.0 and planned.v_max_mps == 1.0
+    np.testing.assert_allclose(planned.geofence_min_m, [-4.95, -4.95])
+    np.testing.assert_allclose(planned.geofence_max_m, [4.95, 4.95])
+    assert [o.clearance_m for o in inflated] == pytest.approx([0.25 + 0.05, 0.1 + 0.05])
+    kept = tightened(Limits(1.0, 0.5, a_max_mps2=1.0), (), 0.05, 2.0)[0]
+    assert kept.a_max_mps2 == 1.0  # a declared a_max stays
