@@ -55,17 +55,6 @@ class Reference(ABC):
         vel = pr.centroid_velocity_mps[:, None, :] + pr.scale_rate_per_s[:, None, None] * q + s * spin
         return pos, vel
 
-    @property
-    def end_s(self) -> float:
-        """When the reference comes to rest for good [s] (``inf`` for one that only converges)."""
-        return float("inf")
-
-    def final_targets_m(self) -> Array:
-        """Drone targets (n, d) [m] where the reference comes to rest: at :attr:`end_s`, or the
-        limit ``t -> inf`` (where a run is complete; its ``completion`` metric is measured here)."""
-        end = self.end_s
-        return self.targets(np.array([end if np.isfinite(end) else 1e12]))[0][0]
-
     def state(self, t_s: float) -> FormationState:
         """The desired formation state at ``t_s``."""
         pr = self.profile(np.array([t_s], dtype=float))
@@ -83,10 +72,6 @@ class ConstantReference(Reference):
     def __init__(self, template: Template, state: FormationState) -> None:
         _same_dim(template, state, "reference")
         self.template, self.goal = template, state
-
-    @property
-    def end_s(self) -> float:
-        return 0.0
 
     def profile(self, times_s: Array) -> Profile:
         t = times_s.shape[0]

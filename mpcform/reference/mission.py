@@ -149,11 +149,6 @@ class MissionReference(Reference):
         self._stack()
 
     # ---- construction ------------------------------------------------------------------------
-
-    @property
-    def end_s(self) -> float:
-        """The end of the last move [s]: the mission is at rest from then on."""
-        return self.duration_s
     def _build(self) -> None:
         d = self.template.dim
         no_axis = np.ones(omega_size(d))

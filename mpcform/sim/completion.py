@@ -1,8 +1,9 @@
 """Did the run arrive? Completion of every drone at the reference's final targets, for any controller.
 
-A drone is complete when it ends within ``tol_m`` of its final target (the reference's value where
-it comes to rest: :meth:`mpcform.reference.base.Reference.final_targets_m`), and stalled when it
-ends short of it and moved less than ``tol_m`` over the run's last ``STALL_WINDOW_S``.
+A drone is complete when it ends within ``tol_m`` of its final target (the reference's value at
+the end of the run: a mission's last keyframe once it is flown, a constant reference's goal, an
+exponential reference's state at that time), and stalled when it ends short of it and moved less
+than ``tol_m`` over the run's last ``STALL_WINDOW_S``.
 """
 
 from __future__ import annotations
@@ -11,21 +12,18 @@ from typing import Any
 
 import numpy as np
 
-from mpcform._validate import Array
 from mpcform.sim.trajectory import Trajectory
 
 COMPLETION_TOL_M = 0.1
 STALL_WINDOW_S = 2.0
 
 
-def completion_metrics(
-    trajectory: Trajectory, final_targets_m: Array, tol_m: float = COMPLETION_TOL_M
-) -> dict[str, Any]:
+def completion_metrics(trajectory: Trajectory, tol_m: float = COMPLETION_TOL_M) -> dict[str, Any]:
     """``completion`` (fraction of drones within ``tol_m`` of their final target at the end),
     ``stalled_drones`` and ``time_to_complete`` [s] (from when on every drone stays within
     ``tol_m``; None if the run ends incomplete)."""
     p, t = trajectory.positions_m, trajectory.t_s
-    done = np.linalg.norm(p - final_targets_m, axis=-1) <= tol_m  # (T, n)
+    done = np.linalg.norm(p - trajectory.reference_m[-1], axis=-1) <= tol_m  # (T, n)
     window = t >= t[-1] - STALL_WINDOW_S
     moved = np.linalg.norm(p[window] - p[-1], axis=-1).max(axis=0)  # (n,)
     every = done.all(axis=1)

@@ -75,12 +75,11 @@ def run_metrics(
     *,
     limits: Limits | None = None,
     obstacles: tuple[SphereObstacle, ...] = (),
-    final_targets_m: Array | None = None,
     completion_tol_m: float = COMPLETION_TOL_M,
 ) -> dict[str, Any]:
-    """Tracking, separation, speed, solver and timing metrics of one run (JSON-ready); with
-    ``limits``, ``obstacles`` and ``final_targets_m`` also the obstacle, geofence and completion
-    metrics, and with the plant's dense motion (``result.true``) the ``*_true`` metrics."""
+    """Tracking, separation, speed, solver, timing and completion metrics of one run (JSON-ready);
+    with ``limits`` and ``obstacles`` also the geofence and obstacle metrics, and with the plant's
+    dense motion (``result.true``) the ``*_true`` metrics."""
     err = tracking_errors_m(result).max(axis=1)
     speed = command_speeds_mps(result)
     pos = result.positions_m
@@ -108,7 +107,7 @@ def run_metrics(
         },
         **_path_metrics(result.positions_m, "", d_min_m, limits, obstacles),
         **({} if result.true is None else _true_metrics(result.true, d_min_m, limits, obstacles)),
-        **({} if final_targets_m is None else completion_metrics(result, final_targets_m, completion_tol_m)),
+        **completion_metrics(result, completion_tol_m),
     }
 
 
