@@ -6,6 +6,7 @@ import time
 
 import numpy as np
 
+from mpcform.outputs import tables
 from mpcform.sim.quadrotor import QuadrotorPlant, QuadrotorSpec
 from mpcform.sim.wind import Wind
 
@@ -39,3 +40,36 @@ def bench_plant(
         "wall_s": time.perf_counter() - wall,
         "cpu_s": time.process_time() - cpu,
     }
+
+
+COLUMNS = (
+    ("n", "drones", "{:.0f}"),
+    ("duration_s", "flight [s]", "{:g}"),
+    ("rate_hz", "rate [Hz]", "{:g}"),
+    ("inner_steps", "inner steps", "{:.0f}"),
+    ("wind", "wind", "{}"),
+    ("wall_med_s", "wall med [s]", "{:.2f}"),
+    ("wall_max_s", "wall max [s]", "{:.2f}"),
+    ("cpu_med_s", "CPU med [s]", "{:.2f}"),
+    ("cpu_max_s", "CPU max [s]", "{:.2f}"),
+    ("real_time", "x real time (CPU)", "{:.1f}"),
+)
+
+
+def run(
+    n: int, duration_s: float, rate_hz: float, repeats: int, *, wind: bool = True
+) -> list[dict[str, object]]:
+    """``repeats`` runs of :func:`bench_plant`; one row with wall and CPU medians and maxima."""
+    runs = [bench_plant(n, duration_s, rate_hz, wind=wind) for _ in range(max(1, repeats))]
+    wall, cpu = (np.array([r[k] for r in runs]) for k in ("wall_s", "cpu_s"))
+    row: dict[str, object] = {"n": n, "duration_s": duration_s, "rate_hz": rate_hz}
+    row |= {"inner_steps": runs[0]["inner_steps"], "wind": "gusts" if wind else "none"}
+    row |= {"wall_med_s": float(np.median(wall)), "wall_max_s": float(wall.max())}
+    row |= {"cpu_med_s": float(np.median(cpu)), "cpu_max_s": float(cpu.max())}
+    row["real_time"] = duration_s / float(np.median(cpu))
+    return [row]
+
+
+def markdown_table(rows: list[dict[str, object]]) -> str:
+    """The rows of :func:`run` as a markdown table."""
+    return tables.markdown_table(rows, COLUMNS)

@@ -19,6 +19,8 @@ from mpcform.outputs.files import OUTPUT_FILES, format_summary
 from mpcform.run.runner import run_scenario
 from mpcform.scenario.keys import key_reference_markdown
 from mpcform.scenario.load import load_scenario
+from mpcform.scenario.plant import with_plant_kind
+from mpcform.sim.plants import KINDS as PLANT_KINDS
 from mpcform.solvers.registry import DEFAULT_SOLVER, PERSISTENT_SOLVERS, solver_infos
 
 EXIT_USAGE = 2
@@ -36,6 +38,8 @@ class _Parser(argparse.ArgumentParser):
 
 def _run(args: argparse.Namespace) -> int:
     scenario = load_scenario(args.scenario)
+    if args.plant is not None:
+        scenario = with_plant_kind(scenario, args.plant)
     cli_runner.check_run_options(args, scenario)  # e.g. --plot without matplotlib: fail before running
     out_dir = Path("results") / scenario.name if args.out is None else Path(args.out)
     run = run_scenario(scenario, out_dir, controller=args.controller, solver=args.solver,
@@ -74,6 +78,14 @@ def _bench_mpc(args: argparse.Namespace) -> int:
     return 0
 
 
+def _bench_plant(args: argparse.Namespace) -> int:
+    from mpcform.bench import plant as bench_plant
+
+    rows = bench_plant.run(args.n, args.duration, args.rate, args.repeats, wind=not args.no_wind)
+    _print_bench(bench_plant.markdown_table(rows), rows, args.json)
+    return 0
+
+
 def _print_bench(table: str, rows: list[dict[str, object]], json_path: str | None) -> None:
     print(table)
     if json_path:
@@ -96,6 +108,14 @@ def _add_bench(sub: argparse._SubParsersAction) -> None:
     mpc.add_argument("--json", metavar="PATH", help="also write the rows as a JSON list of records")
     _add_bench_solvers(kinds)
     _add_bench_scale(kinds)
+    plant = kinds.add_parser("plant", help="the quadrotor plant alone: n drones, a fixed command sequence")
+    plant.set_defaults(func=_bench_plant)
+    plant.add_argument("--n", type=int, default=20, help="drones")
+    plant.add_argument("--duration", type=float, default=12.0, help="flight time [s]")
+    plant.add_argument("--rate", type=float, default=500.0, help="inner-loop rate [Hz]")
+    plant.add_argument("--repeats", type=int, default=3, help="runs (median and max are reported)")
+    plant.add_argument("--no-wind", action="store_true", help="still air (default: gusts of 0.5 m/s)")
+    plant.add_argument("--json", metavar="PATH", help="also write the rows as a JSON list of records")
 
 
 def _progress(text: str) -> None:
@@ -267,6 +287,8 @@ def build_parser() -> argparse.ArgumentParser:
             cmd.add_argument("--out", metavar="DIR", help="output dir (default: results/<name>/)")
             cmd.add_argument("--controller", metavar="NAME", help="override controller.kind")
             cmd.add_argument("--solver", metavar="NAME", help="override controller.solver (mpc)")
+            cmd.add_argument("--plant", metavar="KIND", choices=PLANT_KINDS,
+                             help=f"override plant.kind: {', '.join(PLANT_KINDS)}")  # fmt: skip
             cli_runner.add_run_options(cmd)
     _add_bench(sub)
     _add_problems(sub)

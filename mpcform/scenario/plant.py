@@ -2,14 +2,16 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
 
-from mpcform.errors import ScenarioError
+from mpcform.errors import ScenarioError, ValidationError
 from mpcform.scenario.parse import as_scenario_error, parse_table
+from mpcform.scenario.spec import Scenario
 from mpcform.sim.plant_spec import PlantSpec
 from mpcform.sim.wind import GUST_FIELDS, Wind
 
@@ -28,12 +30,7 @@ def parse_plant(data: Mapping[str, Any], dim: int, dt_s: float) -> PlantSpec:
         )  # fmt: skip
     p = parse_table(data, "plant", dim)
     if p["kind"] == "quadrotor":
-        ratio = p["rate"] * dt_s
-        if ratio < 1.0 - RATE_RTOL or abs(ratio - round(ratio)) > RATE_RTOL * ratio:
-            raise ScenarioError(
-                "plant.rate", f"expected a multiple of the control rate 1 / dt = {1.0 / dt_s:g} Hz, "
-                f"got {p['rate']:g} Hz ({ratio:.6g} inner steps per control step)"
-            )  # fmt: skip
+        check_rate(p["rate"], dt_s)
     with as_scenario_error("plant"):
         return PlantSpec(
             kind=p["kind"],
@@ -50,6 +47,28 @@ def parse_plant(data: Mapping[str, Any], dim: int, dt_s: float) -> PlantSpec:
             measurement_noise_m=p["measurement_noise"],
             margin_m=p["margin"],
         )
+
+
+def check_rate(rate_hz: float, dt_s: float) -> None:
+    """The quadrotor's inner rate must be a whole multiple (>= 1) of the control rate ``1 / dt``."""
+    ratio = rate_hz * dt_s
+    if ratio < 1.0 - RATE_RTOL or abs(ratio - round(ratio)) > RATE_RTOL * ratio:
+        raise ScenarioError(
+            "plant.rate", f"expected a multiple of the control rate 1 / dt = {1.0 / dt_s:g} Hz, "
+            f"got {rate_hz:g} Hz ({ratio:.6g} inner steps per control step)"
+        )  # fmt: skip
+
+
+def with_plant_kind(scenario: Scenario, kind: str) -> Scenario:
+    """``scenario`` flown on a plant of another ``kind`` (``mpcform run --plant``), the table's other
+    keys kept (a wind on the ideal plant is an error)."""
+    try:
+        plant = dataclasses.replace(scenario.plant, kind=kind)
+    except ValidationError as exc:
+        raise ScenarioError("--plant", str(exc).removeprefix(f"{exc.field}: ")) from None
+    if kind == "quadrotor":
+        check_rate(plant.rate_hz, scenario.simulation.dt_s)
+    return dataclasses.replace(scenario, plant=plant)
 
 
 def _wind(raw: Any, dim: int) -> Wind | None:

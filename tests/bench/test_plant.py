@@ -24,3 +24,12 @@ def test_bench_counts_the_inner_steps_of_its_flight():
 def test_bench_scales_down():
     result = bench_plant(n=2, duration_s=0.5, rate_hz=200.0, wind=False)
     assert result["inner_steps"] == 100
+
+
+def test_run_reports_one_row_with_wall_and_cpu():
+    from mpcform.bench.plant import markdown_table, run
+
+    rows = run(n=3, duration_s=0.4, rate_hz=100.0, repeats=2, wind=False)
+    assert len(rows) == 1 and rows[0]["inner_steps"] == 40 and rows[0]["wind"] == "none"
+    assert float(rows[0]["cpu_med_s"]) > 0 and float(rows[0]["real_time"]) > 0
+    assert markdown_table(rows).splitlines()[0].startswith("| drones |")

@@ -138,3 +138,16 @@ def test_solvers_lists_backends(capsys: pytest.CaptureFixture[str]) -> None:
 def test_keys_prints_the_key_reference(capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["keys"]) == 0
     assert capsys.readouterr().out == key_reference_markdown()
+
+
+def test_run_with_a_plant_override_reports_the_true_motion(tmp_path, capsys):
+    status = main(["run", str(ROOT / "scenarios" / "swap_planar_8.toml"), "--plant", "lag", "--out", str(tmp_path)])
+    assert status == 0
+    out = capsys.readouterr().out
+    assert "true motion" in out and "lag plant" in out
+    assert json.loads((tmp_path / "summary.json").read_text())["plant"]["kind"] == "lag"
+
+
+def test_unknown_plant_kind_is_a_usage_error(capsys):
+    assert main(["run", str(ROOT / "scenarios" / "swap_planar_8.toml"), "--plant", "rocket"]) == 2
+    assert "--plant" in capsys.readouterr().err
