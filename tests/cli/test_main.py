@@ -141,7 +141,8 @@ def test_keys_prints_the_key_reference(capsys: pytest.CaptureFixture[str]) -> No
 
 
 def test_run_with_a_plant_override_reports_the_true_motion(tmp_path, capsys):
-    status = main(["run", str(ROOT / "scenarios" / "swap_planar_8.toml"), "--plant", "lag", "--out", str(tmp_path)])
+    swap = str(ROOT / "scenarios" / "swap_planar_8.toml")
+    status = main(["run", swap, "--plant", "lag", "--out", str(tmp_path)])
     assert status == 0
     out = capsys.readouterr().out
     assert "true motion" in out and "lag plant" in out
