@@ -1,0 +1,74 @@
+"""Plans flown on realistic plants (slow): the bundled MPC scenarios and the three swaps under a
+velocity lag (0.1, 0.2, 0.3 s), a second-order loop and the quadrotor in gusty wind, and a seeded
+random family of swaps under a lag and the quadrotor. The true, dense trajectory keeps d_min and
+the obstacles; every drone arrives; commands stay within v_max."""
+
+from __future__ import annotations
+
+import copy
+import tomllib
+from importlib import metadata
+from pathlib import Path
+
+import numpy as np
+import pytest
+from families import swap_planar, swap_spatial
+
+from mpcform.run.runner import run_scenario
+from mpcform.scenario.load import scenario_from_dict
+
+pytestmark = pytest.mark.slow
+SCENARIOS = Path(__file__).resolve().parents[1] / "scenarios"
+FILES = {p.stem: tomllib.loads(p.read_text()) for p in SCENARIOS.glob("*.toml")}
+MPC = sorted(n for n, data in FILES.items() if data["controller"]["kind"] == "mpc" and "plant" not in data)
+PLANTS = {
+    "lag0.1": {"kind": "lag", "time_constant": 0.1},
+    "lag0.2": {"kind": "lag", "time_constant": 0.2},
+    "lag0.3": {"kind": "lag", "time_constant": 0.3},
+    "second_order": {"kind": "second_order", "damping": 0.7, "natural_frequency": 6.0},
+    "quadrotor_wind": {"kind": "quadrotor", "wind": {"gust_std": 0.5, "gust_time": 1.0}},
+}
+try:
+    metadata.distribution("drone-models")
+    FLIGHT = True
+except metadata.PackageNotFoundError:
+    FLIGHT = False
+
+
+def with_plant(data: dict, plant: dict) -> dict:
+    data, plant = copy.deepcopy(data), copy.deepcopy(plant)
+    if "wind" in plant:
+        plant["wind"]["mean"] = [1.0, 0.0] + [0.0] * (data["dim"] - 2)
+    data["plant"] = plant
+    return data
+
+
+def check(data: dict) -> dict:
+    run = run_scenario(scenario_from_dict(data))
+    m = run.summary["metrics"]
+    assert m["separation_violations_true"] == 0, (m["min_separation_true"], run.summary["plant"])
+    assert m.get("obstacle_violations_true", 0) == 0, m.get("min_obstacle_clearance_true")
+    assert m["geofence_violations_true"] == 0
+    assert m["speed_violations"] == 0  # the certified command; the true speed may exceed v_max
+    assert m["max_speed_true"] is not None
+    assert m["completion"] == 1.0, (m["completion"], m["stalled_drones"])
+    return m
+
+
+@pytest.mark.parametrize("plant", sorted(PLANTS))
+@pytest.mark.parametrize("name", MPC)
+def test_bundled_scenario_on_a_realistic_plant(name: str, plant: str) -> None:
+    if plant.startswith("quadrotor") and not FLIGHT:
+        pytest.skip("needs drone-models: pip install -e '.[flight]'")
+    check(with_plant(FILES[name], PLANTS[plant]))
+
+
+@pytest.mark.parametrize("seed", range(12))
+def test_random_swaps_under_a_lag_and_the_quadrotor(seed: int) -> None:
+    rng = np.random.default_rng(1000 + seed)
+    data = (swap_planar if seed % 2 else swap_spatial)(rng, seed)
+    data["controller"]["horizon"] = 10
+    while len(data["template"]["offsets"]) > 20:  # n up to 20
+        data = (swap_planar if seed % 2 else swap_spatial)(rng, seed)
+    plant = PLANTS["lag0.2"] if seed % 3 or not FLIGHT else PLANTS["quadrotor_wind"]
+    check(with_plant(data, plant))
