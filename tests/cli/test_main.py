@@ -105,7 +105,7 @@ def test_missing_file(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> Non
 @pytest.mark.parametrize(
     ("argv", "fragments"),
     [
-        (["run", WORKED, "--controller", "trackin"], ("controller.kind", "did you mean")),
+        (["run", WORKED, "--controller", "trackin"], ("--controller", "did you mean 'tracking'")),
         (["run", WORKED, "--solver", "osqp"], ("only to the mpc controller",)),
         (["run", WORKED, "--controller", "mpc", "--solver", "nope"], ("solver", "unknown solver")),
         (["run", str(ROOT / "scenarios" / "formation_flight_100.toml"), "--solver", "osqp"],
