@@ -21,6 +21,7 @@ per QP nonzero (the solver's factorisation included), 20 bytes per dense per-dro
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
@@ -28,6 +29,7 @@ from scipy.spatial import cKDTree
 
 from mpcform._validate import Array
 from mpcform.errors import ScenarioError
+from mpcform.mpc.settings import MPCSettings
 from mpcform.scenario.spec import Scenario
 
 GIB = 2.0**30
@@ -41,6 +43,7 @@ BYTES_PER_DENSE_ENTRY = 20.0  # the per-drone QPs' dense separation rows (two co
 REFERENCE_SAMPLES = 9
 CROSSING_FRACTIONS = (0.25, 0.5, 0.75)
 DEFAULT_FACETS = {2: 16, 3: 32}  # as the planner's velocity polytope
+DEFAULT_HORIZON = MPCSettings().horizon
 
 
 @dataclass(frozen=True)
@@ -111,6 +114,12 @@ def check_memory(
         _size_key(scenario): est.pair_bytes,
     }
     key = max(parts, key=lambda k: parts[k])
+    if key == _size_key(scenario) and (est.horizon or 0) > DEFAULT_HORIZON:
+        spec = scenario.controller
+        mpc = dataclasses.replace(spec.mpc, horizon=DEFAULT_HORIZON)
+        shorter = dataclasses.replace(scenario, controller=dataclasses.replace(spec, mpc=mpc))
+        if estimate_memory(shorter, controller, files=files).total_gib <= max_gib:
+            key = "controller.horizon"  # the long horizon brings every pair within reach
     what = {
         "simulation.duration": f"time series of {est.steps + 1:,} samples x {est.n:,} drones x "
         f"{est.dim} axes",
