@@ -4,10 +4,13 @@ Each solver runs every scenario through :func:`mpcform.run.runner.run_scenario` 
 ``mpc`` controller and that solver (in its own process, with a time limit per run): tracking
 error, minimum separation along segments, slack, fallbacks and per-step times of QP steps. A
 missing or unsupported solver is reported, not run.
+Every scenario is loaded and its ``mpc`` controller built before the first run: an invalid one
+is an error naming the file and key (no run starts), not a failed row per solver.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import multiprocessing as mp
 import os
 import time
@@ -16,10 +19,17 @@ from multiprocessing.connection import Connection
 from pathlib import Path
 from typing import Any
 
+from mpcform._validate import positive
 from mpcform.bench.accuracy import default_solvers
 from mpcform.bench.problems import DEFAULT_SCENARIOS
+from mpcform.bench.report import shorten
 from mpcform.bench.worker import BENCH_ENV
+from mpcform.errors import MPCFormError, ScenarioError, ValidationError
 from mpcform.outputs.tables import Column, markdown_table
+from mpcform.scenario.build import build_controller
+from mpcform.scenario.check import located_problem
+from mpcform.scenario.load import load_scenario
+from mpcform.scenario.spec import Scenario
 from mpcform.solvers.registry import solver_info
 
 CLOSED_LOOP_COLUMNS: list[Column] = [
@@ -38,16 +48,32 @@ CLOSED_LOOP_COLUMNS: list[Column] = [
 ]
 
 
-def _closed_loop_worker(conn: Connection, scenario: str, solver: str, duration_s: float | None) -> None:
-    import dataclasses
+def load_bench_scenario(
+    path: str | Path, duration_s: float | None = None, solver: str | None = None
+) -> Scenario:
+    """The scenario at ``path`` with its duration replaced by ``duration_s`` (if given), checked by
+    building its ``mpc`` controller with ``solver`` (if given); errors name the file, key and line."""
+    try:
+        scenario = load_scenario(path)
+        if duration_s is not None:
+            duration_s, dt = positive("--duration", duration_s), scenario.simulation.dt_s
+            if duration_s < dt:
+                message = f"expected at least one step ({dt:g} s), got {duration_s:g} s"
+                raise ValidationError("--duration", message)
+            sim = dataclasses.replace(scenario.simulation, duration_s=duration_s)
+            scenario = dataclasses.replace(scenario, simulation=sim)
+        if solver is not None:
+            build_controller(scenario, "mpc", solver)
+    except ScenarioError as exc:
+        raise MPCFormError(located_problem(exc, path).text(path)) from None
+    return scenario
 
+
+def _closed_loop_worker(conn: Connection, scenario: str, solver: str, duration_s: float | None) -> None:
     from mpcform.run.runner import run_scenario
-    from mpcform.scenario.load import load_scenario
 
     try:
-        sc = load_scenario(scenario)
-        if duration_s is not None:
-            sc = dataclasses.replace(sc, simulation=dataclasses.replace(sc.simulation, duration_s=duration_s))
+        sc = load_bench_scenario(scenario, duration_s)
         start = time.perf_counter()
         run = run_scenario(sc, controller="mpc", solver=solver)
         conn.send(
@@ -60,7 +86,7 @@ def _closed_loop_worker(conn: Connection, scenario: str, solver: str, duration_s
             }
         )
     except Exception as exc:  # noqa: BLE001 - reported as this run's failure
-        conn.send({"ok": False, "status": f"{type(exc).__name__}: {exc}"[:300]})
+        conn.send({"ok": False, "status": shorten(f"{type(exc).__name__}: {exc}", 300)})
     conn.close()
 
 
@@ -73,6 +99,9 @@ def run_closed_loop(
 ) -> list[dict[str, Any]]:
     """Each solver drives each scenario (controller ``mpc``) in its own process; one record per run."""
     infos = [solver_info(n) for n in (default_solvers() if solvers is None else solvers)]  # unknown: raises
+    usable = next((info.name for info in infos if info.usable), None)
+    for scenario in scenarios:  # an invalid scenario is an error here, not a failed row per solver
+        load_bench_scenario(scenario, duration_s, usable)
     ctx = mp.get_context("spawn")
     rows = []
     os.environ.update(BENCH_ENV)
@@ -132,7 +161,7 @@ def _closed_loop_row(scenario: str, solver: str, out: dict[str, Any]) -> dict[st
 
 
 def _error_cell(value: Any) -> str:
-    return value if isinstance(value, str) else "-" if value is None else f"{value:.2e}"
+    return value.replace("|", "\\|") if isinstance(value, str) else "-" if value is None else f"{value:.2e}"
 
 
 def closed_loop_markdown(rows: Sequence[dict[str, Any]]) -> str:
@@ -145,6 +174,7 @@ def closed_loop_markdown(rows: Sequence[dict[str, Any]]) -> str:
         "along the straight segments [m]; QP-step times exclude fast-path steps.",
         "",
     ]
-    table = [r if r["ok"] else {**r, "final_tracking_error_m": f"failed: {r['status'][:100]}"} for r in rows]
+    table = [r if r["ok"] else {**r, "final_tracking_error_m": f"failed: {shorten(r['status'], 100)}"}
+             for r in rows]  # fmt: skip
     out.append(markdown_table(table, CLOSED_LOOP_COLUMNS, {"final_tracking_error_m": _error_cell}))
     return "\n".join(out) + "\n"

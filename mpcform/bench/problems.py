@@ -35,7 +35,10 @@ import numpy as np
 import scipy.sparse as sp
 
 from mpcform._validate import Array
-from mpcform.errors import MPCFormError
+from mpcform.errors import MPCFormError, ScenarioError, ValidationError
+from mpcform.scenario.build import check_sparse_solver
+from mpcform.scenario.check import located_problem
+from mpcform.scenario.load import load_scenario
 from mpcform.solvers.base import QPBackend, QPContext, QPSolution, SolverOptions
 from mpcform.solvers.registry import make_backend
 
@@ -245,7 +248,6 @@ def _version() -> str:
 def record_scenario(path: str | Path, solver: str | None = None) -> list[RecordedQP]:
     """Run the scenario at ``path`` closed-loop with the MPC planner and return every QP it solved."""
     from mpcform.run.runner import run_scenario
-    from mpcform.scenario.load import load_scenario
 
     scenario = load_scenario(path)
     st = scenario.controller.mpc
@@ -269,16 +271,37 @@ def export_problems(
 ) -> list[Path]:
     """Record each scenario and write ``per_scenario`` of its QPs to ``out_dir/<scenario>/``,
     replacing what that directory held: a contiguous sequence (for warm-start replay) from the
-    middle of the run, where the swap's conflicts are."""
-    written: list[Path] = []
+    middle of the run, where the swap's conflicts are.
+
+    Every scenario is loaded before the first run, and nothing is written unless each one recorded
+    a QP: a scenario whose planner never solved one (every step took the eq. 14 rollout, as no
+    separation, obstacle or limit row was ever active) is an error naming it.
+    """
+    if isinstance(per_scenario, bool) or not isinstance(per_scenario, int) or per_scenario < 1:
+        raise ValidationError("--per-scenario", f"expected an integer >= 1, got {per_scenario!r}")
+    for path in scenarios:
+        try:
+            scenario = load_scenario(path)  # per-drone DAQP solves no sparse QP to record:
+            name = solver or scenario.controller.solver
+            check_sparse_solver(scenario.controller.mpc, "controller.per_drone", name)
+        except ScenarioError as exc:
+            raise MPCFormError(located_problem(exc, path).text(path)) from None
+    kept: list[list[RecordedQP]] = []
     for path in scenarios:
         problems = record_scenario(path, solver)
         if not problems:
-            continue
+            raise MPCFormError(
+                f"{path}: no QP to record: the mpc planner never solved one in this run (at every step the "
+                "eq. 14 rollout met every row: no separation, obstacle or limit row was active); choose a "
+                "scenario whose drones come within reach of d_min, an obstacle or a limit"
+            )
+        first = max(0, (len(problems) - per_scenario) // 2)
+        kept.append(problems[first : first + per_scenario])
+    written: list[Path] = []
+    for problems in kept:
         target = Path(out_dir) / str(problems[0].meta["scenario"])
         if target.exists():
             shutil.rmtree(target)
-        first = max(0, (len(problems) - per_scenario) // 2)
-        for qp in problems[first : first + per_scenario]:
+        for qp in problems:
             written.append(save_problem(target / f"step_{int(qp.meta['step']):04d}.npz", qp))
     return written

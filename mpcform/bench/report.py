@@ -50,8 +50,32 @@ EXACT_COLUMNS: list[Column] = [
 ]
 
 
-def _failures(counts: dict[str, int]) -> str:
-    return "; ".join(f"{k} ({v})" for k, v in counts.items())[:90] or "-"
+FAILURES_WIDTH = 90
+"""Characters of the failures cell: beyond it each status is shortened, its count kept."""
+
+
+def failures_cell(counts: dict[str, int], width: int = FAILURES_WIDTH) -> str:
+    """``status (count); ...`` of the failed solves (``-`` for none), at most about ``width``
+    characters: when the statuses are longer, each is cut at a word boundary and ends in ``...``
+    (never mid-word, never its count); the JSON records keep them whole."""
+    if not counts:
+        return "-"
+    whole = "; ".join(f"{k} ({v})" for k, v in counts.items())
+    if len(whole) > width:
+        each = max(16, width // len(counts) - 8)
+        whole = "; ".join(f"{shorten(k, each)} ({v})" for k, v in counts.items())
+    return whole.replace("|", "\\|")
+
+
+def shorten(text: str, width: int) -> str:
+    """``text`` in one line of at most ``width`` characters, cut at a word boundary with ``...``."""
+    text = " ".join(text.split())
+    if len(text) <= width:
+        return text
+    cut = text[: width - 3]
+    if text[width - 3] != " " and " " in cut:
+        cut = cut.rsplit(" ", 1)[0]
+    return cut.rstrip(" ,;:") + "..."
 
 
 def _versions() -> str:
@@ -121,7 +145,7 @@ def markdown_report(bench: SolverBenchmark) -> str:
             if not rows:
                 continue
             rows.sort(key=lambda r: (-r["success_rate"], r["shgeom_runtime_ms"]))
-            table = markdown_table(rows, SUMMARY_COLUMNS, {"failures": _failures})
+            table = markdown_table(rows, SUMMARY_COLUMNS, {"failures": failures_cell})
             out += [f"### {setting} (tol {TOLERANCES[setting]:g})", "", table, ""]
     if bench.exact:
         out += _exact_section(bench)

@@ -41,6 +41,8 @@ class StepInfo:
 
 @dataclass(frozen=True)
 class ControlStep:
+    """What a controller returns for one step: the command and what the step did."""
+
     command_mps: Array  # (n, d), held over [t, t + dt)
     info: StepInfo
 

@@ -206,9 +206,11 @@ class ConsensusController(Controller):
                 f"below {STABILITY_BOUND / (dt * lam_p):.4g} /s, dt below "
                 f"{STABILITY_BOUND / (st.gain_per_s * lam_p):.4g} s, or use a sparser graph",
             )
-        m = st.gamma_per_s * g.laplacian.toarray() + np.diag(st.leader_gain_per_s * self._leader)
-        lam_s = float(np.linalg.eigvalsh(m)[-1]) if g.n <= DENSE_EIG_MAX_N else (
-            st.gamma_per_s * g.lambda_max + st.leader_gain_per_s)  # fmt: skip
+        if g.n <= DENSE_EIG_MAX_N:  # a dense (n, n) matrix only for small swarms
+            m = st.gamma_per_s * g.laplacian.toarray() + np.diag(st.leader_gain_per_s * self._leader)
+            lam_s = float(np.linalg.eigvalsh(m)[-1])
+        else:  # Weyl's bound: lambda_max(A + B) <= lambda_max(A) + lambda_max(B)
+            lam_s = st.gamma_per_s * g.lambda_max + st.leader_gain_per_s
         y = dt * lam_s
         if y >= STABILITY_BOUND:
             raise ValidationError(
@@ -222,6 +224,8 @@ class ConsensusController(Controller):
 
     # ---- state ------------------------------------------------------------------------------
     def reset(self, t_s: float, positions_m: Array) -> None:
+        """Start a run: every scale estimate at ``initial_scale`` (default: the best-fit scale of
+        ``positions_m``), the link buffers filled with the start, the loss draws reseeded."""
         p = self._check_positions(positions_m)
         s0 = self.settings.initial_scale
         if s0 is None:
@@ -247,6 +251,8 @@ class ConsensusController(Controller):
 
     # ---- one step ---------------------------------------------------------------------------
     def step(self, t_s: float, positions_m: Array) -> ControlStep:
+        """Exchange positions and estimates over the graph (delayed, lossy), then eq. 20: each drone's
+        command from its neighbours' relative positions and its updated scale estimate."""
         p = self._check_positions(positions_m)
         if self._estimates.size == 0:  # step() without reset(): start here
             self.reset(t_s, p)

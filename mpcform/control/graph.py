@@ -15,6 +15,7 @@ from dataclasses import dataclass
 from functools import cached_property
 
 import numpy as np
+from numpy.typing import ArrayLike
 from scipy import sparse
 from scipy.sparse import csgraph
 from scipy.spatial import cKDTree
@@ -74,7 +75,7 @@ class Graph:
         return cls(n, np.column_stack([i, i + 1]), "path")
 
     @classmethod
-    def k_nearest(cls, points_m: object, k: int) -> Graph:
+    def k_nearest(cls, points_m: ArrayLike, k: int) -> Graph:
         """Each drone linked to its ``k`` nearest others on ``points_m`` (n, d), symmetrised.
 
         An edge exists when either end is among the other's k nearest (ties broken by index
@@ -92,7 +93,7 @@ class Graph:
         return cls(n, np.column_stack([rows, idx.ravel()])[keep], "k_nearest")
 
     @classmethod
-    def disk(cls, points_m: object, radius_m: float) -> Graph:
+    def disk(cls, points_m: ArrayLike, radius_m: float) -> Graph:
         """Drones within ``radius_m`` [m] of each other on ``points_m`` (n, d) communicate."""
         pts = finite_array("graph.points", points_m, (None, None))
         radius = positive("graph.radius", radius_m)
@@ -100,7 +101,7 @@ class Graph:
         return cls(pts.shape[0], pairs, "disk")
 
     @classmethod
-    def from_edges(cls, n: int, edges: object) -> Graph:
+    def from_edges(cls, n: int, edges: ArrayLike) -> Graph:
         """An explicit undirected edge list of index pairs (m, 2)."""
         return cls(n, edges, "explicit")  # type: ignore[arg-type]
 
@@ -167,6 +168,7 @@ class Graph:
 
     @property
     def is_connected(self) -> bool:
+        """Whether every drone can reach every other one over the edges."""
         return len(self.components) == 1
 
     def check_connected(self, allow_disconnected: bool = False, purpose: str = "consensus") -> None:

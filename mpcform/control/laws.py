@@ -3,12 +3,13 @@
 from __future__ import annotations
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from mpcform._validate import Array, finite_array, positive
 from mpcform.errors import ValidationError
 
 
-def go_to_goal_closed_form(p0_m: object, goal_m: object, gain_per_s: float, t_s: object) -> Array:
+def go_to_goal_closed_form(p0_m: ArrayLike, goal_m: ArrayLike, gain_per_s: float, t_s: ArrayLike) -> Array:
     """Eq. 5: ``p(t) = p* + (p(0) - p*) e^{-k t}``; returns (T, d) for times ``t_s`` (T,)."""
     p0 = finite_array("p0", p0_m, (None,))
     goal = finite_array("goal", goal_m, p0.shape)
@@ -17,7 +18,9 @@ def go_to_goal_closed_form(p0_m: object, goal_m: object, gain_per_s: float, t_s:
     return goal + np.outer(np.exp(-k * t), p0 - goal)
 
 
-def go_to_goal_discrete(p0_m: object, goal_m: object, gain_per_s: float, dt_s: float, steps: int) -> Array:
+def go_to_goal_discrete(
+    p0_m: ArrayLike, goal_m: ArrayLike, gain_per_s: float, dt_s: float, steps: int
+) -> Array:
     """Eq. 4 under zero-order hold: ``p_j = p* + (1 - k dt)^j (p0 - p*)``; (steps + 1, d)."""
     p0 = finite_array("p0", p0_m, (None,))
     goal = finite_array("goal", goal_m, p0.shape)

@@ -147,6 +147,7 @@ class NullSpaceController(Controller):
         self.last_jacobian = np.zeros((tpl.n * tpl.dim, 0))
 
     def step(self, t_s: float, positions_m: Array) -> ControlStep:
+        """Eq. 14's tracking command plus the secondary objective projected by ``N = I - J J^+``."""
         p = self._check_positions(positions_m)
         st = self.settings
         target, ff = feedforward_targets(self.reference, t_s, self.dt_s, 1, st.feedforward)

@@ -22,6 +22,7 @@ class ProportionalController(Controller):
         self.v_max_mps = None if v_max_mps is None else positive("limits.v_max", v_max_mps)
 
     def step(self, t_s: float, positions_m: Array) -> ControlStep:
+        """Eq. 4: ``u = k (p* - p)``, saturated at v_max (eq. 7) when it is set."""
         p = self._check_positions(positions_m)
         target, _ = self.reference.targets(t_s)
         raw = self.gain_per_s * (target[0] - p)
@@ -57,6 +58,7 @@ class TrackingController(Controller):
         self.feedforward = feedforward
 
     def step(self, t_s: float, positions_m: Array) -> ControlStep:
+        """Eq. 14: ``u = ff + k (p* - p)``, saturated at v_max (eq. 7) when it is set."""
         p = self._check_positions(positions_m)
         target, ff = feedforward_targets(self.reference, t_s, self.dt_s, 1, self.feedforward)
         raw = tracking_command(p, target[0], ff[0], self.gain_per_s)

@@ -10,6 +10,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from mpcform._validate import Array, finite_array
 from mpcform.errors import ValidationError
@@ -112,7 +113,7 @@ class FormationFit:
     scale_identifiable: bool = True
 
 
-def fit_formation(template: Template, positions_m: object) -> FormationFit:
+def fit_formation(template: Template, positions_m: ArrayLike) -> FormationFit:
     """Similarity Procrustes (Umeyama 1991): argmin over (c, R, s) of sum ||p_i - c - s R r_i||^2.
 
     R is a proper rotation and s > 0. The reflection-corrected scale is ``(sv_1 - sv_2) / var_r``

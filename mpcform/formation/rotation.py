@@ -8,6 +8,7 @@ velocities are world-frame (``R_dot = hat(w_world) R``, seed eq. 11).
 from __future__ import annotations
 
 import numpy as np
+from numpy.typing import ArrayLike
 from scipy.spatial.transform import Rotation
 
 from mpcform._validate import Array, finite_array
@@ -22,7 +23,7 @@ def omega_size(dim: int) -> int:
     return 1 if dim == 2 else 3
 
 
-def rotation_matrix(dim: int, param: object, field: str = "rotation") -> Array:
+def rotation_matrix(dim: int, param: ArrayLike, field: str = "rotation") -> Array:
     """Rotation matrix (d, d) of an angle (d = 2) or a rotation vector (d = 3), in radians."""
     if dim == 2:
         theta = float(finite_array(field, param, ()))
@@ -39,7 +40,7 @@ def rotation_param(rotation: Array) -> Array:
     return Rotation.from_matrix(rotation).as_rotvec()
 
 
-def check_rotation(field: str, value: object, dim: int) -> Array:
+def check_rotation(field: str, value: ArrayLike, dim: int) -> Array:
     """Validate a proper rotation matrix (orthonormal, det = +1) of size d."""
     r = finite_array(field, value, (dim, dim))
     err = np.abs(r.T @ r - np.eye(dim)).max()

@@ -5,6 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from mpcform._validate import Array, dimension, finite_array, positive
 from mpcform.formation.rotation import check_rotation, rotation_matrix, rotation_param
@@ -33,7 +34,9 @@ class FormationState:
         object.__setattr__(self, "scale", positive("state.scale", self.scale))
 
     @classmethod
-    def from_param(cls, centroid_m: object, rotation: object = None, scale: float = 1.0) -> FormationState:
+    def from_param(
+        cls, centroid_m: ArrayLike, rotation: ArrayLike | None = None, scale: float = 1.0
+    ) -> FormationState:
         """State from a centroid, a rotation parameter (default identity) and a scale."""
         c = finite_array("state.centroid", centroid_m, (None,))
         dim = dimension("state.centroid (length)", c.shape[0])
@@ -43,6 +46,7 @@ class FormationState:
 
     @property
     def dim(self) -> int:
+        """Spatial dimension d (2 planar, 3 spatial)."""
         return int(self.centroid_m.shape[0])
 
     @property

@@ -5,9 +5,11 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from mpcform._validate import Array, dimension, finite_array, positive
 from mpcform.errors import ValidationError
+from mpcform.formation.geometry import min_pair_distance
 
 CENTRED_RTOL = 1e-9
 
@@ -50,16 +52,12 @@ class Template:
         return int(self.offsets.shape[1])
 
     def min_distance(self) -> float:
-        """Smallest distance between two offsets [m] (inf for one drone)."""
-        if self.n < 2:
-            return float("inf")
-        diff = self.offsets[:, None, :] - self.offsets[None, :, :]
-        dist = np.linalg.norm(diff, axis=-1)
-        return float(dist[np.triu_indices(self.n, 1)].min())
+        """Smallest distance between two offsets [m] (inf for one drone); k-d tree, O(n log n)."""
+        return min_pair_distance(self.offsets)
 
     # ---- constructors -------------------------------------------------------------------
     @classmethod
-    def centred(cls, points: object, name: str = "explicit") -> tuple[Template, Array]:
+    def centred(cls, points: ArrayLike, name: str = "explicit") -> tuple[Template, Array]:
         """Centre ``points`` (n, d): returns the template and the shift that was subtracted."""
         p = finite_array("template.offsets", points, (None, None))
         shift = p.mean(axis=0)

@@ -11,6 +11,7 @@ from abc import ABC, abstractmethod
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import ArrayLike
 from scipy.spatial.transform import Rotation
 
 from mpcform._validate import Array, positive
@@ -42,7 +43,7 @@ class Reference(ABC):
     def profile(self, times_s: Array) -> Profile:
         """Formation states and velocities at ``times_s`` (T,)."""
 
-    def targets(self, times_s: object) -> tuple[Array, Array]:
+    def targets(self, times_s: ArrayLike) -> tuple[Array, Array]:
         """Drone targets ``p*`` [m] and ``p_dot*`` [m/s], each (T, n, d), at ``times_s`` (T,)."""
         pr = self.profile(np.atleast_1d(np.asarray(times_s, dtype=float)))
         q = np.einsum("tij,nj->tni", pr.rotation_body_to_world, self.template.offsets)
@@ -54,6 +55,16 @@ class Reference(ABC):
             spin = np.cross(pr.omega_world_radps[:, None, :], q)
         vel = pr.centroid_velocity_mps[:, None, :] + pr.scale_rate_per_s[:, None, None] * q + s * spin
         return pos, vel
+
+    def start_positions_m(self) -> Array:
+        """The drones' targets at t = 0, ``p*_i(0)`` (n, d) [m]: where the reference starts.
+
+        They differ from where the drones start (a scenario's ``initial_positions_m``) when the
+        reference does not begin at the start formation: a constant reference holds its goal
+        from t = 0 (the swaps start on the opposite side of it), and explicit start positions
+        are fitted by a formation state (``Scenario.start``) they need not match exactly.
+        """
+        return self.targets(0.0)[0][0]
 
     def state(self, t_s: float) -> FormationState:
         """The desired formation state at ``t_s``."""
@@ -74,6 +85,7 @@ class ConstantReference(Reference):
         self.template, self.goal = template, state
 
     def profile(self, times_s: Array) -> Profile:
+        """The goal at every time, at rest."""
         t = times_s.shape[0]
         g, d = self.goal, self.template.dim
         return Profile(
@@ -104,6 +116,7 @@ class ExponentialReference(Reference):
         self._axis, self._phi = geodesic(start.rotation_body_to_world, goal.rotation_body_to_world)
 
     def profile(self, times_s: Array) -> Profile:
+        """Eq. 16 at ``times_s`` (T,): the states and their rates."""
         t = np.maximum(times_s, 0.0)
         lam = self.rate_per_s
         decay = np.exp(-lam * t)

@@ -19,6 +19,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 from scipy.optimize import linear_sum_assignment
 from scipy.spatial.transform import Rotation
 
@@ -72,6 +73,7 @@ class Segment:
 
     @property
     def end_s(self) -> float:
+        """Time the segment ends [s]."""
         return self.start_s + self.duration_s
 
 
@@ -240,7 +242,7 @@ class MissionReference(Reference):
         self._off1 = np.stack([p.offsets1 for p in pieces])
 
     # ---- evaluation ----------------------------------------------------------------------------
-    def dofs(self, times_s: object) -> tuple[Array, Array, Array, Array]:
+    def dofs(self, times_s: ArrayLike) -> tuple[Array, Array, Array, Array]:
         """Segment index (T,) and DOFs ``(c, phi, s, alpha)`` with rates and accelerations, (T, D)."""
         t = finite_array("times", np.atleast_1d(np.asarray(times_s, dtype=float)), (None,))
         t = np.clip(t, 0.0, self.duration_s)
@@ -261,6 +263,7 @@ class MissionReference(Reference):
         return idx, pos, vel, acc
 
     def profile(self, times_s: Array) -> MissionProfile:
+        """The ruckig segments at ``times_s`` (T,): states, rates, accelerations and blended offsets."""
         d = self.template.dim
         idx, x, v, a = self.dofs(times_s)
         phi, phi_dot, phi_ddot = x[:, d], v[:, d], a[:, d]
@@ -292,7 +295,7 @@ class MissionReference(Reference):
             blend_rate_per_s=alpha_dot,
         )
 
-    def targets(self, times_s: object) -> tuple[Array, Array]:
+    def targets(self, times_s: ArrayLike) -> tuple[Array, Array]:
         """Drone targets ``p*_i = c + s R rho_i`` [m] and ``p_dot*_i`` [m/s], each (T, n, d).
 
         ``rho_i = (1 - alpha) r_i + alpha r'_pi(i)``; the velocity includes the blend's term

@@ -35,7 +35,8 @@ from mpcform.errors import ValidationError
 from mpcform.outputs import tables
 from mpcform.run.parallel import process_pool, single_threaded_env
 from mpcform.run.runner import run_scenario
-from mpcform.scenario.load import load_scenario, scenario_from_dict
+from mpcform.scenario.load import load_scenario, scenario_from_dict, scenario_text
+from mpcform.scenario.size import check_memory
 from mpcform.scenario.spec import Scenario
 from mpcform.sim.metrics import REL_TOL
 
@@ -121,6 +122,8 @@ def build_jobs(
     tolerance_m: float = DEFAULT_TOLERANCE_M,
 ) -> list[SweepJob]:
     """The Cartesian product of the ``--set`` lists and the seeds (None: the file's seed)."""
+    if not 0.0 <= tolerance_m < float("inf"):
+        raise ValidationError("--tol", f"expected a final tracking error >= 0 [m], got {tolerance_m!r}")
     keys = [key for key, _ in sets]
     if len(set(keys)) != len(keys):
         raise ValidationError("--set", f"a key is given twice: {keys}")
@@ -135,7 +138,7 @@ def build_jobs(
 def load_job(job: SweepJob) -> Scenario:
     """The job's scenario: the file with its overrides and seed, validated."""
     base = load_scenario(job.path)  # readable, valid TOML (errors name the file)
-    data = tomllib.loads(Path(job.path).read_text(encoding="utf-8"))
+    data = tomllib.loads(scenario_text(Path(job.path).read_bytes()))
     data = apply_overrides(data, job.overrides + ((("seed", job.seed),) if job.seed is not None else ()))
     return scenario_from_dict(data, source=base.source, source_sha256=base.source_sha256,
                               default_name=Path(job.path).stem)  # fmt: skip
@@ -219,18 +222,23 @@ def run_sweep(
     executor: str = "process",
     scheduler: str | None = None,
     progress: Callable[[int, int], None] | None = None,
+    max_memory_gib: float | None = None,
 ) -> list[dict[str, Any]]:
     """Run every job and return the records in job order.
 
     ``workers == 1`` with the process executor runs in this process (no pool). Every distinct
-    parameter combination is validated here first, so a bad ``--set`` fails before any run.
+    parameter combination is validated here first, so a bad ``--set`` fails before any run, and
+    so does a run estimated to need more than ``max_memory_gib`` GiB (None: no limit; see
+    :func:`mpcform.scenario.size.check_memory`).
     """
     if executor not in EXECUTORS:
         raise ValidationError("--executor", f"expected one of {EXECUTORS}, got {executor!r}")
     if workers < 1:
         raise ValidationError("--jobs", f"expected an integer >= 1, got {workers}")
     for overrides in dict.fromkeys(j.overrides for j in jobs):
-        load_job(SweepJob(jobs[0].path, overrides, jobs[0].seed))
+        scenario = load_job(SweepJob(jobs[0].path, overrides, jobs[0].seed))
+        if max_memory_gib is not None:
+            check_memory(scenario, max_memory_gib, files=False)
     results: list[dict[str, Any] | None] = [None] * len(jobs)
     done = 0
     for index, record in _execute(jobs, workers, executor, scheduler):

@@ -24,9 +24,10 @@ from typing import Any
 
 from mpcform.errors import MPCFormError, ScenarioError, ValidationError
 from mpcform.scenario.build import build_controller
-from mpcform.scenario.load import load_scenario, scenario_from_dict
+from mpcform.scenario.load import load_scenario, scenario_from_dict, scenario_text
 from mpcform.scenario.parse import parse_keys, parse_top_level
 from mpcform.scenario.schema import SCHEMA, TABLES, Table
+from mpcform.scenario.size import DEFAULT_MAX_MEMORY_GIB, check_memory
 from mpcform.scenario.spec import Scenario
 
 MAX_ROUNDS = 100
@@ -46,6 +47,15 @@ class Problem:
         where = f"line {self.line}: " if self.line is not None else ""
         return f"{where}{self.field}: {self.message}"
 
+    def text(self, path: str | Path) -> str:
+        """One line: ``FILE:LINE: KEY: MESSAGE``, ``FILE: KEY: MESSAGE`` when the key has no line
+        in the file (a cross-field problem, a key left at its default), or ``FILE: MESSAGE`` when
+        the file itself cannot be read or parsed."""
+        if self.field == str(path):
+            return " ".join(f"{path}: {self.message}".split())
+        where = f"{path}:{self.line}" if self.line is not None else f"{path}"
+        return " ".join(f"{where}: {self.field}: {self.message}".split())
+
 
 @dataclass(frozen=True)
 class CheckResult:
@@ -56,29 +66,56 @@ class CheckResult:
 
     @property
     def ok(self) -> bool:
+        """Whether the file is valid (no problem found)."""
         return not self.problems
 
 
-def check_scenario_file(path: str | Path) -> CheckResult:
-    """Load ``path`` and build its controller; on failure, collect every problem found."""
+def check_scenario_file(
+    path: str | Path, max_memory_gib: float | None = DEFAULT_MAX_MEMORY_GIB, controller: str | None = None
+) -> CheckResult:
+    """Load ``path``, estimate the run's memory and build its controller (``controller``
+    overrides the kind); on failure, collect every problem found. ``max_memory_gib`` None: no
+    memory limit (see :mod:`mpcform.scenario.size`)."""
     path = Path(path)
     try:
         scenario = load_scenario(path)
-        build_controller(scenario)  # e.g. the mpc controller needs limits.v_max with d_min
+        if max_memory_gib is not None:  # before the controller, which may allocate the QP's matrices
+            check_memory(scenario, max_memory_gib, controller)
+        build_controller(scenario, controller)  # e.g. the mpc controller needs limits.v_max with d_min
         return CheckResult(scenario, ())
     except ScenarioError as exc:
         if exc.field == str(path):  # unreadable file or TOML syntax: nothing more to find
             return CheckResult(None, (_problem(exc, None),))
-    text = path.read_bytes().decode("utf-8", errors="replace")
-    data = tomllib.loads(text)
-    problems = check_document(data, default_name=path.stem)
+        first = exc
+    text = scenario_text(path.read_bytes())
+    problems = check_document(tomllib.loads(text), path.stem, controller, max_memory_gib)
+    if not problems:  # the document is valid: the memory estimate failed
+        problems = [_problem(first, None)]
     located = [Problem(p.field, p.message, locate(text, p.field)) for p in problems]
     located.sort(key=lambda p: float("inf") if p.line is None else p.line)  # stable: file order
     return CheckResult(None, tuple(located))
 
 
-def check_document(data: dict[str, Any], default_name: str = "scenario") -> list[Problem]:
-    """Every problem of a parsed scenario document (the TOML as a dict); [] when valid."""
+def located_problem(exc: ScenarioError, path: str | Path) -> Problem:
+    """``exc`` raised for the scenario file ``path``, with the line of its key when found."""
+    path = Path(path)
+    line = None
+    if exc.field != str(path):
+        try:
+            line = locate(scenario_text(path.read_bytes()), exc.field)
+        except OSError:
+            pass
+    return _problem(exc, line)
+
+
+def check_document(
+    data: dict[str, Any],
+    default_name: str = "scenario",
+    controller: str | None = None,
+    max_memory_gib: float | None = DEFAULT_MAX_MEMORY_GIB,
+) -> list[Problem]:
+    """Every problem of a parsed scenario document (the TOML as a dict); [] when valid
+    (``controller`` overrides the controller kind; ``max_memory_gib``: see :func:`check_scenario_file`)."""
     doc = copy.deepcopy(data)
     problems: list[Problem] = []
     tainted: set[str] = set()
@@ -96,7 +133,9 @@ def check_document(data: dict[str, Any], default_name: str = "scenario") -> list
     for _ in range(MAX_ROUNDS):
         try:
             scenario = scenario_from_dict(doc, default_name=default_name)
-            build_controller(scenario)
+            if max_memory_gib is not None:
+                check_memory(scenario, max_memory_gib, controller)
+            build_controller(scenario, controller)
             break
         except ValidationError as exc:
             name = _table_of(exc.field)

@@ -34,6 +34,7 @@ from mpcform.reference.keyframes import DEFAULT_SPEED_FRACTION, MissionLimits, S
 from mpcform.reference.mission import MissionReference
 from mpcform.scenario.build import check_solver_key, check_sparse_solver
 from mpcform.scenario.parse import as_scenario_error, parse_keys, parse_table, parse_top_level
+from mpcform.scenario.placement import check_distinct, check_goal, check_start
 from mpcform.scenario.plant import parse_plant
 from mpcform.scenario.schema import CONSENSUS_FIELDS, MPC_FIELDS, NULLSPACE_FIELDS, TABLES
 from mpcform.scenario.spec import ControllerSpec, Scenario, SimulationSpec
@@ -49,7 +50,7 @@ def load_scenario(path: str | Path) -> Scenario:
         raise ScenarioError(str(path), "no such scenario file") from None
     except OSError as exc:
         raise ScenarioError(str(path), f"cannot read the file: {exc.strerror}") from None
-    text = raw.decode("utf-8", errors="replace")
+    text = scenario_text(raw)
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
@@ -58,6 +59,12 @@ def load_scenario(path: str | Path) -> Scenario:
     return scenario_from_dict(
         data, source=path, source_sha256=hashlib.sha256(raw).hexdigest(), default_name=path.stem
     )
+
+
+def scenario_text(raw: bytes) -> str:
+    """A scenario file's bytes as text: UTF-8, a leading byte order mark (as some Windows editors
+    write) dropped, undecodable bytes replaced (TOML then reports them)."""
+    return raw.decode("utf-8", errors="replace").removeprefix("\ufeff")
 
 
 def scenario_from_dict(
@@ -74,7 +81,15 @@ def scenario_from_dict(
     init = parse_table(data, "initial", dim, tpl.n)
     start, positions = _initial(tpl, init)
     limits = _limits(parse_table(data, "limits", dim), dim)
-    reference = _reference(tpl, start, parse_table(data, "reference", dim), limits)
+    obstacles = _obstacles(data.get("obstacles"), dim)
+    check_start(positions, "initial.positions" if init["positions"] is not None else "initial.centroid",
+                limits, obstacles)  # fmt: skip
+    ref = parse_table(data, "reference", dim)
+    reference = _reference(tpl, start, ref, limits)
+    if isinstance(reference, ConstantReference):
+        goal = reference.start_positions_m()
+        field = "reference.centroid" if ref["centroid"] is not None else "reference"
+        check_goal(goal, field, limits, obstacles)
     sim = SimulationSpec(**_renamed(parse_table(data, "simulation", dim), "simulation"))
     plant = parse_plant(data, dim, sim.dt_s)
     controller = _controller(parse_table(data, "controller", dim), sim.dt_s)
@@ -97,7 +112,7 @@ def scenario_from_dict(
         initial_positions_m=positions,
         reference=reference,
         limits=limits,
-        obstacles=_obstacles(data.get("obstacles"), dim),
+        obstacles=obstacles,
         **_graph(data, tpl, positions, seed),
         controller=controller,
         simulation=sim,
@@ -110,16 +125,11 @@ def scenario_from_dict(
 def _template(t: dict[str, Any], dim: int) -> Template:
     shape = t["shape"]
     with as_scenario_error("template"):
-        if shape in ("polygon", "ring"):
-            return Template.polygon(t["n"], t["radius"], dim, t["phase"])
-        if shape == "line":
-            return Template.line(t["n"], t["spacing"], dim)
-        if shape == "grid":
-            return Template.grid(t["rows"], t["cols"], t["spacing"], dim, t["layers"])
-        if shape == "sphere":
-            if dim != 3:
-                raise ScenarioError("template.shape", f"'sphere' needs dim = 3, got dim = {dim}")
-            return Template.sphere(t["n"], t["radius"])
+        if shape != "explicit":
+            tpl = _shape(t, dim)
+            size_key = "template.spacing" if shape in ("line", "grid") else "template.radius"
+            check_distinct(tpl.offsets, size_key)
+            return tpl
         offsets = t["offsets"]
         centred, shift = Template.centred(offsets)
         if not np.allclose(shift, 0.0, atol=1e-9 * max(1.0, float(np.abs(offsets).max()))):
@@ -129,7 +139,22 @@ def _template(t: dict[str, Any], dim: int) -> Template:
                 f"off by {float(np.linalg.norm(shift)):.6g} m; subtract it from every row "
                 f"(centred: {np.round(centred.offsets, 12).tolist()})",
             )
+        check_distinct(centred.offsets, "template.offsets")
         return centred
+
+
+def _shape(t: dict[str, Any], dim: int) -> Template:
+    """The template of a generated ``shape`` (every shape but ``explicit``)."""
+    shape = t["shape"]
+    if shape in ("polygon", "ring"):
+        return Template.polygon(t["n"], t["radius"], dim, t["phase"])
+    if shape == "line":
+        return Template.line(t["n"], t["spacing"], dim)
+    if shape == "grid":
+        return Template.grid(t["rows"], t["cols"], t["spacing"], dim, t["layers"])
+    if dim != 3:
+        raise ScenarioError("template.shape", f"'sphere' needs dim = 3, got dim = {dim}")
+    return Template.sphere(t["n"], t["radius"])
 
 
 def _initial(tpl: Template, init: dict[str, Any]) -> tuple[FormationState, Array]:
@@ -138,6 +163,7 @@ def _initial(tpl: Template, init: dict[str, Any]) -> tuple[FormationState, Array
         if any(init[k] is not None for k in ("centroid", "rotation", "scale")):
             raise ScenarioError("initial.positions", "give either positions or a formation state "
                                 "(centroid, rotation, scale), not both")  # fmt: skip
+        check_distinct(np.asarray(init["positions"], dtype=float), "initial.positions", "start positions")
         with as_scenario_error("initial"):
             return fit_formation(tpl, init["positions"]).state, np.array(init["positions"])
     if init["centroid"] is None:

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import dataclasses
 import difflib
+from collections.abc import Iterable
 from dataclasses import dataclass
 from typing import Any
 
@@ -86,10 +87,12 @@ class Table:
     array: bool = False
 
     def key(self, name: str) -> Key:
+        """The key called ``name`` (it must exist)."""
         return next(k for k in self.keys if k.name == name)
 
     @property
     def title(self) -> str:
+        """The table as TOML writes its header (``[limits]``, ``[[obstacles]]``; ``Top level``)."""
         if not self.name:
             return "Top level"
         return f"[[{self.name}]]" if self.array else f"[{self.name}]"
@@ -152,10 +155,13 @@ SCHEMA: tuple[Table, ...] = (
         Key("cols", "int", "Grid columns (along y).", required=True, when=("grid",), bound=">= 1"),
         Key("layers", "int", "Grid layers (along z, spatial only).", default=1, when=("grid",),
             bound=">= 1"),
-        Key("offsets", "points", "Offsets r_i, one row per drone; their mean must be zero.", "m",
+        Key("offsets", "points", "Offsets r_i, one row per drone; their mean must be zero and no two "
+            "may coincide.", "m",
             required=True, when=("explicit",)),
     ), selector="shape"),
-    Table("initial", "Start: a formation state, or explicit `positions` (not both).", (
+    Table("initial", "Start: a formation state, or explicit `positions` (not both). Before the "
+          "perturbation, every drone must start inside the geofence and clear of every obstacle "
+          "(at least radius + clearance from its centre), and no two at one point.", (
         Key("centroid", "vector", "Start centroid c.", "m",
             shown_default="required unless `positions`"),
         Key("rotation", "rotation", "Start rotation: angle (d = 2) or rotation vector (d = 3).",
@@ -309,7 +315,10 @@ SCHEMA: tuple[Table, ...] = (
             "and lost like the scale estimates; `sensed`: measured on board, always current.",
             default="communicated", choices=RELATIVE_POSITIONS),
     ), required=False, selector="kind"),
-    Table("simulation", "Closed-loop simulation (zero-order hold, exact single integrator).", (
+    Table("simulation", "Closed-loop simulation (zero-order hold, exact single integrator). A run "
+          "estimated to need more than 4 GiB of memory (duration / dt x n x d values of time "
+          "series, the MPC's rows over its horizon and drone pairs) is refused; `--max-memory` "
+          "raises the limit.", (
         Key("dt", "float", "Control period.", "s", required=True, bound="> 0"),
         Key("duration", "float", "Simulated time.", "s", required=True, bound="> 0"),
         Key("lag", "float", "Removed: a velocity lag is now `[plant]` `kind = \"lag\"` with "
@@ -351,7 +360,10 @@ SCHEMA: tuple[Table, ...] = (
             "`gust_field` (`per_drone` or `shared`); seeded Ornstein-Uhlenbeck gusts acting "
             "through drag.", when=("lag", "second_order", "quadrotor")),
     ), required=False, selector="kind"),
-    Table("obstacles", "Static spheres (discs when planar); repeat the table for more.", (
+    Table("obstacles", "Static spheres (discs when planar); repeat the table for more. No drone "
+          "may start inside one (closer to its centre than radius + clearance), nor may a `constant` "
+          "reference's goal put one there; a moving reference (`exponential`, `mission`) may pass "
+          "through obstacles: the MPC goes around them.", (
         Key("center", "vector", "Centre.", "m", required=True),
         Key("radius", "float", "Radius.", "m", required=True, bound="> 0"),
         Key("clearance", "float", "Distance kept from the surface.", "m",
@@ -366,7 +378,7 @@ def listing(values: tuple[Any, ...], quote: str = "'") -> str:
     return ", ".join(f"{quote}{v}{quote}" for v in values)
 
 
-def did_you_mean(word: str, choices: Any) -> str:
+def did_you_mean(word: str, choices: Iterable[object]) -> str:
     """``"; did you mean 'x'?"`` for the closest of ``choices`` to a misspelt ``word``, else ``""``."""
     close = difflib.get_close_matches(word, [str(c) for c in choices], n=1)
     return f"; did you mean {close[0]!r}?" if close else ""

@@ -46,8 +46,11 @@ class SimulationSpec:
 class Scenario:
     """A validated scenario: ready-made library objects plus where it came from.
 
-    ``start`` is the reference's initial formation state; ``initial_positions_m`` (n, d)
-    includes the seeded perturbation.
+    ``initial_positions_m`` (n, d) [m] are where the drones start, the seeded perturbation
+    included; ``start`` is the formation state the reference starts from (the best fit of
+    explicit start positions). Where the reference puts the drones at t = 0 is
+    ``reference.start_positions_m()``: not the start positions when the reference does not begin
+    at the start formation (a constant reference holds its goal from t = 0, as in the swaps).
     """
 
     name: str

@@ -23,7 +23,7 @@ from mpcform.bench.problems import (
     save_problem,
 )
 from mpcform.cli.main import main
-from mpcform.errors import MPCFormError
+from mpcform.errors import MPCFormError, ValidationError
 from mpcform.solvers.base import SolverOptions
 from mpcform.solvers.registry import make_backend
 
@@ -151,3 +151,27 @@ def test_export_cli(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     assert "wrote 2 problems" in capsys.readouterr().out
     assert len(problem_files(out)) == 2
     assert main(["problems", "export", str(tmp_path / "missing.toml"), "--out", str(out)]) == 2
+
+
+def test_a_scenario_without_any_qp_is_an_error_and_nothing_is_written(tmp_path: Path) -> None:
+    swap = tmp_path / "tiny_swap.toml"
+    swap.write_text(TINY)
+    calm = tmp_path / "calm.toml"  # drones holding their start: every step is the fast path
+    text = tiny_swap_toml("calm", 1.5, 4, 0.3)
+    calm.write_text(text.replace("rotation = 3.141592653589793", "rotation = 0.0"))
+    with pytest.raises(MPCFormError, match=r"calm.toml: no QP to record: the mpc planner never solved one"):
+        export_problems([swap, calm], tmp_path / "out", per_scenario=2)
+    assert not (tmp_path / "out").exists()
+
+
+def test_export_checks_every_scenario_and_option_before_running(tmp_path: Path) -> None:
+    bad = tmp_path / "bad.toml"
+    bad.write_text(TINY.replace("horizon = 5", "horizon = 0"))
+    with pytest.raises(MPCFormError, match=r"bad.toml:\d+: controller.horizon: expected an integer >= 1"):
+        export_problems([bad], tmp_path / "out")
+    with pytest.raises(ValidationError, match="--per-scenario"):
+        export_problems([bad], tmp_path / "out", per_scenario=0)
+    decoupled = tmp_path / "decoupled.toml"
+    decoupled.write_text(TINY.replace("horizon = 5", 'horizon = 5\ncoupling = "decoupled"'))
+    with pytest.raises(MPCFormError, match="controller.per_drone: 'piqp' solves the sparse QP"):
+        export_problems([decoupled], tmp_path / "out")

@@ -5,7 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from mpcform.bench.problems import load_problems
-from mpcform.bench.report import markdown_report, records
+from mpcform.bench.report import failures_cell, markdown_report, records, shorten
 from mpcform.bench.solvers import SolverBenchmark
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -42,3 +42,27 @@ def test_records_list_the_rows_then_the_solvers_not_run() -> None:
     recs = records(bench)
     assert recs[:3] == bench.rows
     assert recs[3]["solver"] == "gone" and recs[3]["mode"] is None and recs[3]["setting"] is None
+
+
+def test_the_failures_cell_is_whole_or_cut_at_words_with_every_count() -> None:
+    assert failures_cell({}) == "-"
+    assert failures_cell({"max iter": 2, "time limit": 1}) == "max iter (2); time limit (1)"
+    long = {
+        "osqp: maximum iterations reached before the primal residual met the tolerance": 4,
+        "qpsolvers: solver returned no solution (infeasible or unbounded problem)": 2,
+        "a|b": 1,
+    }
+    cell = failures_cell(long)
+    parts = cell.split("; ")
+    assert [p.rsplit(" (", 1)[1] for p in parts] == ["4)", "2)", "1)"]  # every count, whole
+    for part, status in zip(parts[:2], long, strict=False):
+        shown = part.rsplit(" (", 1)[0]
+        assert shown.endswith("...") and status.startswith(shown.removesuffix("..."))
+        assert status[len(shown) - 3] == " "  # cut before a space: never mid-word
+    assert parts[2] == "a\\|b (1)"  # a pipe does not break the table
+
+
+def test_shorten() -> None:
+    assert shorten("short", 10) == "short"
+    assert shorten("one two three four", 12) == "one two..."
+    assert shorten("abcdefghijklmnop", 8) == "abcde..."  # one long word: cut inside it

@@ -3,10 +3,15 @@
 from __future__ import annotations
 
 import json
+import subprocess
+import sys
+import time
+from importlib import metadata, resources
 from pathlib import Path
 
 import pytest
 
+from mpcform.cli import main as main_module
 from mpcform.cli.main import main
 from mpcform.scenario.keys import key_reference_markdown
 
@@ -105,7 +110,7 @@ def test_missing_file(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> Non
 @pytest.mark.parametrize(
     ("argv", "fragments"),
     [
-        (["run", WORKED, "--controller", "trackin"], ("controller.kind", "did you mean")),
+        (["run", WORKED, "--controller", "trackin"], ("--controller", "did you mean 'tracking'")),
         (["run", WORKED, "--solver", "osqp"], ("only to the mpc controller",)),
         (["run", WORKED, "--controller", "mpc", "--solver", "nope"], ("solver", "unknown solver")),
         (["run", str(ROOT / "scenarios" / "formation_flight_100.toml"), "--solver", "osqp"],
@@ -138,6 +143,132 @@ def test_solvers_lists_backends(capsys: pytest.CaptureFixture[str]) -> None:
 def test_keys_prints_the_key_reference(capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["keys"]) == 0
     assert capsys.readouterr().out == key_reference_markdown()
+
+
+# ---- version, help, key schema -------------------------------------------------------------------
+def test_version(capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(SystemExit) as info:
+        main(["--version"])
+    assert info.value.code == 0
+    assert capsys.readouterr().out.strip() == f"mpcform {metadata.version('mpcform')}"
+
+
+def test_run_help_lists_the_controllers_and_solvers(capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(SystemExit):
+        main(["run", "--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    assert "override controller.kind: proportional, tracking, mpc, consensus, nullspace" in text
+    assert "osqp, piqp (default), qpsolvers:<name>, casadi:<plugin>" in text
+
+
+def test_keys_json_schema(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["keys", "--json-schema"]) == 0
+    schema = json.loads(capsys.readouterr().out)
+    assert schema["$schema"] == "https://json-schema.org/draft/2020-12/schema"
+    assert "template" in schema["$defs"]
+
+
+def test_the_package_ships_its_type_marker() -> None:
+    assert (resources.files("mpcform") / "py.typed").is_file()
+
+
+# ---- runs too large, bad output paths ------------------------------------------------------------
+MPC = ('kind = "tracking"', 'kind = "mpc"')
+HUGE = [
+    ([("duration = 10.0", "duration = 1e9")], "simulation.duration", "50,000,000,001 samples x 3 drones"),
+    ([MPC, ("gain = 2.0", "gain = 2.0\nhorizon = 1000000")], "controller.horizon", "horizon of 1,000,000"),
+    ([MPC, ("n = 3", "n = 5000"), ("radius = 1.0", "radius = 1.5")], "template.n", "pairs within reach"),
+]
+
+
+@pytest.mark.parametrize(("changes", "key", "fragment"), HUGE, ids=["duration", "horizon", "drones"])
+@pytest.mark.parametrize("command", ["run", "validate"])
+def test_a_run_too_large_is_refused_fast(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], command: str, changes: list[tuple[str, str]],
+    key: str, fragment: str,
+) -> None:  # fmt: skip
+    text = Path(WORKED).read_text()
+    for old, new in changes:
+        text = text.replace(old, new)
+    path = tmp_path / "huge.toml"
+    path.write_text(text)
+    start = time.perf_counter()
+    status = main([command, str(path), *(["--out", str(tmp_path / "o")] if command == "run" else [])])
+    assert time.perf_counter() - start < 5.0
+    line = assert_one_line_error(capsys, status, f"{path}:", f": {key}: the run would need about ", fragment)
+    assert "above the limit of 4 GiB" in line and "--max-memory GIB" in line
+    assert not (tmp_path / "o").exists()
+
+
+def test_max_memory_raises_the_limit(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    path = short_copy(tmp_path, ("duration = 10.0", "duration = 1e4"))  # 500,000 steps: ~0.8 GiB
+    assert_one_line_error(capsys, main(["validate", path, "--max-memory", "0.5"]), "simulation.duration")
+    assert main(["validate", path, "--max-memory", "2"]) == 0
+
+
+def test_out_naming_a_file_fails_before_the_simulation(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    def never(*args: object, **kwargs: object) -> None:
+        raise AssertionError("the simulation ran")
+
+    monkeypatch.setattr(main_module, "run_scenario", never)
+    (tmp_path / "file").write_text("x")
+    status = main(["run", WORKED, "--out", str(tmp_path / "file")])
+    assert_one_line_error(capsys, status, "--out: ", "existing file")
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "results").write_text("x")  # the default results/<name>/ cannot be made
+    assert_one_line_error(capsys, main(["run", WORKED]), "--out: cannot create", "is a file")
+
+
+@pytest.mark.parametrize(
+    ("argv", "flag"),
+    [
+        (["sweep", WORKED, "--json", "{missing}/rows.json"], "--json"),
+        (["sweep", WORKED, "--json", "{dir}"], "--json"),
+        (["bench", "closed-loop", WORKED, "--report", "{missing}/r.md"], "--report"),
+        (["problems", "export", WORKED, "--out", "{file}"], "--out"),
+        (["compare", "{dir}", "--json", "{missing}/c.json"], "--json"),
+    ],
+)
+def test_output_paths_are_checked_before_the_work(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], argv: list[str], flag: str
+) -> None:
+    (tmp_path / "file").write_text("x")
+    names = {"missing": str(tmp_path / "missing"), "dir": str(tmp_path), "file": str(tmp_path / "file")}
+    start = time.perf_counter()
+    status = main([a.format(**names) for a in argv])
+    assert time.perf_counter() - start < 5.0
+    assert_one_line_error(capsys, status, f"mpcform: error: {flag}: ")
+
+
+# ---- validate's lines, run's located errors, a closed pipe ---------------------------------------
+def test_validate_lines_are_file_line_key_message(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    text = Path(WORKED).read_text().replace('kind = "tracking"', 'kind = "mpc"\nhroizon = 5')
+    path = tmp_path / "s.toml"
+    path.write_text(text.replace("v_max = 3.0\n", ""))  # the MPC needs v_max with d_min
+    assert main(["validate", str(path)]) == 2
+    lines = capsys.readouterr().err.splitlines()
+    line = next(k for k, row in enumerate(path.read_text().splitlines(), 1) if row.startswith("hroizon"))
+    assert lines[0].startswith(f"mpcform: error: {path}:{line}: controller.hroizon: unknown key")
+    assert lines[1].startswith(f"mpcform: error: {path}: limits.v_max: the MPC needs v_max")  # no line
+    assert lines[2] == f"mpcform: 2 problems in {path}"
+
+
+def test_run_errors_name_the_file_and_line(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    path = short_copy(tmp_path, ("gain = 2.0", "gain = 200.0"))
+    line = next(k for k, row in enumerate(Path(path).read_text().splitlines(), 1) if row.startswith("gain"))
+    assert_one_line_error(capsys, main(["run", path, "--out", str(tmp_path / "o")]),
+                          f"mpcform: error: {path}:{line}: controller.gain: ")  # fmt: skip
+
+
+def test_a_closed_pipe_ends_quietly_with_status_141() -> None:
+    code = "import sys; from mpcform.cli.main import main; sys.exit(main(['keys']))"
+    proc = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    assert proc.stdout is not None and proc.stderr is not None
+    proc.stdout.close()  # the reader is gone before the first line is written
+    err = proc.stderr.read().decode()
+    assert proc.wait(timeout=60) == 141 and err == ""
 
 
 def test_run_with_a_plant_override_reports_the_true_motion(tmp_path, capsys):

@@ -23,7 +23,7 @@ from mpcform import (
 )
 from mpcform.cli.main import main
 from mpcform.control.consensus import relative_position_error
-from mpcform.control.graph import DisconnectedGraphWarning
+from mpcform.control.graph import DENSE_EIG_MAX_N, DisconnectedGraphWarning
 from mpcform.formation.kinematics import forward_kinematics
 from mpcform.reference.base import Profile, Reference
 from mpcform.run.runner import run_scenario
@@ -378,3 +378,21 @@ def test_consensus_converges_just_inside_and_diverges_just_outside_each_bound(wh
         _disagreement(*outside, check=True)
     pos, sc = _disagreement(*outside, check=False)  # flown anyway: the refusal was right
     assert (pos if which == "position" else sc) > 10.0
+
+
+def test_a_large_swarm_never_builds_a_dense_laplacian(monkeypatch: pytest.MonkeyPatch) -> None:
+    n = DENSE_EIG_MAX_N + 1
+    tpl, ref = ring_doubling(n)
+    graph = Graph.ring(n)
+    calls = []
+    original = type(graph.laplacian).toarray
+
+    def counted(self: object, *args: object, **kwargs: object) -> object:
+        calls.append(1)
+        return original(self, *args, **kwargs)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(type(graph.laplacian), "toarray", counted)
+    ConsensusController(ref, graph, 0.1, ConsensusSettings())  # stable: the bound on lambda_max is used
+    assert calls == []  # an (n, n) matrix would be 8 n^2 bytes: 32 GB for 64,000 drones
+    ConsensusController(*ring_doubling(8)[1:], Graph.ring(8), 0.1, ConsensusSettings())
+    assert calls  # small swarms: the exact eigenvalue

@@ -1,5 +1,7 @@
 """References: drone targets and their velocities (finite differences), limits, clamping."""
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 from helpers import random_state, random_template
@@ -110,3 +112,21 @@ def test_bad_references_are_rejected(build, match):
     planar, spatial = FormationState.from_param([0.0, 0.0]), FormationState.from_param([0.0] * 3)
     with pytest.raises(ValidationError, match=match):
         build(Template.polygon(3), planar, spatial)
+
+
+def test_start_positions_are_the_targets_at_time_zero() -> None:
+    tpl = Template.polygon(4, 2.0)
+    start = FormationState.from_param([1.0, 2.0], 0.5, 1.0)
+    goal = FormationState.from_param([5.0, 0.0], 0.0, 2.0)
+    moving = ExponentialReference(tpl, start, goal, 1.0)
+    assert np.allclose(moving.start_positions_m(), forward_kinematics(tpl, start))
+    held = ConstantReference(tpl, goal)
+    assert np.allclose(held.start_positions_m(), forward_kinematics(tpl, goal))  # a constant one: its goal
+    assert held.start_positions_m().shape == (4, 2)
+
+
+def test_a_swap_starts_away_from_its_reference() -> None:
+    from mpcform.scenario.load import load_scenario  # the scenario layer, for its bundled swap
+
+    s = load_scenario(Path(__file__).resolve().parents[2] / "scenarios" / "swap_planar_8.toml")
+    assert np.allclose(s.initial_positions_m, -s.reference.start_positions_m())  # p_i(0) = -r_i, p*_i = r_i

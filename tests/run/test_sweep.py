@@ -143,3 +143,31 @@ def test_dask_executor_runs_the_same_jobs(tiny: Path) -> None:
     with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=False) as cluster:
         records = run_sweep(jobs, executor="dask", scheduler=cluster.scheduler_address)
     assert [r["seed"] for r in records] == [0, 1] and all(r["error"] is None for r in records)
+
+
+@pytest.mark.parametrize("tol", [-1.0, float("nan"), float("inf")])
+def test_a_negative_or_undefined_tolerance_is_refused(tiny: Path, tol: float) -> None:
+    with pytest.raises(ValidationError, match=r"^--tol: expected a final tracking error >= 0"):
+        build_jobs(tiny, None, [], tolerance_m=tol)
+    assert build_jobs(tiny, None, [], tolerance_m=0.0)[0].tolerance_m == 0.0
+
+
+def test_cli_tol_minus_one(tiny: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["sweep", str(tiny), "--tol", "-1"]) == 2
+    expected = "mpcform: error: --tol: expected a final tracking error >= 0 [m], got -1.0"
+    assert capsys.readouterr().err.strip() == expected
+
+
+def test_a_combination_too_large_fails_before_any_run(tiny: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    jobs = build_jobs(tiny, None, [parse_set("simulation.duration=0.6,1e9")])
+    with pytest.raises(ScenarioError, match=r"^simulation.duration: the run would need about .* GiB"):
+        run_sweep(jobs, max_memory_gib=4.0)
+    assert main(["sweep", str(tiny), "--set", "simulation.duration=1e9"]) == 2
+    assert "--max-memory GIB" in capsys.readouterr().err
+    assert len(run_sweep(jobs[:1], max_memory_gib=4.0)) == 1
+
+
+def test_a_byte_order_mark_is_accepted(tmp_path: Path) -> None:
+    path = tmp_path / "bom.toml"
+    path.write_bytes(b"\xef\xbb\xbf" + TINY.encode())
+    assert load_job(SweepJob(str(path), (("controller.horizon", 3),), 2)).controller.mpc.horizon == 3

@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
+import time
 from pathlib import Path
 
 import pytest
 
-from mpcform.scenario.check import check_scenario_file, locate
+from mpcform.errors import ScenarioError
+from mpcform.scenario.check import Problem, check_scenario_file, locate, located_problem
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -133,3 +135,47 @@ def test_consequences_are_not_reported(tmp_path: Path) -> None:
 )
 def test_locate(field: str, line: int | None) -> None:
     assert locate(MESSY, field) == line
+
+
+# ---- one line per problem, memory, byte order mark ---------------------------------------------
+def test_problem_text_is_file_line_key_message() -> None:
+    assert Problem("sed", "unknown key", 3).text("a.toml") == "a.toml:3: sed: unknown key"
+    assert Problem("limits.v_max", "needed", None).text("a.toml") == "a.toml: limits.v_max: needed"
+    assert Problem("a.toml", "TOML syntax error: x").text("a.toml") == "a.toml: TOML syntax error: x"
+    assert Problem("k", "two\n  lines", 1).text("a.toml") == "a.toml:1: k: two lines"
+
+
+def test_a_run_too_large_is_a_problem_at_its_key(tmp_path: Path) -> None:
+    text = (ROOT / "scenarios" / "worked_example.toml").read_text()
+    text = text.replace("duration = 10.0", "duration = 1e9")
+    path = write(tmp_path, text)
+    (problem,) = check_scenario_file(path).problems
+    assert problem.field == "simulation.duration" and "GiB of memory" in problem.message
+    assert text.splitlines()[problem.line - 1].startswith("duration = 1e9")  # type: ignore[operator]
+    assert check_scenario_file(path, max_memory_gib=None).ok
+    assert check_scenario_file(path, max_memory_gib=1e6).ok
+
+
+def test_the_memory_check_comes_before_any_controller_is_built(tmp_path: Path) -> None:
+    text = (ROOT / "scenarios" / "swap_planar_8.toml").read_text()
+    text = text.replace("horizon = 10", 'horizon = 1000000\ncoupling = "decoupled"\nhroizon = 3')
+    start = time.perf_counter()
+    problems = check_scenario_file(write(tmp_path, text)).problems  # dense (H d)^2 matrices: 32 TB
+    assert time.perf_counter() - start < 5.0
+    assert [p.field for p in problems] == ["controller.horizon", "controller.hroizon"]
+
+
+def test_a_byte_order_mark_is_accepted(tmp_path: Path) -> None:
+    path = tmp_path / "bom.toml"
+    text = (ROOT / "scenarios" / "worked_example.toml").read_text()
+    path.write_bytes(b"\xef\xbb\xbf" + text.replace("gain = 2.0", "gian = 2.0").encode())
+    (problem,) = check_scenario_file(path).problems
+    assert problem.field == "controller.gian"
+    assert text.splitlines()[problem.line - 1].startswith("gain = 2.0")  # type: ignore[operator]
+
+
+def test_located_problem_finds_the_line_of_an_error(tmp_path: Path) -> None:
+    path = write(tmp_path, MESSY)
+    problem = located_problem(ScenarioError("controller.gain", "too high"), path)
+    assert (problem.field, problem.line, problem.message) == ("controller.gain", 29, "too high")
+    assert located_problem(ScenarioError(str(path), "x"), path).line is None

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import copy
+import hashlib
 import tomllib
 from pathlib import Path
 from typing import Any
@@ -14,7 +15,7 @@ from saved_runs import SCENARIOS
 from mpcform import MPCSettings, ScenarioError
 from mpcform.formation.kinematics import forward_kinematics
 from mpcform.formation.state import FormationState
-from mpcform.scenario.load import load_scenario, scenario_from_dict
+from mpcform.scenario.load import load_scenario, scenario_from_dict, scenario_text
 from mpcform.solvers.registry import DEFAULT_SOLVER
 
 WORKED = SCENARIOS / "worked_example.toml"
@@ -159,3 +160,12 @@ def test_toml_nan_literal(tmp_path: Path) -> None:
     with pytest.raises(ScenarioError, match="expected a finite number > 0") as err:
         load_scenario(path)
     assert err.value.field == "controller.gain"
+
+
+def test_a_byte_order_mark_is_accepted(tmp_path: Path) -> None:
+    path = tmp_path / "bom.toml"
+    raw = b"\xef\xbb\xbf" + WORKED.read_bytes()
+    path.write_bytes(raw)
+    s = load_scenario(path)
+    assert s.n == 3 and s.source_sha256 == hashlib.sha256(raw).hexdigest()  # the hash of the file as it is
+    assert scenario_text(raw) == WORKED.read_text()

@@ -1,0 +1,265 @@
+"""The ``bench``, ``problems`` and ``sweep`` subcommands of ``mpcform`` (wired in by :mod:`mpcform.cli.main`).
+
+The benchmark modules are imported only when a benchmark runs (or its options are listed).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+from typing import Any
+
+from mpcform.scenario.size import DEFAULT_MAX_MEMORY_GIB
+from mpcform.solvers.registry import DEFAULT_SOLVER, PERSISTENT_SOLVERS
+
+
+def solver_help(what: str = "QP backend") -> str:
+    """Help text naming the solvers: the registry's backends and the two families."""
+    from mpcform.solvers.casadi_conic import CASADI_CONIC_PLUGINS
+
+    named = ", ".join(f"{b} (default)" if b == DEFAULT_SOLVER else b for b in PERSISTENT_SOLVERS)
+    return (f"{what}: {named}, qpsolvers:<name>, casadi:<plugin> ({', '.join(CASADI_CONIC_PLUGINS)}) "
+            "or casadi:ipopt; `mpcform solvers` shows which are installed")  # fmt: skip
+
+
+def max_memory_gib(text: str) -> float:
+    """The ``--max-memory`` value: a number of GiB > 0."""
+    try:
+        value = float(text)
+    except ValueError:
+        value = float("nan")
+    if not value > 0 or value == float("inf"):
+        raise argparse.ArgumentTypeError(f"expected a number of GiB > 0, got {text!r}")
+    return value
+
+
+def add_max_memory(cmd: argparse.ArgumentParser, per: str = "run") -> None:
+    """The ``--max-memory GIB`` option (see :mod:`mpcform.scenario.size`)."""
+    cmd.add_argument("--max-memory", type=max_memory_gib, default=DEFAULT_MAX_MEMORY_GIB, metavar="GIB",
+                     help=f"refuse a {per} estimated to need more memory than this [GiB] "
+                     f"(default {DEFAULT_MAX_MEMORY_GIB:g})")  # fmt: skip
+
+
+def print_bench(table: str, rows: list[dict[str, Any]], json_path: str | None) -> None:
+    """Print a benchmark's markdown and write its records to ``json_path`` (if given)."""
+    print(table)
+    if json_path:
+        Path(json_path).write_text(json.dumps(rows, indent=2, default=float) + "\n")
+
+
+def progress(text: str) -> None:
+    """A progress line on stderr, when it is a terminal."""
+    if sys.stderr.isatty():
+        print(text, file=sys.stderr, flush=True)
+
+
+# ---- bench ----------------------------------------------------------------------------------
+def _bench_mpc(args: argparse.Namespace) -> int:
+    from mpcform.bench import mpc as bench_mpc  # benchmarks are imported only when asked for
+
+    rows = bench_mpc.run(args.n, args.spatial_n, args.steps, args.solver, args.coupling, args.cvxpy_max_n)
+    print_bench(bench_mpc.markdown_table(rows), rows, args.json)
+    return 0
+
+
+def add_bench(sub: argparse._SubParsersAction) -> None:
+    """``bench mpc``, ``bench solvers``, ``bench closed-loop``, ``bench scale``, ``bench plant``."""
+    bench = sub.add_parser("bench", help="benchmarks (markdown table; --json PATH for records)")
+    kinds = bench.add_subparsers(dest="bench", required=True, metavar="BENCH")
+    mpc = kinds.add_parser("mpc", help="planner step times vs raw solver, numpy rollout and cvxpy")
+    mpc.set_defaults(func=_bench_mpc)
+    mpc.add_argument("--n", type=int, nargs="*", default=[8, 16, 32, 64], help="planar swap sizes")
+    mpc.add_argument("--spatial-n", type=int, nargs="*", default=[20], help="spatial swap sizes")
+    mpc.add_argument("--steps", type=int, default=60, help="closed-loop steps per swap (dt 0.1 s)")
+    mpc.add_argument("--solver", default=DEFAULT_SOLVER, choices=PERSISTENT_SOLVERS,
+                     help="QP backend (decoupled, solved per drone: of the cvxpy reference only)")
+    mpc.add_argument("--coupling", default="joint", choices=("joint", "decoupled", "decoupled-sparse"),
+                     help="planner mode (decoupled-sparse: one sparse QP, not per-drone DAQP QPs)")
+    mpc.add_argument("--cvxpy-max-n", type=int, default=16, help="largest n also run through cvxpy")
+    mpc.add_argument("--json", metavar="PATH", help="also write the rows as a JSON list of records")
+    _add_bench_solvers(kinds)
+    _add_bench_scale(kinds)
+    plant = kinds.add_parser("plant", help="the quadrotor plant alone: n drones, a fixed command sequence")
+    plant.set_defaults(func=_bench_plant)
+    plant.add_argument("--n", type=int, default=20, help="drones")
+    plant.add_argument("--duration", type=float, default=12.0, help="flight time [s]")
+    plant.add_argument("--rate", type=float, default=500.0, help="inner-loop rate [Hz]")
+    plant.add_argument("--repeats", type=int, default=3, help="runs (median and max are reported)")
+    plant.add_argument("--no-wind", action="store_true", help="still air (default: gusts of 0.5 m/s)")
+    plant.add_argument("--json", metavar="PATH", help="also write the rows as a JSON list of records")
+
+
+def _bench_plant(args: argparse.Namespace) -> int:
+    from mpcform.bench import plant as bench_plant
+
+    rows = bench_plant.run(args.n, args.duration, args.rate, args.repeats, wind=not args.no_wind)
+    print_bench(bench_plant.markdown_table(rows), rows, args.json)
+    return 0
+
+
+def _bench_solvers(args: argparse.Namespace) -> int:
+    from mpcform.bench import report as bench_report
+    from mpcform.bench import solvers as bs
+
+    problems = args.problems or bs.DEFAULT_PROBLEMS_DIR
+    bench = bs.run_solver_benchmark(problems, args.solvers, args.settings, args.modes, args.time_limit,
+                                    exact=not args.no_exact, progress=progress)  # fmt: skip
+    report = bench_report.markdown_report(bench)
+    print_bench(report, bench_report.records(bench), args.json)
+    if args.report:
+        Path(args.report).write_text(report + "\n")
+    return 0
+
+
+def _bench_closed_loop(args: argparse.Namespace) -> int:
+    from mpcform.bench import closed_loop
+    from mpcform.bench.problems import DEFAULT_SCENARIOS
+
+    rows = closed_loop.run_closed_loop(args.scenarios or DEFAULT_SCENARIOS[:2], args.solvers, args.timeout,
+                                       args.duration, progress=progress)  # fmt: skip
+    report = closed_loop.closed_loop_markdown(rows)
+    print_bench(report, rows, args.json)
+    if args.report:
+        Path(args.report).write_text(report)
+    return 0
+
+
+def _add_bench_solvers(kinds: argparse._SubParsersAction) -> None:
+    from mpcform.bench.accuracy import SETTINGS
+    from mpcform.bench.solvers import DEFAULT_TIME_LIMIT_S
+    from mpcform.bench.worker import MODES
+
+    solvers = kinds.add_parser("solvers", help="QP solvers on the recorded problems (problems/)")
+    solvers.set_defaults(func=_bench_solvers)
+    solvers.add_argument("--problems", metavar="DIR", help="problem directory (default: bundled problems/)")
+    solvers.add_argument("--solvers", nargs="+", metavar="NAME",
+                         help=solver_help("backends (default: all known)"))  # fmt: skip
+    solvers.add_argument("--settings", nargs="+", choices=list(SETTINGS), default=list(SETTINGS))
+    solvers.add_argument("--modes", nargs="+", choices=MODES, default=list(MODES))
+    solvers.add_argument("--time-limit", type=float, default=DEFAULT_TIME_LIMIT_S, metavar="S",
+                         help="per-solve time limit [s]")  # fmt: skip
+    solvers.add_argument("--no-exact", action="store_true", help="skip the casadi:ipopt exact reference")
+    loop = kinds.add_parser("closed-loop", help="each solver drives the same scenarios through the planner")
+    loop.set_defaults(func=_bench_closed_loop)
+    loop.add_argument("scenarios", nargs="*", metavar="SCENARIO", help="scenario files (default: the swaps)")
+    loop.add_argument("--solvers", nargs="+", metavar="NAME",
+                      help=solver_help("backends (default: all usable)"))  # fmt: skip
+    loop.add_argument("--timeout", type=float, default=600.0, metavar="S", help="time limit per run [s]")
+    loop.add_argument("--duration", type=float, metavar="S", help="override the scenarios' duration [s]")
+    for cmd in (solvers, loop):
+        cmd.add_argument("--report", metavar="FILE", help="also write the markdown report to FILE")
+        cmd.add_argument("--json", metavar="PATH", help="also write the rows as a JSON list of records")
+
+
+def _bench_scale(args: argparse.Namespace) -> int:
+    from mpcform.bench import scale as bench_scale
+
+    rows = bench_scale.run(args.n, args.scenario, args.coupling, args.steps, args.solver, args.horizon,
+                           args.budget, args.monolithic_budget, isolate=not args.in_process,
+                           trace_memory=args.tracemalloc, progress=progress)  # fmt: skip
+    text, growth = bench_scale.report(rows, args.coupling)
+    print_bench(text, rows + growth, args.json)
+    return 0
+
+
+def _add_bench_scale(kinds: argparse._SubParsersAction) -> None:
+    from mpcform.bench.scale import DEFAULT_N
+    from mpcform.bench.scale_cases import SCENARIOS
+    from mpcform.mpc.settings import GROUPED_MODES
+
+    scale = kinds.add_parser("scale", help="step time and peak memory, 10 to 1000 drones (growth exponent)")
+    scale.set_defaults(func=_bench_scale)
+    scale.add_argument("--n", type=int, nargs="+", default=list(DEFAULT_N), help="swarm sizes")
+    scale.add_argument("--steps", type=int, default=30, help="closed-loop steps per case (dt 0.1 s)")
+    scale.add_argument("--scenario", nargs="+", choices=SCENARIOS, default=list(SCENARIOS))
+    scale.add_argument("--coupling", default="decoupled", choices=GROUPED_MODES,
+                       help="planner mode, grouped (decoupled-sparse: one sparse QP, not per-drone DAQP)")
+    scale.add_argument("--solver", default=DEFAULT_SOLVER, choices=PERSISTENT_SOLVERS, help="QP backend")
+    scale.add_argument("--horizon", type=int, default=10, help="planner horizon [steps]")
+    scale.add_argument("--budget", type=float, default=60.0, metavar="S",
+                       help="planning time per case [s]; a case over it stops early")  # fmt: skip
+    scale.add_argument("--monolithic-budget", type=float, default=60.0, metavar="S",
+                       help="the same for the monolithic joint QP (0: skip it)")  # fmt: skip
+    scale.add_argument("--tracemalloc", action="store_true", help="also trace Python/numpy allocations")
+    scale.add_argument("--in-process", action="store_true", help="run the cases here, not in fresh processes")
+    scale.add_argument("--json", metavar="PATH", help="also write the rows as a JSON list of records")
+
+
+# ---- problems -------------------------------------------------------------------------------
+def _problems_export(args: argparse.Namespace) -> int:
+    from mpcform.bench.problems import DEFAULT_PROBLEMS_DIR, DEFAULT_SCENARIOS, export_problems
+
+    out = Path(args.out) if args.out else DEFAULT_PROBLEMS_DIR
+    paths = export_problems(args.scenarios or DEFAULT_SCENARIOS, out, args.per_scenario, args.solver)
+    size = sum(p.stat().st_size for p in paths) / 2**20
+    print(f"wrote {len(paths)} problems ({size:.1f} MiB) to {out}")
+    return 0
+
+
+def add_problems(sub: argparse._SubParsersAction) -> None:
+    """``problems export``."""
+    from mpcform.bench.problems import DEFAULT_PER_SCENARIO
+
+    problems = sub.add_parser("problems", help="recorded QP instances (problems/)")
+    actions = problems.add_subparsers(dest="problems", required=True, metavar="ACTION")
+    export = actions.add_parser("export", help="record the planner's QPs from scenarios into problems/")
+    export.set_defaults(func=_problems_export)
+    export.add_argument("scenarios", nargs="*", metavar="SCENARIO", help="scenarios (default: the swaps)")
+    export.add_argument("--out", metavar="DIR", help="output directory (default: the bundled problems/)")
+    export.add_argument("--per-scenario", type=int, default=DEFAULT_PER_SCENARIO, metavar="K",
+                        help="QPs kept per scenario (a contiguous sequence)")  # fmt: skip
+    export.add_argument("--solver", metavar="NAME",
+                        help=solver_help("solver driving the runs (default: the scenario's)"))  # fmt: skip
+
+
+# ---- sweep ----------------------------------------------------------------------------------
+SWEEP_HELP = "run a scenario over seeds and parameter values in parallel"
+SWEEP_DESCRIPTION = (
+    "Run one scenario file over a grid of seeds and parameter values (the Cartesian product of "
+    "--seeds and every --set list), in worker processes or on a dask cluster, and print one "
+    "markdown row per parameter combination: success rate over the seeds, separation, tracking "
+    "errors, fallbacks and step times, then the failed runs. A run succeeds when it raised "
+    "nothing, kept d_min (also along the straight segments) and v_max, and ended within --tol of "
+    "its reference. Every combination is validated before the first run."
+)
+
+
+def _sweep(args: argparse.Namespace) -> int:
+    from mpcform.run import sweep
+
+    seeds = sweep.parse_seeds(args.seeds) if args.seeds else None
+    sets = [sweep.parse_set(text) for text in args.set]
+    jobs = sweep.build_jobs(args.scenario, seeds, sets, args.solver, args.tol)
+
+    def report(done: int, total: int) -> None:
+        progress(f"sweep: {done}/{total} runs")
+
+    records = sweep.run_sweep(jobs, args.jobs, args.executor, args.scheduler, progress=report,
+                              max_memory_gib=args.max_memory)  # fmt: skip
+    groups = sweep.aggregate(records)
+    failed = sweep.failures_text(records)
+    print_bench(sweep.markdown_table(groups) + (f"\n\nfailed runs:\n{failed}" if failed else ""),
+                groups + records, args.json)  # fmt: skip
+    return 0
+
+
+def add_sweep(sub: argparse._SubParsersAction) -> None:
+    """``sweep``."""
+    from mpcform.run.sweep import DEFAULT_TOLERANCE_M, EXECUTORS
+
+    cmd = sub.add_parser("sweep", help=SWEEP_HELP, description=SWEEP_DESCRIPTION)
+    cmd.set_defaults(func=_sweep)
+    cmd.add_argument("scenario", metavar="SCENARIO", help="scenario TOML file")
+    cmd.add_argument("--seeds", metavar="SPEC", help="seeds, e.g. 0..19 or 0,3,7 (default: the file's)")
+    cmd.add_argument("--set", action="append", default=[], metavar="KEY=V1,V2",
+                     help="a dotted scenario key and its values, e.g. controller.horizon=5,10")  # fmt: skip
+    cmd.add_argument("--jobs", type=int, default=1, metavar="N", help="worker processes")
+    cmd.add_argument("--solver", metavar="NAME", help=solver_help("override controller.solver (mpc)"))
+    cmd.add_argument("--tol", type=float, default=DEFAULT_TOLERANCE_M, metavar="M",
+                     help="final tracking error of a successful run [m] (>= 0)")  # fmt: skip
+    cmd.add_argument("--executor", default="process", choices=EXECUTORS, help="process pool or dask cluster")
+    cmd.add_argument("--scheduler", metavar="ADDRESS", help="dask scheduler (default: a local cluster)")
+    cmd.add_argument("--json", metavar="PATH", help="also write groups and runs as a JSON list of records")
+    add_max_memory(cmd, "run (each run of the sweep)")

@@ -1,0 +1,70 @@
+"""Output paths of the commands, checked before any work: a long run must not fail at its end
+because ``--out`` names a file or ``--json`` a missing directory.
+
+Every command's output options are checked by their argparse destination: ``out`` (a directory,
+created with its parents when missing) and ``json``, ``report``, ``figure`` (files, written into
+an existing directory).
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+from pathlib import Path
+
+from mpcform.errors import ValidationError
+
+DIRECTORY_OPTIONS = ("out",)
+FILE_OPTIONS = ("json", "report", "figure")
+
+
+def check_output_paths(args: argparse.Namespace) -> None:
+    """Raise :class:`ValidationError` naming the option when one of ``args``' output paths cannot
+    be written (``--figure`` only when a figure is drawn)."""
+    for dest in DIRECTORY_OPTIONS:
+        value = getattr(args, dest, None)
+        if value is not None:
+            check_output_dir(_flag(dest), value)
+    for dest in FILE_OPTIONS:
+        value = getattr(args, dest, None)
+        if value is not None and not (dest == "figure" and getattr(args, "no_figure", False)):
+            check_output_file(_flag(dest), value)
+
+
+def check_output_dir(flag: str, path: str | Path) -> None:
+    """``path`` is a directory, or can be created: not a file, its nearest existing ancestor a
+    writable directory."""
+    path = Path(path)
+    if path.exists() and not path.is_dir():
+        raise ValidationError(flag, f"{str(path)!r} is an existing file; expected a directory "
+                              "(created when missing)")  # fmt: skip
+    _writable_ancestor(flag, path)
+
+
+def check_output_file(flag: str, path: str | Path) -> None:
+    """``path`` can be written as a file: not a directory, in an existing writable directory."""
+    path = Path(path)
+    if path.is_dir():
+        raise ValidationError(flag, f"{str(path)!r} is a directory; expected a file path")
+    parent = path.parent
+    if not parent.is_dir():
+        what = "is not a directory" if parent.exists() else "does not exist"
+        raise ValidationError(flag, f"cannot write {str(path)!r}: the directory {str(parent)!r} {what}")
+    if path.exists() and not os.access(path, os.W_OK):
+        raise ValidationError(flag, f"cannot write {str(path)!r}: permission denied")
+    if not path.exists() and not os.access(parent, os.W_OK | os.X_OK):
+        raise ValidationError(flag, f"cannot write {str(path)!r}: {str(parent)!r} is not writable")
+
+
+def _writable_ancestor(flag: str, path: Path) -> None:
+    ancestor = path
+    while not ancestor.exists() and ancestor != ancestor.parent:
+        ancestor = ancestor.parent
+    if not ancestor.is_dir():
+        raise ValidationError(flag, f"cannot create {str(path)!r}: {str(ancestor)!r} is a file")
+    if not os.access(ancestor, os.W_OK | os.X_OK):
+        raise ValidationError(flag, f"cannot write into {str(path)!r}: {str(ancestor)!r} is not writable")
+
+
+def _flag(dest: str) -> str:
+    return "--" + dest.replace("_", "-")

@@ -1,0 +1,97 @@
+"""Where a scenario puts its drones: apart, inside the geofence, clear of the obstacles.
+
+Checked when a scenario is loaded, each as a :class:`~mpcform.errors.ScenarioError` naming the key:
+
+- two template offsets (or two explicit start positions) at one point: no separation d_min > 0
+  can hold between them, and a template whose offsets are all zero has no shape;
+- a start (before the seeded perturbation) inside an obstacle, closer to its centre than
+  ``radius + clearance`` (the clearance defaults to d_min / 2, as the planner's obstacle rows),
+  or outside the geofence box;
+- a constant reference whose goal puts a drone inside an obstacle: it would hold it there.
+
+A moving reference (exponential, mission) may pass through obstacles: the MPC goes around them.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from mpcform._validate import Array
+from mpcform.errors import ScenarioError
+from mpcform.mpc.limits import Limits, SphereObstacle
+
+Obstacles = tuple[SphereObstacle, ...]
+COINCIDENT_RTOL = 1e-9  # points closer than this times max(1 m, their extent) coincide
+
+
+def check_distinct(points_m: Array, field: str, what: str = "offsets") -> None:
+    """Raise when two rows of ``points_m`` (n, d) are at one point (or all are zero, n >= 2)."""
+    n = points_m.shape[0]
+    if n < 2:
+        return
+    tol = COINCIDENT_RTOL * max(1.0, float(np.abs(points_m).max()))
+    if float(np.abs(points_m).max()) <= tol:
+        raise ScenarioError(field, f"all {n} {what} are zero: the drones would share one point, and no "
+                            "separation d_min > 0 can hold between them")  # fmt: skip
+    dist, idx = cKDTree(points_m).query(points_m, k=2)
+    i = int(np.argmin(dist[:, 1]))
+    if dist[i, 1] > tol:
+        return
+    j = int(idx[i, 1] if idx[i, 1] != i else idx[i, 0])
+    i, j = min(i, j), max(i, j)
+    raise ScenarioError(field, f"{what} {i} and {j} coincide at {_point(points_m[i])} (distance "
+                        f"{dist[i, 1]:.3g} m): no separation d_min > 0 can hold between them; "
+                        "expected distinct points")  # fmt: skip
+
+
+def check_start(positions_m: Array, field: str, limits: Limits, obstacles: Obstacles) -> None:
+    """Raise when a start position (n, d) lies inside an obstacle or outside the geofence."""
+    lo, hi = limits.geofence_min_m, limits.geofence_max_m
+    if lo is not None and hi is not None:
+        outside = np.flatnonzero(((positions_m < lo) | (positions_m > hi)).any(axis=1))
+        if outside.size:
+            i = int(outside[0])
+            raise ScenarioError(field, f"drone {i}{_more(outside)} starts at {_point(positions_m[i])}, "
+                                f"outside the geofence box limits.geofence_min = {_point(lo)} to "
+                                f"limits.geofence_max = {_point(hi)}; expected every start "
+                                "inside it")  # fmt: skip
+    _clear_of_obstacles(positions_m, field, "starts", limits, obstacles)
+
+
+def check_goal(goal_m: Array, field: str, limits: Limits, obstacles: Obstacles) -> None:
+    """Raise when a constant reference's goal positions (n, d) put a drone inside an obstacle."""
+    note = " (a moving reference, exponential or mission, may pass through obstacles)"
+    _clear_of_obstacles(goal_m, field, "has its constant goal", limits, obstacles, note)
+
+
+def required_distance_m(obstacle: SphereObstacle, limits: Limits) -> float:
+    """Radius plus clearance [m]: the clearance defaults to half of d_min (0 without d_min)."""
+    half = 0.5 * (limits.d_min_m or 0.0)
+    return obstacle.radius_m + (half if obstacle.clearance_m is None else obstacle.clearance_m)
+
+
+def _clear_of_obstacles(
+    points_m: Array, field: str, verb: str, limits: Limits, obstacles: Obstacles, note: str = ""
+) -> None:
+    for k, ob in enumerate(obstacles):
+        if ob.center_m.shape != points_m.shape[1:]:
+            continue  # reported elsewhere (obstacles[k].center has the wrong length)
+        need = required_distance_m(ob, limits)
+        dist = np.linalg.norm(points_m - ob.center_m, axis=1)
+        inside = np.flatnonzero(dist < need)
+        if inside.size:
+            i = int(inside[np.argmin(dist[inside])])
+            clearance = "d_min / 2" if ob.clearance_m is None else "clearance"
+            raise ScenarioError(field, f"drone {i}{_more(inside)} {verb} at {_point(points_m[i])}, "
+                                f"{dist[i]:.4g} m from the centre of obstacles[{k}], inside its radius + "
+                                f"{clearance} = {need:.4g} m; expected every drone at least that "
+                                f"far{note}")  # fmt: skip
+
+
+def _more(indices: Array) -> str:
+    return f" (and {indices.size - 1} more)" if indices.size > 1 else ""
+
+
+def _point(p: Array) -> str:
+    return "[" + ", ".join(f"{x:.4g}" for x in p) + "]"

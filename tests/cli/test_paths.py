@@ -1,0 +1,47 @@
+"""Output paths checked before any work: a directory option must not name a file, a file option
+must name a file in an existing directory."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+import pytest
+
+from mpcform.cli.paths import check_output_dir, check_output_file, check_output_paths
+from mpcform.errors import ValidationError
+
+
+def test_a_directory_may_exist_or_be_created(tmp_path: Path) -> None:
+    check_output_dir("--out", tmp_path)
+    check_output_dir("--out", tmp_path / "new" / "deeper")
+
+
+def test_a_directory_option_naming_a_file(tmp_path: Path) -> None:
+    (tmp_path / "f").write_text("x")
+    with pytest.raises(ValidationError, match=r"^--out: '.*f' is an existing file; expected a directory"):
+        check_output_dir("--out", tmp_path / "f")
+    with pytest.raises(ValidationError, match=r"^--out: cannot create '.*f/sub': '.*f' is a file"):
+        check_output_dir("--out", tmp_path / "f" / "sub")
+
+
+def test_a_file_option(tmp_path: Path) -> None:
+    check_output_file("--json", tmp_path / "rows.json")
+    (tmp_path / "old.json").write_text("[]")
+    check_output_file("--json", tmp_path / "old.json")  # overwritten
+    with pytest.raises(ValidationError, match=r"^--json: '.*' is a directory; expected a file path"):
+        check_output_file("--json", tmp_path)
+    with pytest.raises(ValidationError, match=r"^--report: cannot write .*: the directory .* does not exist"):
+        check_output_file("--report", tmp_path / "missing" / "r.md")
+    with pytest.raises(ValidationError, match="is not a directory"):
+        check_output_file("--json", tmp_path / "old.json" / "rows.json")
+
+
+def test_every_output_option_of_a_namespace_is_checked(tmp_path: Path) -> None:
+    (tmp_path / "f").write_text("x")
+    check_output_paths(argparse.Namespace(out=None, json=None, scenario="whatever"))
+    for dest, flag in (("out", "--out"), ("json", "--json"), ("report", "--report"), ("figure", "--figure")):
+        bad = tmp_path / "f" if dest == "out" else tmp_path
+        with pytest.raises(ValidationError, match=f"^{flag}: "):
+            check_output_paths(argparse.Namespace(**{dest: str(bad)}))
+    check_output_paths(argparse.Namespace(figure=str(tmp_path), no_figure=True))  # no figure drawn
