@@ -38,6 +38,7 @@ CLOSEST_COLOUR = "crimson"
 MEDIAN_COLOUR = "tab:blue"
 BAND_ALPHA = 0.25
 SNAPSHOTS = 4
+SNAPSHOT_LABEL = "snapshot-label"  # gid of the ``t = ... s`` text beside a snapshot
 
 
 def formation_edges(offsets_m: Array) -> list[tuple[int, int]]:
@@ -55,10 +56,15 @@ def formation_edges(offsets_m: Array) -> list[tuple[int, int]]:
     if n < 3 or not planar:
         return tree
     try:
-        hull = ConvexHull(centred @ vt[:2].T)
+        hull = ConvexHull(centred @ vt[:2].T)  # (facets: a x + b y + c = 0)
     except QhullError:
         return tree
-    cycle = [int(v) for v in hull.vertices]
+    q = centred @ vt[:2].T
+    gap = np.abs(q @ hull.equations[:, :2].T + hull.equations[:, 2]).min(axis=1)
+    boundary = np.flatnonzero(gap <= 1e-9 * sv[0])  # hull corners and drones on its sides
+    middle = q[hull.vertices].mean(axis=0)
+    angle = np.arctan2(*(q[boundary] - middle).T[::-1])
+    cycle = [int(v) for v in boundary[np.argsort(angle)]]
     outline = {(min(a, b), max(a, b)) for a, b in zip(cycle, cycle[1:] + cycle[:1], strict=True)}
     inside = set(range(n)) - set(cycle)
     links = {(a, b) for a, b in tree if a in inside or b in inside}
@@ -125,9 +131,10 @@ def draw_snapshot(ax: Axes, xy: Array, edges: list[tuple[int, int]], colour: Any
     if label == "text":  # beside drone ``anchor``, pushed outward from the snapshot's centre
         away = xy[anchor] - xy.mean(axis=0)
         away = away / norm if (norm := float(np.linalg.norm(away))) > 0 else np.array([0.0, 1.0])
+        box = {"boxstyle": "round,pad=0.15", "fc": "white", "ec": colour, "alpha": 0.85}
         ax.annotate(f"t = {t_s:.3g} s", xy[anchor], xytext=tuple(14 * away), textcoords="offset points",
-                    ha="center", va="center", fontsize="x-small", zorder=5, gid="snapshot-label",
-                    bbox={"boxstyle": "round,pad=0.15", "fc": "white", "ec": colour, "alpha": 0.85})  # fmt: skip
+                    ha="center", va="center", fontsize="x-small", zorder=5, gid=SNAPSHOT_LABEL,
+                    bbox=box)  # fmt: skip
 
 
 def envelope(ax: Axes, t_s: Array, values: Array, colour: Any, label: str, *, stairs: bool = False) -> None:
