@@ -32,8 +32,18 @@ PER_DRONE_MAX = len(DRONE_COLOURS)  # up to this many drones: one line per drone
 TIME_CMAP = ListedColormap(colormaps["plasma"](np.linspace(0.0, 0.82, 256)), name="time")
 """Snapshots coloured by time: dark blue (start) to orange (end); no pale yellow on white."""
 PATH_GREY = "0.55"  # paths of a swarm above PER_DRONE_MAX drones
-REFERENCE_STYLE = {"color": "k", "lw": 0.9, "ls": (0, (4, 3)), "zorder": 2.6}  # above the paths
-LIMIT_STYLE = {"color": "tab:red", "ls": "--", "lw": 1.1, "zorder": 1.5}  # d_min, v_max, clearance
+REFERENCE_STYLE: dict[str, Any] = {
+    "color": "k",
+    "lw": 0.9,
+    "ls": (0, (4, 3)),
+    "zorder": 2.6,
+}  # above the paths
+LIMIT_STYLE: dict[str, Any] = {
+    "color": "tab:red",
+    "ls": "--",
+    "lw": 1.1,
+    "zorder": 1.5,
+}  # d_min, v_max, clearance
 CLOSEST_COLOUR = "crimson"
 MEDIAN_COLOUR = "tab:blue"
 BAND_ALPHA = 0.25
@@ -109,7 +119,7 @@ def snapshot_indices(run: RunData, count: int = SNAPSHOTS) -> Array:
     where the drones move (until the last command above 1 % of the peak speed): a run that
     settles early does not repeat its final shape."""
     speed = np.linalg.norm(run.trajectory.commands_mps, axis=-1).max(axis=1)  # (T - 1,)
-    moving = np.flatnonzero(speed > 0.01 * speed.max()) if speed.size and speed.max() > 0 else []
+    moving: Any = np.flatnonzero(speed > 0.01 * speed.max()) if speed.size and speed.max() > 0 else []
     last = int(moving[-1]) + 1 if len(moving) else run.trajectory.t_s.shape[0] - 1
     return np.unique(np.linspace(0, last, count).round().astype(int))
 
@@ -142,12 +152,16 @@ def envelope(ax: Axes, t_s: Array, values: Array, colour: Any, label: str, *, st
     lo, mid, hi = values.min(axis=1), np.median(values, axis=1), values.max(axis=1)
     if stairs:  # a command is held over its step: repeat the last value at the end
         lo, mid, hi = (np.append(x, x[-1]) for x in (lo, mid, hi))
-    step = "post" if stairs else None
-    ax.fill_between(t_s, lo, hi, color=colour, alpha=BAND_ALPHA, lw=0, step=step,
+    ax.fill_between(t_s, lo, hi, color=colour, alpha=BAND_ALPHA, lw=0, step="post" if stairs else None,
                     label=f"{label}: min-max over drones", gid="envelope")  # fmt: skip
-    draw = ax.step if stairs else ax.plot
-    kw = {"where": "post"} if stairs else {}
-    draw(t_s, mid, color=colour, lw=1.4, label=f"{label}: median", **kw)
+    ax.plot(
+        t_s,
+        mid,
+        color=colour,
+        lw=1.4,
+        label=f"{label}: median",
+        drawstyle="steps-post" if stairs else "default",
+    )
 
 
 def closest_pair(positions_m: Array) -> tuple[int, int, int, float]:

@@ -58,7 +58,10 @@ def top_view(run: RunData) -> Figure:
         draw_graph(graph_ax, run)
     else:
         ax = fig.subplots()
-    draw_plan(ax, run, (0, 1), labels="text")
+    if skeleton_edges(run):
+        draw_plan(ax, run, (0, 1), labels="text")
+    else:  # a swarm drawn as dots: times in the legend, fewer snapshots
+        draw_plan(ax, run, (0, 1), labels="legend", snapshots=key_moments(run))
     ax.set_aspect("equal", adjustable="box")
     ax.set_title(f"Top view: {run.label}", fontsize="medium")
     _colour_bar(fig, run, [ax])
@@ -71,7 +74,7 @@ def view_3d(run: RunData) -> Figure:
     fig = new_figure((15.0, 5.8))
     axes = fig.subplots(1, 3)
     for k, (ax, plane) in enumerate(zip(axes, PROJECTIONS, strict=True)):
-        draw_plan(ax, run, plane, labels="legend" if k == 0 else "none", snapshots=_key_moments(run))
+        draw_plan(ax, run, plane, labels="legend" if k == 0 else "none", snapshots=key_moments(run))
         ax.set_title(f"{AXIS_NAMES[plane[0]]}-{AXIS_NAMES[plane[1]]} projection", fontsize="medium")
     fig.suptitle(f"Spatial run in three projections: {run.label}", fontsize="medium")
     _colour_bar(fig, run, list(axes))
@@ -91,8 +94,12 @@ def draw_plan(ax: Axes, run: RunData, plane: tuple[int, int], *, labels: str = "
         label = f"drone {i}" if few else ("drone paths" if i == 0 else None)
         ax.plot(p[:, i, a], p[:, i, b], color=colours[i] if few else PATH_GREY, lw=2.4 if few else 0.7,
                 alpha=0.7 if few else 0.6, zorder=2, label=label)  # fmt: skip
-    for i in range(run.n):
-        ax.plot(ref[:, i, a], ref[:, i, b], label="reference path" if i == 0 else None, **REFERENCE_STYLE)
+    if np.ptp(ref, axis=0).max() > 0:
+        for i in range(run.n):
+            ax.plot(ref[:, i, a], ref[:, i, b], label="reference path" if i == 0 else None, **REFERENCE_STYLE)
+    else:  # a constant reference: its points, not paths
+        ax.scatter(ref[0, :, a], ref[0, :, b], marker="x", s=30, color="k", lw=0.8, zorder=4.5,
+                   label="reference p*_i (fixed)")  # fmt: skip
     edges = skeleton_edges(run)
     cmap, norm = time_colour(run)
     size = marker_scale(run.n)
@@ -101,10 +108,10 @@ def draw_plan(ax: Axes, run: RunData, plane: tuple[int, int], *, labels: str = "
         anchor = (k * run.n) // len(idx)  # labels spread over the drones: nested shapes stay legible
         draw_snapshot(ax, p[j][:, [a, b]], edges, cmap(norm(t[j])), float(t[j]), size, labels, anchor)
     end = p[-1][:, [a, b]]
-    ax.scatter(*p[0][:, [a, b]].T, marker="o", s=40 * size, facecolors="none", edgecolors="k", lw=0.8,
-               zorder=4, label="start")  # fmt: skip
-    ax.scatter(*end.T, marker="s", s=26 * size, facecolors="none", edgecolors="k", lw=0.8, zorder=4,
-               label="end")  # fmt: skip
+    start = p[0][:, [a, b]]
+    hollow: dict[str, Any] = {"facecolors": "none", "edgecolors": "k", "lw": 0.8, "zorder": 4}
+    ax.scatter(start[:, 0], start[:, 1], marker="o", s=40 * size, label="start", **hollow)
+    ax.scatter(end[:, 0], end[:, 1], marker="s", s=26 * size, label="end", **hollow)
     draw_leaders(ax, end, run)
     mark_closest_pair(ax, run, plane)
     ax.set(xlabel=f"{AXIS_NAMES[a]} [m]", ylabel=f"{AXIS_NAMES[b]} [m]")
@@ -119,7 +126,7 @@ def legend_below(fig: Figure, ax: Any, ncol: int = 4) -> None:
         fig.legend(handles, labels, loc="outside lower center", ncol=ncol, fontsize="small", frameon=False)
 
 
-def _key_moments(run: RunData) -> np.ndarray:
+def key_moments(run: RunData) -> np.ndarray:
     """Start, moment of minimum separation and end: the snapshots of a spatial run."""
     last = run.trajectory.t_s.shape[0] - 1
     k = closest_pair(run.trajectory.positions_m)[0] if run.n >= 2 else last // 2

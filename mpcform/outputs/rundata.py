@@ -117,15 +117,14 @@ def write_formation_npz(out_dir: str | Path, formation: FormationData) -> Path:
     if formation.scale_ref is None:
         raise ValidationError("formation.scale_ref", "unknown (a run read back without formation.npz)")
     path = Path(out_dir) / FORMATION_NPZ
-    graph: dict[str, Array] = {}
-    if formation.graph_edges is not None:
-        graph = {"graph_edges": formation.graph_edges, "leaders": np.array(formation.leaders, dtype=int)}
-    arrays = {
+    arrays: dict[str, Any] = {
         "offsets": formation.offsets_m,
         "scale_ref": formation.scale_ref,
         "obstacles": formation.obstacles,
     }
-    np.savez_compressed(path, **arrays, **graph)
+    if formation.graph_edges is not None:
+        arrays |= {"graph_edges": formation.graph_edges, "leaders": np.array(formation.leaders, dtype=int)}
+    np.savez_compressed(path, **arrays)
     return path
 
 
