@@ -153,6 +153,8 @@ class _Scene:
                 "links": [ax.plot([], [], color="0.3", lw=1.0)[0] for _ in self.edges],
                 "refs": ax.plot([], [], ls="none", marker="o", ms=1.5 * ms, mfc="none", mec="k", mew=0.6,
                                 label="reference p*_i")[0],
+                "leaders": ax.plot([], [], ls="none", marker="*", ms=13, mfc="gold", mec="k", mew=0.6,
+                                   zorder=5, label="leader" if run.formation.leaders else None)[0],
                 "drones": ax.scatter(p[0, :, a], p[0, :, b], s=ms**2, c=colours, zorder=4, edgecolors="k",
                                      linewidths=0.3, label="drones"),
             })  # fmt: skip
@@ -181,6 +183,8 @@ class _Scene:
                 line.set_data(p[[i, j], a], p[[i, j], b])
             art["refs"].set_data(ref[:, a], ref[:, b])
             art["drones"].set_offsets(p[:, [a, b]])
+            leaders = list(self.run.formation.leaders)
+            art["leaders"].set_data(p[leaders, a], p[leaders, b])
         factor = "real time" if self.speed == 1 else f"{self.speed:g}x real time"
         self.clock.set_text(f"{self.run.label}   t = {t_s:6.2f} s   ({factor})")
         return []
@@ -189,7 +193,7 @@ class _Scene:
         """The artists that change from frame to frame."""
         arts = [self.clock]
         for art in self.artists:
-            arts += [*art["trails"], *art["links"], art["refs"], art["drones"]]
+            arts += [*art["trails"], *art["links"], art["refs"], art["drones"], art["leaders"]]
         return arts
 
     def render(self) -> Array:
