@@ -180,23 +180,13 @@ def format_summary(summary: dict[str, Any]) -> str:
         end = f" from t = {done:.4g} s" if done is not None else f", {m['stalled_drones']} stalled"
         rows.append(("completion", f"{m['completion']:.0%} of drones at their final targets{end}"))
     if "obstacle_violations" in m:
-        rows.append(
-            (
-                "obstacles",
-                f"min clearance {_m(m['min_obstacle_clearance'], 'm')} from a surface, "
-                f"{m['obstacle_violations']} violations",
-            )
-        )
+        rows.append(("obstacles", f"min clearance {_m(m['min_obstacle_clearance'], 'm')} from a surface, "
+                                  f"{m['obstacle_violations']} violations"))
     plant = summary.get("plant")
     if plant is not None and plant.get("kind") != "ideal" and "min_separation_true" in m:
-        rows.append(
-            (
-                "true motion",
-                f"{plant['kind']} plant (margin {_m(plant['margin'], 'm')}): min "
-                f"separation {_m(m['min_separation_true'], 'm')}, {m['separation_violations_true']} "
-                f"violations, max speed {_m(m['max_speed_true'], 'm/s')}",
-            )
-        )
+        rows.append(("true motion", f"{plant['kind']} plant (margin {_m(plant['margin'], 'm')}): min "
+                     f"separation {_m(m['min_separation_true'], 'm')}, {m['separation_violations_true']} "
+                     f"violations, max speed {_m(m['max_speed_true'], 'm/s')}"))
     for mode, st in m["step_time_ms"].items():
         rows.append((f"step time {mode}", f"median {st['median']:.3g} ms, p90 {st['p90']:.3g} ms, "
                                           f"max {st['max']:.3g} ms"))  # fmt: skip
