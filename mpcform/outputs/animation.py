@@ -1,93 +1,221 @@
-"""``flight.gif``: an animation of a run (matplotlib on an Agg canvas, frames written by pillow).
+"""The flight as a video: ``flight.mp4`` (matplotlib's ffmpeg writer, when ffmpeg is installed)
+or ``flight.gif`` (pillow), drawn with :class:`matplotlib.animation.FuncAnimation` on an Agg canvas.
+
+The video plays the flight at ``speed`` times real time (default 1: a 20 s flight lasts 20 s),
+with at most ``max_frames`` frames: a long flight gets fewer frames per second, never a shorter
+video. Every frame writes the flight time and the speed factor. A planar run is seen from above;
+a spatial run in two projections (x-y and x-z), which keep depth readable without a camera.
+``progress(done, total)`` is called after each frame (the CLI draws a bar with it).
 
 Imported only when an animation is asked for, like :mod:`mpcform.outputs.figures`.
 """
 
 from __future__ import annotations
 
+import math
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+from matplotlib.animation import AbstractMovieWriter, FFMpegWriter, FuncAnimation
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
 from mpcform._validate import Array
+from mpcform.errors import ValidationError
 from mpcform.outputs.drawing import (
+    PATH_GREY,
+    PER_DRONE_MAX,
     draw_obstacles,
     drone_colours,
-    equal_3d,
-    formation_edges,
     marker_scale,
-    plan_size,
+    skeleton_edges,
 )
 from mpcform.outputs.rundata import RunData
 
 ANIMATION_FILE = "flight.gif"
+MP4_FILE = "flight.mp4"
+FPS_CHOICES = (20, 10, 5, 4, 2, 1)  # frame rates whose frame time is a whole number of 10 ms (GIF)
+MAX_FRAMES = 300
+TRAIL_S = 3.0
+AXIS_NAMES = ("x", "y", "z")
+
+Progress = Callable[[int, int], None]
 
 
-def animate_run(run: RunData, path: str | Path, *, max_frames: int = 80, fps: int = 12,
-                trail_s: float = 3.0) -> Path:  # fmt: skip
-    """Write a GIF of the flight (top view; 3D for spatial runs) with trails and the reference.
+def animation_file() -> str:
+    """``flight.mp4`` when matplotlib finds ffmpeg, else ``flight.gif``."""
+    return MP4_FILE if FFMpegWriter.isAvailable() else ANIMATION_FILE
 
-    At most ``max_frames`` frames evenly spaced in time, shown at ``fps`` frames per second.
-    """
-    from PIL import Image  # pillow: a dependency of matplotlib, listed in the plot extra
 
+def frame_times(t0_s: float, t1_s: float, speed: float = 1.0, fps: int = 10,
+                max_frames: int = MAX_FRAMES) -> tuple[Array, int]:  # fmt: skip
+    """Flight times of the frames and the frame rate: frames ``speed / fps`` seconds of flight
+    apart, at the highest rate of :data:`FPS_CHOICES` up to ``fps`` that needs at most
+    ``max_frames`` frames. The video lasts ``(t1 - t0) / speed`` seconds (plus one frame)."""
+    if not speed > 0 or not math.isfinite(speed):
+        raise ValidationError("speed", f"expected a positive real-time factor, got {speed!r}")
+    if max_frames < 2:
+        raise ValidationError("max_frames", f"expected at least 2, got {max_frames!r}")
+    video_s = (t1_s - t0_s) / speed
+    rates = [f for f in FPS_CHOICES if f <= max(fps, 1)] or [1]
+    rate = next((f for f in rates if video_s * f + 1 <= max_frames), rates[-1])
+    count = min(max_frames, int(math.floor(video_s * rate + 1e-9)) + 1)
+    return t0_s + np.arange(count) * speed / rate, rate
+
+
+def animate_run(run: RunData, path: str | Path, *, speed: float = 1.0, fps: int = 10,
+                max_frames: int = MAX_FRAMES, progress: Progress | None = None,
+                dpi: int = 80) -> Path:  # fmt: skip
+    """Write the flight to ``path``: MP4 for a ``.mp4`` suffix (needs ffmpeg), else a GIF."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    p, ref, t = run.trajectory.positions_m, run.trajectory.reference_m, run.trajectory.t_s
-    frames = np.unique(np.linspace(0, t.shape[0] - 1, min(max_frames, t.shape[0])).round().astype(int))
-    trail = max(1, int(round(trail_s / float(t[1] - t[0]))))
-    colours = drone_colours(run.n)
-    edges = formation_edges(run.formation.offsets_m)
-    spatial = run.dim == 3
-    d = 3 if spatial else 2
-    legend_in = 2.0  # the legend sits right of the axes, off the flight
-    width, height = (6.0 + legend_in, 5.6) if spatial else plan_size(run, 6.0, legend_in, 3.0)
-    fig = Figure(figsize=(width, height), dpi=96)  # fixed margins: no layout engine per frame
-    FigureCanvasAgg(fig)
-    fig.subplots_adjust(left=0.8 / width, right=1.0 - (legend_in + 0.1) / width, bottom=0.65 / height,
-                        top=1.0 - 0.65 / height)  # fmt: skip
-    ax: Any = fig.add_subplot(projection="3d") if spatial else fig.add_subplot()
-    lo = np.minimum(p.min(axis=(0, 1)), ref.min(axis=(0, 1)))[:d]
-    hi = np.maximum(p.max(axis=(0, 1)), ref.max(axis=(0, 1)))[:d]
-    if spatial:
-        equal_3d(ax, np.stack([lo, hi]))
-        ax.set(xlabel="x [m]", ylabel="y [m]", zlabel="z [m]")
-    else:
-        draw_obstacles(ax, run)
-        pad = 0.08 * float((hi - lo).max()) + 0.5
-        ax.set(xlim=(lo[0] - pad, hi[0] + pad), ylim=(lo[1] - pad, hi[1] + pad), xlabel="x [m]",
-               ylabel="y [m]")  # fmt: skip
-        ax.set_aspect("equal", adjustable="box")
-        ax.grid(True, alpha=0.3)
-    trails = [ax.plot(*p[:1, i, :d].T, color=colours[i], lw=1.0, alpha=0.7)[0] for i in range(run.n)]
-    links = [ax.plot(*np.zeros((d, 2)), color="0.4", lw=0.8)[0] for _ in edges]
-    ms = 6.0 * float(np.sqrt(marker_scale(run.n)))  # marker diameter [pt]
-    refs = ax.plot(*ref[0, :, :d].T, ls="none", marker="o", ms=1.4 * ms, mfc="none", mec="0.5",
-                   label="reference p*_i")[0]  # fmt: skip
-    drones = ax.plot(*p[0, :, :d].T, ls="none", marker="o", ms=ms, color="tab:blue", label="drones")[0]
-    trails[0].set_label(f"last {trail_s:g} s")
-    ax.legend(loc="upper left", bbox_to_anchor=(1.02, 1.0), fontsize="small", borderaxespad=0.0)
-    images = []
-    for j in frames.tolist():
-        start = max(0, j - trail)
-        for i, line in enumerate(trails):
-            _set_data(line, p[start : j + 1, i, :d], spatial)
-        for (a, b), line in zip(edges, links, strict=True):
-            _set_data(line, p[j, [a, b], :d], spatial)
-        _set_data(refs, ref[j, :, :d], spatial)
-        _set_data(drones, p[j, :, :d], spatial)
-        ax.set_title(f"{run.label}\nt = {t[j]:6.2f} s", fontsize="medium")
-        fig.canvas.draw()
-        rgba = np.asarray(fig.canvas.buffer_rgba())  # type: ignore[attr-defined]
-        images.append(Image.fromarray(rgba[..., :3].copy()))
-    images[0].save(path, save_all=True, append_images=images[1:], duration=int(round(1000 / fps)), loop=0)
+    mp4 = path.suffix.lower() == ".mp4"
+    if mp4 and not FFMpegWriter.isAvailable():
+        raise ValidationError(str(path), "an MP4 needs ffmpeg on the PATH; write a .gif instead")
+    t = run.trajectory.t_s
+    times, rate = frame_times(float(t[0]), float(t[-1]), speed, fps, max_frames)
+    scene = _Scene(run, speed, dpi)
+    anim = FuncAnimation(scene.fig, scene.update, frames=times, init_func=lambda: [], blit=False,
+                         interval=1000 / rate, repeat=False, cache_frame_data=False)  # fmt: skip
+    writer = FFMpegWriter(fps=rate) if mp4 else GifWriter(scene.render, fps=rate)
+    callback = None if progress is None else (lambda i, n: progress(i + 1, n))
+    anim.save(str(path), writer=writer, dpi=dpi, progress_callback=callback)
     return path
 
 
-def _set_data(line: Any, xyz: Array, spatial: bool) -> None:
-    line.set_data(xyz[:, 0], xyz[:, 1])
-    if spatial:
-        line.set_3d_properties(xyz[:, 2])
+class GifWriter(AbstractMovieWriter):
+    """A GIF writer (pillow) that takes each frame from ``render()`` (an (h, w, 3) uint8 image):
+    the scene redraws only its moving artists over a cached background (blitting), several times
+    faster than a full redraw per frame. Every frame lasts exactly ``1000 / fps`` ms."""
+
+    def __init__(self, render: Callable[[], Array], fps: int) -> None:
+        super().__init__(fps=fps)
+        self.render = render
+        self.images: list[Any] = []
+
+    def setup(self, fig: Any, outfile: Any, dpi: float | None = None) -> None:
+        super().setup(fig, outfile, dpi=dpi)
+        self.images = []
+
+    def grab_frame(self, **savefig_kwargs: Any) -> None:
+        from PIL import Image  # pillow: a dependency of matplotlib, listed in the plot extra
+
+        self.images.append(Image.fromarray(self.render()))
+
+    def finish(self) -> None:
+        self.images[0].save(self.outfile, save_all=True, append_images=self.images[1:],
+                            duration=int(round(1000 / self.fps)), loop=0)  # fmt: skip
+
+
+class _FrameCanvas(FigureCanvasAgg):
+    """An Agg canvas that ignores the full redraw FuncAnimation asks for after each frame
+    (``draw_idle``): the writer draws the frame itself (blitting for GIFs, a full draw for MP4)."""
+
+    def draw_idle(self, *args: Any, **kwargs: Any) -> None:
+        pass
+
+
+class _Scene:
+    """The figure of the animation and its moving artists; :meth:`update` draws flight time t."""
+
+    def __init__(self, run: RunData, speed: float, dpi: int) -> None:
+        self.run, self.speed = run, speed
+        self.background: Any = None
+        self.planes = ((0, 1),) if run.dim == 2 else ((0, 1), (0, 2))
+        self.edges = skeleton_edges(run)
+        p, ref = run.trajectory.positions_m, run.trajectory.reference_m
+        both = np.concatenate([p.reshape(-1, run.dim), ref.reshape(-1, run.dim)])
+        span = np.maximum(both.max(axis=0) - both.min(axis=0), 1.0)
+        ratio = max(span[b] / span[a] for a, b in self.planes)
+        panel_in = 6.4 if run.dim == 2 else 5.0
+        height = float(np.clip(panel_in * ratio + 1.6, 3.2, 7.5))
+        self.fig = Figure(figsize=(panel_in * len(self.planes), height), dpi=dpi, layout="constrained")
+        _FrameCanvas(self.fig)
+        axes = self.fig.subplots(1, len(self.planes), squeeze=False)[0]
+        few = run.n <= PER_DRONE_MAX
+        colours = drone_colours(run.n) if few else ["tab:blue"] * run.n
+        ms = 6.0 * float(np.sqrt(marker_scale(run.n)))
+        self.artists: list[dict[str, Any]] = []
+        for ax, (a, b) in zip(axes, self.planes, strict=True):
+            draw_obstacles(ax, run, (a, b))
+            both = np.concatenate([p[..., [a, b]].reshape(-1, 2), ref[..., [a, b]].reshape(-1, 2)])
+            lo, hi = both.min(axis=0), both.max(axis=0)
+            pad = 0.06 * float((hi - lo).max()) + 0.3
+            ax.set(xlim=(lo[0] - pad, hi[0] + pad), ylim=(lo[1] - pad, hi[1] + pad),
+                   xlabel=f"{AXIS_NAMES[a]} [m]", ylabel=f"{AXIS_NAMES[b]} [m]", aspect="equal")  # fmt: skip
+            ax.grid(True, alpha=0.3)
+            trail_colour = colours if few else [PATH_GREY] * run.n
+            self.artists.append({
+                "plane": (a, b),
+                "trails": [ax.plot([], [], color=c, lw=1.0, alpha=0.7)[0] for c in trail_colour],
+                "links": [ax.plot([], [], color="0.3", lw=1.0)[0] for _ in self.edges],
+                "refs": ax.plot([], [], ls="none", marker="o", ms=1.5 * ms, mfc="none", mec="k", mew=0.6,
+                                label="reference p*_i")[0],
+                "leaders": ax.plot([], [], ls="none", marker="*", ms=13, mfc="gold", mec="k", mew=0.6,
+                                   zorder=5, label="leader" if run.formation.leaders else None)[0],
+                "drones": ax.scatter(p[0, :, a], p[0, :, b], s=ms**2, c=colours, zorder=4, edgecolors="k",
+                                     linewidths=0.3, label="drones"),
+            })  # fmt: skip
+            ax.set_title(f"{AXIS_NAMES[a]}-{AXIS_NAMES[b]}" + (" (top view)" if (a, b) == (0, 1) else ""),
+                         fontsize="small")  # fmt: skip
+        self.artists[0]["trails"][0].set_label(f"last {TRAIL_S:g} s")
+        handles, labels = axes[0].get_legend_handles_labels()
+        self.fig.legend(
+            handles, labels, loc="outside lower center", ncol=5, fontsize="x-small", frameon=False
+        )
+        self.clock = self.fig.suptitle(f"{run.label}   t = 000.00 s", fontsize="medium", family="monospace")
+        self.fig.canvas.draw()  # lay the figure out once, then keep it: no layout pass per frame
+        self.fig.set_layout_engine("none")
+
+    def update(self, t_s: float) -> list[Any]:
+        """Move every artist to flight time ``t_s`` (positions interpolated between samples)."""
+        traj = self.run.trajectory
+        p, ref = _at(traj.t_s, traj.positions_m, t_s), _at(traj.t_s, traj.reference_m, t_s)
+        window = (traj.t_s >= t_s - TRAIL_S) & (traj.t_s <= t_s)
+        for art in self.artists:
+            a, b = art["plane"]
+            for i, line in enumerate(art["trails"]):
+                line.set_data(np.append(traj.positions_m[window, i, a], p[i, a]),
+                              np.append(traj.positions_m[window, i, b], p[i, b]))  # fmt: skip
+            for (i, j), line in zip(self.edges, art["links"], strict=True):
+                line.set_data(p[[i, j], a], p[[i, j], b])
+            art["refs"].set_data(ref[:, a], ref[:, b])
+            art["drones"].set_offsets(p[:, [a, b]])
+            leaders = list(self.run.formation.leaders)
+            art["leaders"].set_data(p[leaders, a], p[leaders, b])
+        factor = "real time" if self.speed == 1 else f"{self.speed:g}x real time"
+        self.clock.set_text(f"{self.run.label}   t = {t_s:6.2f} s   ({factor})")
+        return []
+
+    def moving(self) -> list[Any]:
+        """The artists that change from frame to frame."""
+        arts = [self.clock]
+        for art in self.artists:
+            arts += [*art["trails"], *art["links"], art["refs"], art["drones"], art["leaders"]]
+        return arts
+
+    def render(self) -> Array:
+        """The current frame as an (h, w, 3) uint8 image: the still background (drawn once)
+        with the moving artists drawn over it."""
+        canvas: Any = self.fig.canvas
+        moving = self.moving()
+        if self.background is None:
+            for artist in moving:
+                artist.set_visible(False)
+            canvas.draw()
+            self.background = canvas.copy_from_bbox(self.fig.bbox)
+            for artist in moving:
+                artist.set_visible(True)
+        canvas.restore_region(self.background)
+        for artist in moving:
+            self.fig.draw_artist(artist)
+        return np.asarray(canvas.buffer_rgba())[..., :3].copy()
+
+
+def _at(t_s: Array, values: Array, t: float) -> Array:
+    """``values`` (T, n, d) linearly interpolated at time ``t``."""
+    k = int(np.clip(np.searchsorted(t_s, t, side="right") - 1, 0, t_s.shape[0] - 2))
+    w = float(np.clip((t - t_s[k]) / (t_s[k + 1] - t_s[k]), 0.0, 1.0))
+    return np.asarray((1 - w) * values[k] + w * values[k + 1])

@@ -1,5 +1,6 @@
-"""Drawing pieces shared by the figures and the animation: drone colours, marker sizes, the
-formation's skeleton, obstacles, plan-view sizes and equal 3D axes (matplotlib).
+"""Drawing pieces shared by the figures and the animation (matplotlib): one style, the formation's
+edges, drone colours, time-coloured snapshots, envelopes, the closest pair, the communication
+graph, obstacles, plan-view sizes and equal 3D axes.
 
 Imported only when plots are asked for, like :mod:`mpcform.outputs.figures` and
 :mod:`mpcform.outputs.animation`.
@@ -12,34 +13,100 @@ from typing import Any
 import numpy as np
 from matplotlib import colormaps
 from matplotlib.axes import Axes
+from matplotlib.colors import ListedColormap, Normalize
 from matplotlib.patches import Circle
 from matplotlib.ticker import MaxNLocator
 from scipy.sparse.csgraph import minimum_spanning_tree
+from scipy.spatial import ConvexHull, QhullError
 from scipy.spatial.distance import pdist, squareform
 
 from mpcform._validate import Array
+from mpcform.formation.geometry import min_pair_distance
 from mpcform.outputs.rundata import RunData
 
-DRONE_COLOURS = ("tab:blue", "tab:orange", "tab:green", "tab:red", "tab:purple", "tab:brown", "tab:pink",
-                 "tab:olive", "tab:cyan")  # fmt: skip
-PER_DRONE_MAX = len(DRONE_COLOURS)  # up to this many drones: one legend entry / speed line per drone
+# ---- the one style of every figure ---------------------------------------------------------
+DRONE_COLOURS = ("tab:blue", "tab:orange", "tab:green", "tab:red", "tab:purple", "tab:brown")
+DRONE_LINESTYLES = ("-", (0, (5, 2)), "-.", (0, (1, 1.5)), (0, (8, 2, 1, 2)), (0, (3, 3)))
+"""Per-drone dash patterns: curves of drones that move alike (symmetric formations) stay visible."""
+PER_DRONE_MAX = len(DRONE_COLOURS)  # up to this many drones: one line per drone, else envelopes
+TIME_CMAP = ListedColormap(colormaps["plasma"](np.linspace(0.0, 0.82, 256)), name="time")
+"""Snapshots coloured by time: dark blue (start) to orange (end); no pale yellow on white."""
+PATH_GREY = "0.55"  # paths of a swarm above PER_DRONE_MAX drones
+REFERENCE_STYLE: dict[str, Any] = {
+    "color": "k",
+    "lw": 0.9,
+    "ls": (0, (4, 3)),
+    "zorder": 2.6,
+}  # above the paths
+LIMIT_STYLE: dict[str, Any] = {
+    "color": "tab:red",
+    "ls": "--",
+    "lw": 1.1,
+    "zorder": 1.5,
+}  # d_min, v_max, clearance
+CLOSEST_COLOUR = "crimson"
+MEDIAN_COLOUR = "tab:blue"
+BAND_ALPHA = 0.25
+SNAPSHOTS = 4
+SNAPSHOT_LABEL = "snapshot-label"  # gid of the ``t = ... s`` text beside a snapshot
 
 
 def formation_edges(offsets_m: Array) -> list[tuple[int, int]]:
-    """Edges of the minimum spanning tree of the template offsets (draws any shape's skeleton)."""
+    """Edges that draw the template's shape: the closed outline (convex hull) of a planar template,
+    so a ring or polygon of n drones gets n edges, with the drones inside the outline joined to it
+    by their minimum spanning tree; a collinear or truly 3-D template keeps its minimum spanning
+    tree (a 3-D hull is a tangle of triangles)."""
     n = offsets_m.shape[0]
     if n < 2:
         return []
+    centred = offsets_m - offsets_m.mean(axis=0)
+    _, sv, vt = np.linalg.svd(centred, full_matrices=False)
+    tree = _spanning_tree(offsets_m)
+    planar = len(sv) >= 2 and sv[1] > 1e-9 * sv[0] and (len(sv) < 3 or sv[2] <= 1e-9 * sv[0])
+    if n < 3 or not planar:
+        return tree
+    try:
+        hull = ConvexHull(centred @ vt[:2].T)  # (facets: a x + b y + c = 0)
+    except QhullError:
+        return tree
+    q = centred @ vt[:2].T
+    gap = np.abs(q @ hull.equations[:, :2].T + hull.equations[:, 2]).min(axis=1)
+    boundary = np.flatnonzero(gap <= 1e-9 * sv[0])  # hull corners and drones on its sides
+    middle = q[hull.vertices].mean(axis=0)
+    angle = np.arctan2(*(q[boundary] - middle).T[::-1])
+    cycle = [int(v) for v in boundary[np.argsort(angle)]]
+    outline = {(min(a, b), max(a, b)) for a, b in zip(cycle, cycle[1:] + cycle[:1], strict=True)}
+    inside = set(range(n)) - set(cycle)
+    links = {(a, b) for a, b in tree if a in inside or b in inside}
+    return sorted(outline | links)
+
+
+def skeleton_edges(run: RunData) -> list[tuple[int, int]]:
+    """The edges drawn in a run's plan views: :func:`formation_edges`, except none for a swarm of
+    more than :data:`PER_DRONE_MAX` drones on a truly 3-D template (a projected tangle)."""
+    offsets = run.formation.offsets_m
+    sv = np.linalg.svd(offsets - offsets.mean(axis=0), compute_uv=False)
+    solid = sv.shape[0] >= 3 and sv[2] > 1e-9 * sv[0]
+    return [] if solid and run.n > PER_DRONE_MAX else formation_edges(offsets)
+
+
+def _spanning_tree(offsets_m: Array) -> list[tuple[int, int]]:
+    n = offsets_m.shape[0]
     dist = squareform(pdist(offsets_m)) + 1e-12 * (1 - np.eye(n))  # keep coincident points linked
     tree = minimum_spanning_tree(dist).tocoo()
     return sorted((int(min(a, b)), int(max(a, b))) for a, b in zip(tree.row, tree.col, strict=True))
 
 
+def per_drone_style(i: int) -> dict[str, Any]:
+    """Colour and dash pattern of drone ``i`` (``i < PER_DRONE_MAX``) in the time series."""
+    return {"color": DRONE_COLOURS[i], "ls": DRONE_LINESTYLES[i], "lw": 1.3}
+
+
 def drone_colours(n: int) -> list[Any]:
-    """Distinct colours without grey (the formation snapshots are grey) up to 9, else viridis."""
+    """Distinct colours up to :data:`PER_DRONE_MAX` drones, else shades of one colour map."""
     if n <= len(DRONE_COLOURS):
         return list(DRONE_COLOURS[:n])
-    return [colormaps["viridis"](i / max(1, n - 1)) for i in range(n)]
+    return [colormaps["viridis"](0.1 + 0.8 * i / max(1, n - 1)) for i in range(n)]
 
 
 def marker_scale(n: int) -> float:
@@ -47,8 +114,108 @@ def marker_scale(n: int) -> float:
     return float(min(1.0, max(0.3, 20.0 / max(n, 1))))
 
 
+def snapshot_indices(run: RunData, count: int = SNAPSHOTS) -> Array:
+    """Sample indices of ``count`` snapshots evenly spaced in time over the part of the flight
+    where the drones move (until the last command above 1 % of the peak speed): a run that
+    settles early does not repeat its final shape."""
+    speed = np.linalg.norm(run.trajectory.commands_mps, axis=-1).max(axis=1)  # (T - 1,)
+    moving: Any = np.flatnonzero(speed > 0.01 * speed.max()) if speed.size and speed.max() > 0 else []
+    last = int(moving[-1]) + 1 if len(moving) else run.trajectory.t_s.shape[0] - 1
+    return np.unique(np.linspace(0, last, count).round().astype(int))
+
+
+def time_colour(run: RunData) -> tuple[Any, Normalize]:
+    """The colour map and normalisation of the snapshots' time (for a colour bar)."""
+    t = run.trajectory.t_s
+    return TIME_CMAP, Normalize(float(t[0]), float(t[-1]))
+
+
+def draw_snapshot(ax: Axes, xy: Array, edges: list[tuple[int, int]], colour: Any, t_s: float,
+                  size: float, label: str = "text", anchor: int = 0) -> None:  # fmt: skip
+    """One formation snapshot in a plane: its edges, drones and its time, ``t = ... s``, written
+    beside drone ``anchor`` (``label="text"``) or as its legend entry (``"legend"``)."""
+    for a, b in edges:
+        ax.plot(xy[[a, b], 0], xy[[a, b], 1], color=colour, lw=1.3, zorder=3)
+    ax.scatter(xy[:, 0], xy[:, 1], color=colour, s=16 * size, zorder=3.1, edgecolors="k", lw=0.3,
+               label=f"snapshot t = {t_s:.3g} s" if label == "legend" else None)  # fmt: skip
+    if label == "text":  # beside drone ``anchor``, pushed outward from the snapshot's centre
+        away = xy[anchor] - xy.mean(axis=0)
+        away = away / norm if (norm := float(np.linalg.norm(away))) > 0 else np.array([0.0, 1.0])
+        box = {"boxstyle": "round,pad=0.15", "fc": "white", "ec": colour, "alpha": 0.85}
+        ax.annotate(f"t = {t_s:.3g} s", xy[anchor], xytext=tuple(14 * away), textcoords="offset points",
+                    ha="center", va="center", fontsize="x-small", zorder=5, gid=SNAPSHOT_LABEL,
+                    bbox=box)  # fmt: skip
+
+
+def envelope(ax: Axes, t_s: Array, values: Array, colour: Any, label: str, *, stairs: bool = False) -> None:
+    """Min-max band and median over drones of ``values`` (T or T - 1, n) (``stairs``: held values)."""
+    lo, mid, hi = values.min(axis=1), np.median(values, axis=1), values.max(axis=1)
+    if stairs:  # a command is held over its step: repeat the last value at the end
+        lo, mid, hi = (np.append(x, x[-1]) for x in (lo, mid, hi))
+    ax.fill_between(t_s, lo, hi, color=colour, alpha=BAND_ALPHA, lw=0, step="post" if stairs else None,
+                    label=f"{label}: min-max over drones", gid="envelope")  # fmt: skip
+    ax.plot(
+        t_s,
+        mid,
+        color=colour,
+        lw=1.4,
+        label=f"{label}: median",
+        drawstyle="steps-post" if stairs else "default",
+    )
+
+
+def closest_pair(positions_m: Array) -> tuple[int, int, int, float]:
+    """``(sample, i, j, distance [m])`` of the closest two drones over the samples."""
+    sep = np.array([min_pair_distance(p) for p in positions_m])
+    k = int(np.argmin(sep))
+    dist = squareform(pdist(positions_m[k])) + np.diag(np.full(positions_m.shape[1], np.inf))
+    i, j = np.unravel_index(int(np.argmin(dist)), dist.shape)
+    return k, int(min(i, j)), int(max(i, j)), float(sep[k])
+
+
+def mark_closest_pair(ax: Axes, run: RunData, axes: tuple[int, int] = (0, 1)) -> None:
+    """The two closest drones at the moment of minimum separation, joined by a red segment."""
+    if run.n < 2:
+        return
+    k, i, j, dist = closest_pair(run.trajectory.positions_m)
+    xy = run.trajectory.positions_m[k][[i, j]][:, list(axes)]
+    t = float(run.trajectory.t_s[k])
+    ax.plot(xy[:, 0], xy[:, 1], color=CLOSEST_COLOUR, lw=2.2, marker="o", ms=5, zorder=6,
+            label=f"closest pair {i}-{j}: {dist:.2f} m at t = {t:.3g} s")  # fmt: skip
+    if run.d_min_m is not None:  # touching circles of radius d_min / 2: the separation is kept
+        for centre in xy:
+            ax.add_patch(Circle(tuple(centre), run.d_min_m / 2, fill=False, color=CLOSEST_COLOUR, lw=0.9,
+                                ls="--", zorder=6))  # fmt: skip
+
+
+def draw_leaders(ax: Axes, xy: Array, run: RunData) -> None:
+    """The leaders of a consensus run (stars) at positions ``xy`` (n, 2)."""
+    leaders = list(run.formation.leaders)
+    if leaders:
+        ax.scatter(xy[leaders, 0], xy[leaders, 1], marker="*", s=170, color="gold", edgecolors="k",
+                   zorder=6, label="leader (sees the commanded scale)")  # fmt: skip
+
+
+def draw_graph(ax: Axes, run: RunData) -> None:
+    """The communication graph on the template: numbered drones, one line per link, leaders starred."""
+    graph, leaders = run.formation.graph_edges, list(run.formation.leaders)
+    if graph is None:
+        return
+    r = run.formation.offsets_m[:, :2]
+    for a, b in graph.astype(int):
+        ax.plot(r[[a, b], 0], r[[a, b], 1], color="tab:green", lw=1.0)
+    ax.scatter(r[:, 0], r[:, 1], s=90, color="white", edgecolors="tab:green", zorder=3)
+    for i, (x, y) in enumerate(r):
+        ax.text(x, y, str(i), ha="center", va="center", fontsize=6, zorder=4)
+    if leaders:
+        ax.scatter(r[leaders, 0], r[leaders, 1], marker="*", s=150, color="gold", edgecolors="k", zorder=5)
+    ax.set_title(f"communication graph\n({graph.shape[0]} links, leader starred)", fontsize="x-small")
+    ax.set(xticks=[], yticks=[], aspect="equal")
+    ax.margins(0.15)
+
+
 def plan_size(
-    run: RunData, width_in: float = 6.5, legend_in: float = 2.8, min_height_in: float = 4.2
+    run: RunData, width_in: float = 6.5, legend_in: float = 0.0, min_height_in: float = 4.2
 ) -> tuple[float, float]:
     """Figure size for an equal-aspect x-y plot of the run: the height follows the data."""
     traj, obstacles, d = run.trajectory, run.formation.obstacles, run.dim
@@ -58,22 +225,22 @@ def plan_size(
         reach = float(row[d]) + (float(row[d + 1]) if np.isfinite(row[d + 1]) else 0.0)
         lo, hi = np.minimum(lo, row[:2] - reach), np.maximum(hi, row[:2] + reach)
     span = np.maximum(hi - lo, 1.0)
-    height = float(np.clip(width_in * span[1] / span[0] + 1.3, min_height_in, 9.0))
+    height = float(np.clip(width_in * span[1] / span[0] + 1.6, min_height_in, 9.0))
     return width_in + legend_in, height
 
 
-def draw_obstacles(ax: Axes, run: RunData) -> None:
-    """Each obstacle as a grey disc in the x-y plane, its clearance as a dotted ring."""
+def draw_obstacles(ax: Axes, run: RunData, axes: tuple[int, int] = (0, 1)) -> None:
+    """Each obstacle as a grey disc in the plane of ``axes``, its clearance as a dotted ring."""
     d_min = run.d_min_m
     for k, row in enumerate(run.formation.obstacles):
-        centre, radius, clearance = row[:2], float(row[run.dim]), float(row[run.dim + 1])
+        centre, radius, clearance = row[list(axes)], float(row[run.dim]), float(row[run.dim + 1])
         if not np.isfinite(clearance):
             clearance = 0.5 * d_min if d_min is not None else 0.0
         ax.add_patch(Circle(tuple(centre), radius, color="0.75", zorder=1,
                             label="obstacle" if k == 0 else None))  # fmt: skip
         if clearance > 0:
-            ax.add_patch(Circle(tuple(centre), radius + clearance, fill=False, ls=":", color="0.4",
-                                zorder=1, label="obstacle + clearance" if k == 0 else None))  # fmt: skip
+            ax.add_patch(Circle(tuple(centre), radius + clearance, fill=False, ls=":", color="0.3",
+                                zorder=1, label="required clearance" if k == 0 else None))  # fmt: skip
 
 
 def equal_3d(ax: Any, points: Array) -> None:

@@ -4,15 +4,19 @@ Imported only when plots are asked for (never by ``mpcform/__init__``). Figures 
 with matplotlib's object API on an Agg canvas, never through pyplot: no window opens, no
 global backend is switched, and nothing stays in pyplot's figure registry. Every figure is drawn
 from a :class:`~mpcform.outputs.rundata.RunData` (a run in memory or read back from its
-directory) with the series of :mod:`mpcform.sim.metrics`:
+directory) with the series of :mod:`mpcform.sim.metrics` and :mod:`mpcform.sim.safety`, in the
+style of :mod:`mpcform.outputs.drawing` (above six drones, a min-max band and the median over
+drones replace the per-drone lines):
 
-- ``top_view.png``: trajectories in the x-y plane, formation snapshots (drones joined by the
-  template's minimum spanning tree), start and end, reference paths, obstacles;
-- ``view_3d.png`` (spatial runs): the same in 3D;
-- ``tracking_error.png``: max and median over drones of ``||p_i - p*_i||`` [m], log scale;
-- ``separation.png``: minimum distance between two drones [m] with the d_min line;
-- ``speed.png``: command speeds ``||u_i||`` [m/s] (zero-order hold) with the v_max line;
-- ``scale.png``: best-fit scale of the positions (Umeyama) and the reference's scale;
+- ``top_view.png`` and ``view_3d.png`` (spatial runs: x-y, x-z, y-z projections): see
+  :mod:`mpcform.outputs.plan_views`;
+- ``tracking_error.png``: ``||p_i - p*_i||`` [m] over drones, log scale;
+- ``separation.png``: minimum distance between two drones [m], d_min, the closest moment marked;
+- ``speed.png``: command speeds ``||u_i||`` [m/s] (zero-order hold) with v_max;
+- ``clearance.png`` (runs with obstacles): distance of the drones to each obstacle's surface
+  along the segments [m] against the required clearance;
+- ``scale.png``: best-fit scale of the positions (Umeyama) and the reference's scale, drawn only
+  where the drones hold the template's shape (a permuted or mirrored start has no scale);
 - :func:`compare_runs`: tracking error, separation and speed of several runs on one figure.
 
 PNG files carry the run's provenance (scenario, hash, seed, versions) in their metadata.
@@ -26,28 +30,33 @@ from typing import Any
 
 import numpy as np
 from matplotlib import colormaps
-from matplotlib.axes import Axes
-from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
 from mpcform._validate import Array
+from mpcform.formation.kinematics import fit_formation
+from mpcform.formation.template import Template
+from mpcform.mpc.limits import SphereObstacle
 from mpcform.outputs.drawing import (
+    CLOSEST_COLOUR,
+    LIMIT_STYLE,
+    MEDIAN_COLOUR,
     PER_DRONE_MAX,
-    draw_obstacles,
-    drone_colours,
-    equal_3d,
-    formation_edges,
-    marker_scale,
-    plan_size,
+    closest_pair,
+    envelope,
+    per_drone_style,
 )
+from mpcform.outputs.plan_views import new_figure, top_view, view_3d
 from mpcform.outputs.rundata import RunData
-from mpcform.sim.metrics import command_speeds_mps, fitted_scales, min_separations_m, tracking_errors_m
+from mpcform.sim.metrics import command_speeds_mps, min_separations_m, tracking_errors_m
+from mpcform.sim.safety import obstacle_distances_along, required_clearance_m
 
 FIGURE_FILES = ("top_view.png", "view_3d.png", "tracking_error.png", "separation.png", "speed.png",
-                "scale.png")  # fmt: skip
-SNAPSHOTS = 5
+                "clearance.png", "scale.png")  # fmt: skip
 LINESTYLES = ("-", "--", ":", "-.")  # runs of a comparison: overlapping curves stay visible
 LOG_FLOOR_M = 1e-14  # tracking errors below this (exact starts) are not drawn on the log axis
+AXIS_HEADROOM = 1.1  # a time-series axis ends at most 10 % above what it must show
+SHAPE_TOL = 0.2  # relative RMS residual above which the drones do not hold the template's shape
+SERIES_SIZE_IN = (8.0, 4.2)
 DPI = 110
 
 
@@ -59,145 +68,150 @@ def plot_run(run: RunData, out_dir: str | Path) -> list[Path]:
     if run.dim == 3:
         figures.append(("view_3d.png", view_3d(run)))
     figures += [("tracking_error.png", tracking_error(run)), ("speed.png", speeds(run))]
+    if run.formation.obstacles.shape[0]:
+        figures.append(("clearance.png", clearance(run)))
     if run.n >= 2:  # one drone has neither separation nor scale
         figures += [("separation.png", separation(run)), ("scale.png", scale(run))]
-    paths = []
-    for name, fig in figures:
-        paths.append(_save(fig, out / name, run))
-    return paths
+    return [save_figure(fig, out / name, run) for name, fig in figures]
 
 
 # ---- single runs ------------------------------------------------------------------------
-def top_view(run: RunData) -> Figure:
-    """Trajectories in the x-y plane with formation snapshots and obstacles."""
-    fig = _figure(plan_size(run))
-    ax = fig.subplots()
-    draw_obstacles(ax, run)
-    p, ref = run.trajectory.positions_m, run.trajectory.reference_m
-    colours = drone_colours(run.n)
-    for i in range(run.n):
-        ax.plot(ref[:, i, 0], ref[:, i, 1], color="0.6", lw=0.8, ls="--",
-                label="reference path" if i == 0 else None)  # fmt: skip
-        label = f"drone {i}" if run.n <= PER_DRONE_MAX else ("drone paths" if i == 0 else None)
-        ax.plot(p[:, i, 0], p[:, i, 1], color=colours[i], lw=1.2, label=label)
-    edges = formation_edges(run.formation.offsets_m)
-    for j, tj in zip(*_snapshot_indices(run), strict=True):
-        shade = colormaps["Greys"](0.45 + 0.55 * j / max(1, run.trajectory.t_s.shape[0] - 1))
-        _draw_formation(ax, p[j, :, :2], edges, shade, f"formation at t = {tj:.3g} s")
-    size = marker_scale(run.n)
-    ax.scatter(p[0, :, 0], p[0, :, 1], marker="o", s=28 * size, facecolors="none", edgecolors="tab:green",
-               zorder=4, label="start")  # fmt: skip
-    ax.scatter(p[-1, :, 0], p[-1, :, 1], marker="s", s=22 * size, color="tab:red", zorder=4, label="end")
-    ax.set(xlabel="x [m]", ylabel="y [m]", title=f"Top view: {run.label}")
-    ax.set_aspect("equal", adjustable="box")
-    ax.grid(True, alpha=0.3)
-    _legend(ax, outside=True)
-    return fig
-
-
-def view_3d(run: RunData) -> Figure:
-    """Trajectories and formation snapshots in 3D (spatial runs)."""
-    fig = _figure((8, 7))
-    ax: Any = fig.add_subplot(projection="3d")
-    p, ref = run.trajectory.positions_m, run.trajectory.reference_m
-    colours = drone_colours(run.n)
-    for i in range(run.n):
-        ax.plot(*ref[:, i].T, color="0.6", lw=0.8, ls="--", label="reference path" if i == 0 else None)
-        label = f"drone {i}" if run.n <= PER_DRONE_MAX else ("drone paths" if i == 0 else None)
-        ax.plot(*p[:, i].T, color=colours[i], lw=1.2, label=label)
-    edges = formation_edges(run.formation.offsets_m)
-    size = marker_scale(run.n)
-    for j, tj in zip(*_snapshot_indices(run), strict=True):
-        shade = colormaps["Greys"](0.45 + 0.55 * j / max(1, run.trajectory.t_s.shape[0] - 1))
-        for a, b in edges:
-            ax.plot(*np.stack([p[j, a], p[j, b]]).T, color=shade, lw=1.0)
-        ax.scatter(*p[j].T, color=shade, s=12 * size, label=f"formation at t = {tj:.3g} s")
-    ax.scatter(*p[0].T, marker="o", s=28 * size, facecolors="none", edgecolors="tab:green", label="start")
-    ax.scatter(*p[-1].T, marker="s", s=22 * size, color="tab:red", label="end")
-    equal_3d(ax, np.concatenate([p.reshape(-1, 3), ref.reshape(-1, 3)]))
-    ax.set(xlabel="x [m]", ylabel="y [m]", zlabel="z [m]", title=f"3D view: {run.label}")
-    _legend(ax, outside=True)
-    return fig
-
-
 def tracking_error(run: RunData) -> Figure:
-    """Max and median over drones of the tracking error, log scale."""
-    err, t = tracking_errors_m(run.trajectory), run.trajectory.t_s
-    fig = _figure((8, 4.5))
-    ax = fig.subplots()
-    label = "max over drones" if run.n > 1 else "drone 0"
-    ax.semilogy(t, _loggable(err.max(axis=1)), color="tab:red", label=label)
-    if run.n > 1:
-        ax.semilogy(t, _loggable(np.median(err, axis=1)), color="tab:blue", ls="--",
-                    label="median over drones")  # fmt: skip
-    ax.set(xlabel="time t [s]", ylabel="tracking error ||p_i - p*_i|| [m]",
-           title=f"Tracking error: {run.label}")  # fmt: skip
-    ax.grid(True, which="both", alpha=0.3)
-    _legend(ax)
+    """Tracking error of every drone (up to six) or its min-max band and median, log scale."""
+    err, t = _loggable(tracking_errors_m(run.trajectory)), run.trajectory.t_s
+    fig, ax = _series_axes()
+    if run.n <= PER_DRONE_MAX:
+        for i in range(run.n):
+            ax.plot(t, err[:, i], label=f"drone {i}", **per_drone_style(i))
+    else:
+        envelope(ax, t, err, MEDIAN_COLOUR, "tracking error")
+    ax.set_yscale("log")
+    _finish(ax, run, "Tracking error", "tracking error ||p_i - p*_i|| [m]")
     return fig
 
 
 def separation(run: RunData) -> Figure:
-    """Smallest distance between two drones at every sample, with d_min."""
-    fig = _figure((8, 4.5))
-    ax = fig.subplots()
-    ax.plot(run.trajectory.t_s, min_separations_m(run.trajectory), color="tab:blue",
-            label="min distance between two drones")  # fmt: skip
+    """Smallest distance between two drones at every sample, d_min, and the closest moment."""
+    fig, ax = _series_axes()
+    sep, t = min_separations_m(run.trajectory), run.trajectory.t_s
+    ax.plot(t, sep, color=MEDIAN_COLOUR, lw=1.4, label="min distance between two drones")
     if run.d_min_m is not None:
-        ax.axhline(run.d_min_m, color="tab:red", ls="--", zorder=1.5, label=f"d_min = {run.d_min_m:g} m")
-    ax.set_ylim(bottom=0.0)
-    ax.set(xlabel="time t [s]", ylabel="minimum separation [m]", title=f"Separation: {run.label}")
-    ax.grid(True, alpha=0.3)
-    _legend(ax)
+        ax.axhline(run.d_min_m, label=f"d_min = {run.d_min_m:g} m", **LIMIT_STYLE)
+    k, i, j, dist = closest_pair(run.trajectory.positions_m)
+    ax.plot(t[k], dist, "o", color=CLOSEST_COLOUR, ms=7, zorder=5,
+            label=f"closest: drones {i}-{j}, {dist:.3g} m at t = {t[k]:.3g} s")  # fmt: skip
+    ax.set_ylim(0.0, AXIS_HEADROOM * float(max(sep.max(), run.d_min_m or 0.0)))
+    _finish(ax, run, "Separation", "minimum separation [m]")
     return fig
 
 
 def speeds(run: RunData) -> Figure:
-    """Command speeds (held over each step) with v_max."""
+    """Command speeds (held over each step) per drone or as an envelope, with v_max."""
     speed, t = command_speeds_mps(run.trajectory), run.trajectory.t_s  # (T-1, n), (T,)
-    fig = _figure((8, 4.5))
-    ax = fig.subplots()
+    fig, ax = _series_axes()
     if run.n <= PER_DRONE_MAX:
-        colours = drone_colours(run.n)
         for i in range(run.n):
-            ax.stairs(speed[:, i], t, color=colours[i], lw=1.0, baseline=None, label=f"drone {i}")
+            ax.stairs(speed[:, i], t, baseline=None, label=f"drone {i}", **per_drone_style(i))
     else:
-        ax.stairs(speed.max(axis=1), t, color="tab:red", baseline=None, label="max over drones")
-        ax.stairs(np.median(speed, axis=1), t, color="tab:blue", baseline=None, label="median over drones")
-        ax.stairs(speed.min(axis=1), t, color="tab:green", baseline=None, label="min over drones")
-    if run.v_max_mps is not None:
-        ax.axhline(run.v_max_mps, color="k", ls="--", zorder=1.5, label=f"v_max = {run.v_max_mps:g} m/s")
-    top = max(float(speed.max()), run.v_max_mps or 0.0)
-    ax.set_ylim(0.0, 1.25 * top if top > 0 else 1.0)  # headroom for the legend above the v_max line
-    ax.set(xlabel="time t [s]", ylabel="speed ||u_i|| [m/s]", title=f"Command speeds: {run.label}")
-    ax.grid(True, alpha=0.3)
-    _legend(ax, outside=run.n <= PER_DRONE_MAX)
+        envelope(ax, t, speed, MEDIAN_COLOUR, "speed", stairs=True)
+    top = speed_axis_top(float(speed.max()), run.v_max_mps)
+    v_max = run.v_max_mps
+    if v_max is not None and v_max <= top:
+        ax.axhline(v_max, label=f"v_max = {v_max:g} m/s", **LIMIT_STYLE)
+    elif v_max is not None:
+        ax.text(0.99, 0.97, f"v_max = {v_max:g} m/s (off scale: {v_max / speed.max():.3g}x the peak)",
+                transform=ax.transAxes, ha="right", va="top", fontsize="small", color="tab:red")  # fmt: skip
+    ax.set_ylim(0.0, top)
+    _finish(ax, run, "Command speeds", "speed ||u_i|| [m/s]")
+    return fig
+
+
+def speed_axis_top(data_max: float, v_max: float | None) -> float:
+    """Upper end of a speed axis: 10 % above the data's peak, or above v_max when v_max is within
+    twice the peak (otherwise v_max is written, not drawn)."""
+    top = data_max
+    if v_max is not None and v_max <= 2.0 * data_max:
+        top = max(top, v_max)
+    return AXIS_HEADROOM * top if top > 0 else 1.0
+
+
+def clearance(run: RunData) -> Figure:
+    """Distance [m] of the drones to each obstacle's surface along the segments (min over drones),
+    against its required clearance (radius + clearance from the centre; default d_min / 2)."""
+    traj, d = run.trajectory, run.dim
+    rows = run.formation.obstacles
+    obstacles = tuple(
+        SphereObstacle(row[:d], float(row[d]), float(row[d + 1]) if np.isfinite(row[d + 1]) else None)
+        for row in rows
+    )
+    dist = obstacle_distances_along(traj.positions_m, obstacles)  # (T - 1, n, m) to the centres
+    t_mid = 0.5 * (traj.t_s[1:] + traj.t_s[:-1])  # one value per segment, at its middle
+    fig, ax = _series_axes()
+    colours = colormaps["tab10"]
+    required = [required_clearance_m(ob, run.d_min_m) - ob.radius_m for ob in obstacles]
+    for k, ob in enumerate(obstacles):
+        surface = dist[:, :, k].min(axis=1) - ob.radius_m
+        tag = f"obstacle {k}" if len(obstacles) > 1 else "obstacle"
+        ax.plot(t_mid, surface, color=colours(k % 10), ls=LINESTYLES[k % len(LINESTYLES)], lw=1.4,
+                label=f"{tag}: closest drone, min {surface.min():.3g} m")  # fmt: skip
+        m = int(np.argmin(surface))
+        ax.plot(t_mid[m], surface[m], "o", color=CLOSEST_COLOUR, ms=6, zorder=5)
+        if len(set(required)) > 1:
+            ax.axhline(required[k], color=colours(k % 10), ls="--", lw=1.0, label=f"{tag}: required")
+    if len(set(required)) == 1:
+        ax.axhline(required[0], label=f"required clearance {required[0]:.3g} m", **LIMIT_STYLE)
+    ax.set_ylim(bottom=0.0)
+    _finish(ax, run, "Obstacle clearance", "distance to the obstacle's surface [m]")
     return fig
 
 
 def scale(run: RunData) -> Figure:
-    """Best-fit scale of the drones' positions and the reference's scale."""
+    """Best-fit scale of the drones' positions (where they hold the template's shape) and the
+    reference's scale. Per-drone scale estimates are not recorded by the controllers today."""
     traj, formation = run.trajectory, run.formation
-    fig = _figure((8, 4.5))
-    ax = fig.subplots()
+    fig, ax = _series_axes()
     rel = " (relative to the start)" if formation.scale_is_relative else ""
-    ax.plot(traj.t_s, fitted_scales(formation.offsets_m, traj.positions_m), color="tab:blue",
-            label="best fit of the drones")  # fmt: skip
+    fitted, shaped = fitted_scales_in_shape(formation.offsets_m, traj.positions_m)
+    ax.plot(traj.t_s, np.where(shaped, fitted, np.nan), color=MEDIAN_COLOUR, lw=1.4,
+            label="best fit of the drones' positions")  # fmt: skip
     ref = formation.scale_ref
     if ref is None:
-        ref = fitted_scales(formation.offsets_m, traj.reference_m)
-    ax.plot(traj.t_s, ref, color="k", ls="--", label="reference")
-    ax.set(xlabel="time t [s]", ylabel=f"formation scale s{rel}", title=f"Scale: {run.label}")
-    ax.grid(True, alpha=0.3)
-    _legend(ax)
+        ref = fitted_scales_in_shape(formation.offsets_m, traj.reference_m)[0]
+    ax.plot(traj.t_s, ref, label="reference", **{**LIMIT_STYLE, "color": "k", "zorder": 3})
+    notes = []
+    if not shaped.all():
+        t_in = traj.t_s[shaped]
+        for k, (a, b) in enumerate(_runs(~shaped)):
+            ax.axvspan(traj.t_s[a], traj.t_s[b], color="0.85", lw=0, zorder=0,
+                       label="not in the template's shape" if k == 0 else None)  # fmt: skip
+        since = f"; in shape from t = {t_in[0]:.3g} s" if t_in.size else ""
+        notes.append(f"not drawn while the drones do not hold the template's shape{since}")
+    if formation.graph_edges is not None:
+        notes.append("per-drone consensus estimates s_hat_i are not recorded: best fit shown")
+    if notes:
+        ax.text(0.01, 0.02, "\n".join(notes), transform=ax.transAxes, fontsize="small", va="bottom",
+                color="0.25", gid="scale-note")  # fmt: skip
+    _finish(ax, run, "Scale", f"formation scale s{rel}")
     return fig
+
+
+def fitted_scales_in_shape(offsets_m: Array, positions_m: Array) -> tuple[Array, Array]:
+    """Best-fit (Umeyama) scale at every sample and whether the drones hold the template's shape
+    there (RMS residual at most :data:`SHAPE_TOL` of the fitted size, the fit identifiable)."""
+    template = Template(offsets_m - offsets_m.mean(axis=0))
+    size = float(np.sqrt((template.offsets**2).sum(axis=1).mean()))
+    fits = [fit_formation(template, p) for p in positions_m]
+    scales = np.array([f.state.scale for f in fits])
+    shaped = np.array([f.scale_identifiable and f.residual_rms_m <= SHAPE_TOL * f.state.scale * size
+                       for f in fits])  # fmt: skip
+    return scales, shaped
 
 
 # ---- several runs --------------------------------------------------------------------------
 def compare_runs(runs: Sequence[RunData], path: str | Path, labels: Sequence[str] | None = None) -> Path:
     """One figure: tracking error (log), minimum separation and maximum speed of every run."""
     labels = [r.label for r in runs] if labels is None else list(labels)
-    fig = _figure((9, 10))
+    fig = new_figure((9, 10))
     axes = fig.subplots(3, 1, sharex=True)
     colours = colormaps["tab10"]
     for k, (run, label) in enumerate(zip(runs, labels, strict=True)):
@@ -226,23 +240,23 @@ def compare_runs(runs: Sequence[RunData], path: str | Path, labels: Sequence[str
     return path
 
 
+def _runs(mask: Array) -> list[tuple[int, int]]:
+    """``(first, last)`` sample index of each run of True in ``mask``."""
+    edges = np.diff(np.concatenate([[0], mask.astype(int), [0]]))
+    return list(zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1) - 1, strict=True))
+
+
 # ---- helpers ------------------------------------------------------------------------------
-def _figure(size_in: tuple[float, float]) -> Figure:
-    fig = Figure(figsize=size_in, layout="constrained")
-    FigureCanvasAgg(fig)
-    return fig
+def _series_axes() -> tuple[Figure, Any]:
+    fig = new_figure(SERIES_SIZE_IN)
+    return fig, fig.subplots()
 
 
-def _snapshot_indices(run: RunData) -> tuple[Array, Array]:
-    t = run.trajectory.t_s
-    idx = np.unique(np.linspace(0, t.shape[0] - 1, SNAPSHOTS).round().astype(int))
-    return idx, t[idx]
-
-
-def _draw_formation(ax: Axes, xy: Array, edges: list[tuple[int, int]], colour: Any, label: str) -> None:
-    for a, b in edges:
-        ax.plot(xy[[a, b], 0], xy[[a, b], 1], color=colour, lw=1.0, zorder=3)
-    ax.scatter(xy[:, 0], xy[:, 1], color=colour, s=14 * marker_scale(xy.shape[0]), zorder=3, label=label)
+def _finish(ax: Any, run: RunData, title: str, ylabel: str) -> None:
+    ax.set(xlabel="time t [s]", ylabel=ylabel, xlim=(run.trajectory.t_s[0], run.trajectory.t_s[-1]))
+    ax.set_title(f"{title}: {run.label}", fontsize="medium")
+    ax.grid(True, which="both", alpha=0.3)
+    _legend(ax)
 
 
 def _loggable(values: Array) -> Array:
@@ -250,17 +264,14 @@ def _loggable(values: Array) -> Array:
     return np.where(values >= LOG_FLOOR_M, values, np.nan)
 
 
-def _legend(ax: Any, outside: bool = False) -> None:
-    handles, labels = ax.get_legend_handles_labels()
-    if not handles:
-        return
-    if outside:
-        ax.legend(loc="upper left", bbox_to_anchor=(1.02, 1.0), fontsize="small", borderaxespad=0.0)
-    else:
-        ax.legend(loc="best", fontsize="small")
+def _legend(ax: Any) -> None:
+    handles, _ = ax.get_legend_handles_labels()
+    if handles:
+        ax.legend(loc="best", fontsize="small", framealpha=0.9)
 
 
-def _save(fig: Figure, path: Path, run: RunData) -> Path:
+def save_figure(fig: Figure, path: Path, run: RunData, dpi: int = DPI) -> Path:
+    """Write ``fig`` as a PNG with the run's provenance in its metadata."""
     prov = run.summary.get("provenance") or {}
     metadata = {
         "Title": f"{path.stem}: {run.label}",
@@ -268,5 +279,5 @@ def _save(fig: Figure, path: Path, run: RunData) -> Path:
         "Description": f"scenario {run.name}, sha256 {prov.get('scenario_sha256')}, seed {prov.get('seed')}",
         "Source": str(run.directory),
     }
-    fig.savefig(path, dpi=DPI, bbox_inches="tight", metadata=metadata)  # nothing clipped
+    fig.savefig(path, dpi=dpi, bbox_inches="tight", metadata=metadata)  # nothing clipped
     return path

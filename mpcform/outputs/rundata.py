@@ -6,7 +6,9 @@ the best-fit scale and the formation's edges), the reference's scale and the obs
 ``mpcform run --plot/--export`` takes them from the scenario in memory (:func:`formation_data`)
 and saves them as ``formation.npz`` beside the other files: ``offsets`` (n, d) [m],
 ``scale_ref`` (T,), ``obstacles`` (k, d + 2) [m] (centre, radius, clearance; NaN clearance:
-d_min / 2). :func:`load_run` reads a directory back into the same :class:`RunData`; without
+d_min / 2), and for a consensus run ``graph_edges`` (m, 2) and ``leaders`` (k,) (the
+communication graph's links and the drones that see the commanded scale; absent otherwise).
+:func:`load_run` reads a directory back into the same :class:`RunData`; without
 ``formation.npz`` it falls back to the reference's start shape (scale then relative to the start).
 """
 
@@ -39,11 +41,14 @@ class FormationData:
     """The scenario's side of a run: ``offsets_m`` (n, d), the template (or, without
     ``formation.npz``, the reference's start shape ``s0 R0 r_i``); ``scale_ref`` (T,), the
     reference's scale, or None when unknown; ``obstacles`` (k, d + 2): centre, radius,
-    clearance (NaN: d_min / 2) of each sphere."""
+    clearance (NaN: d_min / 2) of each sphere; ``graph_edges`` (m, 2), the communication graph
+    of a consensus run (None: no graph), and ``leaders``, its drones that see the commanded scale."""
 
     offsets_m: Array
     scale_ref: Array | None
     obstacles: Array
+    graph_edges: Array | None = None
+    leaders: tuple[int, ...] = ()
 
     @property
     def scale_is_relative(self) -> bool:
@@ -96,21 +101,30 @@ def formation_data(scenario: Scenario, t_s: Array) -> FormationData:
         row[:d], row[d] = obstacle.center_m, obstacle.radius_m
         if obstacle.clearance_m is not None:
             row[d + 1] = obstacle.clearance_m
+    consensus = scenario.controller.consensus if scenario.controller.kind == "consensus" else None
     return FormationData(
         offsets_m=np.array(scenario.template.offsets),
         scale_ref=np.asarray(scenario.reference.profile(np.asarray(t_s, dtype=float)).scale, dtype=float),
         obstacles=obstacles,
+        graph_edges=None if scenario.graph is None else np.array(scenario.graph.edges, dtype=int),
+        leaders=() if consensus is None else tuple(int(i) for i in consensus.leaders),
     )
 
 
 def write_formation_npz(out_dir: str | Path, formation: FormationData) -> Path:
-    """Write ``formation.npz`` (offsets (n, d) [m], scale_ref (T,), obstacles (k, d + 2) [m])."""
+    """Write ``formation.npz`` (offsets (n, d) [m], scale_ref (T,), obstacles (k, d + 2) [m]; with a
+    communication graph also graph_edges (m, 2) and leaders (k,))."""
     if formation.scale_ref is None:
         raise ValidationError("formation.scale_ref", "unknown (a run read back without formation.npz)")
     path = Path(out_dir) / FORMATION_NPZ
-    np.savez_compressed(
-        path, offsets=formation.offsets_m, scale_ref=formation.scale_ref, obstacles=formation.obstacles
-    )
+    arrays: dict[str, Any] = {
+        "offsets": formation.offsets_m,
+        "scale_ref": formation.scale_ref,
+        "obstacles": formation.obstacles,
+    }
+    if formation.graph_edges is not None:
+        arrays |= {"graph_edges": formation.graph_edges, "leaders": np.array(formation.leaders, dtype=int)}
+    np.savez_compressed(path, **arrays)
     return path
 
 
@@ -144,11 +158,18 @@ def _load_formation(path: Path, trajectory: Trajectory) -> FormationData:
     if not path.exists():
         ref0 = trajectory.reference_m[0]
         return FormationData(ref0 - ref0.mean(axis=0), None, np.empty((0, d + 2)))
-    extra = _npz(path, ("offsets", "scale_ref", "obstacles"))
+    extra = _npz(path, ("offsets", "scale_ref", "obstacles"), optional=("graph_edges", "leaders"))
     if extra["offsets"].shape != (n, d) or extra["scale_ref"].shape != trajectory.t_s.shape:
         shapes = f"offsets {extra['offsets'].shape} or scale_ref {extra['scale_ref'].shape}"
         raise RunDirError(str(path), f"{shapes} do not match p {trajectory.positions_m.shape}")
-    return FormationData(extra["offsets"], extra["scale_ref"], extra["obstacles"].reshape(-1, d + 2))
+    graph = extra.get("graph_edges")
+    return FormationData(
+        extra["offsets"],
+        extra["scale_ref"],
+        extra["obstacles"].reshape(-1, d + 2),
+        graph_edges=None if graph is None else graph.astype(int).reshape(-1, 2),
+        leaders=tuple(int(i) for i in extra.get("leaders", np.empty(0))),
+    )
 
 
 def _npz(path: Path, keys: tuple[str, ...], optional: tuple[str, ...] = ()) -> dict[str, Array]:

@@ -84,7 +84,7 @@ def test_run_draws_and_exports_from_memory(
         for module, name in ((cli_runner, "load_run"), (rundata, "load_run"), (np, "load")):
             patch.setattr(module, name, no_read_back)
         assert main(["run", path, "--out", str(out), "--plot", "--export"]) == 0
-    assert "wrote 5 figures" in capsys.readouterr().out
+    assert "wrote 6 figures" in capsys.readouterr().out  # clearance.png: the scenario has obstacles
     assert main(["plot", str(out), "--out", str(tmp_path / "plots")]) == 0
     assert main(["export", str(out), "--out", str(tmp_path / "export")]) == 0
     for name in ("plots", "export"):

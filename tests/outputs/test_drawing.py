@@ -1,4 +1,4 @@
-"""Shared drawing pieces: the formation's skeleton, drone colours and marker sizes."""
+"""Shared drawing pieces: the formation's edges, drone colours, marker sizes, snapshots, envelopes."""
 
 from __future__ import annotations
 
@@ -7,13 +7,47 @@ import pytest
 
 pytest.importorskip("matplotlib")
 
-from mpcform.outputs.drawing import PER_DRONE_MAX, drone_colours, formation_edges, marker_scale  # noqa: E402
+from matplotlib.figure import Figure  # noqa: E402
+
+from mpcform.formation.template import Template  # noqa: E402
+from mpcform.outputs.drawing import (  # noqa: E402
+    PER_DRONE_MAX,
+    SNAPSHOT_LABEL,
+    closest_pair,
+    draw_snapshot,
+    drone_colours,
+    envelope,
+    formation_edges,
+    marker_scale,
+)
 
 
-def test_formation_edges_are_the_minimum_spanning_tree() -> None:
-    offsets = np.array([[0.0, 0.0], [1.0, 0.0], [2.0, 0.0], [2.0, 1.0]])
-    assert formation_edges(offsets) == [(0, 1), (1, 2), (2, 3)]
-    assert formation_edges(offsets[:1]) == []
+@pytest.mark.parametrize("n", [3, 4, 8, 12])
+def test_a_ring_of_n_drones_is_drawn_closed_with_n_edges(n: int) -> None:
+    edges = formation_edges(Template.polygon(n, 1.5).offsets)
+    assert len(edges) == n
+    degree = np.bincount(np.array(edges).ravel(), minlength=n)
+    assert (degree == 2).all()  # a cycle through every drone, not a spanning tree (n - 1 edges)
+
+
+def test_a_planar_ring_in_space_is_closed_too() -> None:
+    ring = Template.polygon(6, 1.0, dim=3).offsets
+    assert len(formation_edges(ring)) == 6
+
+
+def test_drones_inside_the_outline_hang_on_it_and_lines_keep_the_spanning_tree() -> None:
+    grid = Template.grid(3, 3, 1.0).offsets  # 8 on the outline (4 corners, 4 on the sides), 1 inside
+    edges = formation_edges(grid)
+    centre = int(np.argmin(np.linalg.norm(grid - grid.mean(axis=0), axis=1)))
+    outline = [e for e in edges if centre not in e]
+    assert (
+        len(outline) == 8
+        and (np.bincount(np.array(outline).ravel(), minlength=9)[np.arange(9) != centre] == 2).all()
+    )
+    assert 1 <= len(edges) - 8 <= 4  # the centre hangs on its nearest neighbours
+    line = np.array([[0.0, 0.0], [1.0, 0.0], [2.0, 0.0], [3.0, 0.0]])
+    assert formation_edges(line) == [(0, 1), (1, 2), (2, 3)]
+    assert formation_edges(line[:1]) == []
 
 
 def test_colours_and_markers_follow_the_swarm_size() -> None:
@@ -23,3 +57,27 @@ def test_colours_and_markers_follow_the_swarm_size() -> None:
     assert len(many) == PER_DRONE_MAX + 1 and not isinstance(many[0], str)  # a colour map
     assert marker_scale(1) == marker_scale(20) == 1.0
     assert marker_scale(40) == pytest.approx(0.5) and marker_scale(100) == pytest.approx(0.3)
+
+
+def test_a_snapshot_carries_its_time() -> None:
+    ax = Figure().subplots()
+    draw_snapshot(ax, np.eye(3)[:, :2], [(0, 1)], "k", 12.5, 1.0)
+    texts = [t for t in ax.texts if t.get_gid() == SNAPSHOT_LABEL]
+    assert [t.get_text() for t in texts] == ["t = 12.5 s"]
+    ax = Figure().subplots()
+    draw_snapshot(ax, np.eye(3)[:, :2], [], "k", 3.0, 1.0, label="legend")
+    assert ax.get_legend_handles_labels()[1] == ["snapshot t = 3 s"]
+
+
+def test_envelope_is_a_band_and_a_median() -> None:
+    ax = Figure().subplots()
+    values = np.array([[0.0, 1.0, 5.0], [1.0, 2.0, 3.0]])
+    envelope(ax, np.array([0.0, 1.0]), values, "tab:blue", "speed")
+    band = [c for c in ax.collections if c.get_gid() == "envelope"]
+    assert len(band) == 1 and len(ax.lines) == 1
+    np.testing.assert_allclose(ax.lines[0].get_ydata(), [1.0, 2.0])
+
+
+def test_closest_pair() -> None:
+    p = np.array([[[0.0, 0.0], [3.0, 0.0], [0.0, 4.0]], [[0.0, 0.0], [3.0, 0.0], [2.5, 0.0]]])
+    assert closest_pair(p) == (1, 1, 2, pytest.approx(0.5))

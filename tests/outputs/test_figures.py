@@ -1,4 +1,5 @@
-"""Figures on the Agg canvas: files written, non-empty, with provenance; the same from memory; lazy import."""
+"""Figures on the Agg canvas: files written, non-empty, with provenance; envelopes above six drones,
+the speed axis, obstacle clearance, the scale only where the drones hold the shape; lazy import."""
 
 from __future__ import annotations
 
@@ -12,8 +13,12 @@ from saved_runs import short_run
 pytest.importorskip("matplotlib")
 PIL = pytest.importorskip("PIL.Image")
 
+import numpy as np  # noqa: E402
+
 from mpcform.outputs import figures  # noqa: E402
+from mpcform.outputs.drawing import PER_DRONE_MAX  # noqa: E402
 from mpcform.outputs.rundata import load_run  # noqa: E402
+from mpcform.sim.metrics import command_speeds_mps  # noqa: E402
 
 
 def png(path: Path) -> tuple[int, int]:
@@ -27,7 +32,8 @@ def test_planar_run_figures(tmp_path: Path) -> None:
     short_run("obstacles_planar", tmp_path, steps=30)
     paths = figures.plot_run(load_run(tmp_path), tmp_path / "plots")
     names = {p.name for p in paths}
-    assert names == {"top_view.png", "tracking_error.png", "speed.png", "separation.png", "scale.png"}
+    assert names == {"top_view.png", "tracking_error.png", "speed.png", "separation.png", "scale.png",
+                     "clearance.png"}  # fmt: skip
     assert names < set(figures.FIGURE_FILES)
     for path in paths:
         width, height = png(path)
@@ -53,6 +59,61 @@ def test_scale_without_formation_data_is_relative(tmp_path: Path) -> None:
     assert ax.get_ylabel() == "formation scale s (relative to the start)"
     best_fit, reference = (line.get_ydata() for line in ax.get_lines())
     assert best_fit[0] == pytest.approx(1.0) and reference[0] == pytest.approx(1.0)
+
+
+def test_scale_is_not_drawn_while_a_permuted_start_is_out_of_shape(tmp_path: Path) -> None:
+    short_run("swap_spatial_12", tmp_path, steps=10)  # explicit start: the mirrored goal
+    ax = figures.scale(load_run(tmp_path)).axes[0]
+    best_fit = np.asarray(ax.get_lines()[0].get_ydata())
+    assert np.isnan(best_fit[0])  # no scale where there is no formation
+    assert any("not drawn" in t.get_text() for t in ax.texts)
+
+
+@pytest.mark.parametrize(
+    ("data_max", "v_max", "top"), [(1.0, 1.5, 1.65), (1.0, 2.5, 1.1), (1.0, None, 1.1), (2.0, 1.0, 2.2)]
+)
+def test_speed_axis_ends_at_most_10_percent_above_what_it_must_show(
+    data_max: float, v_max: float | None, top: float
+) -> None:
+    assert figures.speed_axis_top(data_max, v_max) == pytest.approx(top)
+
+
+def test_speed_figure_axis_and_off_scale_v_max(tmp_path: Path) -> None:
+    short_run("consensus_ring", tmp_path, steps=40)  # speeds far below v_max
+    run = load_run(tmp_path)
+    ax = figures.speeds(run).axes[0]
+    peak = float(command_speeds_mps(run.trajectory).max())
+    assert run.v_max_mps is not None and run.v_max_mps > 2 * peak
+    assert ax.get_ylim()[1] == pytest.approx(1.1 * peak)
+    assert any("off scale" in t.get_text() for t in ax.texts)
+
+
+def test_envelopes_above_six_drones_one_line_per_drone_below(tmp_path: Path) -> None:
+    short_run("swap_planar_8", tmp_path / "eight", steps=10)
+    many = load_run(tmp_path / "eight")
+    assert many.n > PER_DRONE_MAX
+    for fig in (figures.speeds(many), figures.tracking_error(many)):
+        ax = fig.axes[0]
+        assert [c.get_gid() for c in ax.collections].count("envelope") == 1
+        assert not any(label.startswith("drone ") for label in ax.get_legend_handles_labels()[1])
+    short_run("mission_obstacle_gap", tmp_path / "four", steps=10)
+    few = load_run(tmp_path / "four")
+    ax = figures.speeds(few).axes[0]
+    assert "envelope" not in [c.get_gid() for c in ax.collections]
+    assert sum(label.startswith("drone ") for label in ax.get_legend_handles_labels()[1]) == few.n
+
+
+def test_clearance_against_the_required_clearance(tmp_path: Path) -> None:
+    short_run("mission_obstacle_gap", tmp_path, steps=200)
+    run = load_run(tmp_path)
+    ax = figures.clearance(run).axes[0]
+    labels = ax.get_legend_handles_labels()[1]
+    assert sum("closest drone" in label for label in labels) == run.formation.obstacles.shape[0]
+    assert "required clearance 0.25 m" in labels  # d_min / 2 with d_min = 0.5 m
+    lowest = min(
+        float(np.nanmin(line.get_ydata())) for line in ax.get_lines() if "closest" in str(line.get_label())
+    )
+    assert lowest == pytest.approx(run.summary["metrics"]["min_obstacle_clearance"])
 
 
 def test_compare_runs(tmp_path: Path) -> None:

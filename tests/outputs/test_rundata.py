@@ -102,3 +102,15 @@ def test_formation_data_of_a_scenario_without_obstacles() -> None:
     assert isinstance(formation, FormationData) and not formation.scale_is_relative
     assert formation.offsets_m.shape == (12, 3) and formation.obstacles.shape == (0, 5)
     assert formation.scale_ref is not None and formation.scale_ref.shape == (3,)
+
+
+def test_consensus_graph_and_leaders_round_trip(tmp_path: Path) -> None:
+    short_run("consensus_ring", tmp_path / "ring", steps=4)
+    ring = load_run(tmp_path / "ring").formation
+    assert ring.graph_edges is not None and ring.graph_edges.shape == (8, 2) and ring.leaders == (0,)
+    assert sorted(map(tuple, ring.graph_edges.tolist()))[:2] == [(0, 1), (0, 7)]
+    short_run("worked_example", tmp_path / "mpc", steps=4)
+    mpc = load_run(tmp_path / "mpc").formation
+    assert mpc.graph_edges is None and mpc.leaders == ()
+    with np.load(tmp_path / "mpc" / FORMATION_NPZ) as npz:
+        assert sorted(npz.files) == ["obstacles", "offsets", "scale_ref"]  # unchanged without a graph

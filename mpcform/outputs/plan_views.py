@@ -1,0 +1,139 @@
+"""Plan figures of a run (matplotlib, Agg canvas): ``top_view.png`` and, for spatial runs,
+``view_3d.png`` as three projections (x-y, x-z, y-z), so that paths through the centre and the
+clearance between drones stay readable (a perspective 3-D plot hides both).
+
+Every plan shows the drone paths (one colour per drone up to six drones, else thin shades), the
+reference paths dashed on top, formation snapshots coloured by time (colour bar) and labelled
+``t = ... s``, start and end, obstacles with their required clearance, the closest pair at the
+moment of minimum separation, and for consensus runs the communication graph and the leaders.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from matplotlib.axes import Axes
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.cm import ScalarMappable
+from matplotlib.figure import Figure
+
+from mpcform.outputs.drawing import (
+    PATH_GREY,
+    PER_DRONE_MAX,
+    REFERENCE_STYLE,
+    closest_pair,
+    draw_graph,
+    draw_leaders,
+    draw_obstacles,
+    draw_snapshot,
+    drone_colours,
+    mark_closest_pair,
+    marker_scale,
+    plan_size,
+    skeleton_edges,
+    snapshot_indices,
+    time_colour,
+)
+from mpcform.outputs.rundata import RunData
+
+AXIS_NAMES = ("x", "y", "z")
+PROJECTIONS = ((0, 1), (0, 2), (1, 2))
+
+
+def new_figure(size_in: tuple[float, float]) -> Figure:
+    """A figure on its own Agg canvas (no pyplot, no global state), constrained layout."""
+    fig = Figure(figsize=size_in, layout="constrained")
+    FigureCanvasAgg(fig)
+    return fig
+
+
+def top_view(run: RunData) -> Figure:
+    """Trajectories in the x-y plane with time-labelled snapshots, obstacles and the closest pair."""
+    graph = run.formation.graph_edges is not None
+    width, height = plan_size(run, width_in=8.0)
+    fig = new_figure((width + 1.8 * graph, height))
+    if graph:
+        ax, graph_ax = fig.subplots(1, 2, width_ratios=(width, 1.8))
+        draw_graph(graph_ax, run)
+    else:
+        ax = fig.subplots()
+    if skeleton_edges(run):
+        draw_plan(ax, run, (0, 1), labels="text")
+    else:  # a swarm drawn as dots: times in the legend, fewer snapshots
+        draw_plan(ax, run, (0, 1), labels="legend", snapshots=key_moments(run))
+    ax.set_aspect("equal", adjustable="box")
+    ax.set_title(f"Top view: {run.label}", fontsize="medium")
+    _colour_bar(fig, run, [ax])
+    legend_below(fig, ax)
+    return fig
+
+
+def view_3d(run: RunData) -> Figure:
+    """A spatial run seen along each axis: x-y, x-z and y-z projections side by side."""
+    fig = new_figure((15.0, 5.8))
+    axes = fig.subplots(1, 3)
+    for k, (ax, plane) in enumerate(zip(axes, PROJECTIONS, strict=True)):
+        draw_plan(ax, run, plane, labels="legend" if k == 0 else "none", snapshots=key_moments(run))
+        ax.set_title(f"{AXIS_NAMES[plane[0]]}-{AXIS_NAMES[plane[1]]} projection", fontsize="medium")
+    fig.suptitle(f"Spatial run in three projections: {run.label}", fontsize="medium")
+    _colour_bar(fig, run, list(axes))
+    legend_below(fig, axes[0], ncol=5)
+    return fig
+
+
+def draw_plan(ax: Axes, run: RunData, plane: tuple[int, int], *, labels: str = "text",
+              snapshots: np.ndarray | None = None) -> None:  # fmt: skip
+    """Paths, reference paths, snapshots, start and end, obstacles, graph and closest pair in one plane."""
+    a, b = plane
+    p, ref, t = run.trajectory.positions_m, run.trajectory.reference_m, run.trajectory.t_s
+    draw_obstacles(ax, run, plane)
+    few = run.n <= PER_DRONE_MAX
+    colours = drone_colours(run.n)
+    for i in range(run.n):
+        label = f"drone {i}" if few else ("drone paths" if i == 0 else None)
+        ax.plot(p[:, i, a], p[:, i, b], color=colours[i] if few else PATH_GREY, lw=2.4 if few else 0.7,
+                alpha=0.7 if few else 0.6, zorder=2, label=label)  # fmt: skip
+    if np.ptp(ref, axis=0).max() > 0:
+        for i in range(run.n):
+            ax.plot(ref[:, i, a], ref[:, i, b], label="reference path" if i == 0 else None, **REFERENCE_STYLE)
+    else:  # a constant reference: its points, not paths
+        ax.scatter(ref[0, :, a], ref[0, :, b], marker="x", s=30, color="k", lw=0.8, zorder=4.5,
+                   label="reference p*_i (fixed)")  # fmt: skip
+    edges = skeleton_edges(run)
+    cmap, norm = time_colour(run)
+    size = marker_scale(run.n)
+    idx = snapshot_indices(run) if snapshots is None else snapshots
+    for k, j in enumerate(idx.tolist()):
+        anchor = (k * run.n) // len(idx)  # labels spread over the drones: nested shapes stay legible
+        draw_snapshot(ax, p[j][:, [a, b]], edges, cmap(norm(t[j])), float(t[j]), size, labels, anchor)
+    end = p[-1][:, [a, b]]
+    start = p[0][:, [a, b]]
+    hollow: dict[str, Any] = {"facecolors": "none", "edgecolors": "k", "lw": 0.8, "zorder": 4}
+    ax.scatter(start[:, 0], start[:, 1], marker="o", s=40 * size, label="start", **hollow)
+    ax.scatter(end[:, 0], end[:, 1], marker="s", s=26 * size, label="end", **hollow)
+    draw_leaders(ax, end, run)
+    mark_closest_pair(ax, run, plane)
+    ax.set(xlabel=f"{AXIS_NAMES[a]} [m]", ylabel=f"{AXIS_NAMES[b]} [m]")
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.grid(True, alpha=0.3)
+
+
+def legend_below(fig: Figure, ax: Any, ncol: int = 4) -> None:
+    """A compact legend of ``ax`` under the figure (off the data), one entry per kind of element."""
+    handles, labels = ax.get_legend_handles_labels()
+    if handles:
+        fig.legend(handles, labels, loc="outside lower center", ncol=ncol, fontsize="small", frameon=False)
+
+
+def key_moments(run: RunData) -> np.ndarray:
+    """Start, moment of minimum separation and end: the snapshots of a spatial run."""
+    last = run.trajectory.t_s.shape[0] - 1
+    k = closest_pair(run.trajectory.positions_m)[0] if run.n >= 2 else last // 2
+    return np.unique(np.array([0, k, last]))
+
+
+def _colour_bar(fig: Figure, run: RunData, axes: list[Any]) -> None:
+    cmap, norm = time_colour(run)
+    bar = fig.colorbar(ScalarMappable(norm=norm, cmap=cmap), ax=axes, shrink=0.6, pad=0.01, aspect=25)
+    bar.set_label("snapshot time t [s]")

@@ -1,0 +1,64 @@
+"""Plan figures: time-labelled snapshots, closed rings, the closest pair, the communication graph,
+three projections of a spatial run."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from saved_runs import short_run
+
+pytest.importorskip("matplotlib")
+
+from matplotlib.colors import to_rgba  # noqa: E402
+
+from mpcform.outputs.drawing import SNAPSHOT_LABEL, snapshot_indices, time_colour  # noqa: E402
+from mpcform.outputs.plan_views import top_view, view_3d  # noqa: E402
+from mpcform.outputs.rundata import load_run  # noqa: E402
+
+
+def test_top_view_snapshots_carry_time_labels_and_rings_are_closed(tmp_path: Path) -> None:
+    short_run("consensus_ring", tmp_path, steps=60)
+    run = load_run(tmp_path)
+    fig = top_view(run)
+    ax = fig.axes[0]
+    idx = snapshot_indices(run)
+    labels = [t.get_text() for t in ax.texts if t.get_gid() == SNAPSHOT_LABEL]
+    assert labels == [f"t = {run.trajectory.t_s[j]:.3g} s" for j in idx]
+    assert len(set(labels)) == len(labels) >= 3
+    cmap, norm = time_colour(run)
+    for j in idx:  # each snapshot: n edges in its time's colour (a closed ring of 8)
+        colour = to_rgba(cmap(norm(run.trajectory.t_s[j])))
+        edges = [line for line in ax.get_lines() if to_rgba(line.get_color()) == colour]
+        assert len(edges) == run.n
+    assert any(label.startswith("closest pair") for label in ax.get_legend_handles_labels()[1])
+
+
+def test_consensus_run_shows_its_graph_and_leader(tmp_path: Path) -> None:
+    short_run("consensus_ring", tmp_path, steps=10)
+    run = load_run(tmp_path)
+    assert run.formation.graph_edges is not None and run.formation.leaders == (0,)
+    fig = top_view(run)
+    graph_ax = fig.axes[1]
+    assert "communication graph" in graph_ax.get_title() and len(graph_ax.get_lines()) == 8
+    assert any(label.startswith("leader") for label in fig.axes[0].get_legend_handles_labels()[1])
+
+
+def test_spatial_run_in_three_projections(tmp_path: Path) -> None:
+    short_run("swap_spatial_12", tmp_path, steps=40)
+    fig = view_3d(load_run(tmp_path))
+    titles = [ax.get_title() for ax in fig.axes[:3]]
+    assert titles == ["x-y projection", "x-z projection", "y-z projection"]
+    assert all(ax.name == "rectilinear" for ax in fig.axes)  # no perspective 3-D axes
+    snapshot_labels = [label for label in fig.axes[0].get_legend_handles_labels()[1] if "snapshot" in label]
+    assert len(snapshot_labels) == 3 and all(label.startswith("snapshot t = ") for label in snapshot_labels)
+
+
+def test_snapshots_span_the_motion_not_the_idle_tail(tmp_path: Path) -> None:
+    short_run("mission_obstacle_gap", tmp_path, steps=400)  # hovers at its goal for the last ~3 s
+    run = load_run(tmp_path)
+    idx = snapshot_indices(run)
+    assert idx[0] == 0 and len(idx) == 4 and idx[-1] < run.trajectory.t_s.shape[0] - 20
+    speed = np.linalg.norm(run.trajectory.commands_mps, axis=-1).max(axis=1)
+    assert speed[idx[-1] - 1] > 0.01 * speed.max() >= speed[idx[-1] + 1 :].max()
