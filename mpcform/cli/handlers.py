@@ -28,6 +28,7 @@ from mpcform.scenario.spec import Scenario
 
 PLOTS_DIR = "plots"
 EXPORT_DIR = "export"
+VIEWER_FILE = "viewer.html"
 PLOT_HINT = "plotting needs matplotlib: pip install 'mpcform[plot]'"
 
 
@@ -40,8 +41,11 @@ def add_run_options(cmd: argparse.ArgumentParser) -> None:
     """``--plot``, ``--animate``, ``--export`` (with ``--altitude``, ``--tolerance``) of ``run``."""
     cmd.add_argument("--plot", action="store_true", help="also write PNG figures into DIR/plots/")
     cmd.add_argument(
-        "--animate", action="store_true", help="also write a GIF of the flight, DIR/plots/flight.gif"
-    )
+        "--animate", action="store_true",
+        help="also write the flight as a video: DIR/plots/flight.mp4 with ffmpeg, else flight.gif",
+    )  # fmt: skip
+    _add_speed_option(cmd)
+    cmd.add_argument("--html", action="store_true", help="also write the interactive viewer, DIR/viewer.html")
     cmd.add_argument(
         "--export",
         action="store_true",
@@ -59,6 +63,7 @@ def check_run_options(args: argparse.Namespace, scenario: Scenario) -> None:
     """Fail before simulating when a requested figure cannot be drawn or an option does not apply."""
     if args.plot or args.animate:
         require_plotting(gif=args.animate)
+    check_speed(args)
     if args.altitude is not None and not args.export:
         raise ValidationError("--altitude", "applies only with --export")
     if args.altitude is not None and scenario.dim == 3:
@@ -70,11 +75,15 @@ def check_run_options(args: argparse.Namespace, scenario: Scenario) -> None:
 def finish_run(args: argparse.Namespace, scenario: Scenario, run: RunResult) -> None:
     """After ``run`` wrote its files: ``formation.npz``, figures, animation and export as asked,
     all from the run and the scenario in memory (nothing is read back)."""
-    if run.out_dir is None or not (args.plot or args.animate or args.export):
+    if run.out_dir is None or not (args.plot or args.animate or args.export or args.html):
         return
     data = RunData(run.simulation, formation_data(scenario, run.simulation.t_s), run.summary, run.out_dir)
     write_formation_npz(run.out_dir, data.formation)
-    _figures(data, run.out_dir / PLOTS_DIR, args.plot, args.animate)
+    _figures(data, run.out_dir / PLOTS_DIR, args.plot, args.animate, args.speed)
+    if args.html:
+        lim = scenario.limits
+        fence = None if lim.geofence_min_m is None else (lim.geofence_min_m, lim.geofence_max_m)
+        print(f"wrote {write_view(data, run.out_dir / VIEWER_FILE, fence)}")
     if args.export:
         _report_export(export_run(data, run.out_dir / EXPORT_DIR, altitude_m=args.altitude,
                                   tolerance_m=args.tolerance))  # fmt: skip
@@ -83,10 +92,32 @@ def finish_run(args: argparse.Namespace, scenario: Scenario, run: RunResult) -> 
 # ---- plot, compare, export ----------------------------------------------------------------
 def _plot(args: argparse.Namespace) -> int:
     require_plotting(gif=args.animate)
+    check_speed(args)
     data = load_run(args.dir)
     out = Path(args.dir) / PLOTS_DIR if args.out is None else Path(args.out)
-    _figures(data, out, True, args.animate)
+    _figures(data, out, True, args.animate, args.speed)
     return 0
+
+
+def _view(args: argparse.Namespace) -> int:
+    data = load_run(args.dir)
+    print(f"wrote {write_view(data, Path(args.dir) / VIEWER_FILE if args.out is None else Path(args.out))}")
+    return 0
+
+
+def write_view(data: RunData, path: Path, geofence: tuple[Any, Any] | None = None) -> Path:
+    """The interactive viewer of a run (:mod:`mpcform.outputs.viewer`): one self-contained HTML file."""
+    from mpcform.formation.geometry import formation_edges
+    from mpcform.outputs.viewer import viewer_curves, write_viewer_html
+
+    traj = data.trajectory
+    return write_viewer_html(
+        path, t_s=traj.t_s, positions_m=traj.positions_m, d_min_m=data.d_min_m, v_max_mps=data.v_max_mps,
+        edges=formation_edges(data.formation.offsets_m), obstacles=data.formation.obstacles,
+        geofence=geofence, reference_m=traj.reference_m, title=data.label,
+        curves=viewer_curves(traj.t_s, traj.positions_m, reference_m=traj.reference_m,
+                             commands_mps=traj.commands_mps),
+    )  # fmt: skip
 
 
 def _compare(args: argparse.Namespace) -> int:
@@ -136,7 +167,15 @@ def add_commands(sub: Any) -> None:
     plot.set_defaults(func=_plot)
     plot.add_argument("dir", metavar="DIR", help="output directory of `mpcform run`")
     plot.add_argument("--out", metavar="OUT", help="figure directory (default: DIR/plots/)")
-    plot.add_argument("--animate", action="store_true", help="also write flight.gif")
+    plot.add_argument("--animate", action="store_true", help="also write the flight as a video")
+    _add_speed_option(plot)
+    view = sub.add_parser("view", help="the interactive viewer of a saved run: one self-contained HTML file",
+                          description="Write DIR/viewer.html: drones over time in 2-D or 3-D, a time slider, "
+                          "play/pause at real time, formation edges, obstacles, the geofence, pairs below "
+                          "d_min, and the metric curves with a cursor linked to the time.")  # fmt: skip
+    view.set_defaults(func=_view)
+    view.add_argument("dir", metavar="DIR", help="output directory of `mpcform run`")
+    view.add_argument("--out", metavar="HTML", help="file to write (default: DIR/viewer.html)")
 
     compare = sub.add_parser("compare", help="several saved runs on one figure and one markdown table",
                              description="Compare saved runs (e.g. controllers or solvers on one "
@@ -177,7 +216,20 @@ def _add_export_options(cmd: argparse.ArgumentParser) -> None:
                      f"(default {DEFAULT_TOLERANCE_M:g})")  # fmt: skip
 
 
-def _figures(data: RunData, out: Path, plot: bool, animate: bool) -> None:
+def _add_speed_option(cmd: argparse.ArgumentParser) -> None:
+    cmd.add_argument("--speed", type=float, default=1.0, metavar="X",
+                     help="real-time factor of the video (default 1: as long as the flight)")  # fmt: skip
+
+
+def check_speed(args: argparse.Namespace) -> None:
+    """``--speed`` is a positive real-time factor and applies only with ``--animate``."""
+    if not args.speed > 0 or args.speed == float("inf"):
+        raise ValidationError("--speed", f"expected a positive real-time factor, got {args.speed}")
+    if args.speed != 1.0 and not args.animate:
+        raise ValidationError("--speed", "applies only with --animate")
+
+
+def _figures(data: RunData, out: Path, plot: bool, animate: bool, speed: float = 1.0) -> None:
     if not (plot or animate):
         return
     if plot:
@@ -186,9 +238,14 @@ def _figures(data: RunData, out: Path, plot: bool, animate: bool) -> None:
         paths = plot_run(data, out)
         print(f"wrote {len(paths)} figures ({', '.join(p.name for p in paths)}) to {out}")
     if animate:
-        from mpcform.outputs.animation import ANIMATION_FILE, animate_run
+        from mpcform.outputs.animation import animate_run, animation_file
 
-        print(f"wrote {animate_run(data, out / ANIMATION_FILE)}")
+        bar = ProgressBar("animating")
+        try:
+            path = animate_run(data, out / animation_file(), speed=speed, progress=bar)
+        finally:
+            bar.close()
+        print(f"wrote {path}")
 
 
 def _report_export(result: ExportResult) -> None:

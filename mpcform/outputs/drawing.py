@@ -16,12 +16,10 @@ from matplotlib.axes import Axes
 from matplotlib.colors import ListedColormap, Normalize
 from matplotlib.patches import Circle
 from matplotlib.ticker import MaxNLocator
-from scipy.sparse.csgraph import minimum_spanning_tree
-from scipy.spatial import ConvexHull, QhullError
 from scipy.spatial.distance import pdist, squareform
 
 from mpcform._validate import Array
-from mpcform.formation.geometry import min_pair_distance
+from mpcform.formation.geometry import formation_edges, min_pair_distance
 from mpcform.outputs.rundata import RunData
 
 # ---- the one style of every figure ---------------------------------------------------------
@@ -51,36 +49,6 @@ SNAPSHOTS = 4
 SNAPSHOT_LABEL = "snapshot-label"  # gid of the ``t = ... s`` text beside a snapshot
 
 
-def formation_edges(offsets_m: Array) -> list[tuple[int, int]]:
-    """Edges that draw the template's shape: the closed outline (convex hull) of a planar template,
-    so a ring or polygon of n drones gets n edges, with the drones inside the outline joined to it
-    by their minimum spanning tree; a collinear or truly 3-D template keeps its minimum spanning
-    tree (a 3-D hull is a tangle of triangles)."""
-    n = offsets_m.shape[0]
-    if n < 2:
-        return []
-    centred = offsets_m - offsets_m.mean(axis=0)
-    _, sv, vt = np.linalg.svd(centred, full_matrices=False)
-    tree = _spanning_tree(offsets_m)
-    planar = len(sv) >= 2 and sv[1] > 1e-9 * sv[0] and (len(sv) < 3 or sv[2] <= 1e-9 * sv[0])
-    if n < 3 or not planar:
-        return tree
-    try:
-        hull = ConvexHull(centred @ vt[:2].T)  # (facets: a x + b y + c = 0)
-    except QhullError:
-        return tree
-    q = centred @ vt[:2].T
-    gap = np.abs(q @ hull.equations[:, :2].T + hull.equations[:, 2]).min(axis=1)
-    boundary = np.flatnonzero(gap <= 1e-9 * sv[0])  # hull corners and drones on its sides
-    middle = q[hull.vertices].mean(axis=0)
-    angle = np.arctan2(*(q[boundary] - middle).T[::-1])
-    cycle = [int(v) for v in boundary[np.argsort(angle)]]
-    outline = {(min(a, b), max(a, b)) for a, b in zip(cycle, cycle[1:] + cycle[:1], strict=True)}
-    inside = set(range(n)) - set(cycle)
-    links = {(a, b) for a, b in tree if a in inside or b in inside}
-    return sorted(outline | links)
-
-
 def skeleton_edges(run: RunData) -> list[tuple[int, int]]:
     """The edges drawn in a run's plan views: :func:`formation_edges`, except none for a swarm of
     more than :data:`PER_DRONE_MAX` drones on a truly 3-D template (a projected tangle)."""
@@ -88,13 +56,6 @@ def skeleton_edges(run: RunData) -> list[tuple[int, int]]:
     sv = np.linalg.svd(offsets - offsets.mean(axis=0), compute_uv=False)
     solid = sv.shape[0] >= 3 and sv[2] > 1e-9 * sv[0]
     return [] if solid and run.n > PER_DRONE_MAX else formation_edges(offsets)
-
-
-def _spanning_tree(offsets_m: Array) -> list[tuple[int, int]]:
-    n = offsets_m.shape[0]
-    dist = squareform(pdist(offsets_m)) + 1e-12 * (1 - np.eye(n))  # keep coincident points linked
-    tree = minimum_spanning_tree(dist).tocoo()
-    return sorted((int(min(a, b)), int(max(a, b))) for a, b in zip(tree.row, tree.col, strict=True))
 
 
 def per_drone_style(i: int) -> dict[str, Any]:

@@ -238,3 +238,30 @@ def test_validate_lists_every_problem(tmp_path: Path, capsys: pytest.CaptureFixt
 def test_validate_ok(capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["validate", str(ROOT / "scenarios" / "formation_flight_100.toml")]) == 0
     assert capsys.readouterr().out.startswith("OK formation_flight_100: 100 drones")
+
+
+def test_run_html_and_view_write_the_viewer(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    scenario = short_copy(
+        tmp_path, ROOT / "scenarios" / "obstacles_planar.toml", ("duration = 30.0", "duration = 1.2")
+    )
+    out = tmp_path / "run"
+    assert main(["run", str(scenario), "--out", str(out), "--html"]) == 0
+    page = (out / "viewer.html").read_text()
+    assert "viewer-ready" in page and "http" not in page.split("<body", 1)[1].lower().replace(
+        "http-equiv", ""
+    )
+    assert main(["view", str(out), "--out", str(tmp_path / "again.html")]) == 0
+    assert (tmp_path / "again.html").stat().st_size > 10_000
+    assert "wrote" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize(
+    ("flags", "fragment"),
+    [(["--speed", "2"], "applies only with --animate"), (["--speed", "0", "--animate"], "positive")],
+)
+def test_speed_is_checked_before_running(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], flags, fragment
+) -> None:
+    status = main(["run", str(WORKED), "--out", str(tmp_path / "o"), *flags])
+    error_lines(capsys, status, "--speed", fragment)
+    assert not (tmp_path / "o").exists()

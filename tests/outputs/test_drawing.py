@@ -9,6 +9,7 @@ pytest.importorskip("matplotlib")
 
 from matplotlib.figure import Figure  # noqa: E402
 
+from mpcform.formation.geometry import formation_edges
 from mpcform.formation.template import Template  # noqa: E402
 from mpcform.outputs.drawing import (  # noqa: E402
     PER_DRONE_MAX,
@@ -17,7 +18,6 @@ from mpcform.outputs.drawing import (  # noqa: E402
     draw_snapshot,
     drone_colours,
     envelope,
-    formation_edges,
     marker_scale,
 )
 
