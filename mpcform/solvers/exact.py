@@ -16,7 +16,7 @@ import scipy.sparse as sp
 from mpcform._validate import Array
 from mpcform.errors import SolverError
 from mpcform.solvers.base import QPContext, QPSolution, SolverOptions, failed, given
-from mpcform.solvers.casadi_conic import casadi_sparse
+from mpcform.solvers.casadi_conic import casadi_solution, casadi_sparse
 from mpcform.solvers.stored import StoredQP, quiet_fds
 
 
@@ -54,12 +54,7 @@ class CasadiIpoptBackend(StoredQP):
                 x, stats = self._call(self._context, x0)
         except RuntimeError as exc:
             return failed(f"error: {' '.join(str(exc).split())[:300]}", time.perf_counter() - start)
-        elapsed = time.perf_counter() - start
-        iters = max(0, int(stats.get("iter_count", 0) or 0))
-        status = str(stats.get("return_status", "unknown"))
-        if not stats.get("success", False) or not np.all(np.isfinite(x)):
-            return failed(status, elapsed, iters)
-        return QPSolution(x, None, True, status, iters, elapsed)
+        return casadi_solution(x, None, stats, time.perf_counter() - start)
 
     def _call(self, ctx: QPContext, x0: Array | None) -> tuple[Array, dict[str, Any]]:
         ca = self._casadi
