@@ -180,15 +180,6 @@ class CasadiConicBackend(StoredQP):
             return failed(f"error: {' '.join(str(exc).split())[:300]}", time.perf_counter() - start)
         return casadi_solution(x, y, stats, time.perf_counter() - start)
 
-
-def casadi_solution(x: Array, y: Array | None, stats: dict[str, Any], elapsed_s: float) -> QPSolution:
-    """A solution from casadi's solver statistics: failed unless it reports success with a finite x."""
-    iters = max(0, int(stats.get("iter_count", 0) or 0))
-    status = str(stats.get("return_status", "unknown"))
-    if not stats.get("success", False) or not np.all(np.isfinite(x)):
-        return failed(status, elapsed_s, iters)
-    return QPSolution(x, y, True, status, iters, elapsed_s)
-
     def _call(self, x0: Array | None) -> tuple[Array, Array | None, dict[str, Any]]:
         ca = self._casadi
         P, A, q, lo, hi = self._P, self._A, self._q, self._lo, self._hi
@@ -229,3 +220,12 @@ def casadi_solution(x: Array, y: Array | None, stats: dict[str, Any], elapsed_s:
             z[perm] = x
             x, y = z, None
         return x, y, dict(self._fn.stats())
+
+
+def casadi_solution(x: Array, y: Array | None, stats: dict[str, Any], elapsed_s: float) -> QPSolution:
+    """A solution from casadi's solver statistics: failed unless it reports success with a finite x."""
+    iters = max(0, int(stats.get("iter_count", 0) or 0))
+    status = str(stats.get("return_status", "unknown"))
+    if not stats.get("success", False) or not np.all(np.isfinite(x)):
+        return failed(status, elapsed_s, iters)
+    return QPSolution(x, y, True, status, iters, elapsed_s)
