@@ -64,7 +64,7 @@ class MPCPlanner(Controller):
         self._families = limit_rows(self.dim, dt_s, limits, settings)
         self._separation = sep = Separation(self.dim, limits, settings, self.obstacles)
         self._candidates = CandidateSelector(self.n, dt_s, limits, settings, self.obstacles)
-        self._certifier = Certifier(dt_s, limits.v_max_mps, sep)
+        self._certifier = Certifier(dt_s, limits.v_max_mps, sep, limits.a_max_mps2)
         self._solver: StepSolver  # the sparse QP with a backend, or DAQP per drone
         if settings.solves_per_drone:
             self._solver = PerDroneQP(self.dim, dt_s, limits, settings, self._families)
@@ -117,18 +117,21 @@ class MPCPlanner(Controller):
         warm = warm_start(self._plan, p0, u_nom, x_nom)[:, :, drones] if self._solver.warm_starts else None
         qp = StepQP(self.n, drones, p0[drones], c[:, drones], self._u_prev[drones], sub, cand.rebuilt, warm)
         sol, active = self._solver.solve(qp)
-        status = sol.status
+        status, solved = sol.status, None
+        inside_m, inside = sep.start_shortfall(p0, rows)  # items that start too close
         if sol.success and sol.x is not None:
             u, x = self._merge(drones, sol.x, u_nom, x_nom)
             u0 = self._certifier.certify(p0, u[0], cand)
             if u0 is not None:
                 self._accept(p0, u, x)
-                return ControlStep(u0, self._qp_info(sol, sol.x, active, drones, x, rows))
-            status += "; command failed certification"
-        u, x, note = self._certifier.fallback(self._plan, p0, cand, horizon)
+                info = self._qp_info(sol, sol.x, active, drones, x, rows, inside_m, inside)
+                return ControlStep(u0, info)
+            status, solved = status + "; command failed certification", u[0]
+        u, x, note = self._certifier.fallback(self._plan, p0, cand, horizon, solved, self._u_prev)
         self._accept(p0, u, x)
         info = StepInfo("fallback", status=f"{status}; {note}", iterations=sol.iterations,
-                        solve_time_s=sol.solve_time_s)  # fmt: skip
+                        solve_time_s=sol.solve_time_s, max_slack_m=inside_m,
+                        slack_pairs=_pairs_of(inside))  # fmt: skip
         return ControlStep(u[0].copy(), info)
 
     def _fast_path(self, p0: Array, u_nom: Array, x_nom: Array) -> ControlStep:
@@ -147,25 +150,32 @@ class MPCPlanner(Controller):
         return u, x
 
     def _qp_info(
-        self, sol: QPSolution, z: Array, active: int, drones: Array, x: Array, rows: SeparationRows
+        self, sol: QPSolution, z: Array, active: int, drones: Array, x: Array, rows: SeparationRows,
+        inside_m: float, inside: Array,
     ) -> StepInfo:
         """What a certified solve ``z`` reports: its solver figures and the slack it needed (the
-        items whose rows positions ``x`` (H, n, d) miss)."""
+        items whose rows positions ``x`` (H, n, d) miss, and the items ``inside`` that start
+        ``inside_m`` inside their required distance)."""
         nud = self.settings.horizon * drones.shape[0] * self.dim
         slack = z[2 * nud :]
-        shortfall, slack_items = 0.0, tuple[tuple[int, int], ...]()
+        shortfall, missed = inside_m, inside
         if slack.max(initial=0.0) > SLACK_REPORT_M / 2:
-            shortfall, missed = self._separation.shortfall(x, rows, SLACK_REPORT_M)
-            slack_items = tuple((int(a), int(b)) for a, b in missed)
+            planned, missed = self._separation.shortfall(x, rows, SLACK_REPORT_M)
+            shortfall, missed = max(shortfall, planned), np.concatenate([inside, missed])
         return StepInfo(
             "qp", status=sol.status, iterations=sol.iterations, solve_time_s=sol.solve_time_s,
-            active_rows=active, max_slack_m=max(shortfall, 0.0), slack_pairs=slack_items,
+            active_rows=active, max_slack_m=max(shortfall, 0.0), slack_pairs=_pairs_of(missed),
             qp_drones=int(drones.shape[0]),
         )  # fmt: skip
 
     def _accept(self, p0: Array, u: Array, x: Array) -> None:
         self._plan = Plan.from_relative(p0, u, x)
         self._u_prev = u[0].copy()
+
+
+def _pairs_of(labels: Array) -> tuple[tuple[int, int], ...]:
+    """Item labels (m, 2) as sorted unique tuples."""
+    return tuple(sorted({(int(a), int(b)) for a, b in labels}))
 
 
 def _check_limits(

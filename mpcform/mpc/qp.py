@@ -95,15 +95,23 @@ class MPCQP:
         lo[self.sep_rows] = sep.ravel()
         return lo, hi
 
-    def separation_values(self, coeffs_pairs: Array, coeffs_singles: Array) -> Array:
-        """CSC data of A for row coefficients (P, R, d) of the pairs and (S, R, d) of the singles."""
+    def separation_values(
+        self, coeffs_pairs: Array, coeffs_singles: Array, hard_pairs: Array | None = None,
+        hard_singles: Array | None = None,
+    ) -> Array:
+        """CSC data of A for row coefficients (P, R, d) of the pairs and (S, R, d) of the singles;
+        the items marked ``hard_*`` have no slack in their first row (a hard no-approach row)."""
         vals = self._coo_vals.copy()
         parts = []
         if coeffs_pairs.shape[0]:
             ones = np.ones(coeffs_pairs.shape[:2] + (2,))
+            if hard_pairs is not None:
+                ones[hard_pairs, 0] = 0.0
             parts.append(np.concatenate([coeffs_pairs, -coeffs_pairs, ones], axis=2).ravel())
         if coeffs_singles.shape[0]:
             ones = np.ones(coeffs_singles.shape[:2] + (1,))
+            if hard_singles is not None:
+                ones[hard_singles, 0] = 0.0
             parts.append(np.concatenate([coeffs_singles, ones], axis=2).ravel())
         if parts:
             vals[self._sep_entries] = np.concatenate(parts)

@@ -244,3 +244,32 @@ def test_grouping_equals_the_monolithic_qp(seed: int, coupling: str) -> None:
         assert out.info.mode == "qp" and out.info.qp_drones == (4 if grouping else 8)
         firsts.append(out.command_mps)
     np.testing.assert_allclose(firsts[0], firsts[1], atol=1e-5)
+
+
+def test_close_start_separates_instead_of_freezing() -> None:
+    """Three pairs start inside d_min (decoupled): they never approach, separate, and every drone
+    arrives; while a pair is inside d_min the step reports it as slack."""
+    from families import CLOSE_START_FREEZE, outcome
+
+    out = outcome(CLOSE_START_FREEZE)
+    assert out["completion"] == 1.0 and out["separation_violations"] == 0
+    assert out["approached"] == 0 and out["unseparated"] == 0
+    infos = out["infos"]
+    assert not any(i.mode == "fallback" for i in infos)
+    assert infos[0].max_slack_m > 0.3 and (0, 5) in infos[0].slack_pairs
+
+
+@pytest.mark.parametrize("coupling", ["joint", "decoupled"])
+def test_a_close_pair_never_approaches(coupling: str) -> None:
+    """Two drones 0.1 m apart whose targets lie across each other: the distance never shrinks."""
+    tpl = Template(np.array([[-1.0, 0.0], [1.0, 0.0]]))
+    ref = ConstantReference(tpl, FormationState.from_param([0.0, 0.0]))
+    start = np.array([[0.05, 0.01], [-0.05, -0.01]])  # each on the other's side
+    res = simulate(MPCPlanner(ref, 0.1, Limits(v_max_mps=1.0, d_min_m=0.5), MPCSettings(coupling=coupling)),
+                   start, 8.0)  # fmt: skip
+    rel = res.positions_m[:, 0] - res.positions_m[:, 1]
+    seg = [np.linalg.norm(closest_on_segments(a[None], b[None])) for a, b in zip(rel[:-1], rel[1:])]
+    assert min(seg) >= np.linalg.norm(rel[0]) - 1e-7
+    inside = np.linalg.norm(rel[:-1], axis=1) < 0.5
+    assert all(i.max_slack_m > 0 for i, close in zip(res.infos, inside, strict=True) if close)
+    assert np.linalg.norm(res.positions_m[-1] - res.reference_m[-1], axis=1).max() < 1e-2
