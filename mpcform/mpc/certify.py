@@ -67,7 +67,7 @@ class Certifier:
         if plan is not None:
             u_plan = plan.shifted_inputs()
             u_plan[0] = self.within_limits(u_plan[0], prev)
-            if self.safe(p0, u_plan[0], cand):
+            if u_plan[0].any() and self.safe(p0, u_plan[0], cand):  # (a hold comes last)
                 return u_plan, self.dt_s * np.cumsum(u_plan, axis=0), "previous plan"
         tries = [("solved command", solved), ("separating command", self.separation.push_apart(p0, cand))]
         if self.v_max_mps is not None:

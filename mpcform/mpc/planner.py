@@ -7,6 +7,13 @@ items (:mod:`mpcform.mpc.candidates`), their rows linearised about the guess
 QP over the conflicted drones' groups: the sparse QP with a backend (:mod:`mpcform.mpc.sparse`),
 or in decoupled mode each drone's block with DAQP (:mod:`mpcform.mpc.per_drone`). The command is
 certified, or replaced by the safe fallback (:mod:`mpcform.mpc.certify`), and reported.
+
+In decoupled mode the pair rows are split about the guess's midpoints, unless the rollout meets
+the limit rows and the joint pair rows (and the obstacle rows) about the guess: then every pair of
+the rollout stays ``d_min + margin`` apart along each segment, and the split rows are taken about
+the rollout itself, which meets them exactly; so the rollout is the decoupled QP's optimum, and
+the fast path (which tests the joint rows) returns the same command as a solve. A rollout that
+breaks a limit row is never a linearisation point (the plan could not follow it).
 """
 
 from __future__ import annotations
@@ -107,6 +114,13 @@ class MPCPlanner(Controller):
         if grouped or st.solves_per_drone:  # no fixed pattern: rows only within reach
             cand = cand.within_reach()
         rows = sep.rows(p0, about, cand)
+        if st.coupling == "decoupled" and not off_limits.any() and sep.meets_joint(x_nom, rows):
+            # the rollout meets the limits and the joint rows: the decoupled rows are split about
+            # the rollout itself, which meets them, so it is the optimum (see the module docstring)
+            if st.fast_path:
+                return self._fast_path(p0, u_nom, x_nom)
+            about = np.concatenate([p0[None], p0 + x_nom])
+            rows = sep.rows(p0, about, cand)
         conflicted = sep.conflicted(x_nom, rows)
         if st.fast_path and not (off_limits | conflicted).any():
             return self._fast_path(p0, u_nom, x_nom)

@@ -250,6 +250,19 @@ class Separation:
             missed.append(labels[short > tol])
         return worst, np.unique(np.concatenate(missed), axis=0)
 
+    def meets_joint(self, x: Array, rows: SeparationRows) -> bool:
+        """Whether positions ``x`` (H, n, d) meet the joint pair rows (and the obstacle rows) of the
+        items within reach, given the decoupled ``rows`` of the whole candidate set: a pair's two
+        sides share their normal and their lower bounds add up to the joint one, so the joint row
+        is the sum of its two sides' rows."""
+        xe = x[self.ends - 1]  # (R, n, d)
+        value = np.einsum("srd,rsd->sr", rows.single_coeffs, xe[:, rows.singles]) - rows.single_lower
+        value = np.where(rows.single_on[:, None], value, np.inf)
+        pair = rows.labels[:, 1] >= 0
+        first = pair & (rows.labels[:, 0] < rows.labels[:, 1])  # side i of pair (i, k), i < k
+        joint = value[first] + value[pair & ~first]  # both sides in the candidates' pair order
+        return bool(joint.min(initial=np.inf) >= 0.0 and value[~pair].min(initial=np.inf) >= 0.0)
+
     def conflicted(self, x: Array, rows: SeparationRows) -> Array:
         """Drones (n,) of the items whose rows positions ``x`` (H, n, d) miss (an obstacle item
         names only its drone)."""
