@@ -81,7 +81,7 @@ class MPCPlanner(Controller):
             backend = solver if isinstance(solver, QPBackend) else make_backend(solver, options)
             self._solver = SparseSolver(backend, self.dim, dt_s, limits, settings, self._families, sep)
         self.solver_name = self._solver.name
-        self._tie_break = TieBreak(self.n, settings.tie_break_rad)
+        self._tie_break = TieBreak(self.n, settings.tie_break_rad, dt_s)
         self.reset(0.0, np.zeros((self.n, self.dim)))
 
     # ---- state ----------------------------------------------------------------------------
@@ -90,7 +90,7 @@ class MPCPlanner(Controller):
         self._solver.reset()
         self._plan: Plan | None = None
         self._u_prev = np.zeros((self.n, self.dim))
-        self._tie_break.clear()
+        self._tie_break.reset()
 
     @property
     def plan(self) -> Plan | None:
@@ -124,7 +124,7 @@ class MPCPlanner(Controller):
         conflicted = sep.conflicted(x_nom, rows)
         if st.fast_path and not (off_limits | conflicted).any():
             return self._fast_path(p0, u_nom, x_nom)
-        c = self._tie_break.turn(c, conflicted, self._u_prev, self._plan is not None)
+        c = self._tie_break.turn(c, conflicted, p0, targets[0] - p0, self._plan is not None)
         bad = off_limits | conflicted
         drones = qp_drones(bad, rows.pairs[rows.pair_on]) if grouped else np.arange(self.n)
         sub = rows.subset(drones, self.n, on_only=grouped)  # grouped: the pattern follows the groups
@@ -145,13 +145,18 @@ class MPCPlanner(Controller):
         self._accept(p0, u, x)
         info = StepInfo("fallback", status=f"{status}; {note}", iterations=sol.iterations,
                         solve_time_s=sol.solve_time_s, max_slack_m=inside_m,
-                        slack_pairs=_pairs_of(inside))  # fmt: skip
+                        slack_pairs=_pairs_of(inside), **self._liveness())  # fmt: skip
         return ControlStep(u[0].copy(), info)
+
+    def _liveness(self) -> dict[str, int]:
+        """The tie-break's events of this step (StepInfo fields)."""
+        tb = self._tie_break
+        return {"stalled": tb.new_stalls, "resolving": tb.resolving, "resolved": tb.resolved}
 
     def _fast_path(self, p0: Array, u_nom: Array, x_nom: Array) -> ControlStep:
         self._tie_break.clear()
         self._accept(p0, u_nom, x_nom)
-        return ControlStep(u_nom[0].copy(), StepInfo("fast_path"))
+        return ControlStep(u_nom[0].copy(), StepInfo("fast_path", resolved=self._tie_break.resolved))
 
     def _merge(self, drones: Array, z: Array, u_nom: Array, x_nom: Array) -> tuple[Array, Array]:
         """Inputs and relative positions (H, n, d): the solution ``z``'s for ``drones``, the
@@ -179,7 +184,7 @@ class MPCPlanner(Controller):
         return StepInfo(
             "qp", status=sol.status, iterations=sol.iterations, solve_time_s=sol.solve_time_s,
             active_rows=active, max_slack_m=max(shortfall, 0.0), slack_pairs=_pairs_of(missed),
-            qp_drones=int(drones.shape[0]),
+            qp_drones=int(drones.shape[0]), **self._liveness(),
         )  # fmt: skip
 
     def _accept(self, p0: Array, u: Array, x: Array) -> None:
