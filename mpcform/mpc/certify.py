@@ -65,7 +65,7 @@ class Certifier:
         back, a decelerating step (with ``a_max``), else a hold. ``u_prev`` (n, d): the last command."""
         prev = np.zeros_like(p0) if u_prev is None else u_prev
         if plan is not None:
-            u_plan = plan.shifted_inputs()
+            u_plan = plan.shifted_inputs(self.a_step_mps)
             u_plan[0] = self.within_limits(u_plan[0], prev)
             if u_plan[0].any() and self.safe(p0, u_plan[0], cand):  # (a hold comes last)
                 return u_plan, self.dt_s * np.cumsum(u_plan, axis=0), "previous plan"

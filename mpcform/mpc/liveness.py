@@ -37,7 +37,7 @@ import numpy as np
 from mpcform._validate import Array
 
 STALL_FRACTION = 0.02  # progress per step below this fraction of the wish's step counts as stalled
-STALL_GROWTH = 0.1  # the tie-break angle grows by this fraction of itself per stalled step
+STALL_GROWTH = 0.2  # the tie-break angle grows by this fraction of itself per stalled step
 ARRIVED_M = 1e-2  # a drone this close to its target is not stalled [m]
 FULL_TURN_RAD = 2.0 * np.pi
 BACKOFF_M = 1.0  # how much farther from its target than at its first stall a drone may back off [m]
