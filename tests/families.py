@@ -178,7 +178,8 @@ def outcome(sc: dict[str, Any], tol_m: float = 0.1) -> dict[str, Any]:
     err = np.linalg.norm(p[-1] - res.reference_m[-1], axis=1)
     i, k = np.triu_indices(p.shape[1], 1)
     rel = p[:, i] - p[:, k]  # (T, P, d)
-    seg = np.array([np.linalg.norm(closest_on_segments(a, b), axis=1) for a, b in zip(rel[:-1], rel[1:])])
+    pairs = zip(rel[:-1], rel[1:], strict=True)
+    seg = np.array([np.linalg.norm(closest_on_segments(a, b), axis=1) for a, b in pairs])
     start = np.linalg.norm(rel[0], axis=1)
     close = start < d_min
     seg_min = seg.min(axis=0, initial=np.inf) if seg.size else start
@@ -192,6 +193,7 @@ def outcome(sc: dict[str, Any], tol_m: float = 0.1) -> dict[str, Any]:
     }
     for ob in sc.get("obstacles", []):
         c, req = np.array(ob["center"]), ob["radius"] + ob["clearance"]
-        gaps = [np.linalg.norm(closest_on_segments(a - c, b - c), axis=1) for a, b in zip(p[:-1], p[1:])]
+        steps = zip(p[:-1], p[1:], strict=True)
+        gaps = [np.linalg.norm(closest_on_segments(a - c, b - c), axis=1) for a, b in steps]
         out["obstacle_violations"] += int((np.array(gaps) < req - tol).sum())
     return out

@@ -2,7 +2,9 @@
 
 A command is certified when it lies in the ball ``||u_i|| <= v_max`` (it is scaled into it,
 eq. 7) and, along the first segment ``p0 -> p0 + dt u``, no pair (or drone-obstacle item) within
-reach gets closer than ``d_min`` (its required distance), or than it already was. The fallback, when a solve fails or does not certify, is the first of these
+reach gets closer than ``d_min`` (its required distance), or than it already was.
+
+The fallback, when a solve fails or does not certify, is the first of these
 that certifies: the previous plan's next input; the solved command scaled back (1, 1/2, 1/4,
 1/8: certification is monotone in the scale, the scaled segment being part of the full one); a
 separating command (each drone inside a required distance flies away from its close partners and
@@ -69,9 +71,8 @@ class Certifier:
             u_plan[0] = self.within_limits(u_plan[0], prev)
             if u_plan[0].any() and self.safe(p0, u_plan[0], cand):  # (a hold comes last)
                 return u_plan, self.dt_s * np.cumsum(u_plan, axis=0), "previous plan"
-        tries = [("solved command", solved), ("separating command", self.separation.push_apart(p0, cand))]
-        if self.v_max_mps is not None:
-            tries[1] = (tries[1][0], self.v_max_mps * tries[1][1])
+        push = (self.v_max_mps or 1.0) * self.separation.push_apart(p0, cand)
+        tries = [("solved command", solved), ("separating command", push)]
         for note, base in tries:
             if base is None or not base.any():
                 continue

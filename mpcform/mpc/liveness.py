@@ -90,11 +90,13 @@ class TieBreak:
     def angles(self, conflicted: Array, wish: Array, p0: Array, to_target: Array, started: bool) -> Array:
         """Turn angle per drone [rad]: the base angle, grown by ``STALL_GROWTH`` of it for every
         stalled step in the drone's current conflict, modulo a full turn (a base angle of a quarter
-        turn or more is kept as it is); a drone past its back-off budget starts afresh. Counts this step (see the module docstring)."""
+        turn or more is kept as it is); a drone past its back-off budget starts afresh. Counts this
+        step (see the module docstring)."""
         distance = norms(to_target)
         stalled = conflicted & (distance > ARRIVED_M)
         if self.last_m is not None and started:
-            towards = np.divide(to_target, distance[:, None], out=np.zeros_like(p0), where=distance[:, None] > 0)
+            far = distance[:, None] > 0
+            towards = np.divide(to_target, distance[:, None], out=np.zeros_like(p0), where=far)
             progress = np.einsum("nd,nd->n", p0 - self.last_m, towards)
             stalled &= progress < STALL_FRACTION * norms(wish) * self.dt_s
         else:
@@ -104,7 +106,8 @@ class TieBreak:
         self.resolved = int(np.count_nonzero(~conflicted & (self.stalled > 0)))
         self.stalled = np.where(conflicted, self.stalled + stalled, 0)
         first = np.where(self.stalled > 0, np.minimum(self.stall_distance_m, distance), np.inf)
-        self.stall_distance_m = np.where(stalled, first, np.where(self.stalled > 0, self.stall_distance_m, np.inf))
+        kept = np.where(self.stalled > 0, self.stall_distance_m, np.inf)
+        self.stall_distance_m = np.where(stalled, first, kept)
         backed_off = distance > self.stall_distance_m + BACKOFF_M  # the budget is spent: start afresh
         self.stalled[backed_off] = 0
         self.stall_distance_m[backed_off] = np.inf

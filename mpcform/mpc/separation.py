@@ -199,7 +199,8 @@ class Separation:
             singles += one
         if cand.obstacles.shape[0] and self.obstacles is not None:
             singles.append(self.obstacles.rows(p0, guess, cand.obstacles, cand.obstacle_on))
-        labels, s_coeffs, s_lower, s_on, s_hard = (np.concatenate(parts) for parts in zip(*singles, strict=True))
+        columns = (np.concatenate(parts) for parts in zip(*singles, strict=True))
+        labels, s_coeffs, s_lower, s_on, s_hard = columns
         pairs, p_coeffs, p_lower, p_on, p_hard = joint
         return SeparationRows(
             pairs, p_coeffs, p_lower, p_on, labels[:, 0], labels, s_coeffs, s_lower, s_on, p_hard, s_hard

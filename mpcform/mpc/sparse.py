@@ -60,7 +60,8 @@ class SparseSolver(StepSolver):
         lower = np.concatenate([rows.pair_lower, rows.single_lower])
         on = np.concatenate([rows.pair_on, rows.single_on])
         lo, hi = mpc_qp.bounds(qp.start_m, qp.u_prev_mps, lower, on)
-        a_data = mpc_qp.separation_values(rows.pair_coeffs, rows.single_coeffs, rows.pair_hard, rows.single_hard)
+        hard = rows.pair_hard, rows.single_hard
+        a_data = mpc_qp.separation_values(rows.pair_coeffs, rows.single_coeffs, *hard)
         if self._backend_qp is not mpc_qp:
             a_matrix = mpc_qp.A.copy()
             a_matrix.data = a_data

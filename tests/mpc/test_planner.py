@@ -270,7 +270,8 @@ def test_a_close_pair_never_approaches(coupling: str) -> None:
     res = simulate(MPCPlanner(ref, 0.1, Limits(v_max_mps=1.0, d_min_m=0.5), MPCSettings(coupling=coupling)),
                    start, 8.0)  # fmt: skip
     rel = res.positions_m[:, 0] - res.positions_m[:, 1]
-    seg = [np.linalg.norm(closest_on_segments(a[None], b[None])) for a, b in zip(rel[:-1], rel[1:])]
+    steps = zip(rel[:-1], rel[1:], strict=True)
+    seg = [np.linalg.norm(closest_on_segments(a[None], b[None])) for a, b in steps]
     assert min(seg) >= np.linalg.norm(rel[0]) - 1e-7
     inside = np.linalg.norm(rel[:-1], axis=1) < 0.5
     assert all(i.max_slack_m > 0 for i, close in zip(res.infos, inside, strict=True) if close)
@@ -290,7 +291,8 @@ class Translating(ConstantReference):
 
     def profile(self, times_s: np.ndarray) -> Profile:
         vel = np.broadcast_to(self.v, (times_s.shape[0], self.v.shape[0]))
-        return replace(super().profile(times_s), centroid_m=times_s[:, None] * self.v, centroid_velocity_mps=vel)
+        pos = times_s[:, None] * self.v
+        return replace(super().profile(times_s), centroid_m=pos, centroid_velocity_mps=vel)
 
 
 MODES = [("joint", True), ("decoupled", True), ("decoupled", False)]  # (coupling, per_drone)
@@ -321,3 +323,20 @@ def test_fast_path_on_and_off_agree_in_every_coupling(mode: tuple[str, bool]) ->
         v, start = rng.uniform(-8, 8, 2).tolist(), tpl.offsets + rng.normal(0, 0.2, (n, 2))
         on, off = (translating_run(tpl, v, start, mode, fast_path) for fast_path in (True, False))
         np.testing.assert_allclose(on, off, atol=1e-5)
+
+
+@pytest.mark.slow
+def test_every_run_of_the_random_families_completes_safely() -> None:
+    """200 runs of ``tests/families.py`` (swaps, spheres, close starts): every drone ends within 0.1 m
+    of its target, pairs that start d_min apart stay so along every segment, pairs that start
+    closer never approach and end separated, and no drone enters a sphere's keep-out."""
+    from families import family, outcome
+
+    bad = []
+    for sc in family(1, 200):
+        out = outcome(sc)
+        if out["completion"] < 1.0 or any(
+            out[k] for k in ("separation_violations", "approached", "unseparated", "obstacle_violations")
+        ):
+            bad.append((sc["name"], {k: v for k, v in out.items() if k != "infos"}))
+    assert not bad

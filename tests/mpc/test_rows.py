@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from scipy.spatial import HalfspaceIntersection
 import scipy.sparse as sp
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from scipy.spatial import HalfspaceIntersection
 
 from mpcform.mpc.limits import Limits
 from mpcform.mpc.rows import (
@@ -94,7 +94,8 @@ def test_velocity_polytope_is_inscribed_in_the_ball(dim: int) -> None:
 
 
 @pytest.mark.parametrize(
-    ("dim", "facets"), [(2, 4), (2, 5), (2, 16), (2, 17), (2, 64), (3, 8), (3, 12), (3, 32), (3, 33), (3, 100)]
+    ("dim", "facets"),
+    [(2, 4), (2, 5), (2, 16), (2, 17), (2, 64), (3, 8), (3, 12), (3, 32), (3, 33), (3, 100)],
 )
 def test_velocity_polytope_vertices_are_within_v_max(dim: int, facets: int) -> None:
     """Every vertex of ``{D u <= h v_max}`` (enumerated with HalfspaceIntersection) lies in the ball
@@ -102,7 +103,8 @@ def test_velocity_polytope_vertices_are_within_v_max(dim: int, facets: int) -> N
     where h is computed from the vertices; planar vertices all lie on the ball."""
     v_max = 2.5
     normals, h = velocity_set(dim, MPCSettings(facets=facets), v_max)
-    verts = HalfspaceIntersection(np.column_stack([normals, -np.full(facets, h)]), np.zeros(dim)).intersections
+    halfspaces = np.column_stack([normals, -np.full(facets, h)])
+    verts = HalfspaceIntersection(halfspaces, np.zeros(dim)).intersections
     radius = np.linalg.norm(verts, axis=1)
     assert radius.max() <= v_max * (1 + 1e-12)
     assert radius.max() == pytest.approx(v_max, rel=1e-9)
