@@ -26,7 +26,7 @@ from mpcform.solvers.base import QPBackend, QPContext, QPSolution
 
 RAISE = 30.0  # the slack weight is raised this many fold per re-solve
 MAX_RAISES = 3  # at most this many re-solves (w1 up to 27,000 times the setting)
-SLACK_TOL_M = 1e-7  # a solve with no slack above this is final [m]
+SLACK_TOL_M = 1e-6  # a solve that misses no row by more than this is final [m]
 
 
 class SparseSolver(StepSolver):
@@ -85,9 +85,10 @@ class SparseSolver(StepSolver):
         x0: Array | None,
     ) -> QPSolution:
         """``sol``, or a re-solve with a raised slack weight that needs less slack (module docstring)."""
-        nud, weight = 2 * mpc_qp.layout.nud, self.settings.slack_weight
+        lay, weight = mpc_qp.layout, self.settings.slack_weight
+        nud = 2 * lay.nud
         for _ in range(MAX_RAISES):
-            if not sol.success or sol.x is None or sol.x[nud:].max(initial=0.0) <= SLACK_TOL_M:
+            if not sol.success or sol.x is None or not self._short(sol.x, mpc_qp, qp):
                 return sol
             weight *= RAISE
             self.backend.update(mpc_qp.cost_vector(qp.targets_mps, weight), lo, hi, a_data)
@@ -97,6 +98,15 @@ class SparseSolver(StepSolver):
             sol = QPSolution(again.x, again.y, True, again.status, sol.iterations + again.iterations,
                              sol.solve_time_s + again.solve_time_s)  # fmt: skip
         return sol
+
+    def _short(self, z: Array, mpc_qp: MPCQP, qp: StepQP) -> bool:
+        """Whether the solution ``z`` misses a separation row by more than :data:`SLACK_TOL_M` (an
+        interior-point solver leaves slacks of its tolerance's order at zero: not counted)."""
+        lay = mpc_qp.layout
+        if z[2 * lay.nud :].max(initial=0.0) <= SLACK_TOL_M:
+            return False
+        x = z[lay.nud : 2 * lay.nud].reshape(lay.horizon, lay.n, lay.dim)
+        return self.separation.shortfall(x, qp.rows, SLACK_TOL_M)[0] > SLACK_TOL_M
 
     def _sub_qp(self, drones: Array, rows: SeparationRows, rebuilt: bool) -> MPCQP:
         """The QP over ``drones`` and the items of ``rows``, kept while both stay the same."""
