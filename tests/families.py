@@ -139,3 +139,61 @@ def family(seed: int, count: int) -> Iterator[dict[str, Any]]:
         if sc is not None:
             made += 1
             yield sc
+
+
+CLOSE_START_FREEZE: dict[str, Any] = {  # froze before close starts had their hard no-approach rows
+    "version": 1, "name": "close_start_freeze", "dim": 2, "seed": 13,
+    "template": {"shape": "explicit", "offsets": [
+        [-0.9868547022787612, -0.5404046729473696], [-0.3845822424615776, -1.5829725384194102],
+        [0.6385811673742307, -1.4570827785874187], [-1.441396278938159, 1.1408983667071637],
+        [-0.1381720912265597, 1.10830619552998], [1.5747326245724236, -0.490351987473142],
+        [0.737691522958403, 1.821607415190197]]},
+    "initial": {"positions": [
+        [0.5842413546223961, 1.6079380233859193], [-0.3845822424615776, -1.5829725384194102],
+        [0.6385811673742307, -1.4570827785874187], [-1.441396278938159, 1.1408983667071637],
+        [-0.1381720912265597, 1.10830619552998], [0.14957701754708363, 1.3558148428083334],
+        [0.737691522958403, 1.821607415190197]]},
+    "reference": {"kind": "constant", "centroid": [1.7625682249254604, 1.237208044722145], "rotation": 0.0,
+                  "scale": 1.0},
+    "limits": {"v_max": 1.0449597951536984, "d_min": 0.60699788707885},
+    "controller": {"kind": "mpc", "gain": 2.0, "horizon": 8, "coupling": "decoupled"},
+    "simulation": {"dt": 0.1, "duration": 27.666075437319197},
+}  # fmt: skip
+
+
+def outcome(sc: dict[str, Any], tol_m: float = 0.1) -> dict[str, Any]:
+    """Run a scenario dict and measure what every run must meet: ``completion`` (fraction of drones
+    within ``tol_m`` of their targets at the end), ``separation_violations`` (pairs that start at
+    least d_min apart and come closer along a segment), ``approached`` / ``unseparated`` (pairs that
+    start inside d_min and get closer along a segment / are not d_min apart at the end),
+    ``obstacle_violations`` (drones inside a sphere's keep-out along a segment), and the run's
+    ``infos``."""
+    from mpcform.formation.geometry import closest_on_segments
+    from mpcform.run.runner import run_scenario
+    from mpcform.scenario.load import scenario_from_dict
+
+    s = scenario_from_dict(sc)
+    res = run_scenario(s).simulation
+    p, d_min, tol = res.positions_m, s.limits.d_min_m or 0.0, 1e-6
+    err = np.linalg.norm(p[-1] - res.reference_m[-1], axis=1)
+    i, k = np.triu_indices(p.shape[1], 1)
+    rel = p[:, i] - p[:, k]  # (T, P, d)
+    pairs = zip(rel[:-1], rel[1:], strict=True)
+    seg = np.array([np.linalg.norm(closest_on_segments(a, b), axis=1) for a, b in pairs])
+    start = np.linalg.norm(rel[0], axis=1)
+    close = start < d_min
+    seg_min = seg.min(axis=0, initial=np.inf) if seg.size else start
+    out = {
+        "completion": float((err <= tol_m).mean()),
+        "separation_violations": int((seg[:, ~close] < d_min - tol).sum()),
+        "approached": int((seg_min[close] < start[close] - tol).sum()),
+        "unseparated": int((np.linalg.norm(rel[-1], axis=1)[close] < d_min - tol).sum()),
+        "obstacle_violations": 0,
+        "infos": res.infos,
+    }
+    for ob in sc.get("obstacles", []):
+        c, req = np.array(ob["center"]), ob["radius"] + ob["clearance"]
+        steps = zip(p[:-1], p[1:], strict=True)
+        gaps = [np.linalg.norm(closest_on_segments(a - c, b - c), axis=1) for a, b in steps]
+        out["obstacle_violations"] += int((np.array(gaps) < req - tol).sum())
+    return out

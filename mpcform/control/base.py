@@ -25,7 +25,10 @@ class StepInfo:
     ``mode``: ``law`` (closed form), ``fast_path`` (eq. 14 rollout met every QP row), ``qp``
     (solved), or ``fallback`` (solver failed; certified safe command). ``slack_pairs`` lists the
     drone pairs (or ``(drone, -1 - obstacle)``) whose separation rows needed slack; ``qp_drones``
-    how many drones the QP was solved for (the others' groups took the fast path).
+    how many drones the QP was solved for (the others' groups took the fast path). Liveness
+    (:mod:`mpcform.mpc.liveness`): ``stalled`` drones that started to stall at this step,
+    ``resolving`` drones whose tie-break is escalated, ``resolved`` escalations that ended at this
+    step (the drone left conflict).
     """
 
     mode: str
@@ -37,6 +40,9 @@ class StepInfo:
     max_slack_m: float = 0.0
     slack_pairs: tuple[tuple[int, int], ...] = ()
     qp_drones: int = 0
+    stalled: int = 0
+    resolving: int = 0
+    resolved: int = 0
 
 
 @dataclass(frozen=True)

@@ -2,9 +2,17 @@
 
 A command is certified when it lies in the ball ``||u_i|| <= v_max`` (it is scaled into it,
 eq. 7) and, along the first segment ``p0 -> p0 + dt u``, no pair (or drone-obstacle item) within
-reach gets closer than ``d_min`` (its required distance), or than it already was. The fallback is
-the previous plan's next input, scaled into the ball, if it certifies, else every drone holding;
-so the planning loop never raises or returns NaN for a solver's failure.
+reach gets closer than ``d_min`` (its required distance), or than it already was.
+
+The fallback, when a solve fails or does not certify, is the first of these
+that certifies: the previous plan's next input; the solved command scaled back (1, 1/2, 1/4,
+1/8: certification is monotone in the scale, the scaled segment being part of the full one); a
+separating command (each drone inside a required distance flies away from its close partners and
+obstacles, scaled back the same way); with ``a_max``, a step that decelerates within
+``a_max dt``; a hold (which never brings two drones closer). With ``a_max`` every candidate is
+first moved into the box ``|u - u_prev| <= a_max dt`` (a plant margin assumes command changes
+within it). So the planning loop never raises or returns NaN for a solver's failure, and a pair
+that starts too close separates even when the QP fails.
 """
 
 from __future__ import annotations
@@ -24,8 +32,11 @@ CERTIFY_TOL_M = 1e-7  # separation certification tolerance [m]
 class Certifier:
     """Certifies first inputs against the ball of radius ``v_max_mps`` and the ``separation`` items."""
 
-    def __init__(self, dt_s: float, v_max_mps: float | None, separation: Separation) -> None:
+    def __init__(
+        self, dt_s: float, v_max_mps: float | None, separation: Separation, a_max_mps2: float | None = None
+    ) -> None:
         self.dt_s, self.v_max_mps, self.separation = dt_s, v_max_mps, separation
+        self.a_step_mps = None if a_max_mps2 is None else a_max_mps2 * dt_s  # largest change per step
 
     def certify(self, p0: Array, u: Array, cand: Candidates) -> Array | None:
         """The command ``u`` (n, d) scaled into the ball, if it is safe from ``p0`` (n, d), else None."""
@@ -43,14 +54,54 @@ class Certifier:
         return True
 
     def fallback(
-        self, plan: Plan | None, p0: Array, cand: Candidates, horizon: int
+        self,
+        plan: Plan | None,
+        p0: Array,
+        cand: Candidates,
+        horizon: int,
+        solved: Array | None = None,
+        u_prev: Array | None = None,
     ) -> tuple[Array, Array, str]:
-        """Inputs (H, n, d), relative positions and a status note: the previous plan's next input
-        (scaled into the ball) if it certifies, else a hold."""
+        """Inputs (H, n, d), relative positions and a status note: the first certified of the
+        previous plan's next input, the ``solved`` command (n, d) or a separating command scaled
+        back, a decelerating step (with ``a_max``), else a hold. ``u_prev`` (n, d): the last command."""
+        prev = np.zeros_like(p0) if u_prev is None else u_prev
         if plan is not None:
-            u_plan = plan.shifted_inputs()
-            u_plan[0] = saturate(u_plan[0], self.v_max_mps)
-            if self.safe(p0, u_plan[0], cand):
+            u_plan = plan.shifted_inputs(self.a_step_mps)
+            u_plan[0] = self.within_limits(u_plan[0], prev)
+            if u_plan[0].any() and self.safe(p0, u_plan[0], cand):  # (a hold comes last)
                 return u_plan, self.dt_s * np.cumsum(u_plan, axis=0), "previous plan"
+        push = (self.v_max_mps or 1.0) * self.separation.push_apart(p0, cand)
+        tries = [("solved command", solved), ("separating command", push)]
+        for note, base in tries:
+            if base is None or not base.any():
+                continue
+            for scale in SCALES:
+                u0 = self.within_limits(scale * base, prev)
+                if self.safe(p0, u0, cand):
+                    return self.hold_after(u0, horizon, f"{note} x {scale:g}")
+        if self.a_step_mps is not None and prev.any():
+            u0 = self.within_limits(np.zeros_like(prev), prev)
+            if self.safe(p0, u0, cand):
+                return self.hold_after(u0, horizon, "decelerate")
         hold = np.zeros((horizon,) + p0.shape)
         return hold, hold, "hold"
+
+    def within_limits(self, u: Array, u_prev: Array) -> Array:
+        """``u`` (n, d) moved into the box ``|u - u_prev| <= a_max dt`` (with ``a_max``), then
+        scaled into the ball."""
+        if self.a_step_mps is not None:
+            u = u_prev + np.clip(u - u_prev, -self.a_step_mps, self.a_step_mps)
+        return saturate(u, self.v_max_mps)
+
+    def hold_after(self, u0: Array, horizon: int, note: str) -> tuple[Array, Array, str]:
+        """The plan ``u0`` then slowing to a hold (within ``a_max dt`` per step with ``a_max``)."""
+        u = np.zeros((horizon,) + u0.shape)
+        u[0] = u0
+        if self.a_step_mps is not None:
+            for j in range(1, horizon):
+                u[j] = u[j - 1] - np.clip(u[j - 1], -self.a_step_mps, self.a_step_mps)
+        return u, self.dt_s * np.cumsum(u, axis=0), note
+
+
+SCALES = (1.0, 0.5, 0.25, 0.125)  # fractions of a fallback command tried, largest first

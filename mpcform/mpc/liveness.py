@@ -1,11 +1,33 @@
-"""Liveness: the tie-break that keeps symmetric encounters from deadlocking.
+"""Liveness: the tie-break that keeps symmetric encounters and blocked drones from deadlocking.
 
 When the eq. 14 rollout breaks a separation row, the wishes (targets ``c``) of the drones
 involved are turned to the right about the world z axis, so antipodal swaps circulate instead of
-meeting head-on. A drone that stays stalled in conflict (its last command below
-:data:`STALL_FRACTION` of its wish) turns further each step, by :data:`STALL_GROWTH` of the
-base angle, up to a quarter turn: a symmetric ring that the first angle holds in balance
-(16 drones swapping in decoupled mode) is broken within a few steps.
+meeting head-on. That alone can settle into a standstill: a symmetric ring jammed at the centre
+turns in balance, and a drone pressed against a sphere has its turned wish pushed back by the rows.
+
+Stall detection: a conflicted drone is *stalled* at a step when it is away from its target
+(farther than :data:`ARRIVED_M`) and its last step moved it towards its target by less than
+:data:`STALL_FRACTION` of its wish's step (``|c_0| dt``): whether its reference stands still or
+runs away from it, it is not following.
+
+Resolution (the right-hand rule escalated, with hysteresis): each stalled step raises the drone's
+turn by :data:`STALL_GROWTH` of the base angle; the raised turn is *kept* while the drone stays
+in conflict, even when it moves again, so a ring that starts to circulate keeps circulating
+instead of falling back to the base angle and jamming again. It ends (a *resolution*) only
+when the drone leaves conflict. While the drone stays stuck the turn sweeps on past a quarter
+turn (the wish points backwards to the right, then to the left) and round the full circle: a
+drone wedged in a pocket between two spheres, or between parked drones, backs out of it, and
+if any direction of motion is open to it, the sweep finds it. Once a drone is :data:`BACKOFF_M`
+farther from its target than at its first stall, its escalation starts afresh from the base
+angle with the rule's side switched (it heads for its target again from where it got to, now
+passing the blocking drones or spheres on the other side, the side it backed out on; a turn held
+for good would only orbit the target). The side is kept for the rest of the run.
+Safety is untouched: the turn only changes the cost's targets, every row stays in the QP.
+
+Limits: the rule is local and greedy. A drone backing out of a pocket can fall back into it once
+it is out of conflict (then it stalls and escalates again; nothing bounds how many times), and a
+goal inside a region closed by obstacles or by parked drones is never reached. The rule does not
+plan around a sphere as a whole (no detour goal), so a long wall of spheres is followed slowly.
 """
 
 from __future__ import annotations
@@ -14,38 +36,86 @@ import numpy as np
 
 from mpcform._validate import Array
 
-STALL_FRACTION = 0.02  # a conflicted drone whose last command is below this fraction of its wish is stalled
-STALL_GROWTH = 0.1  # the tie-break angle grows by this fraction of itself per stalled step
+STALL_FRACTION = 0.02  # progress per step below this fraction of the wish's step counts as stalled
+STALL_GROWTH = 0.2  # the tie-break angle grows by this fraction of itself per stalled step
+ARRIVED_M = 1e-2  # a drone this close to its target is not stalled [m]
+FULL_TURN_RAD = 2.0 * np.pi
+BACKOFF_M = 1.0  # how much farther from its target than at its first stall a drone may back off [m]
 
 
 class TieBreak:
-    """The turn of each conflicted drone's wish, and how long each drone has been stalled."""
+    """The turn of each conflicted drone's wish, and how far each drone's turn is escalated.
 
-    def __init__(self, n: int, angle_rad: float) -> None:
+    ``stalled`` counts each drone's stalled steps in its current conflict (its escalation); the
+    event counters :attr:`new_stalls` and :attr:`resolved` refer to the last step.
+    """
+
+    def __init__(self, n: int, angle_rad: float, dt_s: float = 1.0) -> None:
         self.angle_rad = angle_rad  # base angle (0 disables)
-        self.stalled = np.zeros(n, dtype=int)  # steps in a row each drone was stalled in conflict
+        self.dt_s = dt_s
+        self.stalled = np.zeros(n, dtype=int)  # stalled steps in the current conflict, per drone
+        self.last_m: Array | None = None  # positions (n, d) at the last step
+        self.stall_distance_m = np.full(n, np.inf)  # distance to the target at the first stall
+        self.sense = np.ones(n)  # +1: turn to the right, -1: to the left (after a back-off)
+        self.new_stalls = 0  # drones that started to stall at the last step
+        self.resolved = 0  # escalated drones that left conflict at the last step
+
+    def reset(self) -> None:
+        """A new run: every drone turns to the right again."""
+        self.clear()
+        self.sense[:] = 1.0
 
     def clear(self) -> None:
-        """No drone is stalled (a step without conflict, or a new run)."""
+        """No drone is in conflict (a step without conflict, or a new run)."""
+        self.resolved = int(np.count_nonzero(self.stalled))
+        self.new_stalls = 0
         self.stalled[:] = 0
+        self.last_m = None
+        self.stall_distance_m[:] = np.inf
 
-    def turn(self, c: Array, conflicted: Array, u_prev: Array, started: bool) -> Array:
+    @property
+    def resolving(self) -> int:
+        """Drones whose turn is escalated."""
+        return int(np.count_nonzero(self.stalled))
+
+    def turn(self, c: Array, conflicted: Array, p0: Array, to_target: Array, started: bool) -> Array:
         """Targets ``c`` (H, n, d) with the ``conflicted`` (n,) drones' turned to the right;
-        ``u_prev`` (n, d) the last commands, ``started``: whether any command was given."""
+        ``p0`` (n, d) the positions, ``to_target`` (n, d) the way to the targets ``p* - p0``,
+        ``started``: whether any command was given."""
         if self.angle_rad <= 0:
             return c
-        angles = self.angles(conflicted, c[0], u_prev, started)
-        return np.where(conflicted[:, None], turn_about_z(c, -angles), c)
+        angles = self.angles(conflicted, c[0], p0, to_target, started)
+        return np.where(conflicted[:, None], turn_about_z(c, -self.sense * angles), c)
 
-    def angles(self, conflicted: Array, wish: Array, u_prev: Array, started: bool) -> Array:
-        """Turn angle per drone [rad]: the base angle, growing by ``STALL_GROWTH`` of it for every
-        step in a row that the drone has been conflicted and stalled, up to a quarter turn (a base
-        angle above a quarter turn is kept as it is). Counts this step."""
-        stalled = conflicted & (norms(u_prev) < STALL_FRACTION * norms(wish))
-        stalled &= started  # no command given yet: nothing has stalled
-        self.stalled = np.where(stalled, self.stalled + 1, 0)
+    def angles(self, conflicted: Array, wish: Array, p0: Array, to_target: Array, started: bool) -> Array:
+        """Turn angle per drone [rad]: the base angle, grown by ``STALL_GROWTH`` of it for every
+        stalled step in the drone's current conflict, modulo a full turn (a base angle of a quarter
+        turn or more is kept as it is); a drone past its back-off budget starts afresh. Counts this
+        step (see the module docstring)."""
+        distance = norms(to_target)
+        stalled = conflicted & (distance > ARRIVED_M)
+        if self.last_m is not None and started:
+            far = distance[:, None] > 0
+            towards = np.divide(to_target, distance[:, None], out=np.zeros_like(p0), where=far)
+            progress = np.einsum("nd,nd->n", p0 - self.last_m, towards)
+            stalled &= progress < STALL_FRACTION * norms(wish) * self.dt_s
+        else:
+            stalled[:] = False  # no step made yet: nothing has stalled
+        self.last_m = p0.copy()
+        self.new_stalls = int(np.count_nonzero(stalled & (self.stalled == 0)))
+        self.resolved = int(np.count_nonzero(~conflicted & (self.stalled > 0)))
+        self.stalled = np.where(conflicted, self.stalled + stalled, 0)
+        first = np.where(self.stalled > 0, np.minimum(self.stall_distance_m, distance), np.inf)
+        kept = np.where(self.stalled > 0, self.stall_distance_m, np.inf)
+        self.stall_distance_m = np.where(stalled, first, kept)
+        backed_off = distance > self.stall_distance_m + BACKOFF_M  # the budget is spent: start afresh
+        self.stalled[backed_off] = 0
+        self.stall_distance_m[backed_off] = np.inf
+        self.sense[backed_off] *= -1.0
         base = self.angle_rad
-        return np.minimum(base * (1.0 + STALL_GROWTH * self.stalled), max(base, 0.5 * np.pi))
+        if base >= 0.5 * np.pi:  # a base angle of a quarter turn or more is kept as it is
+            return np.full(self.stalled.shape, base)
+        return np.mod(base * (1.0 + STALL_GROWTH * self.stalled), FULL_TURN_RAD)
 
 
 def norms(v: Array) -> Array:

@@ -15,8 +15,10 @@ with a positive-definite Hessian. Two things make it cheap:
   cost is ``0.5 ||v - c||^2``: DAQP gets an identity Hessian (its cheapest setup), the constant
   rows are transformed once and the separation rows of all drones in one matrix product;
 - the slacks are almost always zero, so each drone is first solved without them: if that hard
-  QP is feasible and its multipliers at every step sum to at most ``w1``, its solution with
-  ``s = 0`` meets the soft QP's optimality conditions (exact penalty), else the soft QP is solved.
+  QP is feasible, its solution (``s = 0``) is the drone's plan, else the soft QP is solved. The
+  L1 penalty is exact once ``w1`` exceeds the hard QP's multipliers at every step; those grow
+  with speed and shrink with ``dt`` (a fixed ``w1`` is not exact everywhere), so the hard
+  optimum is taken whenever it exists: the limit of the soft optimum as ``w1`` grows.
 """
 
 from __future__ import annotations
@@ -81,17 +83,19 @@ class PerDroneQP(StepSolver):
         warm_u = np.zeros_like(qp.targets_mps) if qp.warm is None else qp.warm[0]  # inputs only
         return self.solve_drones(
             qp.start_m, qp.targets_mps, qp.u_prev_mps, rows.singles[on], rows.single_coeffs[on],
-            rows.single_lower[on], warm_u,
+            rows.single_lower[on], warm_u, rows.single_hard[on],
         )  # fmt: skip
 
     def solve_drones(
-        self, p0: Array, c: Array, u_prev: Array, singles: Array, coeffs: Array, lower: Array, warm_u: Array
+        self, p0: Array, c: Array, u_prev: Array, singles: Array, coeffs: Array, lower: Array, warm_u: Array,
+        hard: Array | None = None,
     ) -> tuple[QPSolution, int]:
         """Solve every drone's QP.
 
         ``p0`` (n, d) starts, ``c`` (H, n, d) targets, ``u_prev`` (n, d) last commands; separation
         items (all within reach) ``singles`` (S,) drone index, ``coeffs`` (S, R, d), ``lower``
-        (S, R); ``warm_u`` (H, n, d) inputs whose nearly active rows start DAQP's active set.
+        (S, R); ``warm_u`` (H, n, d) inputs whose nearly active rows start DAQP's active set;
+        ``hard`` (S,) the items whose first row is a hard no-approach row (no slack).
         Returns the solution in the sparse QP's layout ``[u | x | s]`` over these n drones (its
         ``solve_time_s`` is the time spent inside DAQP), and the number of active rows.
         """
@@ -100,11 +104,13 @@ class PerDroneQP(StepSolver):
         f_v = -c.transpose(1, 0, 2).reshape(n, nu)  # 0.5 ||v - c||^2
         v_warm = warm_u.transpose(1, 0, 2).reshape(n, nu) @ self._m.T
         c_lo, c_hi = self._bounds(p0, u_prev)
-        sep_v, sep_end, sep_lo, counts = self._separation(n, singles, coeffs, lower)
+        if hard is None:
+            hard = np.zeros(singles.shape[0], dtype=bool)
+        sep_v, sep_end, sep_lo, sep_soft, counts = self._separation(n, singles, coeffs, lower, hard)
         a, lo, hi = self._buffers(int(counts.max(initial=0)))
         offsets = [0, *np.cumsum(counts).tolist()]
         v_out, s_out = np.zeros((n, nu)), np.zeros((n, h))
-        flags, lams, active = np.zeros(n, dtype=int), [], np.zeros(n, dtype=int)
+        flags, active = np.zeros(n, dtype=int), np.zeros(n, dtype=int)
         iters, in_daqp = 0, 0.0
 
         def load(i: int) -> int:
@@ -124,18 +130,14 @@ class PerDroneQP(StepSolver):
             in_daqp += time.perf_counter() - t0
             iters += int(info["iterations"])
             v_out[i], lam = v, info["lam"]
-            lams.append(lam[n_const:])
             active[i] = np.count_nonzero(np.abs(lam) > ACTIVE_TOL)
-        # the hard optimum is the soft one (s = 0) where no step's multipliers sum above w1
-        lam_sep = np.abs(np.concatenate(lams)) if lams else np.zeros(0)  # (only read where flag is OK)
-        drone = np.repeat(np.arange(n), counts)
-        step_sum = np.bincount(drone * h + sep_end - 1, lam_sep, minlength=n * h).reshape(n, h)
-        soft = (flags != DAQP_OK) | (step_sum.max(axis=1, initial=0.0) > st.slack_weight)
+        soft = flags != DAQP_OK  # the hard optimum (s = 0) wherever the hard QP is feasible
         for i in np.flatnonzero(soft).tolist():
             m = load(i)
             t0 = time.perf_counter()
             v_out[i], s_out[i], flags[i], info = self._solve_soft(
-                f_v[i], a[:m], hi[:m], lo[:m], sep_end[offsets[i] : offsets[i + 1]], n_const
+                f_v[i], a[:m], hi[:m], lo[:m], sep_end[offsets[i] : offsets[i + 1]],
+                sep_soft[offsets[i] : offsets[i + 1]], n_const,
             )  # fmt: skip
             in_daqp += time.perf_counter() - t0
             iters += int(info["iterations"])
@@ -162,7 +164,7 @@ class PerDroneQP(StepSolver):
         return self._a, self._lo, self._hi
 
     def _solve_soft(
-        self, f_v: Array, a: Array, hi: Array, lo: Array, end: Array, n_const: int
+        self, f_v: Array, a: Array, hi: Array, lo: Array, end: Array, soft: Array, n_const: int
     ) -> tuple[Array, Array, int, dict[str, Any]]:
         """The drone's QP with its slacks (first, simple bounds ``s >= 0``; Hessian ``diag(w2, I)``).
 
@@ -170,7 +172,7 @@ class PerDroneQP(StepSolver):
         row tolerance up with it (measured: 3.5e-8 misses at ``w2 = 0``)."""
         st, h = self.settings, self.settings.horizon
         a_s = np.zeros((a.shape[0], h))
-        a_s[n_const + np.arange(end.shape[0]), end - 1] = 1.0
+        a_s[n_const + np.arange(end.shape[0]), end - 1] = soft
         f = np.concatenate([np.full(h, st.slack_weight), f_v])
         z, _, flag, info = self._daqp.solve(
             self._hess_soft, f, np.hstack([a_s, a]), np.concatenate([np.full(h, DAQP_INF), hi]),
@@ -179,16 +181,18 @@ class PerDroneQP(StepSolver):
         return z[h:], z[:h], flag, info
 
     def _separation(
-        self, n: int, singles: Array, coeffs: Array, lower: Array
-    ) -> tuple[Array, Array, Array, Array]:
-        """Separation rows in ``v``, their position steps and lower bounds, sorted by drone, and
-        the number of rows per drone.
+        self, n: int, singles: Array, coeffs: Array, lower: Array, hard: Array
+    ) -> tuple[Array, Array, Array, Array, Array]:
+        """Separation rows in ``v``, their position steps, lower bounds and whether they have a
+        slack (not an item's hard first row), sorted by drone, and the number of rows per drone.
 
         A row ``a^T x_e + s_e >= b`` that every reachable ``x_e`` meets (``b <= -|a| e v_max dt``,
         since the velocity set lies in the ball) is dropped: the optimum is unchanged.
         """
         order = np.argsort(singles, kind="stable")
-        singles, coeffs, lower = singles[order], coeffs[order], lower[order]
+        singles, coeffs, lower, hard = singles[order], coeffs[order], lower[order], hard[order]
+        soft = np.ones(lower.shape, dtype=bool)
+        soft[hard, 0] = False
         ends = self._ends
         keep = np.ones(lower.shape, dtype=bool)
         if self.limits.v_max_mps is not None:
@@ -197,7 +201,7 @@ class PerDroneQP(StepSolver):
         rows_v = np.matmul(coeffs.transpose(1, 0, 2), self._x_v[ends - 1]).transpose(1, 0, 2)  # (S, R, H d)
         end = np.broadcast_to(ends, lower.shape)[keep]
         counts = np.bincount(singles, keep.sum(axis=1), minlength=n).astype(np.intp)
-        return rows_v[keep], end, lower[keep], counts
+        return rows_v[keep], end, lower[keep], soft[keep], counts
 
     def _bounds(self, p0: Array, u_prev: Array) -> tuple[Array, Array]:
         """Lower and upper bounds (n, rows) of the constant rows for each drone."""

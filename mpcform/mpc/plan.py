@@ -24,9 +24,19 @@ class Plan:
         """The plan of inputs ``u`` and positions ``x`` (H, n, d) relative to the start ``p0`` (n, d)."""
         return cls(u, np.concatenate([p0[None], p0 + x]))
 
-    def shifted_inputs(self) -> Array:
-        """Inputs (H, n, d) shifted one step, ending in a hold."""
-        return np.concatenate([self.inputs_mps[1:], np.zeros((1,) + self.inputs_mps.shape[1:])])
+    def shifted_inputs(self, a_step_mps: float | None = None) -> Array:
+        """Inputs (H, n, d) shifted one step, ending in a hold; with ``a_step_mps`` (a_max dt) the last
+        step slows down by at most that much per component instead.
+
+        The hold keeps the shifted plan's positions collision-free (the last position repeats),
+        but it can break the acceleration rows at the last step (``|u_{H-1}| > a_max dt``): without
+        a terminal rest constraint, the shifted plan is not always a zero-slack candidate for the
+        next QP when ``a_max`` is set; the guess (:func:`guess`) keeps the hold, the fallback's plan
+        slows down within ``a_max``."""
+        last = np.zeros((1,) + self.inputs_mps.shape[1:])
+        if a_step_mps is not None:
+            last[0] = self.inputs_mps[-1] - np.clip(self.inputs_mps[-1], -a_step_mps, a_step_mps)
+        return np.concatenate([self.inputs_mps[1:], last])
 
 
 def rollout(c: Array, k: float, dt: float) -> tuple[Array, Array]:

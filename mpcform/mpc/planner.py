@@ -7,6 +7,13 @@ items (:mod:`mpcform.mpc.candidates`), their rows linearised about the guess
 QP over the conflicted drones' groups: the sparse QP with a backend (:mod:`mpcform.mpc.sparse`),
 or in decoupled mode each drone's block with DAQP (:mod:`mpcform.mpc.per_drone`). The command is
 certified, or replaced by the safe fallback (:mod:`mpcform.mpc.certify`), and reported.
+
+In decoupled mode the pair rows are split about the guess's midpoints, unless the rollout meets
+the limit rows and the joint pair rows (and the obstacle rows) about the guess: then every pair of
+the rollout stays ``d_min + margin`` apart along each segment, and the split rows are taken about
+the rollout itself, which meets them exactly; so the rollout is the decoupled QP's optimum, and
+the fast path (which tests the joint rows) returns the same command as a solve. A rollout that
+breaks a limit row is never a linearisation point (the plan could not follow it).
 """
 
 from __future__ import annotations
@@ -64,7 +71,7 @@ class MPCPlanner(Controller):
         self._families = limit_rows(self.dim, dt_s, limits, settings)
         self._separation = sep = Separation(self.dim, limits, settings, self.obstacles)
         self._candidates = CandidateSelector(self.n, dt_s, limits, settings, self.obstacles)
-        self._certifier = Certifier(dt_s, limits.v_max_mps, sep)
+        self._certifier = Certifier(dt_s, limits.v_max_mps, sep, limits.a_max_mps2)
         self._solver: StepSolver  # the sparse QP with a backend, or DAQP per drone
         if settings.solves_per_drone:
             self._solver = PerDroneQP(self.dim, dt_s, limits, settings, self._families)
@@ -74,7 +81,7 @@ class MPCPlanner(Controller):
             backend = solver if isinstance(solver, QPBackend) else make_backend(solver, options)
             self._solver = SparseSolver(backend, self.dim, dt_s, limits, settings, self._families, sep)
         self.solver_name = self._solver.name
-        self._tie_break = TieBreak(self.n, settings.tie_break_rad)
+        self._tie_break = TieBreak(self.n, settings.tie_break_rad, dt_s)
         self.reset(0.0, np.zeros((self.n, self.dim)))
 
     # ---- state ----------------------------------------------------------------------------
@@ -83,7 +90,7 @@ class MPCPlanner(Controller):
         self._solver.reset()
         self._plan: Plan | None = None
         self._u_prev = np.zeros((self.n, self.dim))
-        self._tie_break.clear()
+        self._tie_break.reset()
 
     @property
     def plan(self) -> Plan | None:
@@ -107,34 +114,49 @@ class MPCPlanner(Controller):
         if grouped or st.solves_per_drone:  # no fixed pattern: rows only within reach
             cand = cand.within_reach()
         rows = sep.rows(p0, about, cand)
+        if st.coupling == "decoupled" and not off_limits.any() and sep.meets_joint(x_nom, rows):
+            # the rollout meets the limits and the joint rows: the decoupled rows are split about
+            # the rollout itself, which meets them, so it is the optimum (see the module docstring)
+            if st.fast_path:
+                return self._fast_path(p0, u_nom, x_nom)
+            about = np.concatenate([p0[None], p0 + x_nom])
+            rows = sep.rows(p0, about, cand)
         conflicted = sep.conflicted(x_nom, rows)
         if st.fast_path and not (off_limits | conflicted).any():
             return self._fast_path(p0, u_nom, x_nom)
-        c = self._tie_break.turn(c, conflicted, self._u_prev, self._plan is not None)
+        c = self._tie_break.turn(c, conflicted, p0, targets[0] - p0, self._plan is not None)
         bad = off_limits | conflicted
         drones = qp_drones(bad, rows.pairs[rows.pair_on]) if grouped else np.arange(self.n)
         sub = rows.subset(drones, self.n, on_only=grouped)  # grouped: the pattern follows the groups
         warm = warm_start(self._plan, p0, u_nom, x_nom)[:, :, drones] if self._solver.warm_starts else None
         qp = StepQP(self.n, drones, p0[drones], c[:, drones], self._u_prev[drones], sub, cand.rebuilt, warm)
         sol, active = self._solver.solve(qp)
-        status = sol.status
+        status, solved = sol.status, None
+        inside_m, inside = sep.start_shortfall(p0, rows)  # items that start too close
         if sol.success and sol.x is not None:
             u, x = self._merge(drones, sol.x, u_nom, x_nom)
             u0 = self._certifier.certify(p0, u[0], cand)
             if u0 is not None:
                 self._accept(p0, u, x)
-                return ControlStep(u0, self._qp_info(sol, sol.x, active, drones, x, rows))
-            status += "; command failed certification"
-        u, x, note = self._certifier.fallback(self._plan, p0, cand, horizon)
+                info = self._qp_info(sol, sol.x, active, drones, x, rows, inside_m, inside)
+                return ControlStep(u0, info)
+            status, solved = status + "; command failed certification", u[0]
+        u, x, note = self._certifier.fallback(self._plan, p0, cand, horizon, solved, self._u_prev)
         self._accept(p0, u, x)
         info = StepInfo("fallback", status=f"{status}; {note}", iterations=sol.iterations,
-                        solve_time_s=sol.solve_time_s)  # fmt: skip
+                        solve_time_s=sol.solve_time_s, max_slack_m=inside_m,
+                        slack_pairs=_pairs_of(inside), **self._liveness())  # fmt: skip
         return ControlStep(u[0].copy(), info)
+
+    def _liveness(self) -> dict[str, int]:
+        """The tie-break's events of this step (StepInfo fields)."""
+        tb = self._tie_break
+        return {"stalled": tb.new_stalls, "resolving": tb.resolving, "resolved": tb.resolved}
 
     def _fast_path(self, p0: Array, u_nom: Array, x_nom: Array) -> ControlStep:
         self._tie_break.clear()
         self._accept(p0, u_nom, x_nom)
-        return ControlStep(u_nom[0].copy(), StepInfo("fast_path"))
+        return ControlStep(u_nom[0].copy(), StepInfo("fast_path", resolved=self._tie_break.resolved))
 
     def _merge(self, drones: Array, z: Array, u_nom: Array, x_nom: Array) -> tuple[Array, Array]:
         """Inputs and relative positions (H, n, d): the solution ``z``'s for ``drones``, the
@@ -147,25 +169,32 @@ class MPCPlanner(Controller):
         return u, x
 
     def _qp_info(
-        self, sol: QPSolution, z: Array, active: int, drones: Array, x: Array, rows: SeparationRows
+        self, sol: QPSolution, z: Array, active: int, drones: Array, x: Array, rows: SeparationRows,
+        inside_m: float, inside: Array,
     ) -> StepInfo:
         """What a certified solve ``z`` reports: its solver figures and the slack it needed (the
-        items whose rows positions ``x`` (H, n, d) miss)."""
+        items whose rows positions ``x`` (H, n, d) miss, and the items ``inside`` that start
+        ``inside_m`` inside their required distance)."""
         nud = self.settings.horizon * drones.shape[0] * self.dim
         slack = z[2 * nud :]
-        shortfall, slack_items = 0.0, tuple[tuple[int, int], ...]()
+        shortfall, missed = inside_m, inside
         if slack.max(initial=0.0) > SLACK_REPORT_M / 2:
-            shortfall, missed = self._separation.shortfall(x, rows, SLACK_REPORT_M)
-            slack_items = tuple((int(a), int(b)) for a, b in missed)
+            planned, missed = self._separation.shortfall(x, rows, SLACK_REPORT_M)
+            shortfall, missed = max(shortfall, planned), np.concatenate([inside, missed])
         return StepInfo(
             "qp", status=sol.status, iterations=sol.iterations, solve_time_s=sol.solve_time_s,
-            active_rows=active, max_slack_m=max(shortfall, 0.0), slack_pairs=slack_items,
-            qp_drones=int(drones.shape[0]),
+            active_rows=active, max_slack_m=max(shortfall, 0.0), slack_pairs=_pairs_of(missed),
+            qp_drones=int(drones.shape[0]), **self._liveness(),
         )  # fmt: skip
 
     def _accept(self, p0: Array, u: Array, x: Array) -> None:
         self._plan = Plan.from_relative(p0, u, x)
         self._u_prev = u[0].copy()
+
+
+def _pairs_of(labels: Array) -> tuple[tuple[int, int], ...]:
+    """Item labels (m, 2) as sorted unique tuples."""
+    return tuple(sorted({(int(a), int(b)) for a, b in labels}))
 
 
 def _check_limits(

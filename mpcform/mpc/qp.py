@@ -75,14 +75,15 @@ class MPCQP:
         # interior-point backends do not drop them): |c^T (x_i - x_k)| <= 2 v_max H dt
         self._off_lower = -(2.0 * (limits.v_max_mps or 0.0) * h * dt_s + 1.0)
 
-    def cost_vector(self, c: Array) -> Array:
-        """Linear cost term for targets ``c_j = ff_j + k (p*_j - p0)`` (H, n, d)."""
+    def cost_vector(self, c: Array, slack_weight: float | None = None) -> Array:
+        """Linear cost term for targets ``c_j = ff_j + k (p*_j - p0)`` (H, n, d) (slack weight: the
+        settings' unless given)."""
         lay, k = self.layout, self.settings.gain_per_s
         q = np.empty(lay.n_var)
         q[: lay.nud] = -c.ravel()
         q[lay.nud : 2 * lay.nud - lay.n * lay.dim] = -k * c[1:].ravel()
         q[2 * lay.nud - lay.n * lay.dim : 2 * lay.nud] = 0.0
-        q[2 * lay.nud :] = self.settings.slack_weight
+        q[2 * lay.nud :] = self.settings.slack_weight if slack_weight is None else slack_weight
         return q
 
     def bounds(self, p0: Array, u_prev: Array, sep_lower: Array, sep_active: Array) -> tuple[Array, Array]:
@@ -95,15 +96,23 @@ class MPCQP:
         lo[self.sep_rows] = sep.ravel()
         return lo, hi
 
-    def separation_values(self, coeffs_pairs: Array, coeffs_singles: Array) -> Array:
-        """CSC data of A for row coefficients (P, R, d) of the pairs and (S, R, d) of the singles."""
+    def separation_values(
+        self, coeffs_pairs: Array, coeffs_singles: Array, hard_pairs: Array | None = None,
+        hard_singles: Array | None = None,
+    ) -> Array:
+        """CSC data of A for row coefficients (P, R, d) of the pairs and (S, R, d) of the singles;
+        the items marked ``hard_*`` have no slack in their first row (a hard no-approach row)."""
         vals = self._coo_vals.copy()
         parts = []
         if coeffs_pairs.shape[0]:
             ones = np.ones(coeffs_pairs.shape[:2] + (2,))
+            if hard_pairs is not None:
+                ones[hard_pairs, 0] = 0.0
             parts.append(np.concatenate([coeffs_pairs, -coeffs_pairs, ones], axis=2).ravel())
         if coeffs_singles.shape[0]:
             ones = np.ones(coeffs_singles.shape[:2] + (1,))
+            if hard_singles is not None:
+                ones[hard_singles, 0] = 0.0
             parts.append(np.concatenate([coeffs_singles, ones], axis=2).ravel())
         if parts:
             vals[self._sep_entries] = np.concatenate(parts)

@@ -11,6 +11,13 @@ segment ends (position steps of :func:`mpcform.mpc.rows.row_ends`), with a slack
 - decoupled pair: two one-drone rows about the guess's midpoint ``m_e``, each asking for half,
   ``+-c^T W (p0_i + x_{e,i} - m_e) + s_{e,i} >= (d_min + margin) / 2``;
 - obstacle: ``c^T (p0_i + x_{e,i} - c_o) + s_{e,i} >= required_o + margin``.
+
+An item that already starts inside its required distance (a close start) cannot meet these rows
+at once; its first row (the end of the first segment, ``x_1``) is then replaced by a hard
+no-approach row without slack along the start's normal ``c0 = W r0 / |W r0|``: joint
+``c0^T W (x_{1,i} - x_{1,k}) >= 0``, decoupled ``+-c0^T W x_{1,side} >= 0`` per drone, obstacle
+``c0^T x_{1,i} >= 0``. Along the first segment ``|r(t)| >= c0^T r(t) >= |r0|``: such an item never
+gets closer, and every drone holding meets the row, so the hard rows stay feasible.
 """
 
 from __future__ import annotations
@@ -26,7 +33,7 @@ from mpcform.mpc.limits import Limits, SphereObstacle, obstacle_arrays
 from mpcform.mpc.rows import row_ends, row_segments
 from mpcform.mpc.settings import MPCSettings
 
-RowPart = tuple[Array, Array, Array, Array]  # (items or labels, coefficients, lower bounds, on)
+RowPart = tuple[Array, Array, Array, Array, Array]  # (items or labels, coefficients, lower bounds, on, hard)
 Test = tuple[Array, Array, Array | float]  # (relative guess, relative positions, required distance)
 
 
@@ -35,7 +42,9 @@ class SeparationRows:
     """Linearised separation rows of one step, in QP order (R rows per item).
 
     Two-drone items (joint pairs) first, then one-drone items (decoupled pair sides, obstacles);
-    ``labels`` (S, 2) names what a one-drone item reports: ``(i, k)`` or ``(i, -1 - obstacle)``.
+    ``labels`` (S, 2) names what a one-drone item reports: ``(i, k)`` or ``(i, -1 - obstacle)``;
+    ``*_hard`` marks the items that start inside their required distance: their first row is a hard
+    no-approach row (no slack).
     """
 
     pairs: Array  # (P, 2)
@@ -47,6 +56,8 @@ class SeparationRows:
     single_coeffs: Array  # (S, R, d)
     single_lower: Array  # (S, R)
     single_on: Array  # (S,)
+    pair_hard: Array  # (P,)
+    single_hard: Array  # (S,)
 
     def subset(self, drones: Array, n: int, on_only: bool) -> SeparationRows:
         """The rows of the items within ``drones`` (only those within reach with ``on_only``), with
@@ -61,6 +72,7 @@ class SeparationRows:
             local[self.pairs[keep_p]], self.pair_coeffs[keep_p], self.pair_lower[keep_p],
             self.pair_on[keep_p], local[self.singles[keep_s]], self.labels[keep_s],
             self.single_coeffs[keep_s], self.single_lower[keep_s], self.single_on[keep_s],
+            self.pair_hard[keep_p], self.single_hard[keep_s],
         )  # fmt: skip
 
 
@@ -95,16 +107,20 @@ class PairSeparation:
         i, k = pairs[:, 0], pairs[:, 1]
         rel = self.relative(guess, i, k)  # (H + 1, P, d), metric space
         coeffs = segment_normals(rel, self.segs) * self.metric  # (P, R, d), world coordinates
+        hard, c0 = inside(rel[0], self.d_min_m)
+        coeffs[hard, 0] = c0 * self.metric
         if self.joint:
             lower = self.d_min_m + self.margin_m - np.einsum("prd,pd->pr", coeffs, p0[i] - p0[k])
-            return (pairs, coeffs, lower, on), []
+            lower[hard, 0] = 0.0
+            return (pairs, coeffs, lower, on, hard), []
         singles = []  # two per-drone rows about the guess's midpoint at each row's position step
         mid = 0.5 * (guess[:, i] + guess[:, k])[self.ends].transpose(1, 0, 2)  # (P, R, d)
         half = 0.5 * (self.d_min_m + self.margin_m)
         for side, sign in ((i, 1.0), (k, -1.0)):
             lower = half - np.einsum("prd,prd->pr", sign * coeffs, p0[side][:, None] - mid)
+            lower[hard, 0] = 0.0
             labels = np.column_stack([side, i + k - side])
-            singles.append((labels, sign * coeffs, lower, on))
+            singles.append((labels, sign * coeffs, lower, on, hard))
         return None, singles
 
     def clear_test(self, p0: Array, guess: Array, pos: Array, spread: Array) -> Test:
@@ -137,8 +153,11 @@ class ObstacleSeparation:
         drone, ob = items[:, 0], items[:, 1]
         center, required = self.center_m[ob], self.required_m[ob]
         coeffs = segment_normals(guess[:, drone] - center, self.segs)
+        hard, c0 = inside(p0[drone] - center, required)
+        coeffs[hard, 0] = c0
         lower = required[:, None] + self.margin_m - np.einsum("ord,od->or", coeffs, p0[drone] - center)
-        return np.column_stack([drone, -1 - ob]), coeffs, lower, on
+        lower[hard, 0] = 0.0
+        return np.column_stack([drone, -1 - ob]), coeffs, lower, on, hard
 
     def clear_test(self, p0: Array, guess: Array, pos: Array, spread: Array) -> Test:
         """The items that the per-drone spread bound (see :meth:`Separation.clear`) leaves in doubt."""
@@ -171,8 +190,8 @@ class Separation:
     def rows(self, p0: Array, guess: Array, cand: Candidates) -> SeparationRows:
         """Closest-point rows about ``guess`` (H + 1, n, d) for every candidate item."""
         r, d = self.n_rows, self.dim
-        none = np.empty((0, 2), dtype=np.intp)
-        empty = (none, np.empty((0, r, d)), np.empty((0, r)), np.empty(0, dtype=bool))
+        none, no = np.empty((0, 2), dtype=np.intp), np.empty(0, dtype=bool)
+        empty = (none, np.empty((0, r, d)), np.empty((0, r)), no, no)
         joint, singles = empty, [empty]
         if cand.pairs.shape[0] and self.pairs is not None:
             two, one = self.pairs.rows(p0, guess, cand.pairs, cand.pair_on)
@@ -180,8 +199,12 @@ class Separation:
             singles += one
         if cand.obstacles.shape[0] and self.obstacles is not None:
             singles.append(self.obstacles.rows(p0, guess, cand.obstacles, cand.obstacle_on))
-        labels, s_coeffs, s_lower, s_on = (np.concatenate(parts) for parts in zip(*singles, strict=True))
-        return SeparationRows(*joint, labels[:, 0], labels, s_coeffs, s_lower, s_on)
+        columns = (np.concatenate(parts) for parts in zip(*singles, strict=True))
+        labels, s_coeffs, s_lower, s_on, s_hard = columns
+        pairs, p_coeffs, p_lower, p_on, p_hard = joint
+        return SeparationRows(
+            pairs, p_coeffs, p_lower, p_on, labels[:, 0], labels, s_coeffs, s_lower, s_on, p_hard, s_hard
+        )
 
     def clear(self, p0: Array, guess: Array, x: Array) -> bool:
         """A cheap sufficient test that positions ``x`` (H, n, d) meet every joint pair row and
@@ -228,6 +251,19 @@ class Separation:
             missed.append(labels[short > tol])
         return worst, np.unique(np.concatenate(missed), axis=0)
 
+    def meets_joint(self, x: Array, rows: SeparationRows) -> bool:
+        """Whether positions ``x`` (H, n, d) meet the joint pair rows (and the obstacle rows) of the
+        items within reach, given the decoupled ``rows`` of the whole candidate set: a pair's two
+        sides share their normal and their lower bounds add up to the joint one, so the joint row
+        is the sum of its two sides' rows."""
+        xe = x[self.ends - 1]  # (R, n, d)
+        value = np.einsum("srd,rsd->sr", rows.single_coeffs, xe[:, rows.singles]) - rows.single_lower
+        value = np.where(rows.single_on[:, None], value, np.inf)
+        pair = rows.labels[:, 1] >= 0
+        first = pair & (rows.labels[:, 0] < rows.labels[:, 1])  # side i of pair (i, k), i < k
+        joint = value[first] + value[pair & ~first]  # both sides in the candidates' pair order
+        return bool(joint.min(initial=np.inf) >= 0.0 and value[~pair].min(initial=np.inf) >= 0.0)
+
     def conflicted(self, x: Array, rows: SeparationRows) -> Array:
         """Drones (n,) of the items whose rows positions ``x`` (H, n, d) miss (an obstacle item
         names only its drone)."""
@@ -235,6 +271,43 @@ class Separation:
         labels = self.shortfall(x, rows, 0.0)[1]
         conflicted[labels[labels >= 0]] = True
         return conflicted
+
+    def push_apart(self, p0: Array, cand: Candidates) -> Array:
+        """Unit directions (n, d) (zero for a drone with none) away from the partners and
+        obstacles within reach whose required distance it is inside: the sum of the start normals."""
+        push = np.zeros_like(p0)
+        if cand.pair_on.any() and self.pairs is not None:
+            i, k = cand.pairs[cand.pair_on].T
+            hard, c0 = inside(self.pairs.relative(p0, i, k), self.pairs.d_min_m)
+            np.add.at(push, i[hard], c0)
+            np.add.at(push, k[hard], -c0)
+        if cand.obstacle_on.any() and self.obstacles is not None:
+            i, m = cand.obstacles[cand.obstacle_on].T
+            hard, c0 = inside(p0[i] - self.obstacles.center_m[m], self.obstacles.required_m[m])
+            np.add.at(push, i[hard], c0)
+        norm = np.linalg.norm(push, axis=1, keepdims=True)
+        return np.divide(push, norm, out=np.zeros_like(push), where=norm > 1e-12)
+
+    def start_shortfall(self, p0: Array, rows: SeparationRows) -> tuple[float, Array]:
+        """How far [m] the items that start inside their required distance (the hard ones) are
+        inside it at ``p0``, at most, and their labels (m, 2)."""
+        labels = np.concatenate([rows.pairs[rows.pair_hard & rows.pair_on],
+                                 rows.labels[rows.single_hard & rows.single_on]])  # fmt: skip
+        if labels.shape[0] == 0:
+            return 0.0, labels
+        pair = labels[:, 1] >= 0
+        labels[pair] = np.sort(labels[pair], axis=1)  # a decoupled pair's two sides name it once
+        labels = np.unique(labels, axis=0)
+        pair, worst = labels[:, 1] >= 0, 0.0
+        if pair.any() and self.pairs is not None:
+            i, k = labels[pair].T
+            dist = np.linalg.norm(self.pairs.relative(p0, i, k), axis=1)
+            worst = max(worst, float((self.pairs.d_min_m - dist).max()))
+        if (~pair).any() and self.obstacles is not None:
+            i, m = labels[~pair, 0], -1 - labels[~pair, 1]
+            dist = np.linalg.norm(p0[i] - self.obstacles.center_m[m], axis=1)
+            worst = max(worst, float((self.obstacles.required_m[m] - dist).max()))
+        return worst, labels
 
     def first_segment(self, p0: Array, p1: Array, cand: Candidates) -> list[Test]:
         """For the items within reach: relative positions at ``p0`` and ``p1`` and the distance required."""
@@ -244,6 +317,18 @@ class Separation:
         if cand.obstacle_on.any() and self.obstacles is not None:
             tests.append(self.obstacles.first_segment(p0, p1, cand.obstacles[cand.obstacle_on]))
         return tests
+
+
+def inside(rel0: Array, required: Array | float) -> tuple[Array, Array]:
+    """Which items (m,) start inside their required distance (relative start positions ``rel0``
+    (m, d)), and their unit start normals (h, d) ``rel0 / |rel0|`` (a fixed axis if coincident)."""
+    dist = np.linalg.norm(rel0, axis=1)
+    hard = dist < np.broadcast_to(required, dist.shape)
+    c0 = np.zeros((int(hard.sum()), rel0.shape[1]))
+    c0[:, 0] = 1.0
+    ok = dist[hard] > 1e-12
+    c0[ok] = rel0[hard][ok] / dist[hard][ok, None]
+    return hard, c0
 
 
 def _max_norm(v: Array) -> Array:

@@ -30,8 +30,9 @@ class MPCSettings:
     - ``tie_break_rad``: when the eq. 14 rollout breaks a separation row, the desired
       velocities of the drones involved are turned by this angle about the world z axis (to the
       right), so symmetric encounters (antipodal swaps) circulate instead of deadlocking; for a
-      drone that stays stalled in conflict the angle grows step by step (up to a quarter turn).
-      It changes nothing when no row is active (0 disables).
+      drone that stays stalled in conflict the angle grows step by step and is kept while the
+      conflict lasts (:mod:`mpcform.mpc.liveness`). It changes nothing when no row is active
+      (0 disables).
     - ``coupling``: ``"joint"`` (one row per pair, ``c^T (p_i - p_k) >= d_min``) or
       ``"decoupled"`` (each pair row split into two per-drone rows about the guess's midpoint,
       ``c^T (p_i - m) >= d_min / 2``: slightly more conservative, but the QP is block-diagonal

@@ -2,6 +2,13 @@
 
 The QP over the drones solved for is kept while the drones and the items stay the same; the
 backend is set up when the QP (its sparsity pattern) changes and updated otherwise.
+
+Exact penalty at any speed and step: the L1 slack weight ``w1`` is exact only above the hard
+QP's multipliers, which grow with speed and shrink with ``dt``. When a solve uses slack, the QP
+is solved again with the weight raised :data:`RAISE` fold (up to :data:`MAX_RAISES` times) while
+that lowers the slack: a feasible hard QP then gives its own optimum (slack within the solver's
+tolerance), an infeasible one keeps the least slack. The weight enters the cost linearly, so the
+Hessian's conditioning does not change.
 """
 
 from __future__ import annotations
@@ -16,6 +23,10 @@ from mpcform.mpc.rows import LimitRows
 from mpcform.mpc.separation import Separation, SeparationRows
 from mpcform.mpc.settings import MPCSettings
 from mpcform.solvers.base import QPBackend, QPContext, QPSolution
+
+RAISE = 30.0  # the slack weight is raised this many fold per re-solve
+MAX_RAISES = 3  # at most this many re-solves (w1 up to 27,000 times the setting)
+SLACK_TOL_M = 1e-6  # a solve that misses no row by more than this is final [m]
 
 
 class SparseSolver(StepSolver):
@@ -49,7 +60,8 @@ class SparseSolver(StepSolver):
         lower = np.concatenate([rows.pair_lower, rows.single_lower])
         on = np.concatenate([rows.pair_on, rows.single_on])
         lo, hi = mpc_qp.bounds(qp.start_m, qp.u_prev_mps, lower, on)
-        a_data = mpc_qp.separation_values(rows.pair_coeffs, rows.single_coeffs)
+        hard = rows.pair_hard, rows.single_hard
+        a_data = mpc_qp.separation_values(rows.pair_coeffs, rows.single_coeffs, *hard)
         if self._backend_qp is not mpc_qp:
             a_matrix = mpc_qp.A.copy()
             a_matrix.data = a_data
@@ -63,9 +75,38 @@ class SparseSolver(StepSolver):
         if qp.warm is not None:
             x0 = np.concatenate([qp.warm.ravel(), np.zeros(mpc_qp.layout.n_slack)])
         sol = backend.solve(x0)
+        sol = self._exact(sol, mpc_qp, qp, lo, hi, a_data, x0)
         nud = mpc_qp.layout.nud
         active = 0 if sol.y is None else int(np.count_nonzero(np.abs(sol.y[nud:]) > ACTIVE_TOL))
         return sol, active
+
+    def _exact(
+        self, sol: QPSolution, mpc_qp: MPCQP, qp: StepQP, lo: Array, hi: Array, a_data: Array,
+        x0: Array | None,
+    ) -> QPSolution:
+        """``sol``, or a re-solve with a raised slack weight that needs less slack (module docstring)."""
+        lay, weight = mpc_qp.layout, self.settings.slack_weight
+        nud = 2 * lay.nud
+        for _ in range(MAX_RAISES):
+            if not sol.success or sol.x is None or not self._short(sol.x, mpc_qp, qp):
+                return sol
+            weight *= RAISE
+            self.backend.update(mpc_qp.cost_vector(qp.targets_mps, weight), lo, hi, a_data)
+            again = self.backend.solve(x0)
+            if not again.success or again.x is None or again.x[nud:].sum() >= sol.x[nud:].sum():
+                return sol
+            sol = QPSolution(again.x, again.y, True, again.status, sol.iterations + again.iterations,
+                             sol.solve_time_s + again.solve_time_s)  # fmt: skip
+        return sol
+
+    def _short(self, z: Array, mpc_qp: MPCQP, qp: StepQP) -> bool:
+        """Whether the solution ``z`` misses a separation row by more than :data:`SLACK_TOL_M` (an
+        interior-point solver leaves slacks of its tolerance's order at zero: not counted)."""
+        lay = mpc_qp.layout
+        if z[2 * lay.nud :].max(initial=0.0) <= SLACK_TOL_M:
+            return False
+        x = z[lay.nud : 2 * lay.nud].reshape(lay.horizon, lay.n, lay.dim)
+        return self.separation.shortfall(x, qp.rows, SLACK_TOL_M)[0] > SLACK_TOL_M
 
     def _sub_qp(self, drones: Array, rows: SeparationRows, rebuilt: bool) -> MPCQP:
         """The QP over ``drones`` and the items of ``rows``, kept while both stay the same."""

@@ -6,7 +6,9 @@
 ``min_separation_segments`` (along the straight segments between samples; both null for one
 drone), ``max_speed`` (largest ``||u_i||`` [m/s]), ``separation_violations`` (count of
 (sample, pair) closer than d_min) and ``speed_violations`` (count of (step, drone) faster than
-v_max), ``qp_solves``, ``fast_path_steps``, ``solver_failures``, ``max_slack`` [m], and
+v_max), ``qp_solves``, ``fast_path_steps``, ``solver_failures``, ``max_slack`` [m],
+``stall_events`` and ``resolutions`` (drones that started to stall, and escalated tie-breaks
+that ended, :mod:`mpcform.mpc.liveness`), and
 ``step_time_ms`` (median, p90 and max of the controller's wall-clock time per step mode). The
 figures draw the same series (:func:`tracking_errors_m`, :func:`min_separations_m`,
 :func:`command_speeds_mps`).
@@ -102,6 +104,8 @@ def run_metrics(
         "fast_path_steps": int((modes == "fast_path").sum()),
         "solver_failures": int((modes == "fallback").sum()),
         "max_slack": float(max((i.max_slack_m for i in result.infos), default=0.0)),
+        "stall_events": int(sum(i.stalled for i in result.infos)),
+        "resolutions": int(sum(i.resolved for i in result.infos)),
         "step_time_ms": {
             mode: _stats(1e3 * result.step_times_s[modes == mode]) for mode in sorted(set(modes.tolist()))
         },

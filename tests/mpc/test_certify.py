@@ -86,3 +86,42 @@ def test_fallback_holds_when_the_previous_plan_does_not_certify() -> None:
     for plan in (Plan(inputs, np.zeros((3, 2, 2))), None):
         u, x, note = certifier().fallback(plan, p0, items([[0, 1]]), 2)
         assert note == "hold" and u.shape == (2, 2, 2) and not u.any() and not x.any()
+
+
+def test_fallback_separates_a_close_pair_rather_than_holding() -> None:
+    """0.3 m apart (d_min 0.5), the previous plan flies them together: the fallback pushes them apart."""
+    p0 = np.array([[0.0, 0.0], [0.3, 0.0]])
+    inputs = np.array([[[0.0, 0.0], [0.0, 0.0]], [[1.0, 0.0], [-1.0, 0.0]]])
+    u, x, note = certifier().fallback(Plan(inputs, np.zeros((3, 2, 2))), p0, items([[0, 1]]), 2)
+    assert note.startswith("separating command")
+    np.testing.assert_allclose(u[0], [[-1.0, 0.0], [1.0, 0.0]])
+    np.testing.assert_allclose(u[1], 0.0)
+    np.testing.assert_allclose(x, DT * np.cumsum(u, axis=0))
+
+
+def test_fallback_scales_the_solved_command_back_until_it_certifies() -> None:
+    """0.7 m apart, the solved command closes 0.4 m in a step: half of it (0.2 m) certifies."""
+    p0 = np.array([[0.0, 0.0], [0.7, 0.0]])
+    solved = np.array([[2.0, 0.0], [-2.0, 0.0]])
+    cert = Certifier(DT, 3.0, Separation(2, Limits(v_max_mps=3.0, d_min_m=0.5), MPCSettings(), ()))
+    u, _, note = cert.fallback(None, p0, items([[0, 1]]), 3, solved)
+    assert note == "solved command x 0.5"
+    np.testing.assert_allclose(u[0], 0.5 * solved)
+
+
+def test_fallback_keeps_within_a_max() -> None:
+    """With a_max 2 m/s^2 (0.2 m/s per step) every fallback command stays within 0.2 m/s of the last
+    one, and the plan after it slows down by at most that much per step."""
+    lim = Limits(v_max_mps=1.0, d_min_m=0.5, a_max_mps2=2.0)
+    cert = Certifier(DT, 1.0, Separation(2, lim, MPCSettings(), ()), lim.a_max_mps2)
+    p0 = np.array([[0.0, 0.0], [0.3, 0.0]])
+    u_prev = np.array([[0.0, 0.5], [0.0, 0.5]])  # flying side by side
+    u, _, note = cert.fallback(None, p0, items([[0, 1]]), 6, None, u_prev)
+    assert note.startswith("separating command")
+    steps = np.diff(np.concatenate([u_prev[None], u]), axis=0)
+    assert np.abs(steps).max() <= 0.2 + 1e-12
+    np.testing.assert_allclose(u[-1], 0.0)
+    far = np.array([[0.0, 0.0], [5.0, 0.0]])  # nothing to separate: decelerate
+    u, _, note = cert.fallback(None, far, items([[0, 1]]), 4, None, u_prev)
+    assert note == "decelerate"
+    np.testing.assert_allclose(u[0], [[0.0, 0.3], [0.0, 0.3]])

@@ -1,11 +1,19 @@
-"""Tie-break: conflicted drones turn to the right, more while they stay stalled, up to a quarter turn."""
+"""Tie-break: conflicted drones turn to the right, more while they stay stalled; the escalation is kept
+while in conflict, capped, and starts afresh after backing off."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from mpcform.mpc.liveness import STALL_FRACTION, STALL_GROWTH, TieBreak, norms, turn_about_z
+from mpcform.mpc.liveness import (
+    BACKOFF_M,
+    STALL_FRACTION,
+    STALL_GROWTH,
+    TieBreak,
+    norms,
+    turn_about_z,
+)
 
 
 def test_turn_about_z_by_hand() -> None:
@@ -19,39 +27,61 @@ def test_turn_about_z_by_hand() -> None:
 def test_only_conflicted_drones_turn_to_the_right() -> None:
     tb = TieBreak(2, 0.5)
     c = np.array([[[1.0, 0.0], [1.0, 0.0]]] * 3)
-    out = tb.turn(c, np.array([True, False]), np.ones((2, 2)), started=True)
+    out = tb.turn(c, np.array([True, False]), np.zeros((2, 2)), np.ones((2, 2)), started=True)
     np.testing.assert_allclose(out[:, 0], [[np.cos(0.5), -np.sin(0.5)]] * 3)  # clockwise seen from +z
     np.testing.assert_array_equal(out[:, 1], c[:, 1])
     assert np.all(norms(out) == pytest.approx(1.0))
 
 
-def test_angle_grows_while_stalled_up_to_a_quarter_turn() -> None:
-    tb = TieBreak(2, 0.5)
-    conflicted, wish = np.array([True, True]), np.array([[1.0, 0.0], [1.0, 0.0]])
-    u_prev = np.array([[0.5 * STALL_FRACTION, 0.0], [1.0, 0.0]])  # drone 0 stalled, drone 1 moving
-    angles = [tb.angles(conflicted, wish, u_prev, started=True) for _ in range(3)]
-    np.testing.assert_allclose([a[0] for a in angles], [0.5 * (1 + STALL_GROWTH * s) for s in (1, 2, 3)])
+def stalls(tb: TieBreak, conflicted: list[bool], moves: list[list[float]], steps: int) -> list[np.ndarray]:
+    """Turn angles over ``steps`` steps of drones that start at the origin, head for (10, 0) with a
+    wish of 1 m/s, and move by ``moves`` (n, 2) per step."""
+    p, wish, out = np.zeros((len(moves), 2)), np.tile([1.0, 0.0], (len(moves), 1)), []
+    for _ in range(steps):
+        out.append(tb.angles(np.array(conflicted), wish, p, np.array([10.0, 0.0]) - p, started=True))
+        p = p + np.array(moves)
+    return out
+
+
+def test_angle_grows_while_stalled_and_is_kept_while_in_conflict() -> None:
+    tb = TieBreak(2, 0.5, dt_s=0.1)
+    slow = 0.5 * STALL_FRACTION * 0.1  # below STALL_FRACTION of the wish's 0.1 m step
+    angles = stalls(tb, [True, True], [[slow, 0.0], [0.1, 0.0]], 4)  # drone 0 stalled, drone 1 moving
+    np.testing.assert_allclose([a[0] for a in angles], [0.5 * (1 + STALL_GROWTH * s) for s in (0, 1, 2, 3)])
     np.testing.assert_allclose([a[1] for a in angles], 0.5)
-    for _ in range(100):
-        last = tb.angles(conflicted, wish, u_prev, started=True)
-    assert last[0] == pytest.approx(0.5 * np.pi)
-    tb.angles(np.array([False, True]), wish, u_prev, started=True)  # out of conflict: count restarts
-    assert tb.stalled[0] == 0
+    assert tb.new_stalls == 0 and tb.resolving == 1
+    # moving again while still in conflict: the raised angle is kept (no fall back into the jam)
+    p = np.array([[0.0, 0.0], [0.0, 0.0]])
+    again = tb.angles(np.array([True, True]), np.ones((2, 2)), p + 0.05, np.array([10.0, 0.0]) - p, True)
+    assert again[0] == pytest.approx(0.5 * (1 + STALL_GROWTH * 3))
+    tb.angles(np.array([False, True]), np.ones((2, 2)), p, np.ones((2, 2)), True)  # out of conflict
+    assert tb.stalled[0] == 0 and tb.resolved == 1
     tb.stalled[:] = 4
     tb.clear()
-    assert not tb.stalled.any()
+    assert not tb.stalled.any() and tb.resolved == 2
 
 
-def test_nothing_stalls_before_the_first_command_and_zero_disables() -> None:
+def test_a_stuck_drone_sweeps_the_full_circle_and_backing_off_starts_afresh() -> None:
+    tb = TieBreak(1, 0.5, dt_s=0.1)
+    angles = np.array([a[0] for a in stalls(tb, [True], [[0.0, 0.0]], 200)])
+    assert angles.max() > 1.9 * np.pi and angles.min() >= 0.0  # every direction is tried
+    np.testing.assert_allclose(angles, np.mod(0.5 * (1 + STALL_GROWTH * np.arange(200)), 2 * np.pi))
+    tb = TieBreak(1, 0.5, dt_s=0.1)
+    angles = stalls(tb, [True], [[-0.05, 0.0]], 40)  # backing away: 2 m in 40 steps
+    assert tb.stalled[0] < 20 and min(a[0] for a in angles[5:]) < 0.6  # restarted after BACKOFF_M
+    assert BACKOFF_M < 2.0
+
+
+def test_arrived_or_first_steps_do_not_stall_and_zero_disables() -> None:
     tb = TieBreak(1, 0.5)
-    assert tb.angles(np.array([True]), np.ones((1, 2)), np.zeros((1, 2)), started=False)[0] == 0.5
+    p = np.zeros((1, 2))
+    assert tb.angles(np.array([True]), np.ones((1, 2)), p, np.ones((1, 2)), started=False)[0] == 0.5
+    assert tb.angles(np.array([True]), np.ones((1, 2)), p, np.full((1, 2), 1e-3), started=True)[0] == 0.5
     assert tb.stalled[0] == 0
     c = np.ones((2, 1, 2))
-    assert TieBreak(1, 0.0).turn(c, np.array([True]), np.zeros((1, 2)), started=True) is c
+    assert TieBreak(1, 0.0).turn(c, np.array([True]), p, np.ones((1, 2)), started=True) is c
 
 
-def test_a_base_angle_above_a_quarter_turn_is_kept() -> None:
-    tb = TieBreak(1, 2.0)
-    for _ in range(5):
-        angle = tb.angles(np.array([True]), np.ones((1, 2)), np.zeros((1, 2)), started=True)[0]
-    assert angle == 2.0
+def test_a_base_angle_of_a_quarter_turn_or_more_is_kept() -> None:
+    tb = TieBreak(1, 3.0)
+    assert all(a[0] == 3.0 for a in stalls(tb, [True], [[0.0, 0.0]], 5))

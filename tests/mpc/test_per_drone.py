@@ -132,18 +132,20 @@ def test_per_drone_solves_the_sparse_qp(seed: int, variant: str, n: int) -> None
         sparse._plan, sparse._u_prev = per._plan, per._u_prev  # the same guess next step
 
 
-def test_soft_qp_when_the_hard_optimum_is_not_the_penalised_one() -> None:
-    """A weak penalty (w1 below the hard QP's multipliers): the optimum uses slack although the
-    hard QP is feasible, and the per-drone solve finds it too."""
+def test_a_weak_penalty_still_gives_the_hard_optimum() -> None:
+    """A weak penalty (w1 below the hard QP's multipliers) would trade separation for tracking; the
+    hard QP is feasible, so both solvers return its optimum without slack (the sparse one raises its
+    weight and solves again)."""
     tpl = Template.line(2, 2.0)
     ref = ConstantReference(tpl, FormationState.from_param([0.0, 0.0], 0.0))
     start = np.array([[0.45, 0.0], [-0.45, 0.0]])  # separated; each wants the other's side
     lim = Limits(v_max_mps=1.0, d_min_m=0.4)
     per, sparse, _ = pair(ref, lim, slack_weight=0.05, tie_break_rad=0.0)
     a, b = per.step(0.0, start), sparse.step(0.0, start)
-    assert a.info.max_slack_m > 1e-3 and a.info.slack_pairs == ((0, 1), (1, 0))
-    assert a.info.max_slack_m == pytest.approx(b.info.max_slack_m, abs=1e-6)
-    np.testing.assert_allclose(a.command_mps, b.command_mps, atol=1e-6)
+    assert a.info.max_slack_m == 0.0 and b.info.max_slack_m < 1e-5
+    np.testing.assert_allclose(a.command_mps, b.command_mps, atol=1e-4)
+    gap = np.linalg.norm(np.diff(start + 0.1 * a.command_mps, axis=0))
+    assert gap >= 0.4  # no separation traded
 
 
 def test_infeasible_start_separates_with_slack() -> None:

@@ -43,3 +43,13 @@ def test_guess_and_warm_start_shift_the_previous_plan() -> None:
     warm = warm_start(plan, moved, u_nom, x_nom)
     np.testing.assert_array_equal(warm[0, :, 0], [[10.0, 0.0], [0.0, 0.0]])  # ends in a hold
     np.testing.assert_allclose(warm[1, :, 0], [[1.1, -0.1], [1.1, -0.1]])
+
+
+def test_shifted_inputs_end_in_a_hold_or_slow_down_within_a_max() -> None:
+    inputs = np.array([[[1.0, -1.0]], [[2.0, 0.5]], [[3.0, -0.1]]])  # (H = 3, n = 1, d = 2)
+    plan = Plan(inputs, np.zeros((4, 1, 2)))
+    np.testing.assert_allclose(plan.shifted_inputs()[-1], 0.0)  # a hold: |u| jumps by 3 m/s
+    slowed = plan.shifted_inputs(0.2)
+    np.testing.assert_allclose(slowed[:2], inputs[1:])
+    np.testing.assert_allclose(slowed[-1], [[2.8, 0.0]])
+    assert np.abs(slowed[-1] - slowed[-2]).max() <= 0.2 + 1e-12  # the last change within a_max dt

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -17,7 +19,7 @@ from mpcform.formation.template import Template
 from mpcform.mpc.limits import Limits, SphereObstacle
 from mpcform.mpc.planner import MPCPlanner
 from mpcform.mpc.settings import MPCSettings
-from mpcform.reference.base import ConstantReference, ExponentialReference
+from mpcform.reference.base import ConstantReference, ExponentialReference, Profile
 from mpcform.sim.simulation import SimulationResult, simulate
 from mpcform.solvers.base import QPBackend, QPSolution, SolverOptions
 
@@ -244,3 +246,97 @@ def test_grouping_equals_the_monolithic_qp(seed: int, coupling: str) -> None:
         assert out.info.mode == "qp" and out.info.qp_drones == (4 if grouping else 8)
         firsts.append(out.command_mps)
     np.testing.assert_allclose(firsts[0], firsts[1], atol=1e-5)
+
+
+def test_close_start_separates_instead_of_freezing() -> None:
+    """Three pairs start inside d_min (decoupled): they never approach, separate, and every drone
+    arrives; while a pair is inside d_min the step reports it as slack."""
+    from families import CLOSE_START_FREEZE, outcome
+
+    out = outcome(CLOSE_START_FREEZE)
+    assert out["completion"] == 1.0 and out["separation_violations"] == 0
+    assert out["approached"] == 0 and out["unseparated"] == 0
+    infos = out["infos"]
+    assert not any(i.mode == "fallback" for i in infos)
+    assert infos[0].max_slack_m > 0.3 and (0, 5) in infos[0].slack_pairs
+
+
+@pytest.mark.parametrize("coupling", ["joint", "decoupled"])
+def test_a_close_pair_never_approaches(coupling: str) -> None:
+    """Two drones 0.1 m apart whose targets lie across each other: the distance never shrinks."""
+    tpl = Template(np.array([[-1.0, 0.0], [1.0, 0.0]]))
+    ref = ConstantReference(tpl, FormationState.from_param([0.0, 0.0]))
+    start = np.array([[0.05, 0.01], [-0.05, -0.01]])  # each on the other's side
+    res = simulate(MPCPlanner(ref, 0.1, Limits(v_max_mps=1.0, d_min_m=0.5), MPCSettings(coupling=coupling)),
+                   start, 8.0)  # fmt: skip
+    rel = res.positions_m[:, 0] - res.positions_m[:, 1]
+    steps = zip(rel[:-1], rel[1:], strict=True)
+    seg = [np.linalg.norm(closest_on_segments(a[None], b[None])) for a, b in steps]
+    assert min(seg) >= np.linalg.norm(rel[0]) - 1e-7
+    inside = np.linalg.norm(rel[:-1], axis=1) < 0.5
+    assert all(i.max_slack_m > 0 for i, close in zip(res.infos, inside, strict=True) if close)
+    assert np.linalg.norm(res.positions_m[-1] - res.reference_m[-1], axis=1).max() < 1e-2
+
+
+class Translating(ConstantReference):
+    """The template translating at a constant velocity ``v`` [m/s] from the origin."""
+
+    def __init__(self, template: Template, v: list[float]) -> None:
+        super().__init__(template, FormationState.from_param(np.zeros(template.dim)))
+        self.v = np.array(v, dtype=float)
+
+    @property
+    def end_s(self) -> float:
+        return float("inf")
+
+    def profile(self, times_s: np.ndarray) -> Profile:
+        vel = np.broadcast_to(self.v, (times_s.shape[0], self.v.shape[0]))
+        pos = times_s[:, None] * self.v
+        return replace(super().profile(times_s), centroid_m=pos, centroid_velocity_mps=vel)
+
+
+MODES = [("joint", True), ("decoupled", True), ("decoupled", False)]  # (coupling, per_drone)
+
+
+def translating_run(tpl: Template, v: list[float], start: np.ndarray, mode: tuple[str, bool], fast_path: bool,
+                    duration_s: float = 0.5) -> np.ndarray:  # fmt: skip
+    """Commands of a planner (horizon 8, v_max 20, d_min 0.3, tight tolerances) tracking ``Translating``."""
+    st_ = MPCSettings(horizon=8, coupling=mode[0], per_drone=mode[1], fast_path=fast_path, eps_abs=1e-8,
+                      eps_rel=1e-8)  # fmt: skip
+    planner = MPCPlanner(Translating(tpl, v), 0.1, Limits(v_max_mps=20.0, d_min_m=0.3), st_)
+    return simulate(planner, start, duration_s).commands_mps
+
+
+@pytest.mark.parametrize("mode", MODES)
+def test_fast_path_on_and_off_agree_in_every_coupling(mode: tuple[str, bool]) -> None:
+    """Two drones 4 m apart on x, the reference translating at 10 m/s along x (v_max 20): far apart
+    all along, so with or without the fast path the first command is eq. 14's (10, 0) (the decoupled
+    rows split about the rollout, not the holding guess); random translations of 2-6 drones agree
+    to solver tolerance over five steps."""
+    pair = Template(np.array([[-2.0, 0.0], [2.0, 0.0]]))
+    for fast_path in (True, False):
+        first = translating_run(pair, [10.0, 0.0], pair.offsets, mode, fast_path, 0.1)[0]
+        np.testing.assert_allclose(first, [[10.0, 0.0], [10.0, 0.0]], atol=1e-5)
+    rng = np.random.default_rng(3)
+    for n in (2, 4, 6):
+        tpl = Template.polygon(n, 1.0)
+        v, start = rng.uniform(-8, 8, 2).tolist(), tpl.offsets + rng.normal(0, 0.2, (n, 2))
+        on, off = (translating_run(tpl, v, start, mode, fast_path) for fast_path in (True, False))
+        np.testing.assert_allclose(on, off, atol=1e-5)
+
+
+@pytest.mark.slow
+def test_every_run_of_the_random_families_completes_safely() -> None:
+    """200 runs of ``tests/families.py`` (swaps, spheres, close starts): every drone ends within 0.1 m
+    of its target, pairs that start d_min apart stay so along every segment, pairs that start
+    closer never approach and end separated, and no drone enters a sphere's keep-out."""
+    from families import family, outcome
+
+    bad = []
+    for sc in family(1, 200):
+        out = outcome(sc)
+        if out["completion"] < 1.0 or any(
+            out[k] for k in ("separation_violations", "approached", "unseparated", "obstacle_violations")
+        ):
+            bad.append((sc["name"], {k: v for k, v in out.items() if k != "infos"}))
+    assert not bad

@@ -7,6 +7,7 @@ import pytest
 import scipy.sparse as sp
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from scipy.spatial import HalfspaceIntersection
 
 from mpcform.mpc.limits import Limits
 from mpcform.mpc.rows import (
@@ -24,6 +25,7 @@ from mpcform.mpc.rows import (
     separation_pattern,
     slack_rows,
     velocity_polytope,
+    velocity_set,
     violators,
 )
 from mpcform.mpc.settings import MPCSettings
@@ -89,6 +91,25 @@ def test_velocity_polytope_is_inscribed_in_the_ball(dim: int) -> None:
     u = rng.normal(size=(20000, dim))
     inside = u[(u @ normals.T <= h).all(axis=1)]
     assert inside.shape[0] > 0 and np.linalg.norm(inside, axis=1).max() <= 1.0 + 1e-12
+
+
+@pytest.mark.parametrize(
+    ("dim", "facets"),
+    [(2, 4), (2, 5), (2, 16), (2, 17), (2, 64), (3, 8), (3, 12), (3, 32), (3, 33), (3, 100)],
+)
+def test_velocity_polytope_vertices_are_within_v_max(dim: int, facets: int) -> None:
+    """Every vertex of ``{D u <= h v_max}`` (enumerated with HalfspaceIntersection) lies in the ball
+    of radius v_max, and some vertex is on the ball (h is not needlessly small) in the spatial case,
+    where h is computed from the vertices; planar vertices all lie on the ball."""
+    v_max = 2.5
+    normals, h = velocity_set(dim, MPCSettings(facets=facets), v_max)
+    halfspaces = np.column_stack([normals, -np.full(facets, h)])
+    verts = HalfspaceIntersection(halfspaces, np.zeros(dim)).intersections
+    radius = np.linalg.norm(verts, axis=1)
+    assert radius.max() <= v_max * (1 + 1e-12)
+    assert radius.max() == pytest.approx(v_max, rel=1e-9)
+    if dim == 2:
+        np.testing.assert_allclose(radius, v_max, rtol=1e-12)
 
 
 def test_box_velocity_set() -> None:

@@ -83,7 +83,7 @@ def test_rows_at_both_segment_ends() -> None:
     p0 = np.array([[0.0, 0.0], [1.0, 0.0]])
     guess = np.array([p0, p0 + [[0, 0], [0, 1]], p0 + [[0, 0], [0, 2]], p0 + [[0, 0], [0, 2]]])
     pairs = PairSeparation(0.5, np.ones(2), MPCSettings(horizon=3))
-    (labels, coeffs, lower, on), singles = pairs.rows(p0, guess, np.array([[0, 1]]), np.ones(1, bool))
+    (labels, coeffs, lower, on, _), singles = pairs.rows(p0, guess, np.array([[0, 1]]), np.ones(1, bool))
     assert coeffs.shape == (1, 5, 2) and lower.shape == (1, 5) and singles == []
     np.testing.assert_allclose(coeffs[0, 0], [-1.0, 0.0])  # segment 0 starts at the closest point
     np.testing.assert_allclose(coeffs[0, 1], coeffs[0, 2])  # segment 1's two rows share a normal
@@ -169,3 +169,33 @@ def test_first_segment_items_within_reach() -> None:
     np.testing.assert_allclose(d_ob, [0.5 + 0.2])  # radius + half of d_min
     off = Candidates(c.pairs, np.zeros(1, bool), c.obstacles, np.zeros(1, bool), False)
     assert sep.first_segment(p0, p0, off) == []
+
+
+@pytest.mark.parametrize("coupling", ["joint", "decoupled"])
+def test_a_pair_inside_d_min_gets_a_hard_no_approach_row(coupling: str) -> None:
+    """0.3 m apart (d_min 0.5) along x: row 0 (at x_1) is ``c0^T (x_0 - x_1) >= 0``, c0 = (-1, 0), hard."""
+    p0 = np.array([[0.0, 0.0], [0.3, 0.0], [5.0, 0.0]])
+    sep = Separation(2, Limits(v_max_mps=1.0, d_min_m=0.5), MPCSettings(horizon=3, coupling=coupling), ())
+    rows = sep.rows(p0, still(p0, 3), cand([[0, 1], [1, 2]]))
+    if coupling == "joint":
+        np.testing.assert_array_equal(rows.pair_hard, [True, False])
+        np.testing.assert_allclose(rows.pair_coeffs[0, 0], [-1.0, 0.0])
+        assert rows.pair_lower[0, 0] == 0.0 and rows.pair_lower[0, 1] > 0.1  # the others still ask d_min
+    else:
+        np.testing.assert_array_equal(rows.single_hard, [True, False, True, False])
+        np.testing.assert_allclose(rows.single_coeffs[rows.single_hard, 0], [[-1.0, 0.0], [1.0, 0.0]])
+        np.testing.assert_allclose(rows.single_lower[rows.single_hard, 0], 0.0)
+    short, labels = sep.start_shortfall(p0, rows)
+    assert short == pytest.approx(0.2) and labels.tolist() == [[0, 1]]
+
+
+def test_a_drone_inside_an_obstacles_clearance_gets_a_hard_row_and_a_push() -> None:
+    ob = SphereObstacle(np.zeros(2), 1.0, clearance_m=0.5)
+    p0 = np.array([[0.0, 1.2]])  # 0.3 m inside
+    sep = Separation(2, Limits(v_max_mps=1.0), MPCSettings(horizon=2), (ob,))
+    rows = sep.rows(p0, still(p0, 2), cand([], [[0, 0]]))
+    assert rows.single_hard.tolist() == [True]
+    np.testing.assert_allclose(rows.single_coeffs[0, 0], [0.0, 1.0])
+    assert rows.single_lower[0, 0] == 0.0
+    assert sep.start_shortfall(p0, rows)[0] == pytest.approx(0.3)
+    np.testing.assert_allclose(sep.push_apart(p0, cand([], [[0, 0]])), [[0.0, 1.0]])

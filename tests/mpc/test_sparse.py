@@ -5,6 +5,8 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
+import pytest
+import scipy.sparse as sp
 
 from mpcform.mpc.candidates import Candidates
 from mpcform.mpc.limits import Limits, SphereObstacle
@@ -108,3 +110,85 @@ def test_context_numbers_the_drones_locally() -> None:
     np.testing.assert_allclose(ctx.obstacle_centers_m, [OBSTACLE.center_m] * 2)
     np.testing.assert_allclose(ctx.obstacle_distance_m, 0.5 + 0.25 + 2e-3)
     assert ctx.pair_distance_m == 0.5 + 2e-3
+
+
+class HardCheck(QPBackend):
+    """PIQP, and at each step's first solve, whether the same QP without slack is feasible (Clarabel)."""
+
+    name = "piqp+hard-check"
+
+    def __init__(self, dim: int, weight: float) -> None:
+        from mpcform.solvers.registry import make_backend
+
+        super().__init__(SolverOptions())
+        self.inner = make_backend("piqp", SolverOptions(eps_abs=1e-7, eps_rel=1e-7))
+        self.dim, self.weight, self.feasible = dim, weight, []  # type: list[bool]
+        self.warm_starts = self.inner.warm_starts
+
+    def setup(self, P: Any, q: Any, A: Any, lo: Any, hi: Any) -> None:
+        self.P, self.q, self.A, self.lo, self.hi = P, q, A.copy(), lo, hi
+        self.inner.setup(P, q, A, lo, hi)
+
+    def update(self, q: Any, lo: Any, hi: Any, A_data: Any) -> None:
+        self.q, self.lo, self.hi = q, lo, hi
+        self.A.data = np.asarray(A_data, dtype=float).copy()
+        self.inner.update(q, lo, hi, A_data)
+
+    def solve(self, x0: Any = None) -> QPSolution:
+        n_var = self.P.shape[0]
+        n_slack = n_var // (2 * self.dim + 1)
+        if np.all(self.q[n_var - n_slack :] == self.weight):  # the step's first solve
+            self.feasible.append(self.hard_feasible(n_var - n_slack, n_slack))
+        return self.inner.solve(x0)
+
+    def hard_feasible(self, keep: int, n_slack: int) -> bool:
+        from qpsolvers import Problem, solve_problem
+
+        A = self.A[:-n_slack, :keep].tocsc()  # the slack >= 0 rows dropped, slack fixed at zero
+        lo, hi = self.lo[:-n_slack], self.hi[:-n_slack]
+        eq = lo == hi
+        up, down = ~eq & np.isfinite(hi), ~eq & np.isfinite(lo)
+        G = sp.vstack([A[up], -A[down]]).tocsc()
+        P = self.P[:keep, :keep]
+        P = (P + P.T - sp.diags(P.diagonal())).tocsc()
+        problem = Problem(P, self.q[:keep], G, np.concatenate([hi[up], -lo[down]]), A[eq].tocsc(), lo[eq])
+        return bool(solve_problem(problem, solver="clarabel").found)
+
+
+def crowd_and_swap(dim: int = 2) -> list[tuple[Any, np.ndarray]]:
+    """A crowd of 6 drones 0.3-0.6 m apart crossing to a line 1 m apart, and an antipodal swap of 4."""
+    from mpcform.formation.state import FormationState
+    from mpcform.formation.template import Template
+    from mpcform.reference.base import ConstantReference
+
+    rng = np.random.default_rng(7)
+    crowd_start = np.array([[0.0, 0.0], [0.6, 0.0], [1.2, 0.0], [0.0, 0.6], [0.6, 0.6], [1.2, 0.6]])
+    crowd = ConstantReference(Template.line(6, 5.0), FormationState.from_param([0.6, 0.3], 1.0))
+    ring = Template.polygon(4, 1.5)
+    swap = ConstantReference(ring, FormationState.from_param([0.0, 0.0]))
+    return [(crowd, crowd_start + rng.normal(0, 0.01, (6, 2))), (swap, -ring.offsets.copy())]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("coupling", ["joint", "decoupled"])
+@pytest.mark.parametrize("v_max", [1.0, 5.0, 10.0, 20.0])
+def test_no_slack_wherever_the_hard_qp_is_feasible(v_max: float, coupling: str) -> None:
+    """Every dt in {0.1, 0.05, 0.02, 0.01} on a crowd and a swap (gain 2): wherever the QP without
+    slack is feasible (Clarabel), the planner's slack is at most 1e-6 m."""
+    from mpcform.mpc.planner import MPCPlanner
+    from mpcform.sim.simulation import simulate
+
+    checked = 0
+    for dt in (0.1, 0.05, 0.02, 0.01):
+        for ref, start in crowd_and_swap():
+            st_ = MPCSettings(horizon=8, gain_per_s=2.0, coupling=coupling, per_drone=False)
+            backend = HardCheck(2, st_.slack_weight)
+            planner = MPCPlanner(ref, dt, Limits(v_max_mps=v_max, d_min_m=0.3), st_, solver=backend)
+            res = simulate(planner, start, 60 * dt)
+            solved = [i for i in res.infos if i.mode != "fast_path"]
+            assert len(solved) == len(backend.feasible)
+            for info, feasible in zip(solved, backend.feasible, strict=True):
+                if feasible:
+                    assert info.max_slack_m <= 1e-6, (dt, info)
+                    checked += 1
+    assert checked > 0

@@ -31,6 +31,7 @@ METRIC_KEYS = {
     # added with the plants, completion and geofence metrics (the worked example has no obstacles)
     "min_separation_true", "separation_violations_true", "max_speed_true", "max_tracking_error_true",
     "geofence_violations", "geofence_violations_true", "completion", "stalled_drones", "time_to_complete",
+    "stall_events", "resolutions",  # the planner's liveness events
 }  # fmt: skip
 
 
