@@ -36,6 +36,7 @@ import numpy as np
 from mpcform._validate import Array, positive
 from mpcform.errors import ValidationError
 from mpcform.outputs import crazyswarm
+from mpcform.outputs.flight_check import FlightCheck, fly_export
 from mpcform.outputs.flight_limits import FlightEnvelope, FlightLimits, body_rates, envelope
 from mpcform.outputs.files import json_safe, provenance
 from mpcform.outputs.polynomial import (
@@ -78,6 +79,7 @@ class ExportOptions:
     yaw: str = "zero"
     limits: FlightLimits = field(default_factory=FlightLimits)
     allow_limits: bool = False
+    fly: bool = True  # fly the export on the quadrotor plant (skipped without drone-models)
 
     def __post_init__(self) -> None:
         positive("tolerance", self.tolerance_m)
@@ -104,6 +106,7 @@ class ExportResult:
     envelope: FlightEnvelope
     min_separation_m: float
     record: dict[str, Any]
+    flight: FlightCheck | None
 
 
 def positions_3d(run: RunData, options: ExportOptions) -> Array:
@@ -168,11 +171,17 @@ def export_run(run: RunData, out_dir: str | Path, options: ExportOptions | None 
                                      flown.coefficients.reshape(poly.pieces, n, 4, -1)[list(chunk), i]))  # fmt: skip
     start = state["pos"][0]
     files += crazyswarm.write_files(out, stems, start, float(flown.duration_s))
+    dt = float(np.median(np.diff(t)))
+    flight = fly_export(flown, n, opts.tolerance_m, dt, lim.max_acc_mps2) if opts.fly else None
+    if flight is not None and not flight.within_tolerance:
+        warnings.append(f"flown on the quadrotor plant, drone {flight.error_drone} is {flight.max_error_m:.3g} m off "
+                        f"at t = {flight.error_t_s:.2f} s, beyond the declared {flight.declared_tolerance_m:.3g} m")  # fmt: skip
     record = _record(run, opts, fit, timing, env, min_sep, len(chunks), warnings)
+    record["quadrotor_flight"] = None if flight is None else flight.record()
     prov = out / PROVENANCE_JSON
     prov.write_text(json.dumps(json_safe(record), indent=2, allow_nan=False) + "\n")
     files.append(prov)
-    return ExportResult(out, tuple(files), fit, len(chunks), tuple(warnings), timing, env, min_sep, record)
+    return ExportResult(out, tuple(files), fit, len(chunks), tuple(warnings), timing, env, min_sep, record, flight)
 
 
 def flat_state(poly: PiecewisePolynomial, t_s: Array, n: int) -> dict[str, Array]:

@@ -23,6 +23,7 @@ POLY_DEGREE = 7
 CONTINUITY = 4  # position, velocity, acceleration and jerk are continuous at breakpoints
 KNOT_MULTIPLICITY = POLY_DEGREE + 1 - CONTINUITY  # 4: C^3 at every interior knot
 DEFAULT_TOLERANCE_M = 0.02
+MIN_SAMPLES_PER_PIECE = 8
 MAX_PIECE_S = 2.0  # longest piece tried first [s] (keeps float32 powers of tau modest)
 
 
@@ -136,8 +137,8 @@ def fit_positions(
     positions (T, n, d) within ``tolerance_m`` with float32 coefficients.
 
     The count grows by half until the fit is within tolerance, then is bisected down. It stops
-    when the B-spline has as many coefficients as there are samples (``4 pieces + 4``); the
-    result then says it is not within tolerance.
+    at 8 samples per piece (two per added B-spline coefficient: fewer leave the least squares
+    ill-posed); the result then says it is not within tolerance.
     """
     tol = positive("tolerance", tolerance_m)
     t = np.asarray(t_s, dtype=float)
@@ -149,7 +150,7 @@ def fit_positions(
         err = poly.as_float32().evaluate(t).reshape(p.shape) - p
         return PolynomialFit(poly, float(np.linalg.norm(err, axis=-1).max()), tol)
 
-    cap = max(1, (t.shape[0] - POLY_DEGREE - 1) // KNOT_MULTIPLICITY + 1)
+    cap = max(1, (t.shape[0] - 1) // MIN_SAMPLES_PER_PIECE)
     span = float(t[-1] - t[0])
     pieces = min(cap, max(1, math.ceil(span / positive("max_piece", max_piece_s) - 1e-9)))
     failed = pieces - 1  # the largest count known (or taken) to fail

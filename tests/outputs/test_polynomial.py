@@ -39,12 +39,12 @@ def test_pieces_join_up_to_the_jerk(pieces: int, seed: int) -> None:
         assert np.allclose(before, after, atol=1e-5 * scale)
 
 
-def test_fit_stops_when_coefficients_reach_the_samples() -> None:
-    t = np.linspace(0.0, 1.0, 21)
-    p = np.zeros((21, 1, 2))
+def test_fit_stops_at_eight_samples_per_piece() -> None:
+    t = np.linspace(0.0, 1.0, 41)
+    p = np.zeros((41, 1, 2))
     p[::2, 0, 0] = 1.0  # a zigzag no smooth curve follows
     fit = fit_positions(t, p, tolerance_m=1e-6)
-    assert not fit.within_tolerance and fit.polynomial.pieces == 4  # 4 * 4 + 4 = 20 coefficients
+    assert not fit.within_tolerance and fit.polynomial.pieces == 5
 
 
 def test_fewest_pieces_within_tolerance() -> None:
