@@ -185,28 +185,33 @@ def _add_export_options(cmd: argparse.ArgumentParser) -> None:
     cmd.add_argument("--offset", type=_offset, default=(0.0, 0.0, 0.0), metavar="X,Y,Z",
                      help="shift the exported positions [m] (e.g. 0,0,2.5 lifts a spatial run)")  # fmt: skip
     cmd.add_argument("--floor", type=float, default=0.0, metavar="M",
-                     help="refuse an export whose lowest point is below this height [m] (default 0)")  # fmt: skip
+                     help="refuse an export whose lowest point is below this height [m]")  # fmt: skip
     cmd.add_argument("--rate", type=float, default=DEFAULT_RATE_HZ, metavar="HZ",
                      help=f"rate of the setpoint CSVs [Hz] (default {DEFAULT_RATE_HZ:g})")  # fmt: skip
     cmd.add_argument("--yaw", choices=YAW_MODES, default="zero",
                      help="yaw of the drones: zero, or the formation's rotation about z")  # fmt: skip
     d = FlightLimits()
-    for flag, dest, value, unit in (("--max-speed", "max_speed_mps", d.max_speed_mps, "m/s"),
-                                    ("--max-acc", "max_acc_mps2", d.max_acc_mps2, "m/s^2"),
-                                    ("--max-jerk", "max_jerk_mps3", d.max_jerk_mps3, "m/s^3"),
-                                    ("--max-body-rate", "max_body_rate_rad_s", d.max_body_rate_rad_s, "rad/s")):  # fmt: skip
+    flags = (
+        ("--max-speed", "max_speed_mps", d.max_speed_mps, "m/s"),
+        ("--max-acc", "max_acc_mps2", d.max_acc_mps2, "m/s^2"),
+        ("--max-jerk", "max_jerk_mps3", d.max_jerk_mps3, "m/s^3"),
+        ("--max-body-rate", "max_body_rate_rad_s", d.max_body_rate_rad_s, "rad/s"),
+    )
+    for flag, dest, value, unit in flags:
         cmd.add_argument(flag, dest=dest, type=float, default=value, metavar="X",
                          help=f"flight limit [{unit}] (default {value:.3g}, Crazyflie 2.x)")  # fmt: skip
     cmd.add_argument("--allow-limits", action="store_true",
-                     help="export even when a flight limit is exceeded (a warning instead of an error)")  # fmt: skip
+                     help="export even when a flight limit is exceeded (then a warning)")  # fmt: skip
     cmd.add_argument("--no-flight-check", action="store_true",
                      help="do not fly the export on the quadrotor plant (needs drone-models)")  # fmt: skip
 
 
 def export_options(args: argparse.Namespace) -> ExportOptions:
     """The :class:`ExportOptions` of the command line."""
-    limits = FlightLimits(args.max_speed_mps, args.max_acc_mps2, args.max_jerk_mps3, args.max_body_rate_rad_s,
-                          platform_thrust_acc_mps2())  # fmt: skip
+    limits = FlightLimits(
+        args.max_speed_mps, args.max_acc_mps2, args.max_jerk_mps3, args.max_body_rate_rad_s,
+        platform_thrust_acc_mps2(),
+    )  # fmt: skip
     return ExportOptions(altitude_m=args.altitude, offset_m=args.offset, floor_m=args.floor,
                          tolerance_m=args.tolerance, rate_hz=args.rate, yaw=args.yaw, limits=limits,
                          allow_limits=args.allow_limits, fly=not args.no_flight_check)  # fmt: skip
@@ -220,7 +225,7 @@ def _offset(text: str) -> tuple[float, float, float]:
         values = ()
     if len(values) != 3:
         raise argparse.ArgumentTypeError(f"expected X,Y,Z (three numbers), got {text!r}")
-    return values  # type: ignore[return-value]
+    return values
 
 
 def _figures(data: RunData, out: Path, plot: bool, animate: bool) -> None:

@@ -86,18 +86,31 @@ def crazyflies_yaml(start_m: Array) -> str:
     """The ``robots`` section for drones starting at ``start_m`` (n, 3): on the floor below it."""
     lines = ["# mpcform export: one robot per drone; edit each uri (radio address) before flying", "robots:"]
     for i, p in enumerate(start_m.tolist()):
-        lines += [f"  {robot_name(i)}:", "    enabled: true",
-                  f"    uri: radio://0/80/2M/E7E7E7E7{i + 1:02X}  # placeholder",
-                  f"    initial_position: [{p[0]:.4f}, {p[1]:.4f}, 0.0]", f"    type: {ROBOT_TYPE}"]  # fmt: skip
+        lines += [
+            f"  {robot_name(i)}:",
+            "    enabled: true",
+            f"    uri: radio://0/80/2M/E7E7E7E7{i + 1:02X}  # placeholder",
+            f"    initial_position: [{p[0]:.4f}, {p[1]:.4f}, 0.0]",
+            f"    type: {ROBOT_TYPE}",
+        ]
     return "\n".join(lines) + "\n"
 
 
 def fly_script(stems: list[str], start_m: Array, duration_s: float) -> str:
     """The text of ``fly.py`` for the drones' files ``<stem>_poly7.csv`` and starts (n, 3)."""
-    robots = {robot_name(i): (f"{stem}_poly7.csv", [round(x, 4) for x in start_m[i].tolist()])
-              for i, stem in enumerate(stems)}  # fmt: skip
-    return FLY_TEMPLATE.format(max_pieces=CRAZYFLIE_MAX_PIECES, robots=robots, takeoff=float(start_m[:, 2].min()),
-                               duration=duration_s, takeoff_s=TAKEOFF_S, goto_s=GOTO_S, land_s=LAND_S)  # fmt: skip
+    robots = {
+        robot_name(i): (f"{stem}_poly7.csv", [round(x, 4) for x in start_m[i].tolist()])
+        for i, stem in enumerate(stems)
+    }
+    return FLY_TEMPLATE.format(
+        max_pieces=CRAZYFLIE_MAX_PIECES,
+        robots=robots,
+        takeoff=float(start_m[:, 2].min()),
+        duration=duration_s,
+        takeoff_s=TAKEOFF_S,
+        goto_s=GOTO_S,
+        land_s=LAND_S,
+    )
 
 
 def write_files(out: Path, stems: list[str], start_m: Array, duration_s: float) -> list[Path]:

@@ -25,7 +25,6 @@ Yaw is 0, or with ``yaw="formation"`` the formation's rotation about z (:mod:`mp
 
 from __future__ import annotations
 
-import csv
 import json
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -36,13 +35,20 @@ import numpy as np
 from mpcform._validate import Array, positive
 from mpcform.errors import ValidationError
 from mpcform.outputs import crazyswarm
-from mpcform.outputs.flight_check import FlightCheck, fly_export
-from mpcform.outputs.flight_limits import FlightEnvelope, FlightLimits, body_rates, envelope
 from mpcform.outputs.files import json_safe, provenance
+from mpcform.outputs.flight_check import FlightCheck, fly_export
+from mpcform.outputs.flight_files import (
+    POLY_HEADER,
+    SETPOINT_COLUMNS,
+    read_poly,
+    read_setpoints,
+    write_poly,
+    write_setpoints,
+)
+from mpcform.outputs.flight_limits import FlightEnvelope, FlightLimits, body_rates, envelope
 from mpcform.outputs.polynomial import (
     DEFAULT_TOLERANCE_M,
     MAX_PIECE_S,
-    POLY_DEGREE,
     PiecewisePolynomial,
     PolynomialFit,
     fit_piecewise_polynomial,
@@ -55,14 +61,14 @@ from mpcform.outputs.yaw import formation_yaw
 CRAZYFLIE_MAX_PIECES = crazyswarm.CRAZYFLIE_MAX_PIECES
 DEFAULT_ALTITUDE_M = 1.0
 DEFAULT_RATE_HZ = 100.0
+PATH_SAMPLES = 10  # per planned interval: the path is fitted to the planned positions joined by lines
 FIT_RATE_HZ = 50.0  # samples of the retimed reference per second, besides the planned samples
 CHECK_RATE_HZ = 500.0  # sampling of the pieces for limits, floor and separation
 LIMIT_SLACK = 0.9  # the retiming aims at this fraction of each limit (the fit adds a little)
-SETPOINT_COLUMNS = ("t", "x", "y", "z", "vx", "vy", "vz", "ax", "ay", "az", "yaw", "omega_x", "omega_y", "omega_z")
-POLY_AXES = ("x", "y", "z", "yaw")
-POLY_HEADER = ("Duration", *(f"{a}^{m}" for a in POLY_AXES for m in range(POLY_DEGREE + 1)))
 PROVENANCE_JSON = "provenance.json"
 YAW_MODES = ("zero", "formation")
+__all__ = ["POLY_HEADER", "SETPOINT_COLUMNS", "ExportOptions", "ExportResult", "export_run", "read_poly",
+           "read_setpoints"]  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -114,7 +120,9 @@ def positions_3d(run: RunData, options: ExportOptions) -> Array:
     p = run.trajectory.positions_m
     if run.dim == 3:
         if options.altitude_m is not None:
-            raise ValidationError("altitude", "applies only to planar runs; shift a spatial run with --offset X,Y,Z")
+            raise ValidationError(
+                "altitude", "applies only to planar runs; shift a spatial run with --offset X,Y,Z"
+            )
         p3 = p.copy()
     else:
         alt = DEFAULT_ALTITUDE_M if options.altitude_m is None else options.altitude_m
@@ -122,26 +130,45 @@ def positions_3d(run: RunData, options: ExportOptions) -> Array:
     return p3 + np.asarray(options.offset_m, dtype=float)
 
 
-def export_run(run: RunData, out_dir: str | Path, options: ExportOptions | None = None, **fields: Any) -> ExportResult:
+def export_run(
+    run: RunData, out_dir: str | Path, options: ExportOptions | None = None, **fields: Any
+) -> ExportResult:
     """Retime, fit, check and write every drone's files (``fields`` override ``options``)."""
     opts = replace(options or ExportOptions(), **fields)
     out = Path(out_dir)
     t = run.trajectory.t_s - run.trajectory.t_s[0]
     planned = positions_3d(run, opts)
+    n = run.n
     lim = opts.limits
     half = 0.5 * opts.tolerance_m
-    path = fit_positions(t, planned, half, opts.max_piece_s).polynomial  # smooth path of the plan time
-    timing = retime(path, LIMIT_SLACK * lim.max_speed_mps, LIMIT_SLACK * lim.max_acc_mps2, LIMIT_SLACK * lim.max_jerk_mps3)
+    dense = np.linspace(
+        0.0, t[-1], PATH_SAMPLES * (t.shape[0] - 1) + 1
+    )  # held commands: linear between samples
+    lines = np.stack([np.interp(dense, t, x) for x in planned.reshape(t.shape[0], -1).T], axis=-1)
+    path = fit_positions(dense, lines.reshape(dense.shape[0], n, 3), half, opts.max_piece_s).polynomial
+    timing = retime(
+        path, LIMIT_SLACK * lim.max_speed_mps, LIMIT_SLACK * lim.max_acc_mps2, LIMIT_SLACK * lim.max_jerk_mps3
+    )
     t_planned = timing.new_time(t)
     grid = np.linspace(0.0, timing.duration_s, int(np.ceil(FIT_RATE_HZ * timing.duration_s)) + 1)
     t_fit = np.unique(np.concatenate([grid, t_planned]))
     fit = fit_positions(t_fit, timing.positions(t_fit), half, opts.max_piece_s, rest_ends=True)
     poly = fit.polynomial
-    yaw = np.zeros(t.shape) if opts.yaw == "zero" else formation_yaw(run.trajectory.positions_m, run.formation.offsets_m)
-    yaw_poly = fit_piecewise_polynomial(t_fit, np.interp(t_fit, t_planned, yaw)[:, None], poly.pieces, rest_ends=True)
-    n = run.n
-    coef = np.concatenate([poly.coefficients.reshape(poly.pieces, n, 3, -1),
-                           np.repeat(yaw_poly.coefficients[:, None], n, axis=1)], axis=2)  # fmt: skip
+    yaw = (
+        np.zeros(t.shape)
+        if opts.yaw == "zero"
+        else formation_yaw(run.trajectory.positions_m, run.formation.offsets_m)
+    )
+    yaw_poly = fit_piecewise_polynomial(
+        t_fit, np.interp(t_fit, t_planned, yaw)[:, None], poly.pieces, rest_ends=True
+    )
+    coef = np.concatenate(
+        [
+            poly.coefficients.reshape(poly.pieces, n, 3, -1),
+            np.repeat(yaw_poly.coefficients[:, None], n, axis=1),
+        ],
+        axis=2,
+    )
     flown = PiecewisePolynomial(0.0, poly.durations_s, coef.reshape(poly.pieces, n * 4, -1)).as_float32()
     err = flown.evaluate(t_planned).reshape(t.shape[0], n, 4)[..., :3] - planned
     fit = PolynomialFit(poly, float(np.linalg.norm(err, axis=-1).max()), opts.tolerance_m)
@@ -150,10 +177,15 @@ def export_run(run: RunData, out_dir: str | Path, options: ExportOptions | None 
     _check_floor(state["pos"], t_check, opts.floor_m)
     env = envelope(t_check, state["vel"], state["acc"], state["jerk"], state["omega"])
     warnings = _warnings(run, fit, env, opts, min_sep := _min_separation(state["pos"]))
-    chunks = [range(s, min(s + CRAZYFLIE_MAX_PIECES, poly.pieces)) for s in range(0, poly.pieces, CRAZYFLIE_MAX_PIECES)]
+    chunks = [
+        range(s, min(s + CRAZYFLIE_MAX_PIECES, poly.pieces))
+        for s in range(0, poly.pieces, CRAZYFLIE_MAX_PIECES)
+    ]
     if len(chunks) > 1:
-        warnings.append(f"{poly.pieces} pieces per drone exceed the Crazyflie's {CRAZYFLIE_MAX_PIECES}: split into "
-                        f"{len(chunks)} files per drone (fly.py refuses them), or raise --tolerance")  # fmt: skip
+        warnings.append(
+            f"{poly.pieces} pieces per drone exceed the Crazyflie's {CRAZYFLIE_MAX_PIECES}: split into "
+            f"{len(chunks)} files per drone (fly.py refuses them), or raise --tolerance"
+        )
     out.mkdir(parents=True, exist_ok=True)
     for stale in [*out.glob("drone*_setpoints.csv"), *out.glob("drone*_poly7*.csv")]:
         stale.unlink()  # an earlier export (perhaps split into more parts) of this directory
@@ -164,32 +196,47 @@ def export_run(run: RunData, out_dir: str | Path, options: ExportOptions | None 
     sp = flat_state(flown, t_sp, n) | {"t": t_sp}
     stems = [f"drone{i:0{width}d}" for i in range(n)]
     for i, stem in enumerate(stems):
-        files.append(_write_setpoints(out / f"{stem}_setpoints.csv", sp, i))
+        files.append(write_setpoints(out / f"{stem}_setpoints.csv", sp, i))
         for part, chunk in enumerate(chunks, start=1):
             suffix = "" if len(chunks) == 1 else f"_part{part}"
-            files.append(_write_poly(out / f"{stem}_poly7{suffix}.csv", flown.durations_s[list(chunk)],
-                                     flown.coefficients.reshape(poly.pieces, n, 4, -1)[list(chunk), i]))  # fmt: skip
+            files.append(
+                write_poly(
+                    out / f"{stem}_poly7{suffix}.csv",
+                    flown.durations_s[list(chunk)],
+                    flown.coefficients.reshape(poly.pieces, n, 4, -1)[list(chunk), i],
+                )
+            )
     start = state["pos"][0]
     files += crazyswarm.write_files(out, stems, start, float(flown.duration_s))
     dt = float(np.median(np.diff(t)))
     flight = fly_export(flown, n, opts.tolerance_m, dt, lim.max_acc_mps2) if opts.fly else None
     if flight is not None and not flight.within_tolerance:
-        warnings.append(f"flown on the quadrotor plant, drone {flight.error_drone} is {flight.max_error_m:.3g} m off "
-                        f"at t = {flight.error_t_s:.2f} s, beyond the declared {flight.declared_tolerance_m:.3g} m")  # fmt: skip
+        warnings.append(
+            f"flown on the quadrotor plant, drone {flight.error_drone} is {flight.max_error_m:.3g} m off "
+            f"at t = {flight.error_t_s:.2f} s, beyond the declared {flight.declared_tolerance_m:.3g} m"
+        )
     record = _record(run, opts, fit, timing, env, min_sep, len(chunks), warnings)
     record["quadrotor_flight"] = None if flight is None else flight.record()
     prov = out / PROVENANCE_JSON
     prov.write_text(json.dumps(json_safe(record), indent=2, allow_nan=False) + "\n")
     files.append(prov)
-    return ExportResult(out, tuple(files), fit, len(chunks), tuple(warnings), timing, env, min_sep, record, flight)
+    return ExportResult(
+        out, tuple(files), fit, len(chunks), tuple(warnings), timing, env, min_sep, record, flight
+    )
 
 
 def flat_state(poly: PiecewisePolynomial, t_s: Array, n: int) -> dict[str, Array]:
     """Position, velocity, acceleration, jerk (T, n, 3), yaw, yaw rate (T, n) and body rates
     omega (T, n, 3) of ``n`` drones' pieces (series drone * 4 + x, y, z, yaw) at ``t_s``."""
     d = [poly.evaluate(t_s, r).reshape(t_s.shape[0], n, 4) for r in range(4)]
-    state = {"pos": d[0][..., :3], "vel": d[1][..., :3], "acc": d[2][..., :3], "jerk": d[3][..., :3],
-             "yaw": d[0][..., 3], "yaw_rate": d[1][..., 3]}  # fmt: skip
+    state = {
+        "pos": d[0][..., :3],
+        "vel": d[1][..., :3],
+        "acc": d[2][..., :3],
+        "jerk": d[3][..., :3],
+        "yaw": d[0][..., 3],
+        "yaw_rate": d[1][..., 3],
+    }
     state["omega"] = body_rates(state["acc"], state["jerk"], state["yaw"], state["yaw_rate"])
     return state
 
@@ -197,8 +244,11 @@ def flat_state(poly: PiecewisePolynomial, t_s: Array, n: int) -> dict[str, Array
 def _check_floor(pos: Array, t_s: Array, floor_m: float) -> None:
     j, i = np.unravel_index(int(np.argmin(pos[..., 2])), pos.shape[:2])
     if pos[j, i, 2] < floor_m:
-        raise ValidationError("floor", f"drone {i} at t = {t_s[j]:.3f} s is at z = {pos[j, i, 2]:.3f} m, below the "
-                              f"floor {floor_m:g} m: shift the run up with --offset X,Y,Z")  # fmt: skip
+        raise ValidationError(
+            "floor",
+            f"drone {i} at t = {t_s[j]:.3f} s is at z = {pos[j, i, 2]:.3f} m, below the "
+            f"floor {floor_m:g} m: shift the run up with --offset X,Y,Z",
+        )
 
 
 def _min_separation(pos: Array) -> float:
@@ -209,19 +259,27 @@ def _min_separation(pos: Array) -> float:
     return float(np.linalg.norm(pos[:, iu[0]] - pos[:, iu[1]], axis=-1).min())
 
 
-def _warnings(run: RunData, fit: PolynomialFit, env: FlightEnvelope, opts: ExportOptions, min_sep: float) -> list[str]:
+def _warnings(
+    run: RunData, fit: PolynomialFit, env: FlightEnvelope, opts: ExportOptions, min_sep: float
+) -> list[str]:
     warnings: list[str] = []
     if not fit.within_tolerance:
-        warnings.append(f"the polynomial pieces miss the planned positions by up to {fit.max_error_m:.3g} m "
-                        f"(tolerance {opts.tolerance_m:g} m)")  # fmt: skip
+        warnings.append(
+            f"the polynomial pieces miss the planned positions by up to {fit.max_error_m:.3g} m "
+            f"(tolerance {opts.tolerance_m:g} m)"
+        )
     metrics = run.summary.get("metrics") or {}
     if metrics.get("separation_violations"):
-        warnings.append(f"the planned flight itself brings drones closer than d_min = {run.d_min_m:g} m "
-                        f"({metrics['separation_violations']} sample pairs, down to "
-                        f"{metrics.get('min_separation_segments') or 0.0:.3g} m): do not fly it")  # fmt: skip
+        warnings.append(
+            f"the planned flight itself brings drones closer than d_min = {run.d_min_m:g} m "
+            f"({metrics['separation_violations']} sample pairs, down to "
+            f"{metrics.get('min_separation_segments') or 0.0:.3g} m): do not fly it"
+        )
     elif run.d_min_m is not None and min_sep < run.d_min_m - 2.0 * opts.tolerance_m:
-        warnings.append(f"the retimed pieces bring two drones to {min_sep:.3g} m, closer than d_min = "
-                        f"{run.d_min_m:g} m less twice the tolerance: lower --tolerance")  # fmt: skip
+        warnings.append(
+            f"the retimed pieces bring two drones to {min_sep:.3g} m, closer than d_min = "
+            f"{run.d_min_m:g} m less twice the tolerance: lower --tolerance"
+        )
     problems = env.violations(opts.limits)
     if problems and not opts.allow_limits:
         raise ValidationError("limits", "; ".join(problems) + " (--allow-limits to export anyway)")
@@ -229,21 +287,41 @@ def _warnings(run: RunData, fit: PolynomialFit, env: FlightEnvelope, opts: Expor
     return warnings
 
 
-def _record(run: RunData, opts: ExportOptions, fit: PolynomialFit, timing: Retiming, env: FlightEnvelope,
-            min_sep: float, parts: int, warnings: list[str]) -> dict[str, Any]:  # fmt: skip
+def _record(
+    run: RunData,
+    opts: ExportOptions,
+    fit: PolynomialFit,
+    timing: Retiming,
+    env: FlightEnvelope,
+    min_sep: float,
+    parts: int,
+    warnings: list[str],
+) -> dict[str, Any]:
     prov = run.summary.get("provenance", {})
     scenario_file = prov.get("scenario_file")
-    peak = {name: {"drone": p.drone, "t_s": p.t_s, "value": p.value} for name, p in
-            (("speed_mps", env.speed), ("acc_mps2", env.acc), ("jerk_mps3", env.jerk),
-             ("body_rate_rad_s", env.body_rate), ("thrust_per_mass_mps2", env.thrust_acc))}  # fmt: skip
+    peak = {
+        name: {"drone": p.drone, "t_s": p.t_s, "value": p.value}
+        for name, p in (
+            ("speed_mps", env.speed),
+            ("acc_mps2", env.acc),
+            ("jerk_mps3", env.jerk),
+            ("body_rate_rad_s", env.body_rate),
+            ("thrust_per_mass_mps2", env.thrust_acc),
+        )
+    }
     return {
-        "export": provenance(int(prov.get("seed") or 0), None if scenario_file is None else Path(str(scenario_file)),
-                             prov.get("scenario_sha256")),  # fmt: skip
+        "export": provenance(
+            int(prov.get("seed") or 0),
+            None if scenario_file is None else Path(str(scenario_file)),
+            prov.get("scenario_sha256"),
+        ),
         "run": prov or None,
         "source": str(run.directory),
         "scenario": run.name,
         "files": {
-            "setpoints": "droneNNN_setpoints.csv: " + ",".join(SETPOINT_COLUMNS) + " [s, m, m/s, m/s^2, rad, rad/s]",
+            "setpoints": "droneNNN_setpoints.csv: "
+            + ",".join(SETPOINT_COLUMNS)
+            + " [s, m, m/s, m/s^2, rad, rad/s]",
             "polynomials": "droneNNN_poly7[_partK].csv: Crazyswarm uav_trajectories format, "
             "ascending powers of the time since the piece's start [s]",
             "crazyswarm2": f"{crazyswarm.CRAZYFLIES_YAML}, {crazyswarm.FLY_PY}",
@@ -269,44 +347,3 @@ def _record(run: RunData, opts: ExportOptions, fit: PolynomialFit, timing: Retim
         "d_min_m": run.d_min_m,
         "warnings": warnings,
     }
-
-
-def read_setpoints(path: str | Path) -> dict[str, Array]:
-    """Columns of a setpoint CSV as float arrays."""
-    with Path(path).open(newline="") as f:
-        rows = list(csv.DictReader(f))
-    return {c: np.array([float(r[c]) for r in rows]) for c in SETPOINT_COLUMNS}
-
-
-def read_poly(paths: list[Path] | list[str]) -> PiecewisePolynomial:
-    """The pieces of one drone from its polynomial CSV file(s), in order; series x, y, z, yaw."""
-    rows: list[list[float]] = []
-    for path in paths:
-        with Path(path).open(newline="") as f:
-            reader = csv.reader(f)
-            header = next(reader)
-            if tuple(header) != POLY_HEADER:
-                raise ValidationError(str(path), f"unexpected header {header[:3]}...")
-            rows += [[float(x) for x in row] for row in reader]
-    data = np.array(rows)
-    return PiecewisePolynomial(0.0, data[:, 0], data[:, 1:].reshape(-1, 4, POLY_DEGREE + 1))
-
-
-def _write_setpoints(path: Path, state: dict[str, Array], i: int) -> Path:
-    with path.open("w", newline="") as f:
-        writer = csv.writer(f, lineterminator="\n")
-        writer.writerow(SETPOINT_COLUMNS)
-        cols = np.column_stack([state["t"], state["pos"][:, i], state["vel"][:, i], state["acc"][:, i],
-                                state["yaw"][:, i], state["omega"][:, i]])  # fmt: skip
-        writer.writerows([[repr(x) for x in row] for row in cols.tolist()])
-    return path
-
-
-def _write_poly(path: Path, durations: Array, coef: Array) -> Path:
-    """``coef`` (K, 4, 8) for x, y, z, yaw."""
-    with path.open("w", newline="") as f:
-        writer = csv.writer(f, lineterminator="\n")
-        writer.writerow(POLY_HEADER)
-        for duration, c in zip(durations.tolist(), coef.tolist(), strict=True):
-            writer.writerow([repr(x) for x in (duration, *c[0], *c[1], *c[2], *c[3])])
-    return path

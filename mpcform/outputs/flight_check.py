@@ -45,10 +45,16 @@ class FlightCheck:
         return self.max_error_m <= self.declared_tolerance_m
 
     def record(self) -> dict[str, float | int | bool]:
-        return {"max_tracking_error_m": self.max_error_m, "drone": self.error_drone, "t_s": self.error_t_s,
-                "min_separation_m": self.min_separation_m, "plant_margin_m": self.plant_margin_m,
-                "fit_tolerance_m": self.fit_tolerance_m, "declared_tolerance_m": self.declared_tolerance_m,
-                "within_tolerance": self.within_tolerance}  # fmt: skip
+        return {
+            "max_tracking_error_m": self.max_error_m,
+            "drone": self.error_drone,
+            "t_s": self.error_t_s,
+            "min_separation_m": self.min_separation_m,
+            "plant_margin_m": self.plant_margin_m,
+            "fit_tolerance_m": self.fit_tolerance_m,
+            "declared_tolerance_m": self.declared_tolerance_m,
+            "within_tolerance": self.within_tolerance,
+        }
 
 
 def drone_models_available() -> bool:

@@ -52,8 +52,10 @@ class FlightLimits:
 
     def __post_init__(self) -> None:
         for name in ("max_speed_mps", "max_acc_mps2", "max_jerk_mps3", "max_body_rate_rad_s"):
-            positive(name.removesuffix("_mps").removesuffix("_mps2").removesuffix("_mps3")
-                     .removesuffix("_rad_s"), getattr(self, name))  # fmt: skip
+            positive(
+                name.removesuffix("_mps").removesuffix("_mps2").removesuffix("_mps3").removesuffix("_rad_s"),
+                getattr(self, name),
+            )
         if self.max_thrust_acc_mps2 is not None and not self.max_thrust_acc_mps2 > GRAVITY_MPS2:
             raise ValidationError("max_thrust", f"expected more than g, got {self.max_thrust_acc_mps2!r}")
 
@@ -103,14 +105,19 @@ class FlightEnvelope:
 
     def violations(self, limits: FlightLimits) -> list[str]:
         """One line per exceeded limit, naming the drone, the time and the value."""
-        checks = [("speed", self.speed, limits.max_speed_mps, "m/s", "--max-speed"),
-                  ("acceleration", self.acc, limits.max_acc_mps2, "m/s^2", "--max-acc"),
-                  ("jerk", self.jerk, limits.max_jerk_mps3, "m/s^3", "--max-jerk"),
-                  ("body rate", self.body_rate, limits.max_body_rate_rad_s, "rad/s", "--max-body-rate"),
-                  ("thrust per mass", self.thrust_acc, limits.max_thrust_acc_mps2, "m/s^2", "the platform")]  # fmt: skip
-        return [f"drone {peak.drone} at t = {peak.t_s:.3f} s: {name} {peak.value:.4g} {unit} exceeds "
-                f"{limit:.4g} {unit} ({flag})"
-                for name, peak, limit, unit, flag in checks if limit is not None and peak.value > limit]  # fmt: skip
+        checks = [
+            ("speed", self.speed, limits.max_speed_mps, "m/s", "--max-speed"),
+            ("acceleration", self.acc, limits.max_acc_mps2, "m/s^2", "--max-acc"),
+            ("jerk", self.jerk, limits.max_jerk_mps3, "m/s^3", "--max-jerk"),
+            ("body rate", self.body_rate, limits.max_body_rate_rad_s, "rad/s", "--max-body-rate"),
+            ("thrust per mass", self.thrust_acc, limits.max_thrust_acc_mps2, "m/s^2", "the platform"),
+        ]
+        return [
+            f"drone {peak.drone} at t = {peak.t_s:.3f} s: {name} {peak.value:.4g} {unit} exceeds "
+            f"{limit:.4g} {unit} ({flag})"
+            for name, peak, limit, unit, flag in checks
+            if limit is not None and peak.value > limit
+        ]
 
 
 def envelope(t_s: Array, vel: Array, acc: Array, jerk: Array, omega: Array) -> FlightEnvelope:

@@ -76,8 +76,9 @@ class PiecewisePolynomial:
 def knots(t0_s: float, t1_s: float, pieces: int) -> Array:
     """Knot vector of a degree-7 spline with ``pieces`` uniform pieces, continuous up to the jerk."""
     inner = np.linspace(t0_s, t1_s, pieces + 1)[1:-1]
-    return np.concatenate([[t0_s] * (POLY_DEGREE + 1), np.repeat(inner, KNOT_MULTIPLICITY),
-                           [t1_s] * (POLY_DEGREE + 1)])  # fmt: skip
+    return np.concatenate(
+        [[t0_s] * (POLY_DEGREE + 1), np.repeat(inner, KNOT_MULTIPLICITY), [t1_s] * (POLY_DEGREE + 1)]
+    )
 
 
 def fit_piecewise_polynomial(
@@ -96,7 +97,9 @@ def fit_piecewise_polynomial(
     try:
         spline = make_lsq_spline(t, y, knots(float(t[0]), float(t[-1]), pieces), k=POLY_DEGREE)
     except (ValueError, np.linalg.LinAlgError) as exc:  # too few samples for the pieces
-        raise ValidationError("pieces", f"{pieces} pieces cannot be fitted to {t.shape[0]} samples: {exc}") from exc
+        raise ValidationError(
+            "pieces", f"{pieces} pieces cannot be fitted to {t.shape[0]} samples: {exc}"
+        ) from exc
     c = spline.c.copy()
     if rest_ends:
         c[:3], c[-3:] = y[0], y[-1]
@@ -106,11 +109,15 @@ def fit_piecewise_polynomial(
 def from_spline(spline: BSpline) -> PiecewisePolynomial:
     """The non-empty pieces of a B-spline with coefficients (C, m) as ascending power series in
     the local time (:meth:`PPoly.from_spline` converts one series at a time)."""
-    series = [PPoly.from_spline(BSpline(spline.t, spline.c[:, j], spline.k)) for j in range(spline.c.shape[1])]
+    series = [
+        PPoly.from_spline(BSpline(spline.t, spline.c[:, j], spline.k)) for j in range(spline.c.shape[1])
+    ]
     widths = np.diff(series[0].x)
     keep = widths > 0  # repeated knots give empty intervals
     coef = np.stack([pp.c[:, keep] for pp in series], axis=-1)  # (8, K, m), descending powers
-    return PiecewisePolynomial(float(series[0].x[0]), widths[keep], np.ascontiguousarray(coef[::-1].transpose(1, 2, 0)))
+    return PiecewisePolynomial(
+        float(series[0].x[0]), widths[keep], np.ascontiguousarray(coef[::-1].transpose(1, 2, 0))
+    )
 
 
 @dataclass(frozen=True)

@@ -62,12 +62,18 @@ class Retiming:
 
 def retime(path: PiecewisePolynomial, v_max_mps: float, a_max_mps2: float, j_max_mps3: float) -> Retiming:
     """The rest-to-rest time scaling of ``path`` (series drone * 3 + axis, starting at 0 s)."""
-    v, a, j = (positive(name, x) for name, x in (("max_speed", v_max_mps), ("max_acc", a_max_mps2),
-                                                 ("max_jerk", j_max_mps3)))  # fmt: skip
+    v, a, j = (
+        positive(name, x)
+        for name, x in (("max_speed", v_max_mps), ("max_acc", a_max_mps2), ("max_jerk", j_max_mps3))
+    )
     end = path.duration_s
     dense = np.linspace(0.0, end, DERIVATIVE_SAMPLES * path.pieces + 1)
-    m1, m2, m3 = (max(float(np.linalg.norm(path.evaluate(dense, r).reshape(dense.shape[0], -1, 3),
-                                           axis=-1).max()), 1e-9) for r in (1, 2, 3))  # fmt: skip
+    m1, m2, m3 = (
+        max(
+            float(np.linalg.norm(path.evaluate(dense, r).reshape(dense.shape[0], -1, 3), axis=-1).max()), 1e-9
+        )
+        for r in (1, 2, 3)
+    )
     sd = min(v / m1, np.sqrt(0.5 * a / m2), np.cbrt(j / (3.0 * m3)))
     sdd = min(0.5 * a / m1, j / (9.0 * m2 * sd))
     sddd = j / (3.0 * m1)

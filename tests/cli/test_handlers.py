@@ -194,7 +194,8 @@ def test_compare_table_only_and_bad_directory(tmp_path: Path, capsys: pytest.Cap
 
 def test_export_command(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     short_run("swap_planar_8", tmp_path, steps=40)
-    argv = ["export", str(tmp_path), "--altitude", "1.2", "--tolerance", "0.01", "--rate", "50", "--no-flight-check"]
+    argv = ["export", str(tmp_path), "--altitude", "1.2", "--tolerance", "0.01", "--rate", "50"]
+    argv.append("--no-flight-check")
     assert main(argv) == 0
     out = capsys.readouterr().out
     assert "exported 8 drones" in out and "tolerance 0.01 m" in out and "rest to rest in" in out
@@ -216,7 +217,16 @@ def test_export_refuses_the_floor_and_limits(tmp_path: Path, capsys: pytest.Capt
     assert "mpcform: warning: drone" in capsys.readouterr().err
 
 
-@pytest.mark.parametrize("argv", [["plot"], ["export"], ["compare"], ["export", "d", "--tolerance", "x"], ["export", "d", "--offset", "1,2"]])
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["plot"],
+        ["export"],
+        ["compare"],
+        ["export", "d", "--tolerance", "x"],
+        ["export", "d", "--offset", "1,2"],
+    ],
+)
 def test_usage_errors(capsys: pytest.CaptureFixture[str], argv: list[str]) -> None:
     status = main(argv)
     err = capsys.readouterr().err

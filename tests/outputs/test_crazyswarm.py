@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from mpcform.outputs.crazyswarm import CRAZYFLIE_MAX_PIECES, FLY_PY, crazyflies_yaml, write_files
-from mpcform.outputs.export import POLY_HEADER
+from mpcform.outputs.flight_files import POLY_HEADER
 
 
 def _poly_file(path: Path, pieces: int, start: list[float]) -> None:

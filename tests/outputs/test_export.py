@@ -68,9 +68,15 @@ class CrazyswarmTrajectory:
 
 @pytest.mark.parametrize(
     ("name", "steps", "offset"),
-    [("swap_planar_8", 120, (0.0, 0.0, 0.0)), ("swap_spatial_12", 100, LIFT), ("worked_example", 150, (0.0, 0.0, 0.0))],
+    [
+        ("swap_planar_8", 120, (0.0, 0.0, 0.0)),
+        ("swap_spatial_12", 100, LIFT),
+        ("worked_example", 150, (0.0, 0.0, 0.0)),
+    ],
 )
-def test_crazyswarm_reader_reproduces_the_retimed_plan(tmp_path: Path, name: str, steps: int, offset: tuple) -> None:
+def test_crazyswarm_reader_reproduces_the_retimed_plan(
+    tmp_path: Path, name: str, steps: int, offset: tuple
+) -> None:
     run = short_run(name, tmp_path / "run", steps=steps)
     data = load_run(tmp_path / "run")
     result = export_run(data, tmp_path / "export", tolerance_m=TOLERANCE_M, offset_m=offset, fly=False)
@@ -105,7 +111,14 @@ def test_flight_starts_and_ends_at_rest(tmp_path: Path, name: str) -> None:
 
 def test_setpoints_agree_with_the_polynomials(tmp_path: Path) -> None:
     short_run("swap_spatial_12", tmp_path / "run", steps=60)
-    export_run(load_run(tmp_path / "run"), tmp_path / "export", offset_m=LIFT, rate_hz=50.0, yaw="formation", fly=False)
+    export_run(
+        load_run(tmp_path / "run"),
+        tmp_path / "export",
+        offset_m=LIFT,
+        rate_hz=50.0,
+        yaw="formation",
+        fly=False,
+    )
     poly = read_poly([tmp_path / "export" / "drone003_poly7.csv"])
     cols = read_setpoints(tmp_path / "export" / "drone003_setpoints.csv")
     path = tmp_path / "export" / "drone003_setpoints.csv"
@@ -166,12 +179,18 @@ def test_provenance_goes_with_the_export(tmp_path: Path) -> None:
 def test_floor_offset_and_altitude(tmp_path: Path) -> None:
     short_run("swap_spatial_12", tmp_path / "run", steps=10)
     data = load_run(tmp_path / "run")
-    with pytest.raises(ValidationError, match="altitude: applies only to planar runs; shift a spatial run with --offset"):
+    with pytest.raises(
+        ValidationError, match="altitude: applies only to planar runs; shift a spatial run with --offset"
+    ):
         export_run(data, tmp_path / "export", altitude_m=1.0, fly=False)
-    with pytest.raises(ValidationError, match=r"floor: drone \d+ at t = [0-9.]+ s is at z = -[0-9.]+ m, below the floor 0 m"):
+    with pytest.raises(
+        ValidationError, match=r"floor: drone \d+ at t = [0-9.]+ s is at z = -[0-9.]+ m, below the floor 0 m"
+    ):
         export_run(data, tmp_path / "export", fly=False)  # the swap is centred at z = 0
     result = export_run(data, tmp_path / "export", offset_m=LIFT, fly=False)
-    z0 = float(np.loadtxt(tmp_path / "export" / "drone000_poly7.csv", delimiter=",", skiprows=1, ndmin=2)[0, 17])
+    z0 = float(
+        np.loadtxt(tmp_path / "export" / "drone000_poly7.csv", delimiter=",", skiprows=1, ndmin=2)[0, 17]
+    )
     assert z0 == pytest.approx(data.trajectory.positions_m[0, 0, 2] + 3.0, abs=1e-5)
     with pytest.raises(ValidationError, match="below the floor 2.5 m"):
         export_run(data, tmp_path / "export", offset_m=LIFT, floor_m=2.5, fly=False)
@@ -182,11 +201,15 @@ def test_limits_are_errors_unless_allowed(tmp_path: Path) -> None:
     short_run("swap_planar_8", tmp_path / "run", steps=60)
     data = load_run(tmp_path / "run")
     tight = FlightLimits(max_body_rate_rad_s=0.01)
-    with pytest.raises(ValidationError, match=r"limits: drone \d+ at t = [0-9.]+ s: body rate [0-9.]+ rad/s exceeds 0.01"):
+    with pytest.raises(
+        ValidationError, match=r"limits: drone \d+ at t = [0-9.]+ s: body rate [0-9.]+ rad/s exceeds 0.01"
+    ):
         export_run(data, tmp_path / "export", ExportOptions(limits=tight, fly=False))
     result = export_run(data, tmp_path / "export", ExportOptions(limits=tight, allow_limits=True, fly=False))
     assert any("body rate" in w for w in result.warnings)
-    slow = export_run(data, tmp_path / "slow", ExportOptions(limits=FlightLimits(max_speed_mps=0.3), fly=False))
+    slow = export_run(
+        data, tmp_path / "slow", ExportOptions(limits=FlightLimits(max_speed_mps=0.3), fly=False)
+    )
     assert slow.envelope.speed.value <= 0.3 and slow.retiming.duration_s > result.retiming.duration_s
 
 

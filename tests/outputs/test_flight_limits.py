@@ -49,7 +49,9 @@ def test_envelope_names_drone_time_value() -> None:
     assert (env.speed.drone, env.speed.t_s, env.speed.value) == (1, 1.0, 2.0)
     (line,) = env.violations(FlightLimits(max_speed_mps=1.5))
     assert line == "drone 1 at t = 1.000 s: speed 2 m/s exceeds 1.5 m/s (--max-speed)"
-    assert env.violations(FlightLimits()) == ["drone 1 at t = 1.000 s: speed 2 m/s exceeds 1 m/s (--max-speed)"]
+    assert env.violations(FlightLimits()) == [
+        "drone 1 at t = 1.000 s: speed 2 m/s exceeds 1 m/s (--max-speed)"
+    ]
 
 
 def test_defaults_and_validation() -> None:
