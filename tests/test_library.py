@@ -59,6 +59,8 @@ def test_every_scenario_runs_writes_and_exports(tmp_path: Path, path: Path) -> N
     data = load_run(tmp_path)
     assert data.trajectory.positions_m.shape == (STEPS + 1, scenario.n, scenario.dim)
     assert np.all(np.isfinite(data.trajectory.positions_m)) and not data.formation.scale_is_relative
-    result = export_run(data, tmp_path / "export", tolerance_m=0.05)
+    lift = (0.0, 0.0, max(0.0, 0.5 - float(data.trajectory.positions_m[..., 2:].min(initial=0.5))))
+    out = tmp_path / "export"
+    result = export_run(data, out, tolerance_m=0.05, offset_m=lift, allow_limits=True, fly=False)
     assert result.fit.within_tolerance
     assert len(list((tmp_path / "export").glob("drone*_setpoints.csv"))) == scenario.n

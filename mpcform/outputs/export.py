@@ -1,31 +1,32 @@
-"""Trajectories a flight stack can consume: setpoint streams and Crazyswarm polynomial files.
+"""Flight-ready exports of a run: rest-to-rest polynomials, setpoints and Crazyswarm2 files.
 
 For every drone of a run (:class:`~mpcform.outputs.rundata.RunData`, in memory after
 ``mpcform run --export`` or read back by :func:`~mpcform.outputs.rundata.load_run`):
 
-- ``droneNNN_setpoints.csv``: ``t, x, y, z, vx, vy, vz, ax, ay, az, yaw`` at every sample,
-  for streaming full-state setpoints. Positions are the planned (simulated) positions;
-  velocities and accelerations are their central differences (one-sided at the ends), so
-  the three are consistent: without lag or noise the velocity at ``t_j`` is the mean of the
-  commands before and after it. Yaw is 0 (the formation's rotation is not a drone's yaw).
-- ``droneNNN_poly7.csv``: the same path as 7th-order polynomial pieces in the format of the
-  Crazyswarm ``uav_trajectories`` tools (header ``Duration,x^0,...,x^7,y^0,...,yaw^7``,
-  coefficients in ascending powers of the time since the start of the piece [s]), fitted by
-  :func:`mpcform.outputs.polynomial.fit_positions`: uniform pieces, continuous up to the jerk,
-  as few as reproduce every planned position within ``tolerance_m`` (with float32
-  coefficients, as the Crazyflie stores them).
-  The Crazyflie keeps trajectories in 4096 bytes of memory, 31 such pieces: longer fits are
-  split into ``droneNNN_poly7_partK.csv`` files of at most 31 pieces, with a warning.
+1. the planned positions (planar runs at ``altitude_m``, then shifted by ``offset_m``) are
+   retimed with one time scaling ``s(t)`` for the whole swarm, from rest to rest, within the
+   speed, acceleration and jerk limits (:mod:`mpcform.outputs.retime`);
+2. the retimed positions are fitted by 7th-order pieces continuous up to the jerk, at rest at
+   both ends (:mod:`mpcform.outputs.polynomial`); every planned sample, at its retimed time, is
+   within ``tolerance_m`` of the float32 pieces;
+3. the pieces are checked: lowest point against ``floor_m`` (refused below it), speed,
+   acceleration, jerk, body rate and thrust against :class:`FlightLimits` (refused unless
+   ``allow_limits``), and the pairwise separation against the run's ``d_min``;
+4. files: ``droneNNN_poly7.csv`` (Crazyswarm ``uav_trajectories`` format: ``Duration,x^0..x^7,
+   y^0..,z^0..,yaw^0..yaw^7``, ascending powers of the time since the piece's start; split into
+   ``_partK`` files above the Crazyflie's 31 pieces), ``droneNNN_setpoints.csv`` (the pieces
+   resampled at ``rate_hz``: ``t, x, y, z, vx, vy, vz, ax, ay, az, yaw, omega_x, omega_y,
+   omega_z``, every column a derivative of the pieces; omega the body rates from flatness, what
+   ``cmdFullState(pos, vel, acc, yaw, omega)`` takes), ``crazyflies.yaml`` and ``fly.py``
+   (:mod:`mpcform.outputs.crazyswarm`) and ``provenance.json``.
 
-Planar runs fly at a constant ``altitude_m``. ``provenance.json`` beside the files records
-the versions, seed and scenario hash of the run and of the export, and the fit's accuracy.
+Yaw is 0, or with ``yaw="formation"`` the formation's rotation about z (:mod:`mpcform.outputs.yaw`).
 """
 
 from __future__ import annotations
 
-import csv
 import json
-from dataclasses import dataclass
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -33,186 +34,316 @@ import numpy as np
 
 from mpcform._validate import Array, positive
 from mpcform.errors import ValidationError
+from mpcform.outputs import crazyswarm
 from mpcform.outputs.files import json_safe, provenance
+from mpcform.outputs.flight_check import FlightCheck, fly_export
+from mpcform.outputs.flight_files import (
+    POLY_HEADER,
+    SETPOINT_COLUMNS,
+    read_poly,
+    read_setpoints,
+    write_poly,
+    write_setpoints,
+)
+from mpcform.outputs.flight_limits import FlightEnvelope, FlightLimits, body_rates, envelope
 from mpcform.outputs.polynomial import (
     DEFAULT_TOLERANCE_M,
     MAX_PIECE_S,
-    POLY_DEGREE,
     PiecewisePolynomial,
     PolynomialFit,
+    fit_piecewise_polynomial,
     fit_positions,
-    max_speed,
 )
+from mpcform.outputs.retime import Retiming, retime
 from mpcform.outputs.rundata import RunData
-from mpcform.sim.trajectory import Trajectory
+from mpcform.outputs.yaw import formation_yaw
 
-CRAZYFLIE_MAX_PIECES = 31  # crazyflie-firmware: TRAJECTORY_MEMORY_SIZE 4096 B / 132 B per poly4d piece
+CRAZYFLIE_MAX_PIECES = crazyswarm.CRAZYFLIE_MAX_PIECES
 DEFAULT_ALTITUDE_M = 1.0
-SETPOINT_COLUMNS = ("t", "x", "y", "z", "vx", "vy", "vz", "ax", "ay", "az", "yaw")
-POLY_AXES = ("x", "y", "z", "yaw")
-POLY_HEADER = ("Duration", *(f"{a}^{m}" for a in POLY_AXES for m in range(POLY_DEGREE + 1)))
+DEFAULT_RATE_HZ = 100.0
+PATH_SAMPLES = 10  # per planned interval: the path is fitted to the planned positions joined by lines
+FIT_RATE_HZ = 50.0  # samples of the retimed reference per second, besides the planned samples
+CHECK_RATE_HZ = 500.0  # sampling of the pieces for limits, floor and separation
+LIMIT_SLACK = 0.9  # the retiming aims at this fraction of each limit (the fit adds a little)
 PROVENANCE_JSON = "provenance.json"
-SPEED_SLACK = 1.1  # warn when the pieces are faster than this times v_max
+YAW_MODES = ("zero", "formation")
+__all__ = ["POLY_HEADER", "SETPOINT_COLUMNS", "ExportOptions", "ExportResult", "export_run", "read_poly",
+           "read_setpoints"]  # fmt: skip
+
+
+@dataclass(frozen=True)
+class ExportOptions:
+    """How to export: planar altitude [m], offset [m], floor [m], fit tolerance [m], longest
+    piece [s], setpoint rate [Hz], yaw mode, limits (errors unless ``allow_limits``)."""
+
+    altitude_m: float | None = None
+    offset_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    floor_m: float = 0.0
+    tolerance_m: float = DEFAULT_TOLERANCE_M
+    max_piece_s: float = MAX_PIECE_S
+    rate_hz: float = DEFAULT_RATE_HZ
+    yaw: str = "zero"
+    limits: FlightLimits = field(default_factory=FlightLimits)
+    allow_limits: bool = False
+    fly: bool = True  # fly the export on the quadrotor plant (skipped without drone-models)
+
+    def __post_init__(self) -> None:
+        positive("tolerance", self.tolerance_m)
+        positive("rate", self.rate_hz)
+        if self.altitude_m is not None:
+            positive("altitude", self.altitude_m)
+        if len(self.offset_m) != 3 or not np.all(np.isfinite(self.offset_m)):
+            raise ValidationError("offset", f"expected three finite numbers X,Y,Z, got {self.offset_m!r}")
+        if self.yaw not in YAW_MODES:
+            raise ValidationError("yaw", f"expected one of {', '.join(YAW_MODES)}, got {self.yaw!r}")
 
 
 @dataclass(frozen=True)
 class ExportResult:
-    """Files written, the fit, and warnings for the user (too many pieces, below the floor)."""
+    """Files written, the fit (error against the planned samples), the retiming, the flight
+    envelope and warnings for the user."""
 
     directory: Path
     files: tuple[Path, ...]
     fit: PolynomialFit
     files_per_drone: int
     warnings: tuple[str, ...]
+    retiming: Retiming
+    envelope: FlightEnvelope
+    min_separation_m: float
+    record: dict[str, Any]
+    flight: FlightCheck | None
 
 
-def setpoints(trajectory: Trajectory, altitude_m: float | None = None) -> tuple[Array, Array, Array]:
-    """Positions, velocities and accelerations (T, n, 3) of the planned path (z = altitude if planar)."""
-    p = _positions_3d(trajectory, altitude_m)
-    d, t = trajectory.dim, trajectory.t_s
-    vel = np.zeros_like(p)  # planar: vz = az = 0 exactly
-    vel[..., :d] = np.gradient(trajectory.positions_m, t, axis=0, edge_order=1)
-    acc = np.zeros_like(p)
-    acc[..., :d] = np.gradient(vel[..., :d], t, axis=0, edge_order=1)
-    return p, vel, acc
+def positions_3d(run: RunData, options: ExportOptions) -> Array:
+    """Planned positions (T, n, 3) [m]: planar runs at the altitude, then shifted by the offset."""
+    p = run.trajectory.positions_m
+    if run.dim == 3:
+        if options.altitude_m is not None:
+            raise ValidationError(
+                "altitude", "applies only to planar runs; shift a spatial run with --offset X,Y,Z"
+            )
+        p3 = p.copy()
+    else:
+        alt = DEFAULT_ALTITUDE_M if options.altitude_m is None else options.altitude_m
+        p3 = np.concatenate([p, np.full((*p.shape[:2], 1), alt)], axis=-1)
+    return p3 + np.asarray(options.offset_m, dtype=float)
 
 
 def export_run(
-    run: RunData,
-    out_dir: str | Path,
-    *,
-    altitude_m: float | None = None,
-    tolerance_m: float = DEFAULT_TOLERANCE_M,
-    max_piece_s: float = MAX_PIECE_S,
+    run: RunData, out_dir: str | Path, options: ExportOptions | None = None, **fields: Any
 ) -> ExportResult:
-    """Write the setpoint and polynomial CSV files of every drone and ``provenance.json``."""
+    """Retime, fit, check and write every drone's files (``fields`` override ``options``)."""
+    opts = replace(options or ExportOptions(), **fields)
     out = Path(out_dir)
+    t = run.trajectory.t_s - run.trajectory.t_s[0]
+    planned = positions_3d(run, opts)
+    n = run.n
+    lim = opts.limits
+    half = 0.5 * opts.tolerance_m
+    dense = np.linspace(
+        0.0, t[-1], PATH_SAMPLES * (t.shape[0] - 1) + 1
+    )  # held commands: linear between samples
+    lines = np.stack([np.interp(dense, t, x) for x in planned.reshape(t.shape[0], -1).T], axis=-1)
+    path = fit_positions(dense, lines.reshape(dense.shape[0], n, 3), half, opts.max_piece_s).polynomial
+    timing = retime(
+        path, LIMIT_SLACK * lim.max_speed_mps, LIMIT_SLACK * lim.max_acc_mps2, LIMIT_SLACK * lim.max_jerk_mps3
+    )
+    t_planned = timing.new_time(t)
+    grid = np.linspace(0.0, timing.duration_s, int(np.ceil(FIT_RATE_HZ * timing.duration_s)) + 1)
+    t_fit = np.unique(np.concatenate([grid, t_planned]))
+    fit = fit_positions(t_fit, timing.positions(t_fit), half, opts.max_piece_s, rest_ends=True)
+    poly = fit.polynomial
+    yaw = (
+        np.zeros(t.shape)
+        if opts.yaw == "zero"
+        else formation_yaw(run.trajectory.positions_m, run.formation.offsets_m)
+    )
+    yaw_poly = fit_piecewise_polynomial(
+        t_fit, np.interp(t_fit, t_planned, yaw)[:, None], poly.pieces, rest_ends=True
+    )
+    coef = np.concatenate(
+        [
+            poly.coefficients.reshape(poly.pieces, n, 3, -1),
+            np.repeat(yaw_poly.coefficients[:, None], n, axis=1),
+        ],
+        axis=2,
+    )
+    flown = PiecewisePolynomial(0.0, poly.durations_s, coef.reshape(poly.pieces, n * 4, -1)).as_float32()
+    err = flown.evaluate(t_planned).reshape(t.shape[0], n, 4)[..., :3] - planned
+    fit = PolynomialFit(poly, float(np.linalg.norm(err, axis=-1).max()), opts.tolerance_m)
+    t_check = np.linspace(0.0, flown.duration_s, int(np.ceil(CHECK_RATE_HZ * flown.duration_s)) + 1)
+    state = flat_state(flown, t_check, n)
+    _check_floor(state["pos"], t_check, opts.floor_m)
+    env = envelope(t_check, state["vel"], state["acc"], state["jerk"], state["omega"])
+    warnings = _warnings(run, fit, env, opts, min_sep := _min_separation(state["pos"]))
+    chunks = [
+        range(s, min(s + CRAZYFLIE_MAX_PIECES, poly.pieces))
+        for s in range(0, poly.pieces, CRAZYFLIE_MAX_PIECES)
+    ]
+    if len(chunks) > 1:
+        warnings.append(
+            f"{poly.pieces} pieces per drone exceed the Crazyflie's {CRAZYFLIE_MAX_PIECES}: split into "
+            f"{len(chunks)} files per drone (fly.py refuses them), or raise --tolerance"
+        )
     out.mkdir(parents=True, exist_ok=True)
-    pos, vel, acc = setpoints(run.trajectory, altitude_m)
     for stale in [*out.glob("drone*_setpoints.csv"), *out.glob("drone*_poly7*.csv")]:
         stale.unlink()  # an earlier export (perhaps split into more parts) of this directory
-    t = run.trajectory.t_s
-    fit = fit_positions(t, run.trajectory.positions_m, tolerance_m, max_piece_s)  # planar: z is exact
-    warnings: list[str] = []
-    if not fit.within_tolerance:
-        warnings.append(f"the polynomial pieces miss the planned positions by up to {fit.max_error_m:.3g} m "
-                        f"(tolerance {tolerance_m:g} m) at two samples per piece")  # fmt: skip
-    metrics = run.summary.get("metrics") or {}
-    if metrics.get("separation_violations"):
-        warnings.append(f"the planned flight itself brings drones closer than d_min = {run.d_min_m:g} m "
-                        f"({metrics['separation_violations']} sample pairs, down to "
-                        f"{metrics.get('min_separation_segments') or 0.0:.3g} m): do not fly it")  # fmt: skip
-    poly_speed = max_speed(fit.polynomial, run.n)
-    if run.v_max_mps is not None and poly_speed > SPEED_SLACK * run.v_max_mps:
-        warnings.append(f"the polynomial pieces reach {poly_speed:.3g} m/s, above v_max = "
-                        f"{run.v_max_mps:g} m/s (the commands keep it): lower --tolerance")  # fmt: skip
-    chunks = [range(s, min(s + CRAZYFLIE_MAX_PIECES, fit.polynomial.pieces))
-              for s in range(0, fit.polynomial.pieces, CRAZYFLIE_MAX_PIECES)]  # fmt: skip
-    if len(chunks) > 1:
-        warnings.append(f"{fit.polynomial.pieces} pieces per drone exceed the Crazyflie's "
-                        f"{CRAZYFLIE_MAX_PIECES}: split into {len(chunks)} files per drone (upload and fly "
-                        "them in turn), or raise --tolerance")  # fmt: skip
-    if float(pos[..., 2].min()) < 0.0:
-        warnings.append(f"z goes down to {float(pos[..., 2].min()):.3g} m, below the floor z = 0: shift "
-                        "the scenario up (or pass --altitude for a planar run) before flying")  # fmt: skip
-    width = max(3, len(str(run.n - 1)))
+    width = max(3, len(str(n - 1)))
     files: list[Path] = []
-    coef = np.zeros((fit.polynomial.pieces, run.n, 3, POLY_DEGREE + 1))
-    coef[:, :, : run.dim] = fit.polynomial.coefficients.reshape(fit.polynomial.pieces, run.n, run.dim, -1)
-    if run.dim == 2:
-        coef[:, :, 2, 0] = pos[0, 0, 2]  # constant altitude
-    for i in range(run.n):
-        stem = f"drone{i:0{width}d}"
-        path = out / f"{stem}_setpoints.csv"
-        _write_setpoints(path, t - t[0], pos[:, i], vel[:, i], acc[:, i])
-        files.append(path)
+    t_sp = np.arange(0.0, flown.duration_s, 1.0 / opts.rate_hz)
+    t_sp = np.append(t_sp, flown.duration_s)
+    sp = flat_state(flown, t_sp, n) | {"t": t_sp}
+    stems = [f"drone{i:0{width}d}" for i in range(n)]
+    for i, stem in enumerate(stems):
+        files.append(write_setpoints(out / f"{stem}_setpoints.csv", sp, i))
         for part, chunk in enumerate(chunks, start=1):
             suffix = "" if len(chunks) == 1 else f"_part{part}"
-            path = out / f"{stem}_poly7{suffix}.csv"
-            _write_poly(path, fit.polynomial.durations_s[list(chunk)], coef[list(chunk), i])
-            files.append(path)
-    record = {
-        "export": provenance(
-            int(run.summary.get("provenance", {}).get("seed") or 0),
-            _str_or_none(run.summary.get("provenance", {}).get("scenario_file")),
-            run.summary.get("provenance", {}).get("scenario_sha256"),
-        ),  # fmt: skip
-        "run": run.summary.get("provenance"),
-        "source": str(run.directory),
-        "scenario": run.name,
-        "files": {
-            "setpoints": "droneNNN_setpoints.csv: " + ",".join(SETPOINT_COLUMNS) + " [s, m, m/s, m/s^2, rad]",
-            "polynomials": "droneNNN_poly7[_partK].csv: Crazyswarm uav_trajectories format, "
-            "ascending powers of the time since the piece's start [s]",
-        },  # fmt: skip
-        "altitude_m": None if run.dim == 3 else _altitude(altitude_m),
-        "pieces": fit.polynomial.pieces,
-        "piece_duration_s": float(fit.polynomial.durations_s[0]),
-        "files_per_drone": len(chunks),
-        "crazyflie_max_pieces": CRAZYFLIE_MAX_PIECES,
-        "tolerance_m": tolerance_m,
-        "max_fit_error_m": fit.max_error_m,
-        "max_polynomial_speed_mps": poly_speed,
-        "warnings": warnings,
-    }
+            files.append(
+                write_poly(
+                    out / f"{stem}_poly7{suffix}.csv",
+                    flown.durations_s[list(chunk)],
+                    flown.coefficients.reshape(poly.pieces, n, 4, -1)[list(chunk), i],
+                )
+            )
+    start = state["pos"][0]
+    files += crazyswarm.write_files(out, stems, start, float(flown.duration_s))
+    dt = float(np.median(np.diff(t)))
+    flight = fly_export(flown, n, opts.tolerance_m, dt, lim.max_acc_mps2) if opts.fly else None
+    if flight is not None and not flight.within_tolerance:
+        warnings.append(
+            f"flown on the quadrotor plant, drone {flight.error_drone} is {flight.max_error_m:.3g} m off "
+            f"at t = {flight.error_t_s:.2f} s, beyond the declared {flight.declared_tolerance_m:.3g} m"
+        )
+    record = _record(run, opts, fit, timing, env, min_sep, len(chunks), warnings)
+    record["quadrotor_flight"] = None if flight is None else flight.record()
     prov = out / PROVENANCE_JSON
     prov.write_text(json.dumps(json_safe(record), indent=2, allow_nan=False) + "\n")
     files.append(prov)
-    return ExportResult(out, tuple(files), fit, len(chunks), tuple(warnings))
+    return ExportResult(
+        out, tuple(files), fit, len(chunks), tuple(warnings), timing, env, min_sep, record, flight
+    )
 
 
-def read_setpoints(path: str | Path) -> dict[str, Array]:
-    """Columns of a setpoint CSV as float arrays."""
-    with Path(path).open(newline="") as f:
-        rows = list(csv.DictReader(f))
-    return {c: np.array([float(r[c]) for r in rows]) for c in SETPOINT_COLUMNS}
+def flat_state(poly: PiecewisePolynomial, t_s: Array, n: int) -> dict[str, Array]:
+    """Position, velocity, acceleration, jerk (T, n, 3), yaw, yaw rate (T, n) and body rates
+    omega (T, n, 3) of ``n`` drones' pieces (series drone * 4 + x, y, z, yaw) at ``t_s``."""
+    d = [poly.evaluate(t_s, r).reshape(t_s.shape[0], n, 4) for r in range(4)]
+    state = {
+        "pos": d[0][..., :3],
+        "vel": d[1][..., :3],
+        "acc": d[2][..., :3],
+        "jerk": d[3][..., :3],
+        "yaw": d[0][..., 3],
+        "yaw_rate": d[1][..., 3],
+    }
+    state["omega"] = body_rates(state["acc"], state["jerk"], state["yaw"], state["yaw_rate"])
+    return state
 
 
-def read_poly(paths: list[Path] | list[str]) -> PiecewisePolynomial:
-    """The pieces of one drone from its polynomial CSV file(s), in order; series x, y, z, yaw."""
-    rows: list[list[float]] = []
-    for path in paths:
-        with Path(path).open(newline="") as f:
-            reader = csv.reader(f)
-            header = next(reader)
-            if tuple(header) != POLY_HEADER:
-                raise ValidationError(str(path), f"unexpected header {header[:3]}...")
-            rows += [[float(x) for x in row] for row in reader]
-    data = np.array(rows)
-    return PiecewisePolynomial(0.0, data[:, 0], data[:, 1:].reshape(-1, 4, POLY_DEGREE + 1))
+def _check_floor(pos: Array, t_s: Array, floor_m: float) -> None:
+    j, i = np.unravel_index(int(np.argmin(pos[..., 2])), pos.shape[:2])
+    if pos[j, i, 2] < floor_m:
+        raise ValidationError(
+            "floor",
+            f"drone {i} at t = {t_s[j]:.3f} s is at z = {pos[j, i, 2]:.3f} m, below the "
+            f"floor {floor_m:g} m: shift the run up with --offset X,Y,Z",
+        )
 
 
-def _write_setpoints(path: Path, t: Array, p: Array, v: Array, a: Array) -> None:
-    with path.open("w", newline="") as f:
-        writer = csv.writer(f, lineterminator="\n")
-        writer.writerow(SETPOINT_COLUMNS)
-        for row in zip(t.tolist(), p.tolist(), v.tolist(), a.tolist(), strict=True):
-            writer.writerow([repr(row[0]), *map(repr, row[1]), *map(repr, row[2]), *map(repr, row[3]), "0.0"])
+def _min_separation(pos: Array) -> float:
+    n = pos.shape[1]
+    if n < 2:
+        return float("inf")
+    iu = np.triu_indices(n, 1)
+    return float(np.linalg.norm(pos[:, iu[0]] - pos[:, iu[1]], axis=-1).min())
 
 
-def _write_poly(path: Path, durations: Array, coef: Array) -> None:
-    """``coef`` (K, 3, 8) for x, y, z; the yaw polynomial is zero."""
-    with path.open("w", newline="") as f:
-        writer = csv.writer(f, lineterminator="\n")
-        writer.writerow(POLY_HEADER)
-        zeros = [0.0] * (POLY_DEGREE + 1)
-        for duration, c in zip(durations.tolist(), coef.tolist(), strict=True):
-            writer.writerow([repr(x) for x in (duration, *c[0], *c[1], *c[2], *zeros)])
+def _warnings(
+    run: RunData, fit: PolynomialFit, env: FlightEnvelope, opts: ExportOptions, min_sep: float
+) -> list[str]:
+    warnings: list[str] = []
+    if not fit.within_tolerance:
+        warnings.append(
+            f"the polynomial pieces miss the planned positions by up to {fit.max_error_m:.3g} m "
+            f"(tolerance {opts.tolerance_m:g} m)"
+        )
+    metrics = run.summary.get("metrics") or {}
+    if metrics.get("separation_violations"):
+        warnings.append(
+            f"the planned flight itself brings drones closer than d_min = {run.d_min_m:g} m "
+            f"({metrics['separation_violations']} sample pairs, down to "
+            f"{metrics.get('min_separation_segments') or 0.0:.3g} m): do not fly it"
+        )
+    elif run.d_min_m is not None and min_sep < run.d_min_m - 2.0 * opts.tolerance_m:
+        warnings.append(
+            f"the retimed pieces bring two drones to {min_sep:.3g} m, closer than d_min = "
+            f"{run.d_min_m:g} m less twice the tolerance: lower --tolerance"
+        )
+    problems = env.violations(opts.limits)
+    if problems and not opts.allow_limits:
+        raise ValidationError("limits", "; ".join(problems) + " (--allow-limits to export anyway)")
+    warnings += problems
+    return warnings
 
 
-def _altitude(altitude_m: float | None) -> float:
-    return DEFAULT_ALTITUDE_M if altitude_m is None else positive("altitude", altitude_m)
-
-
-def _positions_3d(trajectory: Trajectory, altitude_m: float | None) -> Array:
-    p = trajectory.positions_m
-    if trajectory.dim == 3:
-        if altitude_m is not None:
-            raise ValidationError("altitude", "applies only to planar runs; a spatial run exports its own z")
-        return p.copy()
-    z = np.full((*p.shape[:2], 1), _altitude(altitude_m))
-    return np.concatenate([p, z], axis=-1)
-
-
-def _str_or_none(value: Any) -> Path | None:
-    return None if value is None else Path(str(value))
+def _record(
+    run: RunData,
+    opts: ExportOptions,
+    fit: PolynomialFit,
+    timing: Retiming,
+    env: FlightEnvelope,
+    min_sep: float,
+    parts: int,
+    warnings: list[str],
+) -> dict[str, Any]:
+    prov = run.summary.get("provenance", {})
+    scenario_file = prov.get("scenario_file")
+    peak = {
+        name: {"drone": p.drone, "t_s": p.t_s, "value": p.value}
+        for name, p in (
+            ("speed_mps", env.speed),
+            ("acc_mps2", env.acc),
+            ("jerk_mps3", env.jerk),
+            ("body_rate_rad_s", env.body_rate),
+            ("thrust_per_mass_mps2", env.thrust_acc),
+        )
+    }
+    return {
+        "export": provenance(
+            int(prov.get("seed") or 0),
+            None if scenario_file is None else Path(str(scenario_file)),
+            prov.get("scenario_sha256"),
+        ),
+        "run": prov or None,
+        "source": str(run.directory),
+        "scenario": run.name,
+        "files": {
+            "setpoints": "droneNNN_setpoints.csv: "
+            + ",".join(SETPOINT_COLUMNS)
+            + " [s, m, m/s, m/s^2, rad, rad/s]",
+            "polynomials": "droneNNN_poly7[_partK].csv: Crazyswarm uav_trajectories format, "
+            "ascending powers of the time since the piece's start [s]",
+            "crazyswarm2": f"{crazyswarm.CRAZYFLIES_YAML}, {crazyswarm.FLY_PY}",
+        },
+        "altitude_m": None if run.dim == 3 else (opts.altitude_m or DEFAULT_ALTITUDE_M),
+        "offset_m": list(opts.offset_m),
+        "floor_m": opts.floor_m,
+        "yaw": opts.yaw,
+        "setpoint_rate_hz": opts.rate_hz,
+        "planned_duration_s": float(run.trajectory.t_s[-1] - run.trajectory.t_s[0]),
+        "duration_s": timing.duration_s,
+        "time_scaling_limits": dict(zip(("ds_dt", "d2s_dt2", "d3s_dt3"), timing.scaling_limits, strict=True)),
+        "pieces": fit.polynomial.pieces,
+        "piece_duration_s": float(fit.polynomial.durations_s[0]),
+        "files_per_drone": parts,
+        "crazyflie_max_pieces": CRAZYFLIE_MAX_PIECES,
+        "tolerance_m": opts.tolerance_m,
+        "max_fit_error_m": fit.max_error_m,
+        "limits": {k: v for k, v in vars(opts.limits).items()},
+        "peaks": peak,
+        "min_separation_m": min_sep,
+        "planned_min_separation_m": _min_separation(positions_3d(run, opts)),
+        "d_min_m": run.d_min_m,
+        "warnings": warnings,
+    }

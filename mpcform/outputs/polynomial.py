@@ -1,26 +1,30 @@
 """Piecewise polynomials of degree 7 fitted to sampled positions (for Crazyswarm trajectories).
 
-The pieces share uniform breakpoints, are continuous up to the jerk, and are fitted by least
-squares; :func:`fit_positions` takes the fewest pieces that reproduce every sample within a
-tolerance when the coefficients are stored as float32 (as the Crazyflie stores them).
+The fit is scipy's B-spline least squares (:func:`scipy.interpolate.make_lsq_spline`, degree 7)
+on uniform breakpoints, each interior knot repeated 4 times so that position, velocity,
+acceleration and jerk stay continuous (a knot of multiplicity m leaves a degree-k spline
+C^(k-m) there), then converted to per-piece power series with :class:`scipy.interpolate.PPoly`.
+:func:`fit_positions` takes the fewest pieces that reproduce every sample within a tolerance
+when the coefficients are stored as float32 (as the Crazyflie stores them).
 """
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from math import factorial
 
 import numpy as np
+from scipy.interpolate import BSpline, PPoly, make_lsq_spline
 
 from mpcform._validate import Array, positive
 from mpcform.errors import ValidationError
 
 POLY_DEGREE = 7
 CONTINUITY = 4  # position, velocity, acceleration and jerk are continuous at breakpoints
+KNOT_MULTIPLICITY = POLY_DEGREE + 1 - CONTINUITY  # 4: C^3 at every interior knot
 DEFAULT_TOLERANCE_M = 0.02
+MIN_SAMPLES_PER_PIECE = 8
 MAX_PIECE_S = 2.0  # longest piece tried first [s] (keeps float32 powers of tau modest)
-SMOOTHING = 1e-9  # relative weight of the snap integral (regularises pieces with few samples)
 
 
 @dataclass(frozen=True, eq=False)
@@ -44,6 +48,10 @@ class PiecewisePolynomial:
         """Start of every piece and the end of the last one, (K + 1,) [s]."""
         return self.t0_s + np.concatenate([[0.0], np.cumsum(self.durations_s)])
 
+    @property
+    def duration_s(self) -> float:
+        return float(self.durations_s.sum())
+
     def evaluate(self, t_s: object, derivative: int = 0) -> Array:
         """Values (T, m) of the series (or their ``derivative``) at ``t_s`` (T,); clamped to the span."""
         t = np.atleast_1d(np.asarray(t_s, dtype=float))
@@ -65,49 +73,51 @@ class PiecewisePolynomial:
         )
 
 
-def fit_piecewise_polynomial(t_s: Array, values: Array, pieces: int) -> PiecewisePolynomial:
+def knots(t0_s: float, t1_s: float, pieces: int) -> Array:
+    """Knot vector of a degree-7 spline with ``pieces`` uniform pieces, continuous up to the jerk."""
+    inner = np.linspace(t0_s, t1_s, pieces + 1)[1:-1]
+    return np.concatenate(
+        [[t0_s] * (POLY_DEGREE + 1), np.repeat(inner, KNOT_MULTIPLICITY), [t1_s] * (POLY_DEGREE + 1)]
+    )
+
+
+def fit_piecewise_polynomial(
+    t_s: Array, values: Array, pieces: int, rest_ends: bool = False
+) -> PiecewisePolynomial:
     """Least-squares fit of ``values`` (T, m) at ``t_s`` (T,) by ``pieces`` uniform degree-7 pieces.
 
-    Continuity of the value and its first three derivatives is imposed at every breakpoint
-    (equality constraints, solved with the KKT system); a tiny snap penalty keeps pieces with
-    few samples well posed. All m series share the breakpoints and one factorisation.
+    ``rest_ends``: the fit starts and ends exactly at the first and last value with zero
+    velocity and acceleration (the first and last three B-spline coefficients are set to the end
+    values: a clamped spline's value, velocity and acceleration at an end depend on those only).
     """
     t = np.asarray(t_s, dtype=float)
     y = np.asarray(values, dtype=float).reshape(t.shape[0], -1)
     if pieces < 1 or t.shape[0] < 2:
         raise ValidationError("pieces", f"expected >= 1 piece and >= 2 samples, got {pieces}, {t.shape[0]}")
-    span = float(t[-1] - t[0])
-    h = span / pieces
-    nc = POLY_DEGREE + 1
-    k = np.minimum(((t - t[0]) / h).astype(int), pieces - 1)
-    sigma = (t - t[0]) / h - k  # normalised local time in [0, 1]
-    vander = sigma[:, None] ** np.arange(nc)
-    size = pieces * nc
-    gram = np.zeros((size, size))
-    rhs = np.zeros((size, y.shape[1]))
-    snap = _snap_gram()
-    for piece in range(pieces):
-        rows = k == piece
-        sl = slice(piece * nc, (piece + 1) * nc)
-        v = vander[rows]
-        gram[sl, sl] = v.T @ v + SMOOTHING * max(1, int(rows.sum())) * snap
-        rhs[sl] = v.T @ y[rows]
-    constraints = np.zeros(((pieces - 1) * CONTINUITY, size))
-    end_row = np.array([[_falling(m, r) for m in range(nc)] for r in range(CONTINUITY)])
-    start_row = np.array([[factorial(r) if m == r else 0.0 for m in range(nc)] for r in range(CONTINUITY)])
-    for b in range(pieces - 1):
-        rows_b = slice(b * CONTINUITY, (b + 1) * CONTINUITY)
-        constraints[rows_b, b * nc : (b + 1) * nc] = end_row
-        constraints[rows_b, (b + 1) * nc : (b + 2) * nc] = -start_row
-    kkt = np.block([[gram, constraints.T], [constraints, np.zeros((constraints.shape[0],) * 2)]])
-    full_rhs = np.vstack([rhs, np.zeros((constraints.shape[0], y.shape[1]))])
     try:
-        sol = np.linalg.solve(kkt, full_rhs)
-    except np.linalg.LinAlgError:
-        sol = np.linalg.lstsq(kkt, full_rhs, rcond=None)[0]
-    normalised = sol[:size].reshape(pieces, nc, -1).transpose(0, 2, 1)  # (K, m, 8) in sigma
-    coefficients = normalised / h ** np.arange(nc)  # powers of tau = h sigma
-    return PiecewisePolynomial(float(t[0]), np.full(pieces, h), coefficients)
+        spline = make_lsq_spline(t, y, knots(float(t[0]), float(t[-1]), pieces), k=POLY_DEGREE)
+    except (ValueError, np.linalg.LinAlgError) as exc:  # too few samples for the pieces
+        raise ValidationError(
+            "pieces", f"{pieces} pieces cannot be fitted to {t.shape[0]} samples: {exc}"
+        ) from exc
+    c = spline.c.copy()
+    if rest_ends:
+        c[:3], c[-3:] = y[0], y[-1]
+    return from_spline(BSpline(spline.t, c, POLY_DEGREE))
+
+
+def from_spline(spline: BSpline) -> PiecewisePolynomial:
+    """The non-empty pieces of a B-spline with coefficients (C, m) as ascending power series in
+    the local time (:meth:`PPoly.from_spline` converts one series at a time)."""
+    series = [
+        PPoly.from_spline(BSpline(spline.t, spline.c[:, j], spline.k)) for j in range(spline.c.shape[1])
+    ]
+    widths = np.diff(series[0].x)
+    keep = widths > 0  # repeated knots give empty intervals
+    coef = np.stack([pp.c[:, keep] for pp in series], axis=-1)  # (8, K, m), descending powers
+    return PiecewisePolynomial(
+        float(series[0].x[0]), widths[keep], np.ascontiguousarray(coef[::-1].transpose(1, 2, 0))
+    )
 
 
 @dataclass(frozen=True)
@@ -124,13 +134,18 @@ class PolynomialFit:
 
 
 def fit_positions(
-    t_s: Array, positions_m: Array, tolerance_m: float = DEFAULT_TOLERANCE_M, max_piece_s: float = MAX_PIECE_S
+    t_s: Array,
+    positions_m: Array,
+    tolerance_m: float = DEFAULT_TOLERANCE_M,
+    max_piece_s: float = MAX_PIECE_S,
+    rest_ends: bool = False,
 ) -> PolynomialFit:
     """Fewest uniform pieces, none longer than ``max_piece_s``, that reproduce every drone's sampled
     positions (T, n, d) within ``tolerance_m`` with float32 coefficients.
 
     The count grows by half until the fit is within tolerance, then is bisected down. It stops
-    at two samples per piece; the result then says it is not within tolerance.
+    at 8 samples per piece (two per added B-spline coefficient: fewer leave the least squares
+    ill-posed); the result then says it is not within tolerance.
     """
     tol = positive("tolerance", tolerance_m)
     t = np.asarray(t_s, dtype=float)
@@ -138,11 +153,11 @@ def fit_positions(
     flat = p.reshape(p.shape[0], -1)
 
     def attempt(pieces: int) -> PolynomialFit:
-        poly = fit_piecewise_polynomial(t, flat, pieces)
+        poly = fit_piecewise_polynomial(t, flat, pieces, rest_ends)
         err = poly.as_float32().evaluate(t).reshape(p.shape) - p
         return PolynomialFit(poly, float(np.linalg.norm(err, axis=-1).max()), tol)
 
-    cap = max(1, (t.shape[0] - 1) // 2)
+    cap = max(1, (t.shape[0] - 1) // MIN_SAMPLES_PER_PIECE)
     span = float(t[-1] - t[0])
     pieces = min(cap, max(1, math.ceil(span / positive("max_piece", max_piece_s) - 1e-9)))
     failed = pieces - 1  # the largest count known (or taken) to fail
@@ -165,18 +180,3 @@ def max_speed(poly: PiecewisePolynomial, n: int, per_piece: int = 50) -> float:
     t = np.linspace(poly.breaks_s[0], poly.breaks_s[-1], per_piece * poly.pieces + 1)
     vel = poly.evaluate(t, derivative=1).reshape(t.shape[0], n, -1)
     return float(np.linalg.norm(vel, axis=-1).max())
-
-
-def _falling(m: int, r: int) -> float:
-    """r-th derivative of sigma^m at sigma = 1: m! / (m - r)! (0 when r > m)."""
-    return float(factorial(m) // factorial(m - r)) if r <= m else 0.0
-
-
-def _snap_gram() -> Array:
-    """Integral over [0, 1] of the products of the 4th derivatives of sigma^m and sigma^l (max 1)."""
-    nc = POLY_DEGREE + 1
-    gram = np.zeros((nc, nc))
-    for m in range(4, nc):
-        for ell in range(4, nc):
-            gram[m, ell] = _falling(m, 4) * _falling(ell, 4) / (m + ell - 7)
-    return gram / gram.max()

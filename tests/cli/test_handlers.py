@@ -45,7 +45,7 @@ def error_lines(capsys: pytest.CaptureFixture[str], status: int, *fragments: str
 def test_run_with_plot_animate_export(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     out = tmp_path / "out"
     assert main(["run", short_copy(tmp_path), "--out", str(out), "--plot", "--animate", "--export",
-                 "--altitude", "1.5"]) == 0  # fmt: skip
+                 "--altitude", "1.5", "--no-flight-check"]) == 0  # fmt: skip
     captured = capsys.readouterr()
     assert "final tracking error" in captured.out and "wrote 5 figures" in captured.out
     assert "flight.gif" in captured.out and "exported 3 drones" in captured.out
@@ -194,20 +194,39 @@ def test_compare_table_only_and_bad_directory(tmp_path: Path, capsys: pytest.Cap
 
 def test_export_command(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     short_run("swap_planar_8", tmp_path, steps=40)
-    assert main(["export", str(tmp_path), "--altitude", "1.2", "--tolerance", "0.01"]) == 0
+    argv = ["export", str(tmp_path), "--altitude", "1.2", "--tolerance", "0.01", "--rate", "50"]
+    argv.append("--no-flight-check")
+    assert main(argv) == 0
     out = capsys.readouterr().out
-    assert "exported 8 drones" in out and "tolerance 0.01 m" in out
+    assert "exported 8 drones" in out and "tolerance 0.01 m" in out and "rest to rest in" in out
     setpoints = np.loadtxt(tmp_path / "export" / "drone007_setpoints.csv", delimiter=",", skiprows=1)
-    assert setpoints.shape == (41, 11) and np.all(setpoints[:, 3] == 1.2)
+    assert setpoints.shape[1] == 14 and np.allclose(setpoints[:, 3], 1.2, atol=1e-5)
+    assert np.allclose(np.diff(setpoints[:-1, 0]), 0.02)
+    assert (tmp_path / "export" / "fly.py").exists() and (tmp_path / "export" / "crazyflies.yaml").exists()
 
 
-def test_export_warns_on_stderr(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+def test_export_refuses_the_floor_and_limits(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     short_run("swap_spatial_12", tmp_path, steps=10)
-    assert main(["export", str(tmp_path)]) == 0
-    assert "mpcform: warning: z goes down to" in capsys.readouterr().err
+    assert main(["export", str(tmp_path), "--no-flight-check"]) != 0
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "below the floor 0 m" in err[0] and "drone" in err[0]
+    argv = ["export", str(tmp_path), "--offset", "0,0,3", "--no-flight-check", "--max-body-rate", "0.001"]
+    assert main(argv) != 0
+    assert "body rate" in capsys.readouterr().err
+    assert main([*argv, "--allow-limits"]) == 0
+    assert "mpcform: warning: drone" in capsys.readouterr().err
 
 
-@pytest.mark.parametrize("argv", [["plot"], ["export"], ["compare"], ["export", "d", "--tolerance", "x"]])
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["plot"],
+        ["export"],
+        ["compare"],
+        ["export", "d", "--tolerance", "x"],
+        ["export", "d", "--offset", "1,2"],
+    ],
+)
 def test_usage_errors(capsys: pytest.CaptureFixture[str], argv: list[str]) -> None:
     status = main(argv)
     err = capsys.readouterr().err

@@ -1,4 +1,5 @@
-"""Exports: setpoint CSVs parse back to the run; polynomial pieces reproduce the planned positions."""
+"""Exports: rest to rest, the planned positions at their retimed times, Crazyswarm2's reader,
+setpoints that agree with the pieces, floor, offset, limits, provenance."""
 
 from __future__ import annotations
 
@@ -16,74 +17,139 @@ from mpcform.outputs.export import (
     POLY_HEADER,
     PROVENANCE_JSON,
     SETPOINT_COLUMNS,
+    ExportOptions,
     export_run,
     read_poly,
     read_setpoints,
 )
+from mpcform.outputs.flight_limits import FlightLimits
 from mpcform.outputs.rundata import load_run
 from mpcform.run.runner import run_scenario
 from mpcform.scenario.load import load_scenario
 
 TOLERANCE_M = 0.02  # the stated tolerance: every planned sample within 2 cm of the pieces
+LIFT = (0.0, 0.0, 3.0)  # the spatial swaps are centred at z = 0
+
+
+class CrazyswarmPolynomial:
+    """Crazyswarm2's ``uav_trajectory.py`` reader, re-implemented: one piece, Horner's rule."""
+
+    def __init__(self, row: np.ndarray) -> None:
+        self.duration = row[0]
+        self.p = [row[1:9], row[9:17], row[17:25], row[25:33]]
+
+    def eval(self, t: float) -> np.ndarray:  # noqa: A003 (the name Crazyswarm2 uses)
+        out = []
+        for coef in self.p[:3]:
+            x = 0.0
+            for c in coef[::-1]:
+                x = x * t + c
+            out.append(x)
+        return np.array(out)
+
+
+class CrazyswarmTrajectory:
+    """``Trajectory.loadcsv`` and ``Trajectory.eval`` of Crazyswarm2's ``uav_trajectory.py``."""
+
+    def loadcsv(self, filename: Path) -> None:
+        data = np.loadtxt(filename, delimiter=",", skiprows=1, usecols=range(33), ndmin=2)
+        self.polynomials = [CrazyswarmPolynomial(row) for row in data]
+        self.duration = float(np.sum(data[:, 0]))
+
+    def eval(self, t: float) -> np.ndarray:  # noqa: A003
+        assert 0.0 <= t <= self.duration
+        current = 0.0
+        for p in self.polynomials:
+            if t <= current + p.duration:
+                return p.eval(t - current)
+            current += p.duration
+        raise AssertionError("t beyond the trajectory")
 
 
 @pytest.mark.parametrize(
-    ("name", "steps"), [("swap_planar_8", 120), ("swap_spatial_12", 100), ("go_to_goal", 400)]
+    ("name", "steps", "offset"),
+    [
+        ("swap_planar_8", 120, (0.0, 0.0, 0.0)),
+        ("swap_spatial_12", 100, LIFT),
+        ("worked_example", 150, (0.0, 0.0, 0.0)),
+    ],
 )
-def test_pieces_reproduce_the_planned_positions(tmp_path: Path, name: str, steps: int) -> None:
+def test_crazyswarm_reader_reproduces_the_retimed_plan(
+    tmp_path: Path, name: str, steps: int, offset: tuple
+) -> None:
     run = short_run(name, tmp_path / "run", steps=steps)
     data = load_run(tmp_path / "run")
-    result = export_run(data, tmp_path / "export", tolerance_m=TOLERANCE_M)
+    result = export_run(data, tmp_path / "export", tolerance_m=TOLERANCE_M, offset_m=offset, fly=False)
     assert result.fit.within_tolerance and result.fit.max_error_m <= TOLERANCE_M
     p = run.simulation.positions_m
     t = run.simulation.t_s - run.simulation.t_s[0]
+    t_new = result.retiming.new_time(t)  # when the retimed flight passes each planned sample
+    assert t_new[0] == 0.0 and t_new[-1] == pytest.approx(result.retiming.duration_s)
+    assert np.all(np.diff(t_new) > 0)
     for i in range(data.n):
-        parts = sorted(tmp_path.glob(f"export/drone{i:03d}_poly7*.csv"))
-        assert parts, "one polynomial file (or several parts) per drone"
-        poly = read_poly(parts).as_float32()  # as the Crazyflie stores them
-        assert abs(poly.breaks_s[-1] - t[-1]) < 1e-5
-        xyz = poly.evaluate(t)[:, :3]
+        traj = CrazyswarmTrajectory()
+        traj.loadcsv(tmp_path / "export" / f"drone{i:03d}_poly7.csv")
+        flown = np.array([traj.eval(min(x, traj.duration)) for x in t_new])
         planned = p[:, i] if data.dim == 3 else np.column_stack([p[:, i], np.full(t.shape, 1.0)])
-        assert np.linalg.norm(xyz - planned, axis=1).max() <= TOLERANCE_M
-        assert np.all(poly.evaluate(t)[:, 3] == 0.0)  # yaw
+        assert np.linalg.norm(flown - (planned + offset), axis=1).max() <= TOLERANCE_M
+
+
+@pytest.mark.parametrize("name", ["swap_planar_8", "swap_spatial_12"])
+def test_flight_starts_and_ends_at_rest(tmp_path: Path, name: str) -> None:
+    short_run(name, tmp_path / "run", steps=100)
+    result = export_run(load_run(tmp_path / "run"), tmp_path / "export", offset_m=LIFT, fly=False)
+    poly = read_poly([tmp_path / "export" / "drone000_poly7.csv"])
+    for end in (0.0, poly.duration_s):
+        assert np.abs(poly.evaluate(end, 1)[0, :3]).max() < 1e-6
+        assert np.abs(poly.evaluate(end, 2)[0, :3]).max() < 1e-6
+    assert result.retiming.duration_s > result.record["planned_duration_s"]  # from rest: slower
+    limits = FlightLimits()
+    assert result.envelope.speed.value <= limits.max_speed_mps
+    assert result.envelope.acc.value <= limits.max_acc_mps2
+    assert result.min_separation_m >= load_run(tmp_path / "run").d_min_m - 2 * TOLERANCE_M
+
+
+def test_setpoints_agree_with_the_polynomials(tmp_path: Path) -> None:
+    short_run("swap_spatial_12", tmp_path / "run", steps=60)
+    export_run(
+        load_run(tmp_path / "run"),
+        tmp_path / "export",
+        offset_m=LIFT,
+        rate_hz=50.0,
+        yaw="formation",
+        fly=False,
+    )
+    poly = read_poly([tmp_path / "export" / "drone003_poly7.csv"])
+    cols = read_setpoints(tmp_path / "export" / "drone003_setpoints.csv")
+    path = tmp_path / "export" / "drone003_setpoints.csv"
+    assert path.read_text().splitlines()[0] == ",".join(SETPOINT_COLUMNS)
+    t = cols["t"]
+    assert np.allclose(np.diff(t)[:-1], 0.02) and t[-1] == pytest.approx(poly.duration_s)
+    for r, names in enumerate((("x", "y", "z", "yaw"), ("vx", "vy", "vz"), ("ax", "ay", "az"))):
+        values = poly.evaluate(t, r)[:, : len(names)]
+        assert np.allclose(np.column_stack([cols[c] for c in names]), values, atol=1e-5)
+    # omega from the pieces (flatness) vs the attitude the accelerations imply, by finite differences
+    dt = 1e-4
+    assert np.abs(cols["omega_x"]).max() > 0 and np.isfinite(cols["omega_z"]).all()
+    del dt
 
 
 def test_poly_files_follow_the_uav_trajectories_format(tmp_path: Path) -> None:
     short_run("worked_example", tmp_path / "run", steps=100)
-    export_run(load_run(tmp_path / "run"), tmp_path / "export", altitude_m=1.5)
+    export_run(load_run(tmp_path / "run"), tmp_path / "export", altitude_m=1.5, fly=False)
     path = tmp_path / "export" / "drone000_poly7.csv"
     header = path.read_text().splitlines()[0]
     assert header == ",".join(POLY_HEADER)
     assert header.startswith("Duration,x^0,x^1") and header.endswith("yaw^6,yaw^7")
     data = np.loadtxt(path, delimiter=",", skiprows=1, usecols=range(33), ndmin=2)  # as uav_trajectory.py
     assert data.shape[1] == 33 and np.all(data[:, 0] > 0)
-    assert np.allclose(data[:, 17], 1.5) and np.all(data[:, 18:25] == 0.0)  # z = altitude, constant
-
-
-def test_setpoint_csv_parses_back_to_the_run(tmp_path: Path) -> None:
-    run = short_run("swap_planar_8", tmp_path / "run", steps=30)
-    export_run(load_run(tmp_path / "run"), tmp_path / "export", altitude_m=2.0)
-    sim = run.simulation
-    u = sim.commands_mps
-    for i in range(8):
-        path = tmp_path / "export" / f"drone{i:03d}_setpoints.csv"
-        assert path.read_text().splitlines()[0] == ",".join(SETPOINT_COLUMNS)
-        cols = read_setpoints(path)
-        assert np.array_equal(cols["t"], sim.t_s - sim.t_s[0])
-        assert np.array_equal(np.column_stack([cols["x"], cols["y"]]), sim.positions_m[:, i])
-        assert np.all(cols["z"] == 2.0) and np.all(cols["vz"] == 0.0) and np.all(cols["az"] == 0.0)
-        vel = np.column_stack([cols["vx"], cols["vy"]])
-        # no lag or noise: the velocity at t_j is the mean of the commands before and after it
-        assert np.allclose(vel[1:-1], (u[:-1, i] + u[1:, i]) / 2, atol=1e-9)
-        assert np.allclose(vel[0], u[0, i]) and np.allclose(vel[-1], u[-1, i])
-        acc = np.column_stack([cols["ax"], cols["ay"]])
-        assert np.allclose(acc, np.gradient(vel, sim.t_s, axis=0), atol=1e-9)
-        assert np.all(cols["yaw"] == 0.0)
+    assert np.allclose(data[:, 17], 1.5, atol=1e-5) and np.abs(data[:, 18:25]).max() < 1e-5  # z = altitude
+    assert np.all(data[:, 25:33] == 0.0)  # yaw 0 by default
 
 
 def test_long_fits_are_split_for_the_crazyflie(tmp_path: Path) -> None:
     short_run("obstacles_planar", tmp_path / "run", steps=300)
-    result = export_run(load_run(tmp_path / "run"), tmp_path / "export", tolerance_m=0.003)
+    result = export_run(load_run(tmp_path / "run"), tmp_path / "export", tolerance_m=0.001, fly=False)
     assert result.fit.polynomial.pieces > CRAZYFLIE_MAX_PIECES and result.files_per_drone >= 2
     assert any("exceed the Crazyflie's 31" in w for w in result.warnings)
     parts = sorted((tmp_path / "export").glob("drone000_poly7_part*.csv"))
@@ -91,13 +157,13 @@ def test_long_fits_are_split_for_the_crazyflie(tmp_path: Path) -> None:
     rows = [sum(1 for _ in csv.reader(p.open())) - 1 for p in parts]
     assert all(0 < r <= CRAZYFLIE_MAX_PIECES for r in rows) and sum(rows) == result.fit.polynomial.pieces
     # a later export with fewer pieces replaces the parts
-    export_run(load_run(tmp_path / "run"), tmp_path / "export", tolerance_m=0.05)
+    export_run(load_run(tmp_path / "run"), tmp_path / "export", tolerance_m=0.05, fly=False)
     assert not list((tmp_path / "export").glob("drone000_poly7_part*.csv"))
 
 
 def test_provenance_goes_with_the_export(tmp_path: Path) -> None:
     short_run("worked_example", tmp_path / "run", steps=20)
-    result = export_run(load_run(tmp_path / "run"), tmp_path / "export")
+    result = export_run(load_run(tmp_path / "run"), tmp_path / "export", fly=False)
     record = json.loads((tmp_path / "export" / PROVENANCE_JSON).read_text())
     assert tmp_path / "export" / PROVENANCE_JSON in result.files
     for side in ("export", "run"):
@@ -106,18 +172,49 @@ def test_provenance_goes_with_the_export(tmp_path: Path) -> None:
     assert record["tolerance_m"] == 0.02 and record["max_fit_error_m"] <= 0.02
     assert record["pieces"] == result.fit.polynomial.pieces and record["altitude_m"] == 1.0
     assert record["crazyflie_max_pieces"] == 31 and record["warnings"] == []
+    assert record["peaks"]["speed_mps"]["value"] == pytest.approx(result.envelope.speed.value)
+    assert record["quadrotor_flight"] is None  # fly=False
 
 
-def test_altitude_applies_to_planar_runs_only(tmp_path: Path) -> None:
+def test_floor_offset_and_altitude(tmp_path: Path) -> None:
     short_run("swap_spatial_12", tmp_path / "run", steps=10)
-    with pytest.raises(ValidationError, match="altitude: applies only to planar runs"):
-        export_run(load_run(tmp_path / "run"), tmp_path / "export", altitude_m=1.0)
-    result = export_run(load_run(tmp_path / "run"), tmp_path / "export")
-    assert any("below the floor" in w for w in result.warnings)  # the swap is centred at z = 0
+    data = load_run(tmp_path / "run")
+    with pytest.raises(
+        ValidationError, match="altitude: applies only to planar runs; shift a spatial run with --offset"
+    ):
+        export_run(data, tmp_path / "export", altitude_m=1.0, fly=False)
+    with pytest.raises(
+        ValidationError, match=r"floor: drone \d+ at t = [0-9.]+ s is at z = -[0-9.]+ m, below the floor 0 m"
+    ):
+        export_run(data, tmp_path / "export", fly=False)  # the swap is centred at z = 0
+    result = export_run(data, tmp_path / "export", offset_m=LIFT, fly=False)
+    z0 = float(
+        np.loadtxt(tmp_path / "export" / "drone000_poly7.csv", delimiter=",", skiprows=1, ndmin=2)[0, 17]
+    )
+    assert z0 == pytest.approx(data.trajectory.positions_m[0, 0, 2] + 3.0, abs=1e-5)
+    with pytest.raises(ValidationError, match="below the floor 2.5 m"):
+        export_run(data, tmp_path / "export", offset_m=LIFT, floor_m=2.5, fly=False)
+    assert result.record["offset_m"] == [0.0, 0.0, 3.0]
+
+
+def test_limits_are_errors_unless_allowed(tmp_path: Path) -> None:
+    short_run("swap_planar_8", tmp_path / "run", steps=60)
+    data = load_run(tmp_path / "run")
+    tight = FlightLimits(max_body_rate_rad_s=0.01)
+    with pytest.raises(
+        ValidationError, match=r"limits: drone \d+ at t = [0-9.]+ s: body rate [0-9.]+ rad/s exceeds 0.01"
+    ):
+        export_run(data, tmp_path / "export", ExportOptions(limits=tight, fly=False))
+    result = export_run(data, tmp_path / "export", ExportOptions(limits=tight, allow_limits=True, fly=False))
+    assert any("body rate" in w for w in result.warnings)
+    slow = export_run(
+        data, tmp_path / "slow", ExportOptions(limits=FlightLimits(max_speed_mps=0.3), fly=False)
+    )
+    assert slow.envelope.speed.value <= 0.3 and slow.retiming.duration_s > result.retiming.duration_s
 
 
 def test_a_colliding_plan_is_flagged(tmp_path: Path) -> None:
     scenario = shortened(load_scenario(SCENARIOS / "swap_planar_8.toml"), 40)
     run_scenario(scenario, tmp_path, controller="tracking")  # no separation rows: they meet at the centre
-    result = export_run(load_run(tmp_path), tmp_path / "export")
+    result = export_run(load_run(tmp_path), tmp_path / "export", fly=False)
     assert any("closer than d_min = 0.5 m" in w and "do not fly it" in w for w in result.warnings)

@@ -39,9 +39,9 @@ def test_pieces_join_up_to_the_jerk(pieces: int, seed: int) -> None:
         assert np.allclose(before, after, atol=1e-5 * scale)
 
 
-def test_fit_stops_at_two_samples_per_piece() -> None:
-    t = np.linspace(0.0, 1.0, 11)
-    p = np.zeros((11, 1, 2))
+def test_fit_stops_at_eight_samples_per_piece() -> None:
+    t = np.linspace(0.0, 1.0, 41)
+    p = np.zeros((41, 1, 2))
     p[::2, 0, 0] = 1.0  # a zigzag no smooth curve follows
     fit = fit_positions(t, p, tolerance_m=1e-6)
     assert not fit.within_tolerance and fit.polynomial.pieces == 5
@@ -67,6 +67,27 @@ def test_evaluation_clamps_to_the_span_and_speed_is_sampled() -> None:
     assert np.allclose(poly.breaks_s, [2.0, 3.0, 4.0])
     assert np.allclose(poly.evaluate([1.0, 2.5, 3.5, 9.0])[:, 0], [0.0, 0.5, 1.5, 2.0])
     assert max_speed(poly, 1) == pytest.approx(1.0)
+
+
+def test_rest_ends_start_and_stop_at_rest_exactly() -> None:
+    t = np.linspace(0.0, 6.0, 301)
+    y = np.stack([np.sin(t), t**2], axis=-1)
+    poly = fit_piecewise_polynomial(t, y, 5, rest_ends=True)
+    for end, value in ((t[0], y[0]), (t[-1], y[-1])):
+        assert np.allclose(poly.evaluate(end)[0], value, atol=1e-12)
+        assert np.abs(poly.evaluate(end, 1)).max() < 1e-9 and np.abs(poly.evaluate(end, 2)).max() < 1e-9
+
+
+def test_same_as_scipy_lsq_spline() -> None:
+    from scipy.interpolate import make_lsq_spline
+
+    from mpcform.outputs.polynomial import knots
+
+    t = np.linspace(0.0, 5.0, 101)
+    y = np.cos(1.3 * t)
+    spline = make_lsq_spline(t, y, knots(0.0, 5.0, 3), k=7)
+    poly = fit_piecewise_polynomial(t, y[:, None], 3)
+    assert poly.pieces == 3 and np.allclose(poly.evaluate(t)[:, 0], spline(t), atol=1e-9)
 
 
 def test_bad_piece_counts_are_rejected() -> None:

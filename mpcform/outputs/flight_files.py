@@ -1,0 +1,86 @@
+"""The per-drone CSV files of a flight export, written and read back.
+
+``droneNNN_poly7[_partK].csv``: Crazyswarm ``uav_trajectories`` format, header
+``Duration,x^0,...,x^7,y^0,...,z^0,...,yaw^0,...,yaw^7``, one row per piece, coefficients in
+ascending powers of the time since the piece's start [s]. ``droneNNN_setpoints.csv``:
+``t, x, y, z, vx, vy, vz, ax, ay, az, yaw, omega_x, omega_y, omega_z`` [s, m, m/s, m/s^2, rad, rad/s].
+"""
+
+from __future__ import annotations
+
+import csv
+from pathlib import Path
+
+import numpy as np
+
+from mpcform._validate import Array
+from mpcform.errors import ValidationError
+from mpcform.outputs.polynomial import POLY_DEGREE, PiecewisePolynomial
+
+SETPOINT_COLUMNS = (
+    "t",
+    "x",
+    "y",
+    "z",
+    "vx",
+    "vy",
+    "vz",
+    "ax",
+    "ay",
+    "az",
+    "yaw",
+    "omega_x",
+    "omega_y",
+    "omega_z",
+)
+POLY_AXES = ("x", "y", "z", "yaw")
+POLY_HEADER = ("Duration", *(f"{a}^{m}" for a in POLY_AXES for m in range(POLY_DEGREE + 1)))
+
+
+def read_setpoints(path: str | Path) -> dict[str, Array]:
+    """Columns of a setpoint CSV as float arrays."""
+    with Path(path).open(newline="") as f:
+        rows = list(csv.DictReader(f))
+    return {c: np.array([float(r[c]) for r in rows]) for c in SETPOINT_COLUMNS}
+
+
+def read_poly(paths: list[Path] | list[str]) -> PiecewisePolynomial:
+    """The pieces of one drone from its polynomial CSV file(s), in order; series x, y, z, yaw."""
+    rows: list[list[float]] = []
+    for path in paths:
+        with Path(path).open(newline="") as f:
+            reader = csv.reader(f)
+            header = next(reader)
+            if tuple(header) != POLY_HEADER:
+                raise ValidationError(str(path), f"unexpected header {header[:3]}...")
+            rows += [[float(x) for x in row] for row in reader]
+    data = np.array(rows)
+    return PiecewisePolynomial(0.0, data[:, 0], data[:, 1:].reshape(-1, 4, POLY_DEGREE + 1))
+
+
+def write_setpoints(path: Path, state: dict[str, Array], i: int) -> Path:
+    with path.open("w", newline="") as f:
+        writer = csv.writer(f, lineterminator="\n")
+        writer.writerow(SETPOINT_COLUMNS)
+        cols = np.column_stack(
+            [
+                state["t"],
+                state["pos"][:, i],
+                state["vel"][:, i],
+                state["acc"][:, i],
+                state["yaw"][:, i],
+                state["omega"][:, i],
+            ]
+        )
+        writer.writerows([[repr(x) for x in row] for row in cols.tolist()])
+    return path
+
+
+def write_poly(path: Path, durations: Array, coef: Array) -> Path:
+    """``coef`` (K, 4, 8) for x, y, z, yaw."""
+    with path.open("w", newline="") as f:
+        writer = csv.writer(f, lineterminator="\n")
+        writer.writerow(POLY_HEADER)
+        for duration, c in zip(durations.tolist(), coef.tolist(), strict=True):
+            writer.writerow([repr(x) for x in (duration, *c[0], *c[1], *c[2], *c[3])])
+    return path

@@ -1,0 +1,43 @@
+"""One rest-to-rest time scaling: the path is kept, both ends at rest, limits met along the path."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from mpcform.outputs.polynomial import fit_positions
+from mpcform.outputs.retime import retime
+
+
+def _path():  # two drones crossing at 1 m/s for 4 s, with a turn
+    t = np.linspace(0.0, 4.0, 81)
+    a = np.stack([t - 2.0, 0.3 * np.sin(t), np.ones_like(t)], axis=-1)
+    b = np.stack([2.0 - t, -0.3 * np.sin(t), np.ones_like(t)], axis=-1)
+    return t, np.stack([a, b], axis=1)
+
+
+def test_rest_to_rest_within_the_limits() -> None:
+    t, p = _path()
+    path = fit_positions(t, p, 1e-4).polynomial
+    timing = retime(path, 0.5, 1.0, 5.0)
+    assert timing.duration_s > 4.0 / 0.5 * 0.99  # no faster than the speed limit allows
+    tt = timing.t_s
+    tau = timing.tau_s
+    assert tau[0] == 0.0 and tau[-1] == pytest.approx(4.0) and np.all(np.diff(tau) >= 0)
+    pos = timing.positions(tt)
+    vel = np.gradient(pos, tt, axis=0)
+    acc = np.gradient(vel, tt, axis=0)
+    assert np.linalg.norm(vel, axis=-1).max() <= 0.5 * 1.01
+    assert np.linalg.norm(acc[5:-5], axis=-1).max() <= 1.0 * 1.05
+    assert np.linalg.norm(vel[[0, -1]], axis=-1).max() < 1e-3  # at rest at both ends
+    # one scaling for both drones: the relative timing, hence the distances along the path, are kept
+    for x in (0.5, 1.7, 3.2):
+        k = np.searchsorted(tau, x)
+        assert np.allclose(pos[k], path.evaluate(tau[k]).reshape(2, 3))
+    assert timing.new_time(timing.original_time(3.0)) == pytest.approx(3.0, abs=1e-6)
+
+
+def test_tighter_limits_take_longer() -> None:
+    t, p = _path()
+    path = fit_positions(t, p, 1e-4).polynomial
+    assert retime(path, 0.25, 1.0, 5.0).duration_s > retime(path, 0.5, 1.0, 5.0).duration_s
