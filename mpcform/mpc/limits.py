@@ -98,7 +98,9 @@ def tightened(
     """The limits a planner keeps so that a plant within ``tube_m`` [m] of every planned segment
     keeps the declared ones (tube MPC with a constant tightening): ``d_min + 2 tube`` between two
     drones (each may be off by the tube; in the downwash metric too, which only shrinks lengths),
-    ``clearance + tube`` from every obstacle, the geofence shrunk by the tube, and ``a_max_mps2``
+    ``clearance + 2 tube`` from every obstacle and the geofence shrunk by ``2 tube`` (the plan starts
+    from a measured position up to a tube off the previous plan, and the next interval adds up to
+    another: a static obstacle, unlike a pair, has no second drone to share it), and ``a_max_mps2``
     (the bound on command changes the tube assumes) where the limits set none. A zero tube and no
     new ``a_max`` return the inputs themselves."""
     tube = positive("plant.margin", tube_m, allow_zero=True)
@@ -109,15 +111,15 @@ def tightened(
     fence = {}
     if limits.geofence_min_m is not None and limits.geofence_max_m is not None:
         fence = {
-            "geofence_min_m": limits.geofence_min_m + tube,
-            "geofence_max_m": limits.geofence_max_m - tube,
+            "geofence_min_m": limits.geofence_min_m + 2.0 * tube,
+            "geofence_max_m": limits.geofence_max_m - 2.0 * tube,
         }
     planned = Limits(
         limits.v_max_mps, None if limits.d_min_m is None else limits.d_min_m + 2.0 * tube, a_max,
         downwash_kappa=limits.downwash_kappa, **fence,
     )  # fmt: skip
     inflated = tuple(
-        SphereObstacle(o.center_m, o.radius_m, (half if o.clearance_m is None else o.clearance_m) + tube)
+        SphereObstacle(o.center_m, o.radius_m, (half if o.clearance_m is None else o.clearance_m) + 2 * tube)
         for o in obstacles
     )
     return planned, inflated

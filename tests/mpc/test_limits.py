@@ -77,8 +77,8 @@ def test_tightened_limits_inflate_separation_obstacles_and_the_fence_by_the_tube
     assert same[0] is lim and same[1] is obstacles  # the ideal plant: the very same objects
     planned, inflated = tightened(lim, obstacles, 0.05, 2.0)
     assert planned.d_min_m == pytest.approx(0.6) and planned.a_max_mps2 == 2.0 and planned.v_max_mps == 1.0
-    np.testing.assert_allclose(planned.geofence_min_m, [-4.95, -4.95])
-    np.testing.assert_allclose(planned.geofence_max_m, [4.95, 4.95])
-    assert [o.clearance_m for o in inflated] == pytest.approx([0.25 + 0.05, 0.1 + 0.05])
+    np.testing.assert_allclose(planned.geofence_min_m, [-4.9, -4.9])
+    np.testing.assert_allclose(planned.geofence_max_m, [4.9, 4.9])
+    assert [o.clearance_m for o in inflated] == pytest.approx([0.25 + 0.1, 0.1 + 0.1])
     kept = tightened(Limits(1.0, 0.5, a_max_mps2=1.0), (), 0.05, 2.0)[0]
     assert kept.a_max_mps2 == 1.0  # a declared a_max stays
