@@ -335,7 +335,8 @@ def test_every_run_of_the_random_families_completes_safely() -> None:
     bad, late = [], []
     for sc in family(1, 200):
         out = outcome(sc)
-        unsafe = any(out[k] for k in ("separation_violations", "approached", "unseparated", "obstacle_violations"))
+        checks = ("separation_violations", "approached", "unseparated", "obstacle_violations")
+        unsafe = any(out[k] for k in checks)
         if unsafe or (out["completion"] < 1.0 and sc["name"] not in STILL_CONVERGING):
             bad.append((sc["name"], {k: v for k, v in out.items() if k != "infos"}))
         elif out["completion"] < 1.0:
