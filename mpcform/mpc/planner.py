@@ -86,6 +86,7 @@ class MPCPlanner(Controller):
 
     # ---- state ----------------------------------------------------------------------------
     def reset(self, t_s: float, positions_m: Array) -> None:
+        """Forget the previous plan, the candidate set and the liveness state (a new run)."""
         self._candidates.reset()
         self._solver.reset()
         self._plan: Plan | None = None
@@ -99,6 +100,11 @@ class MPCPlanner(Controller):
 
     # ---- one step -------------------------------------------------------------------------
     def step(self, t_s: float, positions_m: Array) -> ControlStep:
+        """One receding-horizon step at time ``t_s`` [s] from the measured ``positions_m`` (n, d) [m]:
+        the certified first command (n, d) [m/s] (``||u_i|| <= v_max``, no pair or obstacle closer
+        than its limit along the first segment, or than it already was) and the step's information
+        (mode ``fast_path`` | ``qp`` | ``fallback``, solver status, slack and the pairs that needed it,
+        liveness events). With none of the QP's rows active the command is exactly eq. 14."""
         p0 = self._check_positions(positions_m)
         st, sep = self.settings, self._separation
         k, dt, horizon = st.gain_per_s, self.dt_s, st.horizon
