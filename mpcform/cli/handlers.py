@@ -30,8 +30,7 @@ from mpcform.outputs.export import (
 from mpcform.outputs.flight_limits import FlightLimits, platform_thrust_acc_mps2
 from mpcform.outputs.polynomial import DEFAULT_TOLERANCE_M
 from mpcform.outputs.rundata import RunData, formation_data, load_run, write_formation_npz
-from mpcform.run.runner import RunResult, describe
-from mpcform.scenario.check import check_scenario_file
+from mpcform.run.runner import RunResult
 from mpcform.scenario.spec import Scenario
 
 PLOTS_DIR = "plots"
@@ -150,21 +149,6 @@ def _export(args: argparse.Namespace) -> int:
     out = Path(args.dir) / EXPORT_DIR if args.out is None else Path(args.out)
     _report_export(export_run(data, out, export_options(args)))
     return 0
-
-
-def validate(args: argparse.Namespace) -> int:
-    """``mpcform validate``: OK and a description, or every problem found (exit 2)."""
-    result = check_scenario_file(args.scenario)
-    if result.scenario is not None:
-        print(f"OK {describe(result.scenario)}")
-        return 0
-    for problem in result.problems:
-        where = f"{args.scenario}:{problem.line}: " if problem.line is not None else ""
-        message = " ".join(f"{problem.field}: {problem.message}".split())
-        print(f"mpcform: error: {where}{message}", file=sys.stderr)
-    if len(result.problems) > 1:
-        print(f"mpcform: {len(result.problems)} problems in {args.scenario}", file=sys.stderr)
-    return 2
 
 
 def add_commands(sub: Any) -> None:
