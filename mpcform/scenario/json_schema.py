@@ -24,6 +24,21 @@ VECTOR: dict[str, Any] = {"type": "array", "items": NUMBER, "minItems": 2, "maxI
 INDEX: dict[str, Any] = {"type": "integer", "minimum": 0}
 
 
+WIND = {
+    "type": "object",
+    "description": "Mean wind and seeded gusts acting through drag (mpcform.sim.wind).",
+    "properties": {
+        "mean": {**VECTOR, "description": "mean wind [m/s], d numbers"},
+        "gust_std": {"type": "number", "minimum": 0, "description": "gust standard deviation [m/s]"},
+        "gust_time": {"type": "number", "exclusiveMinimum": 0, "description": "gust correlation time [s]"},
+        "gust_bound": {"type": "number", "minimum": 0, "description": "per-axis clip [m/s] (inf: none)"},
+        "gust_field": {"enum": ["per_drone", "shared"]},
+    },
+    "required": ["mean"],
+    "additionalProperties": False,
+}
+
+
 def scenario_json_schema() -> dict[str, Any]:
     """The JSON Schema of a scenario document (a dict, ready for :func:`json.dumps`)."""
     top = _object(TABLES[""])
@@ -118,5 +133,7 @@ def _type(key: Key, table: Table) -> dict[str, Any]:
         return {"type": "array", "items": {"$ref": "#/$defs/reference_keyframes"}, "minItems": 1}
     if key.name == "template":  # a keyframe's template switch: a [template] table
         return {"$ref": "#/$defs/template"}
+    if key.name == "wind":  # [plant.wind]
+        return WIND
     group = {"type": "number", "exclusiveMinimum": 0}  # max_velocity, max_acceleration, max_jerk
     return {"type": "object", "properties": dict.fromkeys(GROUPS, group), "additionalProperties": False}
