@@ -71,13 +71,20 @@ class SphereObstacle:
                 positive("obstacles.clearance", self.clearance_m, allow_zero=True),
             )
 
+    def clearance_for(self, d_min_m: float | None) -> float:
+        """The clearance [m] kept from the surface: ``clearance_m``, else half of d_min (0 without)."""
+        return 0.5 * (d_min_m or 0.0) if self.clearance_m is None else self.clearance_m
+
+    def required_distance_m(self, d_min_m: float | None) -> float:
+        """Distance [m] a drone keeps from the centre: the radius plus :meth:`clearance_for`."""
+        return self.radius_m + self.clearance_for(d_min_m)
+
 
 def obstacle_arrays(obstacles: tuple[SphereObstacle, ...], d_min_m: float | None) -> tuple[Array, Array]:
     """Centres (m, d) [m] and the distance (m,) [m] drones keep from each centre: the radius plus
     the clearance (half of ``d_min`` when unset)."""
-    half = 0.5 * (d_min_m or 0.0)
     center = np.array([o.center_m for o in obstacles])
-    required = np.array([o.radius_m + (half if o.clearance_m is None else o.clearance_m) for o in obstacles])
+    required = np.array([o.required_distance_m(d_min_m) for o in obstacles])
     return center, required
 
 
@@ -107,7 +114,6 @@ def tightened(
     a_max = limits.a_max_mps2 if limits.a_max_mps2 is not None else a_max_mps2
     if tube == 0.0 and a_max == limits.a_max_mps2:
         return limits, obstacles
-    half = 0.5 * (limits.d_min_m or 0.0)
     fence = {}
     if limits.geofence_min_m is not None and limits.geofence_max_m is not None:
         fence = {
@@ -119,7 +125,7 @@ def tightened(
         downwash_kappa=limits.downwash_kappa, **fence,
     )  # fmt: skip
     inflated = tuple(
-        SphereObstacle(o.center_m, o.radius_m, (half if o.clearance_m is None else o.clearance_m) + 2 * tube)
+        SphereObstacle(o.center_m, o.radius_m, o.clearance_for(limits.d_min_m) + 2 * tube)
         for o in obstacles
     )
     return planned, inflated

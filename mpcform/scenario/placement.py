@@ -67,8 +67,7 @@ def check_goal(goal_m: Array, field: str, limits: Limits, obstacles: Obstacles) 
 
 def required_distance_m(obstacle: SphereObstacle, limits: Limits) -> float:
     """Radius plus clearance [m]: the clearance defaults to half of d_min (0 without d_min)."""
-    half = 0.5 * (limits.d_min_m or 0.0)
-    return obstacle.radius_m + (half if obstacle.clearance_m is None else obstacle.clearance_m)
+    return obstacle.required_distance_m(limits.d_min_m)
 
 
 def _clear_of_obstacles(

@@ -155,10 +155,9 @@ def _candidates(scenario: Scenario) -> tuple[int, int]:
             pairs = max(pairs, (int(tree.count_neighbors(tree, radius)) - scenario.n) // 2)
     items = 0
     if scenario.obstacles:
-        half = 0.5 * (lim.d_min_m or 0.0)
         centres = np.array([o.center_m for o in scenario.obstacles])
-        reach = np.array([o.radius_m + (half if o.clearance_m is None else o.clearance_m)
-                          for o in scenario.obstacles]) + st.margin_m + 2.0 * travel  # fmt: skip
+        required = np.array([o.required_distance_m(lim.d_min_m) for o in scenario.obstacles])
+        reach = required + st.margin_m + 2.0 * travel
         for points in samples:
             near = cKDTree(points).query_ball_point(centres, reach, return_length=True)
             items = max(items, int(near.sum()))

@@ -32,8 +32,7 @@ def separation_violations(path_m: Array, d_min_m: float, metric: Array | None = 
 
 def required_clearance_m(obstacle: SphereObstacle, d_min_m: float | None) -> float:
     """Distance [m] a drone keeps from an obstacle's centre: radius + clearance (default d_min / 2)."""
-    clearance = obstacle.clearance_m if obstacle.clearance_m is not None else 0.5 * (d_min_m or 0.0)
-    return float(obstacle.radius_m + clearance)
+    return float(obstacle.required_distance_m(d_min_m))
 
 
 def obstacle_distances_along(path_m: Array, obstacles: tuple[SphereObstacle, ...]) -> Array:
