@@ -24,6 +24,11 @@ passing the blocking drones or spheres on the other side, the side it backed out
 for good would only orbit the target). The side is kept for the rest of the run.
 Safety is untouched: the turn only changes the cost's targets, every row stays in the QP.
 
+Blocked targets: a drone whose target lies within ``d_min`` of another drone's target, with the
+planner's limits (a plant's margin included), can never reach it; turning or backing off would
+only carry it away. Such a drone is not turned and never
+escalates: it presses towards its target and settles as close as the rows allow.
+
 Limits: the rule is local and greedy. A drone backing out of a pocket can fall back into it once
 it is out of conflict (then it stalls and escalates again; nothing bounds how many times), and a
 goal inside a region closed by obstacles or by parked drones is never reached. The rule does not
@@ -78,12 +83,17 @@ class TieBreak:
         """Drones whose turn is escalated."""
         return int(np.count_nonzero(self.stalled))
 
-    def turn(self, c: Array, conflicted: Array, p0: Array, to_target: Array, started: bool) -> Array:
+    def turn(
+        self, c: Array, conflicted: Array, p0: Array, to_target: Array, started: bool, blocked: Array | None = None
+    ) -> Array:
         """Targets ``c`` (H, n, d) with the ``conflicted`` (n,) drones' turned to the right;
         ``p0`` (n, d) the positions, ``to_target`` (n, d) the way to the targets ``p* - p0``,
-        ``started``: whether any command was given."""
+        ``started``: whether any command was given; ``blocked`` (n,): drones whose target no
+        plan can reach (module doc), never turned."""
         if self.angle_rad <= 0:
             return c
+        if blocked is not None and blocked.any():
+            conflicted = conflicted & ~blocked
         angles = self.angles(conflicted, c[0], p0, to_target, started)
         return np.where(conflicted[:, None], turn_about_z(c, -self.sense * angles), c)
 

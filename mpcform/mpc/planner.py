@@ -130,7 +130,8 @@ class MPCPlanner(Controller):
         conflicted = sep.conflicted(x_nom, rows)
         if st.fast_path and not (off_limits | conflicted).any():
             return self._fast_path(p0, u_nom, x_nom)
-        c = self._tie_break.turn(c, conflicted, p0, targets[0] - p0, self._plan is not None)
+        blocked = sep.blocked_targets(targets[0]) if conflicted.any() else None
+        c = self._tie_break.turn(c, conflicted, p0, targets[0] - p0, self._plan is not None, blocked)
         bad = off_limits | conflicted
         drones = qp_drones(bad, rows.pairs[rows.pair_on]) if grouped else np.arange(self.n)
         sub = rows.subset(drones, self.n, on_only=grouped)  # grouped: the pattern follows the groups

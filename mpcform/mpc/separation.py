@@ -272,6 +272,15 @@ class Separation:
         conflicted[labels[labels >= 0]] = True
         return conflicted
 
+    def blocked_targets(self, targets: Array) -> Array:
+        """Drones (n,) whose target (n, d) lies within ``d_min`` (in the metric, with the margin)
+        of another drone's target: no plan reaches both. (A target inside an obstacle is not
+        blocked: a moving reference may pass through one, and the drone goes around.)"""
+        blocked = np.zeros(targets.shape[0], dtype=bool)
+        if self.pairs is not None and targets.shape[0] > 1:
+            blocked[pairs_within(targets * self.metric, self.pairs.d_min_m + self.margin_m).ravel()] = True
+        return blocked
+
     def push_apart(self, p0: Array, cand: Candidates) -> Array:
         """Unit directions (n, d) (zero for a drone with none) away from the partners and
         obstacles within reach whose required distance it is inside: the sum of the start normals."""
