@@ -17,6 +17,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from mpcform._validate import Array, finite_array, positive
 from mpcform.control.base import Controller, StepInfo
@@ -53,7 +54,7 @@ def plant_seed(seed: int) -> np.random.SeedSequence:
 
 def simulate(
     controller: Controller,
-    initial_positions_m: object,
+    initial_positions_m: ArrayLike,
     duration_s: float,
     *,
     t0_s: float = 0.0,
