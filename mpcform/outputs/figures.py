@@ -178,8 +178,9 @@ def scale(run: RunData) -> Figure:
     fig, ax = _series_axes()
     rel = " (relative to the start)" if formation.scale_is_relative else ""
     estimates = traj.scale_estimates
+    drawn = estimates is not None and not formation.scale_is_relative  # absolute, like s_hat_i
     fitted, shaped = fitted_scales_in_shape(formation.offsets_m, traj.positions_m)
-    fit_style = {"color": MEDIAN_COLOUR, "lw": 1.4} if estimates is None else FIT_UNDER_ESTIMATES
+    fit_style = FIT_UNDER_ESTIMATES if drawn else {"color": MEDIAN_COLOUR, "lw": 1.4}
     ax.plot(traj.t_s, np.where(shaped, fitted, np.nan), label="best fit of the drones' positions",
             **fit_style)  # fmt: skip
     ref = formation.scale_ref
@@ -194,10 +195,10 @@ def scale(run: RunData) -> Figure:
                        label="not in the template's shape" if k == 0 else None)  # fmt: skip
         since = f"; in shape from t = {t_in[0]:.3g} s" if t_in.size else ""
         notes.append(f"not drawn while the drones do not hold the template's shape{since}")
-    if estimates is not None and formation.scale_is_relative:
-        notes.append("estimates s_hat_i not drawn: they need the template's scale (formation.npz)")
-    elif estimates is not None:
+    if estimates is not None and drawn:
         draw_scale_estimates(ax, traj.t_s, estimates, formation.leaders)
+    elif estimates is not None:
+        notes.append("estimates s_hat_i not drawn: they need the template's scale (formation.npz)")
     if notes:
         ax.text(0.01, 0.02, "\n".join(notes), transform=ax.transAxes, fontsize="small", va="bottom",
                 color="0.25", gid="scale-note")  # fmt: skip

@@ -129,9 +129,12 @@ def test_scale_of_a_run_without_estimates_or_without_formation_data(tmp_path: Pa
     found = estimate_artists(figures.scale(load_run(tmp_path / "mpc")).axes[0])
     assert not any(found.values())  # no estimates recorded, nothing to say
     short_run("consensus_ring", tmp_path / "ring", steps=10, formation=False)
-    found = estimate_artists(figures.scale(load_run(tmp_path / "ring")).axes[0])
+    ax = figures.scale(load_run(tmp_path / "ring")).axes[0]
+    found = estimate_artists(ax)
     assert not found[figures.ESTIMATE_GID] and not found[figures.LEADER_GID]
     assert "estimates s_hat_i not drawn" in found["scale-note"][0].get_text()
+    best_fit = ax.get_lines()[0]
+    assert best_fit.get_color() == figures.MEDIAN_COLOUR  # drawn as without estimates
 
 
 @pytest.mark.parametrize(
