@@ -20,6 +20,7 @@ import math
 from collections.abc import Sequence
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from mpcform._validate import Array
 from mpcform.errors import ValidationError
@@ -59,7 +60,7 @@ class CrossingReference(Reference):
         return Profile(zeros, np.broadcast_to(np.eye(d), (t, d, d)), np.ones(t), zeros,
                        np.zeros((t, velocity_size(d) - d - 1)), np.zeros(t))  # fmt: skip
 
-    def targets(self, times_s: object) -> tuple[Array, Array]:
+    def targets(self, times_s: ArrayLike) -> tuple[Array, Array]:
         t = np.atleast_1d(np.asarray(times_s, dtype=float))
         pos = self.start_m + t[:, None, None] * self.velocity_mps
         return pos, np.broadcast_to(self.velocity_mps, pos.shape).copy()

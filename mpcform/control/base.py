@@ -63,6 +63,12 @@ class Controller(ABC):
     def reset(self, t_s: float, positions_m: Array) -> None:  # noqa: B027 - stateless default
         """Start a run at ``t_s`` from ``positions_m`` (n, d)."""
 
+    @property
+    def scale_estimates(self) -> Array | None:
+        """Each drone's own scale estimate ``s_hat_i`` (n,) now, for controllers that keep one
+        (consensus, seed eq. 20); None for the others (the simulation records it when present)."""
+        return None
+
     @abstractmethod
     def step(self, t_s: float, positions_m: Array) -> ControlStep:
         """The command for ``[t_s, t_s + dt)`` given the measured positions (n, d)."""

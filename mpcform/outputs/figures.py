@@ -16,7 +16,8 @@ drones replace the per-drone lines):
 - ``clearance.png`` (runs with obstacles): distance of the drones to each obstacle's surface
   along the segments [m] against the required clearance;
 - ``scale.png``: best-fit scale of the positions (Umeyama) and the reference's scale, drawn only
-  where the drones hold the template's shape (a permuted or mirrored start has no scale);
+  where the drones hold the template's shape (a permuted or mirrored start has no scale), and the
+  drones' own estimates ``s_hat_i`` when the run recorded them (consensus);
 - :func:`compare_runs`: tracking error, separation and speed of several runs on one figure.
 
 PNG files carry the run's provenance (scenario, hash, seed, versions) in their metadata.
@@ -57,6 +58,10 @@ LOG_FLOOR_M = 1e-14  # tracking errors below this (exact starts) are not drawn o
 AXIS_HEADROOM = 1.1  # a time-series axis ends at most 10 % above what it must show
 SHAPE_TOL = 0.2  # relative RMS residual above which the drones do not hold the template's shape
 SERIES_SIZE_IN = (8.0, 4.2)
+ESTIMATE_GID = "scale-estimate"  # a drone's (or the median) scale estimate s_hat_i in scale.png
+LEADER_GID = "scale-leader"  # a leader's scale estimate, starred
+LEADER_STARS = 9  # stars along a leader's estimate
+FIT_UNDER_ESTIMATES: dict[str, Any] = {"color": "0.55", "lw": 2.6, "alpha": 0.7, "zorder": 1.5}
 DPI = 110
 
 
@@ -166,18 +171,22 @@ def clearance(run: RunData) -> Figure:
 
 
 def scale(run: RunData) -> Figure:
-    """Best-fit scale of the drones' positions (where they hold the template's shape) and the
-    reference's scale. Per-drone scale estimates are not recorded by the controllers today."""
+    """Best-fit scale of the drones' positions (where they hold the template's shape), the
+    reference's scale and, for a consensus run, each drone's own estimate ``s_hat_i`` (seed eq. 20):
+    one line per drone up to six drones, else their min-max band and median, the leaders starred."""
     traj, formation = run.trajectory, run.formation
     fig, ax = _series_axes()
     rel = " (relative to the start)" if formation.scale_is_relative else ""
+    estimates = traj.scale_estimates
+    drawn = estimates is not None and not formation.scale_is_relative  # absolute, like s_hat_i
     fitted, shaped = fitted_scales_in_shape(formation.offsets_m, traj.positions_m)
-    ax.plot(traj.t_s, np.where(shaped, fitted, np.nan), color=MEDIAN_COLOUR, lw=1.4,
-            label="best fit of the drones' positions")  # fmt: skip
+    fit_style = FIT_UNDER_ESTIMATES if drawn else {"color": MEDIAN_COLOUR, "lw": 1.4}
+    ax.plot(traj.t_s, np.where(shaped, fitted, np.nan), label="best fit of the drones' positions",
+            **fit_style)  # fmt: skip
     ref = formation.scale_ref
     if ref is None:
         ref = fitted_scales_in_shape(formation.offsets_m, traj.reference_m)[0]
-    ax.plot(traj.t_s, ref, label="reference", **{**LIMIT_STYLE, "color": "k", "zorder": 3})
+    ax.plot(traj.t_s, ref, label="reference s*(t)", **{**LIMIT_STYLE, "color": "k", "zorder": 3})
     notes = []
     if not shaped.all():
         t_in = traj.t_s[shaped]
@@ -186,13 +195,36 @@ def scale(run: RunData) -> Figure:
                        label="not in the template's shape" if k == 0 else None)  # fmt: skip
         since = f"; in shape from t = {t_in[0]:.3g} s" if t_in.size else ""
         notes.append(f"not drawn while the drones do not hold the template's shape{since}")
-    if formation.graph_edges is not None:
-        notes.append("per-drone consensus estimates s_hat_i are not recorded: best fit shown")
+    if estimates is not None and drawn:
+        draw_scale_estimates(ax, traj.t_s, estimates, formation.leaders)
+    elif estimates is not None:
+        notes.append("estimates s_hat_i not drawn: they need the template's scale (formation.npz)")
     if notes:
         ax.text(0.01, 0.02, "\n".join(notes), transform=ax.transAxes, fontsize="small", va="bottom",
                 color="0.25", gid="scale-note")  # fmt: skip
     _finish(ax, run, "Scale", f"formation scale s{rel}")
     return fig
+
+
+def draw_scale_estimates(ax: Any, t_s: Array, estimates: Array, leaders: Sequence[int]) -> None:
+    """The drones' scale estimates (T, n): a line per drone (gid :data:`ESTIMATE_GID`) up to
+    :data:`PER_DRONE_MAX` drones, else the min-max band (gid ``envelope``) and the median (gid
+    :data:`ESTIMATE_GID`); every leader's estimate starred (gid :data:`LEADER_GID`)."""
+    n = estimates.shape[1]
+    if n <= PER_DRONE_MAX:
+        for i in range(n):
+            style = per_drone_style(i)
+            ax.plot(t_s, estimates[:, i], label=f"drone {i}: s_hat_{i}", gid=ESTIMATE_GID, **style)
+    else:
+        envelope(ax, t_s, estimates, MEDIAN_COLOUR, "estimates s_hat_i")
+        ax.lines[-1].set_gid(ESTIMATE_GID)
+    stars = np.unique(np.linspace(0, t_s.shape[0] - 1, LEADER_STARS + 2)[1:-1].round().astype(int))
+    names = ", ".join(map(str, leaders))
+    label = f"leader {names} (sees s*)" if len(leaders) == 1 else f"leaders {names} (see s*)"
+    for k, i in enumerate(leaders):
+        ax.plot(t_s, estimates[:, i], ls="-" if n > PER_DRONE_MAX else "none", color="goldenrod", lw=1.0,
+                marker="*", markevery=stars, ms=11, mfc="gold", mec="k", mew=0.6, zorder=4, gid=LEADER_GID,
+                label=label if k == 0 else None)  # fmt: skip
 
 
 def fitted_scales_in_shape(offsets_m: Array, positions_m: Array) -> tuple[Array, Array]:

@@ -6,7 +6,9 @@
   command [m/s] applied over ``[t_j, t_{j+1})``, ``p_ref`` (T, n, d) desired positions [m]; and
   the plant's dense true motion: ``t_true`` (K,) [s] (every control sample among them, at least
   10 per interval), ``p_true`` and ``v_true`` (K, n, d) [m, m/s], ``p_ref_true`` (K, n, d) [m],
-  and for the quadrotor ``quat_true`` (K, n, 4, xyzw) and ``thrust_true`` (K, n) [N];
+  and for the quadrotor ``quat_true`` (K, n, 4, xyzw) and ``thrust_true`` (K, n) [N]; for a
+  controller with per-drone scale estimates (consensus) ``scale_estimates`` (T, n), each drone's
+  ``s_hat_i`` at every sample;
 - ``trajectory.csv``: one row per time and drone, ``t, drone, x, y[, z], vx, vy[, vz],
   x_ref, y_ref[, z_ref]`` (the command columns are empty at the final time);
 - ``summary.json``: ``scenario, n, dim, dt, steps, controller, solver``, ``limits``
@@ -50,16 +52,20 @@ TRUE_ARRAYS = {
     "quat_true": "quat_xyzw", "thrust_true": "thrust_N",
 }  # fmt: skip
 """Keys of ``trajectory.npz`` for the :class:`~mpcform.sim.trajectory.TrueTrajectory` fields."""
+SCALE_ESTIMATES = "scale_estimates"
+"""Key of ``trajectory.npz`` for the per-drone scale estimates (T, n), written only when recorded."""
 
 
 def write_trajectory_npz(path: Path, trajectory: Trajectory) -> None:
-    """Arrays ``t`` (T,) [s], ``p`` (T, n, d) [m], ``u`` (T-1, n, d) [m/s], ``p_ref`` (T, n, d), and
-    the dense true motion when the trajectory has it (:data:`TRUE_ARRAYS`)."""
+    """Arrays ``t`` (T,) [s], ``p`` (T, n, d) [m], ``u`` (T-1, n, d) [m/s], ``p_ref`` (T, n, d), the
+    dense true motion when the trajectory has it (:data:`TRUE_ARRAYS`) and ``scale_estimates``
+    (T, n) when it has them."""
     traj = trajectory
     true = {} if traj.true is None else {key: getattr(traj.true, name) for key, name in TRUE_ARRAYS.items()}
+    optional = true | {SCALE_ESTIMATES: traj.scale_estimates}
     np.savez_compressed(
         path, t=traj.t_s, p=traj.positions_m, u=traj.commands_mps, p_ref=traj.reference_m,
-        **{key: value for key, value in true.items() if value is not None},
+        **{key: value for key, value in optional.items() if value is not None},
     )  # fmt: skip
 
 

@@ -14,6 +14,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import ArrayLike
 from scipy.interpolate import BSpline, PPoly, make_lsq_spline
 
 from mpcform._validate import Array, positive
@@ -52,7 +53,7 @@ class PiecewisePolynomial:
     def duration_s(self) -> float:
         return float(self.durations_s.sum())
 
-    def evaluate(self, t_s: object, derivative: int = 0) -> Array:
+    def evaluate(self, t_s: ArrayLike, derivative: int = 0) -> Array:
         """Values (T, m) of the series (or their ``derivative``) at ``t_s`` (T,); clamped to the span."""
         t = np.atleast_1d(np.asarray(t_s, dtype=float))
         breaks = self.breaks_s

@@ -21,6 +21,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import ArrayLike
 from ruckig import InputParameter, Result, Ruckig
 from ruckig import Trajectory as RuckigTrajectory
 
@@ -46,15 +47,15 @@ class Retiming:
     def duration_s(self) -> float:
         return float(self.t_s[-1])
 
-    def original_time(self, t_s: object) -> Array:
+    def original_time(self, t_s: ArrayLike) -> Array:
         """``s(t)`` [s of the plan] at new times ``t_s``."""
         return np.interp(np.asarray(t_s, dtype=float), self.t_s, self.tau_s)
 
-    def new_time(self, tau_s: object) -> Array:
+    def new_time(self, tau_s: ArrayLike) -> Array:
         """``s^-1(tau)``: when the retimed flight passes the plan's time ``tau_s``."""
         return np.interp(np.asarray(tau_s, dtype=float), self.tau_s, self.t_s)
 
-    def positions(self, t_s: object) -> Array:
+    def positions(self, t_s: ArrayLike) -> Array:
         """Retimed positions ``P(s(t))`` (T, n, 3) [m]."""
         tau = self.original_time(t_s)
         return self.path.evaluate(tau).reshape(tau.shape[0], -1, 3)

@@ -23,7 +23,7 @@ import numpy as np
 
 from mpcform._validate import Array
 from mpcform.errors import ValidationError
-from mpcform.outputs.files import SUMMARY_JSON, TRAJECTORY_NPZ, TRUE_ARRAYS
+from mpcform.outputs.files import SCALE_ESTIMATES, SUMMARY_JSON, TRAJECTORY_NPZ, TRUE_ARRAYS
 from mpcform.sim.trajectory import Trajectory, TrueTrajectory
 
 if TYPE_CHECKING:
@@ -129,16 +129,18 @@ def write_formation_npz(out_dir: str | Path, formation: FormationData) -> Path:
 
 
 def load_run(directory: str | Path) -> RunData:
-    """Read ``trajectory.npz``, ``summary.json`` and, when present, ``formation.npz``."""
+    """Read ``trajectory.npz`` (with its optional arrays), ``summary.json`` and, when present,
+    ``formation.npz``."""
     root = Path(directory)
     if not root.is_dir():
         raise RunDirError(str(root), "no such run directory (write one with `mpcform run --out DIR`)")
-    arrays = _npz(root / TRAJECTORY_NPZ, ("t", "p", "u", "p_ref"), optional=tuple(TRUE_ARRAYS))
+    arrays = _npz(root / TRAJECTORY_NPZ, ("t", "p", "u", "p_ref"), optional=(*TRUE_ARRAYS, SCALE_ESTIMATES))
     try:
         true = None
         if "t_true" in arrays:
             true = TrueTrajectory(**{name: arrays.get(key) for key, name in TRUE_ARRAYS.items()})  # type: ignore[arg-type]
-        trajectory = Trajectory(arrays["t"], arrays["p"], arrays["u"], arrays["p_ref"], true=true)
+        trajectory = Trajectory(arrays["t"], arrays["p"], arrays["u"], arrays["p_ref"], true=true,
+                                scale_estimates=arrays.get(SCALE_ESTIMATES))  # fmt: skip
     except ValidationError as exc:
         raise RunDirError(str(root / TRAJECTORY_NPZ), str(exc)) from None
     summary_path = root / SUMMARY_JSON

@@ -35,6 +35,7 @@ from abc import ABC, abstractmethod
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import ArrayLike
 from scipy.linalg import expm
 
 from mpcform._validate import Array, dimension, finite_array, positive
@@ -121,7 +122,9 @@ class Plant(ABC):
         self._field: WindField | None = None
         self._noise_rng = np.random.default_rng(self._noise_seed)
 
-    def reset(self, positions_m: object, velocities_mps: object = None, t0_s: float = 0.0) -> None:
+    def reset(
+        self, positions_m: ArrayLike, velocities_mps: ArrayLike | None = None, t0_s: float = 0.0
+    ) -> None:
         """Start from ``positions_m`` (n, d) and ``velocities_mps`` (n, d) (None: at rest) at ``t0_s``."""
         p = finite_array("plant.positions", positions_m, (self.n, self.dim))
         v = (
@@ -134,7 +137,9 @@ class Plant(ABC):
         self._noise_rng = np.random.default_rng(self._noise_seed)
         self._reset(p, v)
 
-    def advance(self, command_mps: object, dt_s: float, planned_positions_m: object = None) -> PlantSamples:
+    def advance(
+        self, command_mps: ArrayLike, dt_s: float, planned_positions_m: ArrayLike | None = None
+    ) -> PlantSamples:
         """Hold ``command_mps`` (n, d) for ``dt_s``; ``planned_positions_m`` (n, d): where the plan
         has the drones at the start of the interval (used by plants with a position loop)."""
         u = finite_array("plant.command", command_mps, (self.n, self.dim))

@@ -17,6 +17,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from mpcform._validate import Array, finite_array, positive
 from mpcform.control.base import Controller, StepInfo
@@ -30,8 +31,9 @@ from mpcform.sim.trajectory import Trajectory, TrueTrajectory
 class SimulationResult(Trajectory):
     """A simulated :class:`~mpcform.sim.trajectory.Trajectory` and the controller's record of its
     T - 1 steps (fields ``t_s, positions_m, commands_mps, reference_m, infos, step_times_s,
-    controller``, in this order); ``wind_clip_fraction``: the share of gust samples the wind's
-    bound clipped (0 without wind)."""
+    controller``, in this order; ``scale_estimates`` (T, n) of a consensus controller, row j the
+    estimates at ``t_j``, those the step there uses); ``wind_clip_fraction``: the share of gust
+    samples the wind's bound clipped (0 without wind)."""
 
     infos: tuple[StepInfo, ...]
     step_times_s: Array  # (T - 1,) wall-clock time of each controller call
@@ -52,7 +54,7 @@ def plant_seed(seed: int) -> np.random.SeedSequence:
 
 def simulate(
     controller: Controller,
-    initial_positions_m: object,
+    initial_positions_m: ArrayLike,
     duration_s: float,
     *,
     t0_s: float = 0.0,
@@ -84,6 +86,7 @@ def simulate(
     pos[0] = p
     plant.reset(p, t0_s=t0_s)
     controller.reset(t0_s, p.copy())
+    s_hat = _estimates_record(controller, steps)
     for j in range(steps):
         start = time.perf_counter()
         out = controller.step(float(t[j]), p.copy())
@@ -101,6 +104,8 @@ def simulate(
         part.t_s[:] = t[j] + (part.t_s - part.t_s[0])  # the control samples exactly among the times
         part.t_s[-1] = t[j + 1]
         pos[j + 1], cmd[j] = p, u
+        if s_hat is not None:
+            s_hat[j + 1] = controller.scale_estimates
         infos.append(out.info)
         parts.append(part)
         if progress is not None:
@@ -113,5 +118,16 @@ def simulate(
     )  # fmt: skip
     return SimulationResult(
         t, pos, cmd, ref, tuple(infos), times, controller.name, true=true,
-        wind_clip_fraction=plant.wind_clip_fraction,
+        scale_estimates=s_hat, wind_clip_fraction=plant.wind_clip_fraction,
     )  # fmt: skip
+
+
+def _estimates_record(controller: Controller, steps: int) -> Array | None:
+    """(steps + 1, n) for the controller's scale estimates, its first row the estimates after the
+    reset; None when the controller keeps none."""
+    first = controller.scale_estimates
+    if first is None:
+        return None
+    record = np.empty((steps + 1, first.shape[0]))
+    record[0] = first
+    return record

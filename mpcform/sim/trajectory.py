@@ -11,6 +11,9 @@ samples: K >= 10 (T - 1) + 1 times that include every control sample, the true p
 velocities, the desired positions at those times and, for the quadrotor, attitude and thrust.
 ``positions_m`` are what the controller saw (equal to the true positions at the control samples
 unless the plant adds measurement noise).
+
+``scale_estimates`` (T, n), for controllers that keep them (consensus, seed eq. 20): each drone's
+own scale estimate ``s_hat_i`` at every sample time; None for the others.
 """
 
 from __future__ import annotations
@@ -59,6 +62,7 @@ class Trajectory:
     commands_mps: Array  # (T - 1, n, d), applied over [t_j, t_{j+1})
     reference_m: Array  # (T, n, d) desired positions p*(t)
     true: TrueTrajectory | None = field(default=None, kw_only=True)
+    scale_estimates: Array | None = field(default=None, kw_only=True)  # (T, n) s_hat_i(t_j)
 
     def __post_init__(self) -> None:
         t, p, u, ref = self.t_s, self.positions_m, self.commands_mps, self.reference_m
@@ -73,6 +77,11 @@ class Trajectory:
                 "trajectory",
                 f"expected commands_mps (T-1, n, d) and reference_m (T, n, d) for positions_m {p.shape}, "
                 f"got {u.shape} and {ref.shape}",
+            )
+        s_hat = self.scale_estimates
+        if s_hat is not None and s_hat.shape != p.shape[:2]:
+            raise ValidationError(
+                "trajectory", f"expected scale_estimates (T, n) = {p.shape[:2]}, got {s_hat.shape}"
             )
 
     @property

@@ -13,6 +13,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from mpcform._validate import Array, finite_array, positive
 from mpcform.errors import ValidationError
@@ -31,7 +32,7 @@ class Wind:
     mean_mps: Array
     gust_std_mps: float = 0.0
     gust_time_s: float = 1.0
-    gust_bound_mps: object = None
+    gust_bound_mps: ArrayLike | None = None  # (d,) once built
     gust_field: str = "per_drone"
 
     def __post_init__(self) -> None:

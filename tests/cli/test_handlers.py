@@ -47,8 +47,11 @@ def test_run_with_plot_animate_export(tmp_path: Path, capsys: pytest.CaptureFixt
     assert main(["run", short_copy(tmp_path), "--out", str(out), "--plot", "--animate", "--export",
                  "--altitude", "1.5", "--no-flight-check"]) == 0  # fmt: skip
     captured = capsys.readouterr()
+    from mpcform.outputs.animation import animation_file  # needs matplotlib
+
+    video = animation_file()  # flight.mp4 with ffmpeg, else flight.gif
     assert "final tracking error" in captured.out and "wrote 5 figures" in captured.out
-    assert "flight.gif" in captured.out and "exported 3 drones" in captured.out
+    assert video in captured.out and "exported 3 drones" in captured.out
     assert captured.err == ""  # not a terminal: no progress bar
     assert {"trajectory.npz", "trajectory.csv", "summary.json", "formation.npz"} <= {
         p.name for p in out.iterdir()
@@ -60,7 +63,7 @@ def test_run_with_plot_animate_export(tmp_path: Path, capsys: pytest.CaptureFixt
         "speed.png",
         "separation.png",
         "scale.png",
-        "flight.gif",
+        video,
     }
     export = {p.name for p in (out / "export").iterdir()}
     assert {"drone000_setpoints.csv", "drone002_poly7.csv", "provenance.json"} <= export
@@ -145,6 +148,16 @@ def test_plot_a_saved_run(tmp_path: Path, capsys: pytest.CaptureFixture[str]) ->
     assert main(["plot", str(tmp_path), "--out", str(tmp_path / "figs")]) == 0
     assert "wrote 6 figures" in capsys.readouterr().out
     assert (tmp_path / "figs" / "view_3d.png").stat().st_size > 0
+
+
+@needs_plot
+def test_plot_a_saved_run_with_its_animation(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    from mpcform.outputs.animation import animation_file  # needs matplotlib
+
+    short_run("worked_example", tmp_path, steps=10)
+    assert main(["plot", str(tmp_path), "--animate", "--speed", "4"]) == 0
+    video = tmp_path / "plots" / animation_file()
+    assert f"wrote {video}" in capsys.readouterr().out and video.stat().st_size > 1000
 
 
 @pytest.mark.parametrize("command", ["plot", "export"])

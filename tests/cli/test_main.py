@@ -153,12 +153,13 @@ def test_version(capsys: pytest.CaptureFixture[str]) -> None:
     assert capsys.readouterr().out.strip() == f"mpcform {metadata.version('mpcform')}"
 
 
-def test_run_help_lists_the_controllers_and_solvers(capsys: pytest.CaptureFixture[str]) -> None:
+def test_run_help_lists_the_controllers_solvers_and_plants(capsys: pytest.CaptureFixture[str]) -> None:
     with pytest.raises(SystemExit):
         main(["run", "--help"])
     text = " ".join(capsys.readouterr().out.split())
     assert "override controller.kind: proportional, tracking, mpc, consensus, nullspace" in text
     assert "osqp, piqp (default), qpsolvers:<name>, casadi:<plugin>" in text
+    assert "--plant KIND override plant.kind: ideal, lag, second_order, quadrotor" in text
 
 
 def test_keys_json_schema(capsys: pytest.CaptureFixture[str]) -> None:

@@ -301,6 +301,12 @@ def test_ring_scenario_doubles_after_the_leader() -> None:
     assert isinstance(ctrl, ConsensusController) and ctrl.settings.law == "centroid_preserving"
     sim = simulate(ctrl, scenario.initial_positions_m, scenario.simulation.duration_s)
     np.testing.assert_allclose(ctrl.scale_estimates, 2.0, atol=1e-3)
+    recorded = sim.scale_estimates  # every drone's s_hat_i at every sample
+    assert recorded is not None and recorded.shape == (sim.t_s.size, scenario.n) == (801, 8)
+    np.testing.assert_array_equal(recorded[-1], ctrl.scale_estimates)
+    s_ref_end = scenario.reference.profile(sim.t_s[-1:]).scale[0]  # 2 - e^-40
+    np.testing.assert_allclose(recorded[-1], s_ref_end, atol=1e-3)
+    assert np.all(recorded[0] == 1.0) and recorded[100, 0] > recorded[100, 4]  # the leader leads
     assert relative_position_error(scenario.template, sim.positions_m[-1], 2.0, np.eye(2)) < 1e-3
     assert np.abs(sim.positions_m.mean(axis=1)).max() < 1e-13
 

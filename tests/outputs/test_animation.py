@@ -1,8 +1,16 @@
-"""The flight video: frames at the real-time factor (GIF frame durations read back with PIL), the
-frame cap, the progress callback, planar and spatial runs, MP4 only with ffmpeg."""
+"""The flight video: frames at the real-time factor (GIF frame durations read back with PIL, MP4
+durations with ffprobe), the frame cap, the progress callback, planar and spatial runs, MP4 only
+with ffmpeg.
+
+The MP4 tests need ffmpeg and ffprobe (Debian: ``apt-get install ffmpeg``); without them they skip,
+unless ``MPCFORM_REQUIRE_BROWSER=1`` (set by ``.ci/run``), where they fail.
+"""
 
 from __future__ import annotations
 
+import os
+import shutil
+import subprocess
 from pathlib import Path
 
 import pytest
@@ -14,7 +22,13 @@ PIL = pytest.importorskip("PIL.Image")
 from matplotlib.animation import FFMpegWriter  # noqa: E402
 
 from mpcform.errors import ValidationError  # noqa: E402
-from mpcform.outputs.animation import ANIMATION_FILE, animate_run, animation_file, frame_times  # noqa: E402
+from mpcform.outputs.animation import (  # noqa: E402
+    ANIMATION_FILE,
+    MP4_FILE,
+    animate_run,
+    animation_file,
+    frame_times,
+)
 from mpcform.outputs.rundata import load_run  # noqa: E402
 
 
@@ -30,7 +44,7 @@ def gif_durations_ms(path: Path) -> list[int]:
 
 @pytest.mark.parametrize("speed", [1.0, 4.0])
 def test_gif_lasts_as_long_as_the_flight_at_the_chosen_speed(tmp_path: Path, speed: float) -> None:
-    short_run("swap_planar_8", tmp_path, steps=60)  # 3 s of flight
+    short_run("swap_planar_8", tmp_path, steps=60)  # 6 s of flight
     run = load_run(tmp_path)
     flight_s = float(run.trajectory.t_s[-1] - run.trajectory.t_s[0])
     calls: list[tuple[int, int]] = []
@@ -80,3 +94,47 @@ def test_mp4_needs_ffmpeg(tmp_path: Path) -> None:
         assert animation_file() == ANIMATION_FILE
         with pytest.raises(ValidationError, match="ffmpeg"):
             animate_run(load_run(tmp_path), tmp_path / "a.mp4")
+
+
+@pytest.fixture(scope="module")
+def ffprobe() -> str:
+    """ffprobe's path, with ffmpeg beside it; skip (fail under ``MPCFORM_REQUIRE_BROWSER=1``) without."""
+    found = shutil.which("ffprobe")
+    if found is None or not FFMpegWriter.isAvailable():
+        reason = "ffmpeg and ffprobe are not on PATH: apt-get install ffmpeg"
+        if os.environ.get("MPCFORM_REQUIRE_BROWSER") == "1":
+            pytest.fail(reason + " (MPCFORM_REQUIRE_BROWSER=1)")
+        pytest.skip(reason)
+    return found
+
+
+def mp4_stream(ffprobe: str, path: Path) -> dict[str, str]:
+    """The container's duration [s] and the video stream's codec, frame rate and decoded frames."""
+    out = subprocess.run(
+        [ffprobe, "-v", "error", "-count_frames", "-select_streams", "v:0", "-show_entries",
+         "format=format_name,duration:stream=codec_name,r_frame_rate,nb_read_frames",
+         "-of", "default=noprint_wrappers=1", str(path)],
+        capture_output=True, text=True, timeout=120, check=True,
+    )  # fmt: skip
+    return dict(line.split("=", 1) for line in out.stdout.split())
+
+
+@pytest.mark.parametrize("speed", [1.0, 4.0])
+def test_mp4_lasts_as_long_as_the_flight_at_the_chosen_speed(
+    tmp_path: Path, ffprobe: str, speed: float
+) -> None:
+    short_run("swap_planar_8", tmp_path, steps=40)  # 4 s of flight
+    run = load_run(tmp_path)
+    t0, t1 = float(run.trajectory.t_s[0]), float(run.trajectory.t_s[-1])
+    assert animation_file() == MP4_FILE
+    calls: list[tuple[int, int]] = []
+    path = animate_run(run, tmp_path / "plots" / MP4_FILE, speed=speed,
+                       progress=lambda done, total: calls.append((done, total)))  # fmt: skip
+    info = mp4_stream(ffprobe, path)
+    times, fps = frame_times(t0, t1, speed)
+    assert "mp4" in info["format_name"] and info["codec_name"] == "h264"
+    assert info["r_frame_rate"] == f"{fps}/1" and int(info["nb_read_frames"]) == len(times)
+    duration_s = float(info["duration"])
+    assert duration_s == pytest.approx(len(times) / fps, abs=1e-3)
+    assert abs(duration_s - (t1 - t0) / speed) <= 1 / fps + 1e-3  # the flight, plus at most one frame
+    assert calls[-1] == (len(times), len(times)) and len(calls) == len(times)

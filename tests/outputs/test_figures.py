@@ -1,5 +1,6 @@
 """Figures on the Agg canvas: files written, non-empty, with provenance; envelopes above six drones,
-the speed axis, obstacle clearance, the scale only where the drones hold the shape; lazy import."""
+the speed axis, obstacle clearance, the scale only where the drones hold the shape and the consensus
+estimates; lazy import."""
 
 from __future__ import annotations
 
@@ -8,7 +9,7 @@ import sys
 from pathlib import Path
 
 import pytest
-from saved_runs import short_run
+from saved_runs import SCENARIOS, short_run, shortened
 
 pytest.importorskip("matplotlib")
 PIL = pytest.importorskip("PIL.Image")
@@ -17,7 +18,9 @@ import numpy as np  # noqa: E402
 
 from mpcform.outputs import figures  # noqa: E402
 from mpcform.outputs.drawing import PER_DRONE_MAX  # noqa: E402
-from mpcform.outputs.rundata import load_run  # noqa: E402
+from mpcform.outputs.rundata import formation_data, load_run, write_formation_npz  # noqa: E402
+from mpcform.run.runner import run_scenario  # noqa: E402
+from mpcform.scenario.load import load_scenario  # noqa: E402
 from mpcform.sim.metrics import command_speeds_mps  # noqa: E402
 
 
@@ -67,6 +70,71 @@ def test_scale_is_not_drawn_while_a_permuted_start_is_out_of_shape(tmp_path: Pat
     best_fit = np.asarray(ax.get_lines()[0].get_ydata())
     assert np.isnan(best_fit[0])  # no scale where there is no formation
     assert any("not drawn" in t.get_text() for t in ax.texts)
+
+
+def estimate_artists(ax) -> dict[str, list]:
+    """The scale figure's artists by gid: drone (or median) estimates, leaders, the band, notes."""
+    gids = (figures.ESTIMATE_GID, figures.LEADER_GID)
+    found = {gid: [line for line in ax.get_lines() if line.get_gid() == gid] for gid in gids}
+    found["envelope"] = [c for c in ax.collections if c.get_gid() == "envelope"]
+    found["scale-note"] = [t for t in ax.texts if t.get_gid() == "scale-note"]
+    return found
+
+
+def test_scale_draws_the_consensus_estimates_as_an_envelope_above_six_drones(tmp_path: Path) -> None:
+    short_run("consensus_ring", tmp_path, steps=120)
+    run = load_run(tmp_path)
+    s_hat = run.trajectory.scale_estimates
+    assert s_hat is not None and run.n == 8 > PER_DRONE_MAX
+    ax = figures.scale(run).axes[0]
+    found = estimate_artists(ax)
+    assert len(found["envelope"]) == 1 and not found["scale-note"]
+    (median,) = found[figures.ESTIMATE_GID]
+    np.testing.assert_array_equal(median.get_ydata(), np.median(s_hat, axis=1))
+    (leader,) = found[figures.LEADER_GID]
+    np.testing.assert_array_equal(leader.get_ydata(), s_hat[:, 0])
+    assert leader.get_marker() == "*" and leader.get_linestyle() == "-"  # the band hides the leader
+    band = found["envelope"][0].get_paths()[0].vertices[:, 1]
+    assert band.min() == pytest.approx(s_hat.min()) and band.max() == pytest.approx(s_hat.max())
+    labels = ax.get_legend_handles_labels()[1]
+    assert "leader 0 (sees s*)" in labels and "reference s*(t)" in labels
+    assert not any(label.startswith("drone ") for label in labels)
+
+
+def test_scale_draws_one_estimate_per_drone_up_to_six_and_stars_every_leader(tmp_path: Path) -> None:
+    text = (SCENARIOS / "consensus_ring.toml").read_text()
+    text = text.replace("n = 8", "n = 5").replace("leaders = [0]", "leaders = [0, 2]")
+    (tmp_path / "ring5.toml").write_text(text)
+    scenario = shortened(load_scenario(tmp_path / "ring5.toml"), 60)
+    result = run_scenario(scenario, tmp_path / "out")
+    write_formation_npz(tmp_path / "out", formation_data(scenario, result.simulation.t_s))
+    run = load_run(tmp_path / "out")
+    s_hat = run.trajectory.scale_estimates
+    assert s_hat is not None and s_hat.shape == (61, 5)
+    found = estimate_artists(figures.scale(run).axes[0])
+    assert not found["envelope"] and not found["scale-note"]
+    lines = found[figures.ESTIMATE_GID]
+    assert [line.get_label() for line in lines] == [f"drone {i}: s_hat_{i}" for i in range(5)]
+    for i, line in enumerate(lines):
+        np.testing.assert_array_equal(line.get_ydata(), s_hat[:, i])
+    leaders = found[figures.LEADER_GID]
+    assert [line.get_label() for line in leaders][0] == "leaders 0, 2 (see s*)"
+    for i, line in zip((0, 2), leaders, strict=True):  # stars on the drone's own line
+        np.testing.assert_array_equal(line.get_ydata(), s_hat[:, i])
+        assert line.get_marker() == "*" and line.get_linestyle() == "None"
+
+
+def test_scale_of_a_run_without_estimates_or_without_formation_data(tmp_path: Path) -> None:
+    short_run("worked_example", tmp_path / "mpc", steps=10)
+    found = estimate_artists(figures.scale(load_run(tmp_path / "mpc")).axes[0])
+    assert not any(found.values())  # no estimates recorded, nothing to say
+    short_run("consensus_ring", tmp_path / "ring", steps=10, formation=False)
+    ax = figures.scale(load_run(tmp_path / "ring")).axes[0]
+    found = estimate_artists(ax)
+    assert not found[figures.ESTIMATE_GID] and not found[figures.LEADER_GID]
+    assert "estimates s_hat_i not drawn" in found["scale-note"][0].get_text()
+    best_fit = ax.get_lines()[0]
+    assert best_fit.get_color() == figures.MEDIAN_COLOUR  # drawn as without estimates
 
 
 @pytest.mark.parametrize(

@@ -14,6 +14,7 @@ import pytest
 from mpcform.outputs.files import (
     DEPENDENCIES,
     OUTPUT_FILES,
+    SCALE_ESTIMATES,
     SUMMARY_KEYS,
     csv_header,
     format_summary,
@@ -69,6 +70,16 @@ def test_npz_holds_exactly_the_simulation(tmp_path: Path, name: str) -> None:
         assert np.array_equal(npz["p_ref"], sim.reference_m)
         t_len, n, d = npz["p"].shape
         assert npz["u"].shape == (t_len - 1, n, d) and npz["p_ref"].shape == (t_len, n, d)
+
+
+def test_npz_adds_the_scale_estimates_of_a_consensus_run_only(tmp_path: Path) -> None:
+    run = run_short("consensus_ring", tmp_path / "out")
+    s_hat = run.simulation.scale_estimates
+    assert s_hat is not None
+    with np.load(tmp_path / "out" / "trajectory.npz") as npz:
+        assert set(npz.files) == {"t", "p", "u", "p_ref", "t_true", "p_true", "v_true", "p_ref_true",
+                                  SCALE_ESTIMATES}  # fmt: skip
+        assert npz[SCALE_ESTIMATES].shape == (8, 8) and np.array_equal(npz[SCALE_ESTIMATES], s_hat)
 
 
 @pytest.mark.parametrize(

@@ -91,6 +91,10 @@ def test_errors_name_the_file(tmp_path: Path) -> None:
              p_ref=np.zeros((3, 2, 2)))  # fmt: skip
     with pytest.raises(RunDirError, match=r"trajectory.npz: trajectory: expected commands_mps \(T-1, n, d\)"):
         load_run(tmp_path)
+    np.savez(tmp_path / "trajectory.npz", t=np.arange(3.0), p=np.zeros((3, 2, 2)), u=np.zeros((2, 2, 2)),
+             p_ref=np.zeros((3, 2, 2)), scale_estimates=np.ones((2, 2)))  # fmt: skip
+    with pytest.raises(RunDirError, match=r"trajectory.npz: trajectory: expected scale_estimates \(T, n\)"):
+        load_run(tmp_path)
     np.savez(tmp_path / "trajectory.npz", t=np.arange(3.0))
     with pytest.raises(RunDirError, match=r"trajectory.npz: missing arrays \['p', 'u', 'p_ref'\]"):
         load_run(tmp_path)
@@ -105,12 +109,17 @@ def test_formation_data_of_a_scenario_without_obstacles() -> None:
 
 
 def test_consensus_graph_and_leaders_round_trip(tmp_path: Path) -> None:
-    short_run("consensus_ring", tmp_path / "ring", steps=4)
-    ring = load_run(tmp_path / "ring").formation
+    run = short_run("consensus_ring", tmp_path / "ring", steps=4)
+    saved = load_run(tmp_path / "ring")
+    ring = saved.formation
     assert ring.graph_edges is not None and ring.graph_edges.shape == (8, 2) and ring.leaders == (0,)
     assert sorted(map(tuple, ring.graph_edges.tolist()))[:2] == [(0, 1), (0, 7)]
+    s_hat = saved.trajectory.scale_estimates
+    assert s_hat is not None and s_hat.shape == (5, 8)
+    assert np.array_equal(s_hat, run.simulation.scale_estimates)
     short_run("worked_example", tmp_path / "mpc", steps=4)
     mpc = load_run(tmp_path / "mpc").formation
     assert mpc.graph_edges is None and mpc.leaders == ()
+    assert load_run(tmp_path / "mpc").trajectory.scale_estimates is None
     with np.load(tmp_path / "mpc" / FORMATION_NPZ) as npz:
         assert sorted(npz.files) == ["obstacles", "offsets", "scale_ref"]  # unchanged without a graph

@@ -19,6 +19,7 @@ import numpy as np
 import pytest
 from saved_runs import short_run
 
+from mpcform.cli.handlers import write_view
 from mpcform.errors import ValidationError
 from mpcform.outputs import viewer
 from mpcform.outputs.rundata import RunData, load_run
@@ -131,15 +132,8 @@ def swap20(tmp_path_factory: pytest.TempPathFactory) -> RunData:
 
 
 def swap20_page(run: RunData, path: Path) -> Path:
-    """The page as the CLI writes it for a saved run."""
-    plotting = pytest.importorskip("mpcform.outputs.plotting")
-    curves = viewer.viewer_curves(run.t_s, run.positions_m, reference_m=run.reference_m,
-                                  commands_mps=run.commands_mps)  # fmt: skip
-    return viewer.write_viewer_html(
-        path, t_s=run.t_s, positions_m=run.positions_m, d_min_m=run.d_min_m, v_max_mps=run.v_max_mps,
-        edges=plotting.formation_edges(run.offsets_m), obstacles=run.obstacles, geofence=None,
-        reference_m=run.reference_m, title=run.label, curves=curves,
-    )  # fmt: skip
+    """The page as the CLI writes it for a saved run (``mpcform view DIR``)."""
+    return write_view(run, path)
 
 
 def test_swap20_page_is_small(swap20: RunData, tmp_path: Path) -> None:
@@ -211,7 +205,7 @@ def test_browser_draws_the_synthetic_run(browser: str, tmp_path: Path) -> None:
 
 def test_browser_draws_the_20_drone_swap(browser: str, swap20: RunData, tmp_path: Path) -> None:
     page = swap20_page(swap20, tmp_path / "swap_spatial_20.html")
-    dom = check_page(browser, page, tmp_path, swap20.t_s.shape[0], "#t=3")
+    dom = check_page(browser, page, tmp_path, swap20.trajectory.t_s.shape[0], "#t=3")
     assert 'data-sample="30"' in dom and "20 drones · 3-D" in dom
 
 

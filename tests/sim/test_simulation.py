@@ -4,6 +4,8 @@ import numpy as np
 import pytest
 
 from mpcform.control.base import Controller, ControlStep, StepInfo
+from mpcform.control.consensus import ConsensusController, ConsensusSettings
+from mpcform.control.graph import Graph
 from mpcform.control.laws import go_to_goal_closed_form, go_to_goal_discrete
 from mpcform.control.tracking import ProportionalController
 from mpcform.errors import MPCFormError, ValidationError
@@ -86,6 +88,28 @@ def test_result_shapes_and_progress():
     np.testing.assert_allclose(run.reference_m, np.broadcast_to(GOAL, (11, 1, 3)))
     assert calls == [(j, 10) for j in range(1, 11)]
     assert isinstance(run, Trajectory) and (run.n, run.dim, run.steps) == (1, 3, 10)
+
+
+def test_scale_estimates_are_recorded_at_every_sample_for_the_controllers_that_keep_them():
+    ring = Template.polygon(8)
+    doubling = ConstantReference(ring, FormationState.from_param([0.0, 0.0], 0.0, 2.0))
+    settings = ConsensusSettings(gamma_per_s=3.0, leader_gain_per_s=3.0)  # leader 0, dt 0.05
+    run = simulate(ConsensusController(doubling, Graph.ring(8), 0.05, settings), ring.offsets, 1.0)
+    s_hat = run.scale_estimates
+    assert s_hat is not None and s_hat.shape == (21, 8)
+    # eq. 20's estimates by hand: all start at the best fit 1; the leader moves first,
+    # s_0 += dt lambda (s* - s_0), and its ring neighbours 1 and 7 follow one step later
+    np.testing.assert_array_equal(s_hat[0], 1.0)
+    np.testing.assert_allclose(s_hat[1], [1.15, *[1.0] * 7], rtol=0, atol=1e-15)
+    np.testing.assert_allclose(s_hat[2, [1, 7]], 1.0 + 0.05 * 3.0 * 0.15, rtol=0, atol=1e-15)
+    np.testing.assert_array_equal(s_hat[2, 2:7], 1.0)
+    replay = ConsensusController(doubling, Graph.ring(8), 0.05, settings)  # the same steps, by hand
+    replay.reset(0.0, run.positions_m[0])
+    for j in range(run.steps):
+        np.testing.assert_array_equal(s_hat[j], replay.scale_estimates)  # row j: s_hat(t_j)
+        replay.step(float(run.t_s[j]), run.positions_m[j])
+    np.testing.assert_array_equal(s_hat[-1], replay.scale_estimates)
+    assert go_to_goal(0.1, duration=0.3).scale_estimates is None  # a controller without estimates
 
 
 def test_result_keeps_one_record_per_step():

@@ -24,6 +24,9 @@ def test_sizes_and_arrays_as_given(dim: int) -> None:
     trajectory = Trajectory(**given)
     assert (trajectory.n, trajectory.dim, trajectory.steps) == (4, dim, 4)
     assert all(getattr(trajectory, k) is v for k, v in given.items())  # no copy, no conversion
+    assert trajectory.scale_estimates is None  # only controllers with estimates record them
+    s_hat = np.ones((5, 4))
+    assert Trajectory(**given, scale_estimates=s_hat).scale_estimates is s_hat
 
 
 @pytest.mark.parametrize(
@@ -34,6 +37,8 @@ def test_sizes_and_arrays_as_given(dim: int) -> None:
         ({"positions_m": np.zeros((4, 3, 4))}, "positions_m (T, n, 2 or 3)"),
         ({"commands_mps": np.zeros((4, 3, 2))}, "commands_mps (T-1, n, d)"),
         ({"reference_m": np.zeros((4, 2, 2))}, "reference_m (T, n, d)"),
+        ({"scale_estimates": np.ones((3, 3))}, "scale_estimates (T, n) = (4, 3), got (3, 3)"),
+        ({"scale_estimates": np.ones(4)}, "scale_estimates (T, n)"),
     ],
 )
 def test_shapes_are_checked(change: dict[str, np.ndarray], fragment: str) -> None:
