@@ -7,6 +7,9 @@ import functools
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
+from scipy.spatial.distance import pdist
+
 from mpcform._validate import Array
 from mpcform.control.consensus import ConsensusSettings, Network
 from mpcform.control.graph import Graph
@@ -80,6 +83,25 @@ class Scenario:
     def robustness(self) -> Robustness:
         """The plant's robust margin and the acceleration bound it assumes (zero for the ideal plant)."""
         return self.plant.robustness(self.dim, self.simulation.dt_s, self.limits.a_max_mps2)
+
+    def spacing_warning(self, controller: str | None = None) -> str | None:
+        """A line when the MPC cannot reach the final formation under the plant: its closest pair
+        is nearer than ``d_min + 2 margin``, the distance the planner keeps between two drones
+        (:func:`mpcform.mpc.limits.tightened`); those drones then stop short of their targets.
+        None otherwise (an ideal plant, no d_min, a controller other than ``controller`` or the
+        file's ``mpc``)."""
+        d_min, margin = self.limits.d_min_m, self.robustness.margin_m
+        if (controller or self.controller.kind) != "mpc" or d_min is None or margin == 0.0 or self.n < 2:
+            return None
+        final = self.reference.targets(np.array([self.simulation.duration_s]))[0][0]
+        closest = float(np.min(pdist(final)))
+        keep = d_min + 2.0 * margin
+        if closest >= keep:
+            return None
+        return (f"plant: the final formation's closest pair is {closest:.3g} m apart, below the "
+                f"{keep:.3g} m (d_min + 2 x margin {margin:.3g} m) the MPC keeps under this plant: "
+                "those drones stop short of their targets (widen the formation, lower limits.a_max "
+                "or set plant.margin)")  # fmt: skip
 
     @property
     def steps(self) -> int:

@@ -76,6 +76,20 @@ def test_validate(capsys: pytest.CaptureFixture[str]) -> None:
     assert out.startswith("OK worked_example: 3 drones") and "\n" not in out
 
 
+def test_validate_warns_when_the_plant_margin_exceeds_the_final_spacing(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """OK and exit 0, plus one warning line naming the spacing, the kept distance and the remedies."""
+    flight = Path(WORKED).parent / "formation_flight_100.toml"
+    path = tmp_path / "slow.toml"
+    path.write_text(flight.read_text() + '\n[plant]\nkind = "lag"\ntime_constant = 0.3\n')
+    assert main(["validate", str(path)]) == 0
+    captured = capsys.readouterr()
+    assert captured.out.startswith("OK formation_flight_100")
+    (line,) = captured.err.strip().splitlines()
+    assert line.startswith(f"mpcform: warning: {path}: plant:") and "0.6 m apart" in line
+
+
 @pytest.mark.parametrize(
     ("replace", "fragments"),
     [

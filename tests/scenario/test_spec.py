@@ -25,3 +25,22 @@ def test_drones_and_steps(duration_s: float, steps: int) -> None:
     s = load_scenario(WORKED)
     short = dataclasses.replace(s, simulation=dataclasses.replace(s.simulation, duration_s=duration_s))
     assert short.n == 3 and short.steps == steps
+
+
+def test_spacing_warning_when_the_plant_margin_exceeds_the_final_spacing() -> None:
+    """formation_flight_100 ends at a spacing of 0.6 m with d_min 0.5: a 0.3 s lag (margin a_max dt
+    tau per axis, 0.0757 m in the plane) keeps 0.651 m, a 0.1 s lag 0.550 m."""
+    import tomllib
+
+    from mpcform.scenario.load import scenario_from_dict
+
+    data = tomllib.loads((SCENARIOS / "formation_flight_100.toml").read_text())
+    assert scenario_from_dict(data).spacing_warning() is None  # the ideal plant
+    data["plant"] = {"kind": "lag", "time_constant": 0.1}
+    assert scenario_from_dict(data).spacing_warning() is None
+    data["plant"] = {"kind": "lag", "time_constant": 0.3}
+    slow = scenario_from_dict(data)
+    text = slow.spacing_warning()
+    assert text is not None and "0.6 m apart" in text and "0.651 m" in text
+    assert abs(0.5 + 2 * slow.robustness.margin_m - 0.651) < 5e-4
+    assert slow.spacing_warning("tracking") is None  # only the MPC keeps the margin
