@@ -33,6 +33,19 @@ def test_only_conflicted_drones_turn_to_the_right() -> None:
     assert np.all(norms(out) == pytest.approx(1.0))
 
 
+def test_a_drone_with_a_blocked_target_is_not_turned_nor_escalated() -> None:
+    """Both drones conflicted and stalled; drone 1's target is blocked: its wish stays as it is and
+    its turn never escalates, drone 0's does."""
+    tb = TieBreak(2, 0.5, dt_s=0.1)
+    c, p = np.array([[[1.0, 0.0], [1.0, 0.0]]] * 3), np.zeros((2, 2))
+    blocked, conflicted = np.array([False, True]), np.array([True, True])
+    for _ in range(4):
+        out = tb.turn(c, conflicted, p, np.array([[10.0, 0.0]] * 2), started=True, blocked=blocked)
+    np.testing.assert_array_equal(out[:, 1], c[:, 1])
+    assert tb.stalled[1] == 0 and tb.stalled[0] == 3
+    assert out[0, 0, 1] < 0.0  # drone 0 turned to the right
+
+
 def stalls(tb: TieBreak, conflicted: list[bool], moves: list[list[float]], steps: int) -> list[np.ndarray]:
     """Turn angles over ``steps`` steps of drones that start at the origin, head for (10, 0) with a
     wish of 1 m/s, and move by ``moves`` (n, 2) per step."""

@@ -199,3 +199,16 @@ def test_a_drone_inside_an_obstacles_clearance_gets_a_hard_row_and_a_push() -> N
     assert rows.single_lower[0, 0] == 0.0
     assert sep.start_shortfall(p0, rows)[0] == pytest.approx(0.3)
     np.testing.assert_allclose(sep.push_apart(p0, cand([], [[0, 0]])), [[0.0, 1.0]])
+
+
+def test_blocked_targets_are_the_pairs_within_d_min_in_the_metric() -> None:
+    """Targets 0.45 m apart block each other under d_min 0.5, 0.6 m apart do not; with downwash
+    (kappa 2) a vertical 0.8 m counts as 0.4 m; obstacles never block (a moving reference may pass
+    through one)."""
+    ob = SphereObstacle(np.array([5.0, 5.0, 0.0]), 1.0)
+    sep = Separation(3, Limits(v_max_mps=1.0, d_min_m=0.5, downwash_kappa=2.0), MPCSettings(), (ob,))
+    targets = np.array([[0, 0, 0], [0.45, 0, 0], [3, 0, 0], [3, 0, 0.8], [6, 0, 0], [5, 5, 0.0]])
+    np.testing.assert_array_equal(sep.blocked_targets(targets), [True, True, True, True, False, False])
+    sep = Separation(3, Limits(v_max_mps=1.0, d_min_m=0.5), MPCSettings(), ())
+    assert not sep.blocked_targets(targets + np.array([[0, 0, 0], [0.15, 0, 0], [0, 0, 0], [0, 0, 0],
+                                                       [0, 0, 0], [0, 0, 0]]))[:2].any()  # fmt: skip
