@@ -2,11 +2,19 @@
 
 ``osqp`` (ADMM, warm-started) and ``piqp`` (proximal interior point). The packages are imported
 when a backend is built, not with this module.
+
+``piqp`` keeps one solver object per pattern (the last :data:`PATTERN_CACHE` patterns): a
+``setup`` with a pattern it has seen becomes an ``update`` of that object. An update solves like a
+fresh setup (PIQP scales the data again and starts every solve from its own initial point; measured
+on the recorded swaps: the same solution to 1e-10). ``osqp`` is set up afresh on every ``setup``:
+an updated OSQP object keeps its scaling, step size and last iterate, so it would solve differently.
 """
 
 from __future__ import annotations
 
 import time
+from collections import OrderedDict
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -15,6 +23,9 @@ import scipy.sparse as sp
 from mpcform._validate import Array
 from mpcform.errors import SolverError
 from mpcform.solvers.base import QPBackend, QPSolution, SolverOptions, given
+
+PATTERN_CACHE = 8
+"""Solver objects ``piqp`` keeps, one per sparsity pattern, the least recently used dropped first."""
 
 
 class OSQPBackend(QPBackend):
@@ -65,7 +76,8 @@ class OSQPBackend(QPBackend):
 
 class PIQPBackend(QPBackend):
     """Persistent ``piqp.SparseSolver`` (proximal interior point); rows with ``l == u`` at setup
-    become its equality block, the others its two-sided inequality block."""
+    become its equality block, the others its two-sided inequality block. One solver object per
+    pattern (``P``, ``A`` and the equality rows), reused when the pattern comes back."""
 
     name = "piqp"
     persistent = True
@@ -76,29 +88,44 @@ class PIQPBackend(QPBackend):
 
         self._piqp = piqp
         self._solver: Any = None
+        self._objects: OrderedDict[bytes, _PIQPObject] = OrderedDict()
+        self.reused = 0  # setups served by a kept solver object
 
     def setup(self, P: sp.csc_matrix, q: Array, A: sp.csc_matrix, lo: Array, hi: Array) -> None:
-        self._eq = eq = lo == hi
-        ids = A.copy()
-        ids.data = np.arange(A.nnz, dtype=float)
-        a_eq, g = ids[eq].tocsc(), ids[~eq].tocsc()
-        self._eq_ids, self._g_ids = a_eq.data.astype(np.intp), g.data.astype(np.intp)
-        self._a_eq, self._g = a_eq, g
-        a_eq.data, g.data = A.data[self._eq_ids], A.data[self._g_ids]
+        eq = lo == hi
+        key = pattern_key(P, A, eq)
+        kept = self._objects.pop(key, None)
+        obj = self._new_object(P, q, A, lo, hi, eq) if kept is None else kept
+        self._objects[key] = obj
+        while len(self._objects) > PATTERN_CACHE:
+            self._objects.popitem(last=False)
+        self._obj, self._solver, self._nnz_a = obj, obj.solver, A.nnz
+        if kept is not None:  # set up before: an update with this data
+            self.reused += 1
+            if not np.array_equal(obj.p_data, P.data):
+                obj.p_data = P.data.copy()
+                obj.solver.update(P=P)
+            self.update(q, lo, hi, A.data)
+
+    def _new_object(
+        self, P: sp.csc_matrix, q: Array, A: sp.csc_matrix, lo: Array, hi: Array, eq: Array
+    ) -> _PIQPObject:
+        (a_eq, eq_ids), (g, g_ids) = row_split(A, eq), row_split(A, ~eq)
         solver = self._piqp.SparseSolver()
         st, o = solver.settings, self.options
         st.verbose = False
         for key, value in given(eps_abs=o.eps_abs, eps_rel=o.eps_rel, max_iter=o.max_iter).items():
             setattr(st, key, value)
         solver.setup(P.copy(), q, a_eq.copy(), lo[eq], g.copy(), lo[~eq], hi[~eq])
-        self._solver, self._nnz_a = solver, A.nnz
+        return _PIQPObject(solver, eq, a_eq, eq_ids, g, g_ids, P.data.copy())
 
     def update(self, q: Array, lo: Array, hi: Array, A_data: Array) -> None:
         if A_data.shape[0] != self._nnz_a:
             raise SolverError(self.name, f"A has {A_data.shape[0]} values, the pattern has {self._nnz_a}")
-        self._a_eq.data, self._g.data = A_data[self._eq_ids], A_data[self._g_ids]
-        eq = self._eq
-        self._solver.update(c=q, A=self._a_eq, b=lo[eq], G=self._g, h_l=lo[~eq], h_u=hi[~eq])
+        obj = self._obj
+        obj.a_eq.data, obj.g.data = A_data[obj.eq_ids], A_data[obj.g_ids]
+        eq = obj.eq
+        self._solver.update(c=q, A=obj.a_eq, b=lo[eq], G=obj.g, h_l=lo[~eq], h_u=hi[~eq])
 
     def solve(self, x0: Array | None = None) -> QPSolution:
         solver = self._solver
@@ -109,11 +136,46 @@ class PIQPBackend(QPBackend):
         elapsed = time.perf_counter() - start
         res = solver.result
         ok = status == self._piqp.PIQP_SOLVED and bool(np.all(np.isfinite(res.x)))
-        y = np.zeros(self._eq.shape[0])
+        eq = self._obj.eq
+        y = np.zeros(eq.shape[0])
         if ok:
-            y[self._eq] = res.y
-            y[~self._eq] = res.z_u - res.z_l
+            y[eq] = res.y
+            y[~eq] = res.z_u - res.z_l
         return QPSolution(
             np.array(res.x) if ok else None, y if ok else None, ok,
             str(status).split(".")[-1].lower(), int(res.info.iter), elapsed,
         )  # fmt: skip
+
+
+@dataclass(eq=False)
+class _PIQPObject:
+    """A ``piqp.SparseSolver`` set up for one pattern: its equality rows ``eq``, the equality and
+    inequality blocks (``a_eq``, ``g``) and which entries of ``A``'s data fill them, ``P``'s values."""
+
+    solver: Any
+    eq: Array
+    a_eq: sp.csc_matrix
+    eq_ids: Array
+    g: sp.csc_matrix
+    g_ids: Array
+    p_data: Array
+
+
+def pattern_key(P: sp.csc_matrix, A: sp.csc_matrix, eq: Array) -> bytes:
+    """The sparsity patterns of ``P`` and ``A`` and the equality rows ``eq``, as one key."""
+    parts = (np.array(P.shape + A.shape, dtype=np.int64), P.indptr, P.indices, A.indptr, A.indices)
+    return b"|".join(np.ascontiguousarray(x).tobytes() for x in parts) + b"|" + np.packbits(eq).tobytes()
+
+
+def row_split(A: sp.csc_matrix, rows: Array) -> tuple[sp.csc_matrix, Array]:
+    """The rows ``rows`` (mask) of ``A`` as a CSC matrix with sorted indices, and the positions of
+    its entries in ``A.data`` (its data is ``A.data[ids]``); O(nnz) when ``A``'s indices are sorted."""
+    order = np.arange(A.nnz)
+    if not A.has_sorted_indices:
+        order = np.lexsort((A.indices, np.repeat(np.arange(A.shape[1]), np.diff(A.indptr))))
+    keep = rows[A.indices[order]]
+    ids = order[keep]
+    indptr = np.concatenate([[0], np.cumsum(keep)])[A.indptr]
+    new_row = np.cumsum(rows) - 1
+    sub = sp.csc_matrix((A.data[ids], new_row[A.indices[ids]], indptr), shape=(int(rows.sum()), A.shape[1]))
+    return sub, ids
