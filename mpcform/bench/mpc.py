@@ -1,8 +1,8 @@
 """``mpcform bench mpc``: per-step cost of the planner against three references to beat.
 
 The references (:mod:`mpcform.bench.mpc_references`): the same QP on a bare persistent solver
-object (the framework's overhead), the same MPC written in cvxpy with parameters (what a user
-would write), and for fast-path steps the eq. 14 rollout over the horizon in plain numpy. QP
+object (the framework's overhead), the same MPC written in cvxpy (what a user would write), and
+for fast-path steps the eq. 14 rollout over the horizon in plain numpy. QP
 steps and fast-path steps are reported apart.
 
 Cases: generated antipodal swaps (planar rings of n drones, spatial spheres) and bundled scenario
@@ -15,9 +15,10 @@ recording backend keeps every QP it sends. Side by side, in the same process:
   median of the paired per-step ratios (paired, so both see the same load). In decoupled mode
   solved per drone, raw is the time of the step's bare DAQP calls;
 - **rollout**: eq. 14 rolled out over the horizon in plain numpy: the yardstick of fast-path steps;
-- **cvxpy**: the same QP in cvxpy with parameters, solved by the same solver for every step (a
-  cvxpy user has no fast path; in decoupled mode the same rows as one sparse QP with ``--solver``),
-  in every case whose cvxpy time, extrapolated from its first two QPs, fits the budget.
+- **cvxpy**: the same QP written in cvxpy with its matrices as constants, built and solved by the
+  same solver at every step (a cvxpy user has no fast path; in decoupled mode the same rows as one
+  sparse QP with ``--solver``), in every case whose time, extrapolated from its first QPs, fits
+  the budget. Rebuilt rather than parametrised: faster here (:func:`mpc_references.cvxpy_replay`).
 
 Every time is given in wall and CPU time (``time.process_time``): medians, 90th percentiles and
 ratios. Set ``OPENBLAS_NUM_THREADS=1`` for runs.
@@ -211,7 +212,7 @@ def _cvxpy_row(
     case: MPCCase, solver: str, options: SolverOptions, cvxpy: str, budget_s: float, ours: dict[str, Any]
 ) -> dict[str, Any]:
     """The cvxpy reference: every step's QP recorded without the fast path (per drone: the same
-    rows as one sparse QP), replayed through cvxpy within ``budget_s``; ratios against ``ours``."""
+    rows as one sparse QP), solved through cvxpy within ``budget_s``; ratios against ``ours``."""
     full = RecordingBackend(make_backend(solver, options))
     no_fast = case.planner(replace(case.settings, fast_path=False, per_drone=False), full)
     q = case.start_m.copy()

@@ -1,6 +1,6 @@
 """The floors of ``bench mpc``: the stopwatch's CPU time, the raw replay (one bare object per
-pattern, the same solutions as our backend), the DAQP meter, the rollout and the cvxpy replay
-with its budget."""
+pattern, the same solutions as our backend), the DAQP meter, the rollout, and cvxpy (the same QP's
+optimum, checked with clarabel; the replay within its budget)."""
 
 from __future__ import annotations
 
@@ -8,17 +8,17 @@ import time
 
 import numpy as np
 import pytest
+import scipy.sparse as sp
 
 from mpcform.bench.mpc import RecordingBackend, generated_case
 from mpcform.bench.mpc_references import (
     RawReplay,
     Stopwatch,
-    coo_order,
     cvxpy_replay,
+    cvxpy_solve,
     daqp_meter,
     rollout_ms,
 )
-from mpcform.mpc.settings import mode_settings
 from mpcform.solvers.base import QPSolution, SolverOptions
 from mpcform.solvers.registry import make_backend
 
@@ -32,10 +32,10 @@ class _Keeping(RecordingBackend):
         return sol
 
 
-def _recorded(n: int, steps: int, monolithic: bool = False) -> _Keeping:
+def _recorded(n: int, steps: int) -> _Keeping:
     """The QPs the joint planner sends on an n-drone planar swap, and their solutions."""
     case = generated_case(n, 2, steps, "joint")
-    settings = mode_settings("monolithic", 10) if monolithic else case.settings
+    settings = case.settings
     rec = _Keeping(make_backend("piqp", SolverOptions(1e-9, 1e-9)))
     rec.solutions = []
     planner = case.planner(settings, rec)
@@ -90,19 +90,25 @@ def test_rollout_takes_time() -> None:
 
 def test_cvxpy_replay_solves_each_qp_or_stops_at_its_budget() -> None:
     pytest.importorskip("cvxpy")
-    problems = _recorded(3, 8, monolithic=True).problems
+    problems = _recorded(3, 8).problems
     done = cvxpy_replay(problems, "piqp", 60.0)
-    setups = sum(pb["setup"] for pb in problems)
-    assert not done.skipped and len(done.times) == len(problems) - setups
-    assert done.whole[0] >= sum(t[0] for t in done.times) > 0
+    assert not done.skipped and len(done.times) == len(problems)
+    assert done.whole[0] == pytest.approx(sum(t[0] for t in done.times)) and done.whole[0] > 0
     stopped = cvxpy_replay(problems, "piqp", 1e-6)
     assert stopped.skipped.startswith("estimated") and "budget 1e-06 s" in stopped.skipped
-    assert len(stopped.times) <= 1
+    assert len(stopped.times) == 1  # the first QP alone is over
 
 
-def test_coo_order_maps_csc_data_to_coo_entries() -> None:
-    import scipy.sparse as sp
+def test_cvxpy_solves_the_recorded_qp() -> None:
+    pytest.importorskip("cvxpy")
+    rec = _recorded(4, 6)
+    for pb, sol in zip(rec.problems, rec.solutions, strict=True):
+        _, x = cvxpy_solve(pb, "clarabel")
+        a = pb["A"].copy()
+        a.data = pb["Ax"]
+        assert x is not None and sol.x is not None
+        assert np.all(a @ x >= pb["l"] - 1e-6) and np.all(a @ x <= pb["u"] + 1e-6)
 
-    a = sp.csc_matrix(np.array([[1.0, 0.0, 2.0], [3.0, 4.0, 0.0]]))
-    coo = a.tocoo()
-    assert np.array_equal(a.data[coo_order(a)], coo.data)
+        p_full = pb["P"] + sp.triu(pb["P"], 1).T
+        cost = [float(0.5 * z @ (p_full @ z) + pb["q"] @ z) for z in (x, sol.x)]
+        assert cost[0] == pytest.approx(cost[1], rel=1e-6, abs=1e-8)
