@@ -3,8 +3,8 @@
 ``osqp`` (ADMM, warm-started) and ``piqp`` (proximal interior point). The packages are imported
 when a backend is built, not with this module.
 
-``piqp`` keeps one solver object per pattern (the last :data:`PATTERN_CACHE` patterns): a
-``setup`` with a pattern it has seen becomes an ``update`` of that object. An update solves like a
+``piqp`` keeps one solver object per pattern (the recent ones, up to :data:`PATTERN_CACHE_NNZ`):
+a ``setup`` with a pattern it has seen becomes an ``update`` of that object. An update solves like a
 fresh setup (PIQP scales the data again and starts every solve from its own initial point; measured
 on the recorded swaps: the same solution to 1e-10). ``osqp`` is set up afresh on every ``setup``:
 an updated OSQP object keeps its scaling, step size and last iterate, so it would solve differently.
@@ -24,8 +24,10 @@ from mpcform._validate import Array
 from mpcform.errors import SolverError
 from mpcform.solvers.base import QPBackend, QPSolution, SolverOptions, given
 
-PATTERN_CACHE = 8
-"""Solver objects ``piqp`` keeps, one per sparsity pattern, the least recently used dropped first."""
+PATTERN_CACHE_NNZ = 250_000
+"""Nonzeros (of ``P`` and ``A``) of the patterns whose solver objects ``piqp`` keeps besides the
+current one, the least recently used dropped first: about 75 MB at the 300 bytes per nonzero of
+:mod:`mpcform.scenario.size` (a very large QP's object is not kept once its pattern changes)."""
 
 
 class OSQPBackend(QPBackend):
@@ -82,25 +84,27 @@ class PIQPBackend(QPBackend):
     name = "piqp"
     persistent = True
 
-    def __init__(self, options: SolverOptions) -> None:
+    def __init__(self, options: SolverOptions, keep_nnz: int = PATTERN_CACHE_NNZ) -> None:
         super().__init__(options)
         import piqp
 
         self._piqp = piqp
         self._solver: Any = None
-        self._objects: OrderedDict[bytes, _PIQPObject] = OrderedDict()
+        self._objects: OrderedDict[bytes, _PIQPObject] = OrderedDict()  # least recently used first
+        self.keep_nnz = keep_nnz  # nonzeros of the patterns kept besides the current one
         self.reused = 0  # setups served by a kept solver object
 
     def setup(self, P: sp.csc_matrix, q: Array, A: sp.csc_matrix, lo: Array, hi: Array) -> None:
         eq = lo == hi
         key = pattern_key(P, A, eq)
-        kept = self._objects.pop(key, None)
-        obj = self._new_object(P, q, A, lo, hi, eq) if kept is None else kept
+        found = self._objects.pop(key, None)
+        obj = self._new_object(P, q, A, lo, hi, eq) if found is None else found
         self._objects[key] = obj
-        while len(self._objects) > PATTERN_CACHE:
-            self._objects.popitem(last=False)
+        others = sum(o.nnz for o in self._objects.values()) - obj.nnz
+        while others > self.keep_nnz:  # the least recently used first (never the current one)
+            others -= self._objects.popitem(last=False)[1].nnz
         self._obj, self._solver, self._nnz_a = obj, obj.solver, A.nnz
-        if kept is not None:  # set up before: an update with this data
+        if found is not None:  # set up before: an update with this data
             self.reused += 1
             if not np.array_equal(obj.p_data, P.data):
                 obj.p_data = P.data.copy()
@@ -160,6 +164,11 @@ class _PIQPObject:
     g_ids: Array
     p_data: Array
 
+    @property
+    def nnz(self) -> int:
+        """Nonzeros of its pattern (``P`` and ``A``)."""
+        return int(self.p_data.shape[0] + self.eq_ids.shape[0] + self.g_ids.shape[0])
+
 
 def pattern_key(P: sp.csc_matrix, A: sp.csc_matrix, eq: Array) -> bytes:
     """The sparsity patterns of ``P`` and ``A`` and the equality rows ``eq``, as one key."""
@@ -169,13 +178,10 @@ def pattern_key(P: sp.csc_matrix, A: sp.csc_matrix, eq: Array) -> bytes:
 
 def row_split(A: sp.csc_matrix, rows: Array) -> tuple[sp.csc_matrix, Array]:
     """The rows ``rows`` (mask) of ``A`` as a CSC matrix with sorted indices, and the positions of
-    its entries in ``A.data`` (its data is ``A.data[ids]``); O(nnz) when ``A``'s indices are sorted."""
-    order = np.arange(A.nnz)
-    if not A.has_sorted_indices:
-        order = np.lexsort((A.indices, np.repeat(np.arange(A.shape[1]), np.diff(A.indptr))))
-    keep = rows[A.indices[order]]
-    ids = order[keep]
-    indptr = np.concatenate([[0], np.cumsum(keep)])[A.indptr]
-    new_row = np.cumsum(rows) - 1
-    sub = sp.csc_matrix((A.data[ids], new_row[A.indices[ids]], indptr), shape=(int(rows.sum()), A.shape[1]))
-    return sub, ids
+    its entries in ``A.data`` (its data is ``A.data[ids]``; explicit zeros stay entries)."""
+    ids = sp.csc_matrix((np.arange(A.nnz, dtype=float), A.indices, A.indptr), shape=A.shape)
+    sub = ids[rows].tocsc()
+    sub.sort_indices()
+    pos = sub.data.astype(np.intp)
+    sub.data = A.data[pos]
+    return sub, pos

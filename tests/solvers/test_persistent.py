@@ -15,7 +15,7 @@ import scipy.sparse as sp
 from mpcform.bench.problems import RecordedQP
 from mpcform.errors import SolverError
 from mpcform.solvers.base import SolverOptions
-from mpcform.solvers.persistent import PATTERN_CACHE, OSQPBackend, PIQPBackend, pattern_key, row_split
+from mpcform.solvers.persistent import OSQPBackend, PIQPBackend, pattern_key, row_split
 
 RECORDED: dict[str, dict[str, Any]] = {
     "piqp": dict(objective=1e-8, residual=1e-8, all_sizes=True),
@@ -74,28 +74,29 @@ def test_piqp_reuses_its_object_when_a_pattern_comes_back(
     assert got.y is not None and want.y is not None and np.max(np.abs(got.y - want.y)) < 1e-7
 
 
-def test_piqp_keeps_the_last_patterns_only(require_usable: Callable[[str], None]) -> None:
+def test_piqp_keeps_recent_patterns_up_to_its_nonzeros(require_usable: Callable[[str], None]) -> None:
     require_usable("piqp")
-    backend = PIQPBackend(SolverOptions())
+    backend = PIQPBackend(SolverOptions(), keep_nnz=30)
     n = 4
-    P = sp.identity(n, format="csc")
+    P = sp.identity(n, format="csc")  # 4 nonzeros
     q = np.arange(n, dtype=float)
 
-    def pattern(k: int) -> sp.csc_matrix:  # rows x_0 + x_j (j = 1 .. k mod n), a distinct pattern each
-        rows = [np.eye(n)[0] + np.eye(n)[1 + j % (n - 1)] for j in range(k + 1)]
-        return sp.csc_matrix(np.array(rows))
-
-    for k in range(PATTERN_CACHE + 1):  # every pattern new: the first one is dropped
-        a = pattern(k)
+    def setup(k: int) -> sp.csc_matrix:  # k + 1 rows x_0 + x_j: 2k + 2 nonzeros, a distinct pattern each
+        a = sp.csc_matrix(np.array([np.eye(n)[0] + np.eye(n)[1 + j % (n - 1)] for j in range(k + 1)]))
         backend.setup(P, q, a, np.full(a.shape[0], -1.0), np.full(a.shape[0], 1.0))
-    a = pattern(0)
-    backend.setup(P, q, a, np.full(1, -1.0), np.full(1, 1.0))
-    assert backend.reused == 0
-    a = pattern(PATTERN_CACHE)
-    backend.setup(P, q, a, np.full(a.shape[0], -1.0), np.full(a.shape[0], 1.0))
+        return a
+
+    for k in range(5):  # objects of 6, 8, 10, 12, 14 nonzeros: keeping 36 besides the last is over 30
+        setup(k)
+    a = setup(1)  # kept
+    assert backend.reused == 1
     sol = backend.solve()
-    assert backend.reused == 1 and sol.success and sol.x is not None
-    assert np.all(np.abs(a @ sol.x) <= 1.0 + 1e-6)
+    fresh = PIQPBackend(SolverOptions())
+    fresh.setup(P, q, a, np.full(a.shape[0], -1.0), np.full(a.shape[0], 1.0))
+    want = fresh.solve().x
+    assert sol.success and sol.x is not None and want is not None and np.max(np.abs(sol.x - want)) < 1e-9
+    setup(0)  # the least recently used: dropped
+    assert backend.reused == 1
 
 
 @pytest.mark.parametrize("sort", [True, False], ids=["sorted", "unsorted"])
