@@ -1,48 +1,58 @@
 """``mpcform bench mpc``: per-step cost of the planner against three references to beat.
 
-The references: the same QP on a bare persistent solver object (the framework's overhead), the
-same MPC written in cvxpy with parameters (what a user would write), and for fast-path steps the
-eq. 14 rollout over the horizon in plain numpy. QP steps and fast-path steps are reported apart.
+The references (:mod:`mpcform.bench.mpc_references`): the same QP on a bare persistent solver
+object (the framework's overhead), the same MPC written in cvxpy (what a user would write), and
+for fast-path steps the eq. 14 rollout over the horizon in plain numpy. QP
+steps and fast-path steps are reported apart.
 
-For each antipodal swap (planar rings of n drones, and spatial spheres) the planner runs closed
-loop while a recording backend keeps every QP it sends. Side by side, in the same process:
+Cases: generated antipodal swaps (planar rings of n drones, spatial spheres) and bundled scenario
+files (the swaps by default), each run closed loop on the ideal plant ``p += dt u`` while a
+recording backend keeps every QP it sends. Side by side, in the same process:
 
-- **raw**: each recorded QP replayed, right after our step, on a bare persistent solver object
-  (``osqp.OSQP`` or ``piqp.SparseSolver``), update + solve only: the framework overhead is the
-  median of the paired ratios of our QP-step time over this (paired, so both see the same load).
-  In decoupled mode solved per drone, raw is the time of the step's bare DAQP calls;
-- **rollout**: eq. 14 rolled out over the horizon in plain numpy (reference targets included):
-  the yardstick of fast-path steps;
-- **cvxpy**: the same QP written in cvxpy with parameters (cost vector, bounds, and the values
-  of A, ``A(v) z = R (v * (C z))`` with constant selections R and C), solved by the same
-  solver through cvxpy for every step of the scenario (a cvxpy user has no fast path); in
-  decoupled mode (solved per drone) the same rows as one sparse QP with ``--solver``.
+- **raw**: the step's recorded QPs replayed right after it on a bare persistent solver object
+  (``osqp.OSQP`` or ``piqp.SparseSolver``) that, like ours, is set up on a new sparsity pattern
+  and updated otherwise: setups count on both sides. The framework overhead ``ours/raw`` is the
+  median of the paired per-step ratios (paired, so both see the same load). In decoupled mode
+  solved per drone, raw is the time of the step's bare DAQP calls;
+- **rollout**: eq. 14 rolled out over the horizon in plain numpy: the yardstick of fast-path steps;
+- **cvxpy**: the same QP written in cvxpy with its matrices as constants, built and solved by the
+  same solver at every step (a cvxpy user has no fast path; in decoupled mode the same rows as one
+  sparse QP with ``--solver``), in every case whose time, extrapolated from its first QPs, fits
+  the budget. Rebuilt rather than parametrised: faster here (:func:`mpc_references.cvxpy_replay`).
 
-Times are wall-clock medians and 90th percentiles; set ``OPENBLAS_NUM_THREADS=1`` for runs.
+Every time is given in wall and CPU time (``time.process_time``): medians, 90th percentiles and
+ratios. Set ``OPENBLAS_NUM_THREADS=1`` for runs.
 """
 
 from __future__ import annotations
 
-import time
-import warnings
+from collections.abc import Callable, Sequence
+from contextlib import nullcontext
 from dataclasses import dataclass, field, replace
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 import scipy.sparse as sp
 
 from mpcform._validate import Array
+from mpcform.bench import mpc_references as refs
+from mpcform.bench.problems import DEFAULT_SCENARIOS
 from mpcform.bench.stats import median_p90
-from mpcform.control.base import feedforward_targets
+from mpcform.errors import ValidationError
 from mpcform.formation.state import FormationState
 from mpcform.formation.template import Template
-from mpcform.mpc.limits import Limits
+from mpcform.mpc.limits import Limits, SphereObstacle, tightened
 from mpcform.mpc.planner import MPCPlanner
-from mpcform.mpc.settings import mode_settings
+from mpcform.mpc.settings import MPCSettings, mode_settings
 from mpcform.outputs import tables
-from mpcform.reference.base import ConstantReference
+from mpcform.reference.base import ConstantReference, Reference
+from mpcform.scenario.load import load_scenario
 from mpcform.solvers.base import QPBackend, QPSolution, SolverOptions
 from mpcform.solvers.registry import DEFAULT_SOLVER, make_backend
+
+DEFAULT_CVXPY_BUDGET_S = 60.0
+"""cvxpy's time budget per case [s] (wall, compilation included)."""
 
 
 @dataclass
@@ -78,6 +88,25 @@ class RecordingBackend(QPBackend):
         )
 
 
+@dataclass(frozen=True, eq=False)
+class MPCCase:
+    """One closed loop: the drones start at ``start_m`` (n, d) and follow ``reference`` for
+    ``steps`` steps of ``dt_s`` [s] on the ideal plant, planned with ``settings``."""
+
+    name: str
+    reference: Reference
+    start_m: Array
+    dt_s: float
+    steps: int
+    limits: Limits
+    settings: MPCSettings
+    obstacles: tuple[SphereObstacle, ...] = ()
+
+    def planner(self, settings: MPCSettings, solver: str | QPBackend) -> MPCPlanner:
+        return MPCPlanner(self.reference, self.dt_s, self.limits, settings, obstacles=self.obstacles,
+                          solver=solver)  # fmt: skip
+
+
 def swap_case(n: int, dim: int) -> tuple[ConstantReference, Array]:
     """Antipodal swap: drone i starts at -r_i and must reach r_i (ring or Fibonacci sphere)."""
     radius = max(2.0, 0.8 / np.sin(np.pi / n)) if dim == 2 else max(2.0, 0.5 * np.sqrt(n))
@@ -85,200 +114,191 @@ def swap_case(n: int, dim: int) -> tuple[ConstantReference, Array]:
     return ConstantReference(tpl, FormationState.from_param(np.zeros(dim))), -tpl.offsets.copy()
 
 
-class _RawSolver:
-    """A bare persistent solver object fed the recorded QPs one by one (same settings as ours)."""
-
-    def __init__(self, solver: str, options: SolverOptions) -> None:
-        self.solver, self.options = solver, options
-        self._raw: Any = None
-
-    def run(self, pb: dict[str, Any]) -> float | None:
-        """Set up (new pattern: returns None) or update + solve, returning the time [ms]."""
-        o = self.options
-        if self.solver == "osqp":
-            import osqp
-
-            if pb["setup"]:
-                self._raw = osqp.OSQP()
-                self._raw.setup(pb["P"], pb["q"], pb["A"], pb["l"], pb["u"], verbose=False, eps_abs=o.eps_abs,
-                                eps_rel=o.eps_rel, max_iter=o.max_iter, polishing=True)  # fmt: skip
-                self._raw.solve(raise_error=False)
-                return None
-            start = time.perf_counter()
-            self._raw.update(q=pb["q"], l=pb["l"], u=pb["u"], Ax=pb["Ax"])
-            self._raw.solve(raise_error=False)
-            return 1e3 * (time.perf_counter() - start)
-        import piqp
-
-        eq = pb["l"] == pb["u"]
-        if pb["setup"]:
-            ids = pb["A"].copy()
-            ids.data = np.arange(ids.nnz, dtype=float)
-            self._a_eq, self._g = ids[eq].tocsc(), ids[~eq].tocsc()
-            self._eq_ids, self._g_ids = self._a_eq.data.astype(np.intp), self._g.data.astype(np.intp)
-            self._a_eq.data, self._g.data = pb["Ax"][self._eq_ids], pb["Ax"][self._g_ids]
-            self._raw = piqp.SparseSolver()
-            self._raw.settings.verbose = False
-            self._raw.settings.eps_abs, self._raw.settings.eps_rel = o.eps_abs, o.eps_rel
-            self._raw.setup(pb["P"], pb["q"], self._a_eq, pb["l"][eq], self._g, pb["l"][~eq], pb["u"][~eq])
-            self._raw.solve()
-            return None
-        start = time.perf_counter()
-        self._a_eq.data, self._g.data = pb["Ax"][self._eq_ids], pb["Ax"][self._g_ids]
-        self._raw.update(
-            c=pb["q"], A=self._a_eq, b=pb["l"][eq], G=self._g, h_l=pb["l"][~eq], h_u=pb["u"][~eq]
-        )
-        self._raw.solve()
-        return 1e3 * (time.perf_counter() - start)
+def generated_case(n: int, dim: int, steps: int, coupling: str) -> MPCCase:
+    """The swap of :func:`swap_case` at dt 0.1 s, v_max 1 m/s, d_min 0.5 m, horizon 10."""
+    ref, start = swap_case(n, dim)
+    name = f"swap {'planar' if dim == 2 else 'spatial'}"
+    return MPCCase(
+        name, ref, start, 0.1, steps, Limits(v_max_mps=1.0, d_min_m=0.5), mode_settings(coupling, 10)
+    )
 
 
-def _cvxpy_replay(problems: list[dict[str, Any]], solver: str) -> tuple[list[float], float]:
-    """Per-step times [ms] of the same QPs in cvxpy with parameters, and the total [s] including
-    problem construction and compilation (the first solve)."""
-    import cvxpy as cp
-
-    total_start = time.perf_counter()
-    times: list[float] = []
-    model: dict[str, Any] = {}
-    for pb in problems:
-        if pb["setup"] or not model:
-            a = pb["A"].tocoo()
-            nnz, (m, nv) = a.nnz, a.shape
-            z = cp.Variable(nv)
-            v, q = cp.Parameter(nnz), cp.Parameter(nv)
-            lo, hi = cp.Parameter(m), cp.Parameter(m)
-            pick = sp.csr_matrix((np.ones(nnz), (np.arange(nnz), a.col)), shape=(nnz, nv))
-            rows = sp.csr_matrix((np.ones(nnz), (a.row, np.arange(nnz))), shape=(m, nnz))
-            pfull = (pb["P"] + sp.triu(pb["P"], 1).T).tocsc()
-            az = rows @ cp.multiply(v, pick @ z)
-            finite_lo, finite_hi = np.isfinite(pb["l"]), np.isfinite(pb["u"])
-            cons = [cp.multiply(finite_lo, az) >= lo, cp.multiply(finite_hi, az) <= hi]
-            problem = cp.Problem(cp.Minimize(0.5 * cp.quad_form(z, cp.psd_wrap(pfull)) + q @ z), cons)
-            model = {"problem": problem, "v": v, "q": q, "lo": lo, "hi": hi, "coo_order": _coo_order(pb["A"])}
-            model["finite"] = finite_lo, finite_hi
-        start = time.perf_counter()
-        finite_lo, finite_hi = model["finite"]
-        model["v"].value = pb["Ax"][model["coo_order"]]
-        model["q"].value = pb["q"]
-        model["lo"].value = np.where(finite_lo, pb["l"], 0.0)
-        model["hi"].value = np.where(finite_hi, pb["u"], 0.0)
-        with warnings.catch_warnings():  # cvxpy warns of inaccurate solutions: timing only here
-            warnings.simplefilter("ignore")
-            model["problem"].solve(solver=solver.upper(), warm_start=True)
-        times.append(1e3 * (time.perf_counter() - start))
-    return times, time.perf_counter() - total_start
+def scenario_case(path: str | Path, coupling: str) -> MPCCase:
+    """A scenario file as it is (its duration, limits and controller settings), planned in the
+    mode ``coupling``; it must fly the ideal plant without process noise."""
+    sc = load_scenario(path)
+    if sc.plant.kind != "ideal" or sc.simulation.noise_std_m > 0:
+        raise ValidationError("scenario", f"{path}: bench mpc runs scenarios on the ideal plant "
+                              f"without noise, got plant {sc.plant.kind!r}, noise "
+                              f"{sc.simulation.noise_std_m:g} m")  # fmt: skip
+    mode = mode_settings(coupling, sc.controller.mpc.horizon)
+    settings = replace(
+        sc.controller.mpc, coupling=mode.coupling, grouping=mode.grouping, per_drone=mode.per_drone
+    )
+    limits, obstacles = tightened(sc.limits, sc.obstacles, sc.robustness.margin_m, sc.robustness.a_max_mps2)
+    dt = sc.simulation.dt_s
+    steps = int(round(sc.simulation.duration_s / dt))
+    return MPCCase(sc.name, sc.reference, sc.initial_positions_m, dt, steps, limits, settings, obstacles)
 
 
-def _coo_order(a: sp.csc_matrix) -> Array:
-    """Indices taking CSC data to the entry order of ``a.tocoo()``."""
-    ids = a.copy()
-    ids.data = np.arange(a.nnz, dtype=float)
-    return ids.tocoo().data.astype(np.intp)
+class _Series:
+    """Paired wall and CPU times [ms]."""
 
+    def __init__(self) -> None:
+        self.wall: list[float] = []
+        self.cpu: list[float] = []
 
-def _rollout_ms(planner: MPCPlanner, t: float, p0: Array) -> float:
-    st = planner.settings
-    start = time.perf_counter()
-    targets, ff = feedforward_targets(planner.reference, t, planner.dt_s, st.horizon, st.feedforward)
-    x = p0
-    for j in range(st.horizon):
-        x = x + planner.dt_s * (ff[j] + st.gain_per_s * (targets[j] - x))
-    return 1e3 * (time.perf_counter() - start)
+    def add(self, t: refs.Times) -> None:
+        self.wall.append(t[0])
+        self.cpu.append(t[1])
+
+    def stats(self, row: dict[str, Any], key: str) -> None:
+        """``key_ms_median``, ``key_ms_p90`` and the same with ``_cpu`` into ``row``."""
+        row[f"{key}_ms_median"], row[f"{key}_ms_p90"] = median_p90(self.wall)
+        row[f"{key}_cpu_ms_median"], row[f"{key}_cpu_ms_p90"] = median_p90(self.cpu)
 
 
 def bench_case(
-    n: int, dim: int, steps: int, solver: str, coupling: str, cvxpy_solver: str | None
+    case: MPCCase, solver: str, cvxpy_solver: str | None, cvxpy_budget_s: float = DEFAULT_CVXPY_BUDGET_S
 ) -> dict[str, Any]:
-    """One swap: our step times by mode, the raw-solver, rollout and (optionally) cvxpy references."""
-    ref, p = swap_case(n, dim)
-    settings = mode_settings(coupling, 10)
-    limits = Limits(v_max_mps=1.0, d_min_m=0.5)
-    options = SolverOptions(settings.eps_abs, settings.eps_rel, settings.max_iter, settings.time_limit_s)
+    """One case: our step times by mode, the raw-solver, rollout and (optionally) cvxpy references."""
+    st = case.settings
+    options = SolverOptions(st.eps_abs, st.eps_rel, st.max_iter, st.time_limit_s)
     rec = RecordingBackend(make_backend(solver, options))
-    per_drone = settings.solves_per_drone  # then --solver is cvxpy's only
-    planner = MPCPlanner(ref, 0.1, limits, settings, solver=DEFAULT_SOLVER if per_drone else rec)
+    per_drone = st.solves_per_drone  # then --solver is cvxpy's only
+    planner = case.planner(st, DEFAULT_SOLVER if per_drone else rec)
+    p = case.start_m.copy()
     planner.reset(0.0, p)
-    ours: dict[str, list[float]] = {"qp": [], "fast_path": [], "fallback": []}
-    rollout: list[float] = []
-    raw_solver, raw, ratios = _RawSolver(solver, options), [], []  # raw replay right after each QP step
-    whole = 0.0
-    for j in range(steps):
-        t, recorded = 0.1 * j, len(rec.problems)
-        start = time.perf_counter()
-        out = planner.step(t, p)
-        elapsed = 1e3 * (time.perf_counter() - start)
-        whole += elapsed / 1e3
-        ours[out.info.mode].append(elapsed)
-        if out.info.mode == "fast_path":
-            rollout.append(_rollout_ms(planner, t, p))
-        if per_drone and out.info.mode == "qp":  # the same per-drone QPs in bare DAQP calls
-            raw.append(1e3 * out.info.solve_time_s)
-            ratios.append(elapsed / raw[-1])
-        if len(rec.problems) > recorded:
-            raw_ms = raw_solver.run(rec.problems[-1])
-            if raw_ms is not None and out.info.mode == "qp":
-                raw.append(raw_ms)
-                ratios.append(elapsed / raw_ms)
-        p = p + 0.1 * out.command_mps
-    setup_steps = [i for i, pb in enumerate(rec.problems) if pb["setup"]]
+    ours = {mode: _Series() for mode in ("qp", "fast_path", "fallback")}
+    rollout, raw, ratio, whole = _Series(), _Series(), _Series(), (0.0, 0.0)
+    replay = refs.RawReplay(solver, options)
+    with refs.daqp_meter() if per_drone else nullcontext([0.0, 0.0]) as in_daqp:
+        for j in range(case.steps):
+            t, recorded, daqp_before = case.dt_s * j, len(rec.problems), tuple(in_daqp)
+            clock = refs.Stopwatch()
+            out = planner.step(t, p)
+            took = clock.ms()
+            whole = refs.added(whole, took)
+            ours[out.info.mode].add(took)
+            if out.info.mode == "fast_path":
+                rollout.add(refs.rollout_ms(planner, t, p))
+            floor = in_daqp[0] - daqp_before[0], in_daqp[1] - daqp_before[1]
+            for pb in rec.problems[recorded:]:  # the step's QPs on the bare solver, right after it
+                floor = refs.added(floor, replay.run(pb))
+            if out.info.mode == "qp" and floor[0] > 0 and floor[1] > 0:
+                raw.add(floor)
+                ratio.add((took[0] / floor[0], took[1] / floor[1]))
+            p = p + case.dt_s * out.command_mps
     row: dict[str, Any] = {
-        "case": f"swap {'planar' if dim == 2 else 'spatial'}", "n": n, "dim": dim, "steps": steps,
-        "solver": planner.solver_name, "coupling": coupling, "qp_steps": len(ours["qp"]),
-        "fast_path_steps": len(ours["fast_path"]), "fallback_steps": len(ours["fallback"]),
-        "rebuilds": len(setup_steps),
+        "case": case.name, "n": case.start_m.shape[0], "dim": case.start_m.shape[1], "steps": case.steps,
+        "solver": planner.solver_name, "coupling": st.coupling, "qp_steps": len(ours["qp"].wall),
+        "fast_path_steps": len(ours["fast_path"].wall), "fallback_steps": len(ours["fallback"].wall),
+        "setups": sum(1 for pb in rec.problems if pb["setup"]), "reused": getattr(rec.inner, "reused", 0),
     }  # fmt: skip
-    row["qp_ms_median"], row["qp_ms_p90"] = median_p90(ours["qp"])
-    row["raw_ms_median"], row["raw_ms_p90"] = median_p90(raw)
-    row["overhead"] = median_p90(ratios)[0]  # median of paired per-step ratios (same load)
-    row["fast_ms_median"], row["fast_ms_p90"] = median_p90(ours["fast_path"])
-    row["rollout_ms_median"] = median_p90(rollout)[0]
-    row["fast_ratio"] = row["fast_ms_median"] / row["rollout_ms_median"] if rollout else float("nan")
-    row["whole_s"] = whole
+    ours["qp"].stats(row, "qp")
+    raw.stats(row, "raw")
+    ours["fast_path"].stats(row, "fast")
+    rollout.stats(row, "rollout")
+    row["overhead"], row["overhead_cpu"] = median_p90(ratio.wall)[0], median_p90(ratio.cpu)[0]
+    row["fast_ratio"] = row["fast_ms_median"] / row["rollout_ms_median"]
+    row["fast_ratio_cpu"] = row["fast_cpu_ms_median"] / row["rollout_cpu_ms_median"]
+    row["whole_s"], row["whole_cpu_s"] = whole[0] / 1e3, whole[1] / 1e3
     if cvxpy_solver is not None:
-        full = RecordingBackend(make_backend(solver, options))  # every step as a QP, as cvxpy users solve
-        sparse = replace(settings, fast_path=False, per_drone=False)
-        no_fast = MPCPlanner(ref, 0.1, limits, sparse, solver=full)  # per drone: the same QPs, one sparse QP
-        q = swap_case(n, dim)[1]
-        no_fast.reset(0.0, q)
-        for j in range(steps):
-            q = q + 0.1 * no_fast.step(0.1 * j, q).command_mps
-        cv_times, cv_total = _cvxpy_replay(full.problems, cvxpy_solver)
-        row["cvxpy_ms_median"], row["cvxpy_ms_p90"] = median_p90(cv_times[1:])
-        row["cvxpy_speedup_qp"] = row["cvxpy_ms_median"] / row["qp_ms_median"]
-        row["cvxpy_whole_s"] = cv_total
-        row["cvxpy_speedup_whole"] = cv_total / whole
+        row.update(_cvxpy_row(case, solver, options, cvxpy_solver, cvxpy_budget_s, row))
     return row
 
 
-COLUMNS = [
+def _cvxpy_row(
+    case: MPCCase, solver: str, options: SolverOptions, cvxpy: str, budget_s: float, ours: dict[str, Any]
+) -> dict[str, Any]:
+    """The cvxpy reference: every step's QP recorded without the fast path (per drone: the same
+    rows as one sparse QP), solved through cvxpy within ``budget_s``; ratios against ``ours``."""
+    full = RecordingBackend(make_backend(solver, options))
+    no_fast = case.planner(replace(case.settings, fast_path=False, per_drone=False), full)
+    q = case.start_m.copy()
+    no_fast.reset(0.0, q)
+    for j in range(case.steps):
+        q = q + case.dt_s * no_fast.step(case.dt_s * j, q).command_mps
+    res = refs.cvxpy_replay(full.problems, cvxpy, budget_s)
+    if res.skipped:
+        return {"cvxpy_skipped": res.skipped}
+    row: dict[str, Any] = {}
+    series = _Series()
+    for t in res.times:
+        series.add(t)
+    series.stats(row, "cvxpy")
+    row["cvxpy_speedup_qp"] = row["cvxpy_ms_median"] / ours["qp_ms_median"]
+    row["cvxpy_speedup_qp_cpu"] = row["cvxpy_cpu_ms_median"] / ours["qp_cpu_ms_median"]
+    row["cvxpy_whole_s"], row["cvxpy_whole_cpu_s"] = res.whole[0] / 1e3, res.whole[1] / 1e3
+    row["cvxpy_speedup_whole"] = row["cvxpy_whole_s"] / ours["whole_s"]
+    row["cvxpy_speedup_whole_cpu"] = row["cvxpy_whole_cpu_s"] / ours["whole_cpu_s"]
+    return row
+
+
+COLUMNS: list[tuple[str, str, str]] = [
     ("case", "case", "{}"), ("n", "n", "{}"), ("steps", "steps", "{}"), ("qp_steps", "QP", "{}"),
-    ("fast_path_steps", "fast", "{}"), ("qp_ms_median", "QP med [ms]", "{:.2f}"),
-    ("qp_ms_p90", "QP p90", "{:.2f}"),
-    ("raw_ms_median", "raw med", "{:.2f}"), ("overhead", "ours/raw", "{:.2f}x"),
+    ("fast_path_steps", "fast", "{}"), ("setups", "setups", "{}"), ("reused", "reused", "{}"),
+    ("qp_ms_median", "QP med [ms]", "{:.2f}"), ("qp_ms_p90", "QP p90", "{:.2f}"),
+    ("raw_ms_median", "raw med", "{:.2f}"), ("raw_ms_p90", "raw p90", "{:.2f}"),
+    ("overhead", "ours/raw", "{:.2f}x"),
     ("fast_ms_median", "fast med [ms]", "{:.3f}"), ("fast_ms_p90", "fast p90", "{:.3f}"),
     ("rollout_ms_median", "numpy rollout", "{:.3f}"), ("fast_ratio", "fast/rollout", "{:.1f}x"),
     ("cvxpy_ms_median", "cvxpy QP med", "{:.1f}"), ("cvxpy_speedup_qp", "vs cvxpy (QP)", "{:.1f}x"),
     ("whole_s", "whole [s]", "{:.2f}"), ("cvxpy_whole_s", "cvxpy whole", "{:.2f}"),
     ("cvxpy_speedup_whole", "vs cvxpy (whole)", "{:.1f}x"),
 ]  # fmt: skip
+"""Columns; a time or ratio column shows ``wall / CPU`` (its key and the key with ``_cpu``)."""
+
+
+def cpu_key(key: str) -> str:
+    """The record key of the CPU-time twin of ``key`` (``qp_ms_median`` -> ``qp_cpu_ms_median``,
+    ``whole_s`` -> ``whole_cpu_s``, ``overhead`` -> ``overhead_cpu``)."""
+    if "_ms_" in key:
+        return key.replace("_ms_", "_cpu_ms_", 1)
+    return f"{key[:-2]}_cpu_s" if key.endswith("_s") else f"{key}_cpu"
+
+
+def _paired(fmt: str) -> Callable[[Any], str]:
+    """Formatter of a ``(wall, CPU)`` cell."""
+
+    def one(value: Any) -> str:
+        return "-" if value is None or not np.isfinite(value) else fmt.format(value)
+
+    return lambda pair: "-" if pair == (None, None) else f"{one(pair[0])} / {one(pair[1])}"
 
 
 def markdown_table(rows: list[dict[str, Any]]) -> str:
-    """The rows as a markdown table (missing or NaN entries shown as ``-``)."""
-    return tables.markdown_table(rows, COLUMNS)
+    """The rows as a markdown table, times and ratios as ``wall / CPU`` (missing or NaN: ``-``),
+    a line saying so, then one line per case whose cvxpy run was skipped, with the reason."""
+    pairs = {key: _paired(fmt) for key, _, fmt in COLUMNS if fmt != "{}"}
+    shown = [{**r, **{key: (r.get(key), r.get(cpu_key(key))) for key in pairs}} for r in rows]
+    notes = [f"cvxpy skipped for {r['case']} (n = {r['n']}): {r['cvxpy_skipped']}" for r in rows
+             if r.get("cvxpy_skipped")]  # fmt: skip
+    table = tables.markdown_table(shown, COLUMNS, pairs)
+    return "\n".join([table, "", "Times and ratios: wall / CPU (process time).", *notes])
 
 
 def run(
-    planar_n: list[int], spatial_n: list[int], steps: int, solver: str, coupling: str, cvxpy_max_n: int
+    planar_n: Sequence[int],
+    spatial_n: Sequence[int],
+    steps: int,
+    solver: str,
+    coupling: str,
+    cvxpy_budget_s: float = DEFAULT_CVXPY_BUDGET_S,
+    scenarios: Sequence[str | Path] = DEFAULT_SCENARIOS,
+    progress: Callable[[str], None] | None = None,
 ) -> list[dict[str, Any]]:
-    """All cases; cvxpy only up to ``cvxpy_max_n`` drones (its compilation grows quickly)."""
-    cvxpy_solver = solver if _have_cvxpy() else None
+    """The generated swaps, then the scenario files; cvxpy in every case that fits
+    ``cvxpy_budget_s`` (0: none)."""
+    cases = [generated_case(n, dim, steps, coupling) for dim, sizes in ((2, planar_n), (3, spatial_n))
+             for n in sizes]  # fmt: skip
+    cases += [scenario_case(path, coupling) for path in scenarios]
+    cvxpy_solver = solver if cvxpy_budget_s > 0 and _have_cvxpy() else None
     rows = []
-    for dim, sizes in ((2, planar_n), (3, spatial_n)):
-        for n in sizes:
-            rows.append(
-                bench_case(n, dim, steps, solver, coupling, cvxpy_solver if n <= cvxpy_max_n else None)
-            )
+    for case in cases:
+        if progress is not None:
+            progress(f"bench mpc: {case.name} (n = {case.start_m.shape[0]})")
+        rows.append(bench_case(case, solver, cvxpy_solver, cvxpy_budget_s))
     return rows
 
 

@@ -35,6 +35,17 @@ def max_memory_gib(text: str) -> float:
     return value
 
 
+def seconds(text: str) -> float:
+    """A time budget [s]: a finite number >= 0."""
+    try:
+        value = float(text)
+    except ValueError:
+        value = float("nan")
+    if not 0 <= value < float("inf"):
+        raise argparse.ArgumentTypeError(f"expected a number of seconds >= 0, got {text!r}")
+    return value
+
+
 def add_max_memory(cmd: argparse.ArgumentParser, per: str = "run") -> None:
     """The ``--max-memory GIB`` option (see :mod:`mpcform.scenario.size`)."""
     cmd.add_argument("--max-memory", type=max_memory_gib, default=DEFAULT_MAX_MEMORY_GIB, metavar="GIB",
@@ -59,7 +70,9 @@ def progress(text: str) -> None:
 def _bench_mpc(args: argparse.Namespace) -> int:
     from mpcform.bench import mpc as bench_mpc  # benchmarks are imported only when asked for
 
-    rows = bench_mpc.run(args.n, args.spatial_n, args.steps, args.solver, args.coupling, args.cvxpy_max_n)
+    scenarios = bench_mpc.DEFAULT_SCENARIOS if args.scenarios is None else args.scenarios
+    rows = bench_mpc.run(args.n, args.spatial_n, args.steps, args.solver, args.coupling, args.cvxpy_budget,
+                         scenarios, progress=progress)  # fmt: skip
     print_bench(bench_mpc.markdown_table(rows), rows, args.json)
     return 0
 
@@ -72,12 +85,17 @@ def add_bench(sub: argparse._SubParsersAction) -> None:
     mpc.set_defaults(func=_bench_mpc)
     mpc.add_argument("--n", type=int, nargs="*", default=[8, 16, 32, 64], help="planar swap sizes")
     mpc.add_argument("--spatial-n", type=int, nargs="*", default=[20], help="spatial swap sizes")
-    mpc.add_argument("--steps", type=int, default=60, help="closed-loop steps per swap (dt 0.1 s)")
+    mpc.add_argument("--steps", type=int, default=60, help="closed-loop steps per generated swap (dt 0.1 s)")
+    mpc.add_argument("--scenarios", nargs="*", metavar="SCENARIO",
+                     help="scenario files run as they are (ideal plant; default: the bundled swaps "
+                     "swap_planar_8, swap_spatial_12, swap_spatial_20; none when given empty)")  # fmt: skip
     mpc.add_argument("--solver", default=DEFAULT_SOLVER, choices=PERSISTENT_SOLVERS,
                      help="QP backend (decoupled, solved per drone: of the cvxpy reference only)")
     mpc.add_argument("--coupling", default="joint", choices=("joint", "decoupled", "decoupled-sparse"),
                      help="planner mode (decoupled-sparse: one sparse QP, not per-drone DAQP QPs)")
-    mpc.add_argument("--cvxpy-max-n", type=int, default=16, help="largest n also run through cvxpy")
+    mpc.add_argument("--cvxpy-budget", type=seconds, default=60.0, metavar="S",
+                     help="cvxpy's time per case [s]: a case whose cvxpy time, extrapolated from its first "
+                     "QPs, exceeds it is skipped with the reason (default 60; 0: no cvxpy)")  # fmt: skip
     mpc.add_argument("--json", metavar="PATH", help="also write the rows as a JSON list of records")
     _add_bench_solvers(kinds)
     _add_bench_scale(kinds)

@@ -1,4 +1,5 @@
-"""The bench, problems and sweep subcommands' options: solver help, --max-memory, the sweep's description."""
+"""The bench, problems and sweep subcommands' options: solver help, --max-memory, --cvxpy-budget, the
+sweep's description."""
 
 from __future__ import annotations
 
@@ -6,7 +7,7 @@ import argparse
 
 import pytest
 
-from mpcform.cli.bench_commands import SWEEP_DESCRIPTION, max_memory_gib, solver_help
+from mpcform.cli.bench_commands import SWEEP_DESCRIPTION, max_memory_gib, seconds, solver_help
 from mpcform.cli.main import build_parser
 from mpcform.solvers.casadi_conic import CASADI_CONIC_PLUGINS
 from mpcform.solvers.registry import DEFAULT_SOLVER, PERSISTENT_SOLVERS
@@ -28,6 +29,16 @@ def test_max_memory_must_be_a_positive_number(text: str) -> None:
 
 def test_max_memory_value() -> None:
     assert max_memory_gib("0.5") == 0.5 and max_memory_gib("64") == 64.0
+
+
+@pytest.mark.parametrize("text", ["-1", "nan", "inf", "soon"])
+def test_seconds_must_be_a_finite_number_at_least_zero(text: str) -> None:
+    with pytest.raises(argparse.ArgumentTypeError, match="expected a number of seconds >= 0"):
+        seconds(text)
+
+
+def test_seconds_value() -> None:
+    assert seconds("0") == 0.0 and seconds("60") == 60.0
 
 
 def test_sweep_has_a_description_and_max_memory() -> None:
