@@ -42,6 +42,7 @@ DAQP_INF = 1e30  # DAQP's "no bound"
 DAQP_OK = 1
 PRIMAL_TOL = 1e-9  # DAQP row feasibility tolerance (its default 1e-6 shows in the plans)
 MIN_SLACK_QUADRATIC = 1e-6  # keeps the soft QP's Hessian positive definite when w2 = 0
+BATCH_BYTES = 2**24  # the rows' w_e are gathered for all drones at once up to this size [bytes]
 
 
 class PerDroneQP(StepSolver):
@@ -69,8 +70,10 @@ class PerDroneQP(StepSolver):
         rows = [family.dense() for family in families]  # constant rows over u; bounds per drone from _bounds
         self._const_v = (np.vstack(rows) if rows else np.zeros((0, nu))) @ self._m_inv
         self._ends = row_ends(h)
-        # x_e = dt sum_{j<e} u_j, so a^T x_e = a^T (sum_{j<e} dt M^-1[(j, .), :]) v: (H, d, H d) per end e
-        self._x_v = dt_s * np.cumsum(self._m_inv.reshape(h, dim, nu), axis=0)
+        # x_e = dt sum_{j<e} u_j = (sum_{j<e} dt M^-1[(j, .), :]) v, and M^-1 = T (x) I_d, so
+        # x_e = (w_e (x) I_d) v, a^T x_e = (w_e (x) a)^T v: w_e (H, d) per end e (equal columns)
+        x_v = dt_s * np.cumsum(self._m_inv.reshape(h, dim, nu), axis=0)
+        self._w_end = np.einsum("echc->ehc", x_v.reshape(h, dim, h, dim)).copy()
         self._eye = np.eye(nu)
         w2 = max(settings.slack_quadratic, MIN_SLACK_QUADRATIC)
         self._hess_soft = np.diag(np.concatenate([np.full(h, w2), np.ones(nu)]))
@@ -79,23 +82,24 @@ class PerDroneQP(StepSolver):
 
     def solve(self, qp: StepQP) -> tuple[QPSolution, int]:
         """Solve every drone's QP (the one-drone separation rows within reach of ``qp.rows``)."""
-        rows, on = qp.rows, qp.rows.single_on
+        rows = qp.rows
         warm_u = np.zeros_like(qp.targets_mps) if qp.warm is None else qp.warm[0]  # inputs only
         return self.solve_drones(
-            qp.start_m, qp.targets_mps, qp.u_prev_mps, rows.singles[on], rows.single_coeffs[on],
-            rows.single_lower[on], warm_u, rows.single_hard[on],
+            qp.start_m, qp.targets_mps, qp.u_prev_mps, rows.singles, rows.single_coeffs, rows.single_lower,
+            warm_u, rows.single_hard, rows.single_on,
         )  # fmt: skip
 
     def solve_drones(
         self, p0: Array, c: Array, u_prev: Array, singles: Array, coeffs: Array, lower: Array, warm_u: Array,
-        hard: Array | None = None,
+        hard: Array | None = None, on: Array | None = None,
     ) -> tuple[QPSolution, int]:
         """Solve every drone's QP.
 
         ``p0`` (n, d) starts, ``c`` (H, n, d) targets, ``u_prev`` (n, d) last commands; separation
-        items (all within reach) ``singles`` (S,) drone index, ``coeffs`` (S, R, d), ``lower``
-        (S, R); ``warm_u`` (H, n, d) inputs whose nearly active rows start DAQP's active set;
-        ``hard`` (S,) the items whose first row is a hard no-approach row (no slack).
+        items ``singles`` (S,) drone index, ``coeffs`` (S, R, d), ``lower`` (S, R); ``warm_u``
+        (H, n, d) inputs whose nearly active rows start DAQP's active set; ``hard`` (S,) the items
+        whose first row is a hard no-approach row (no slack); ``on`` (S,) the items within reach
+        (the others are left out; all by default).
         Returns the solution in the sparse QP's layout ``[u | x | s]`` over these n drones (its
         ``solve_time_s`` is the time spent inside DAQP), and the number of active rows.
         """
@@ -104,33 +108,39 @@ class PerDroneQP(StepSolver):
         f_v = -c.transpose(1, 0, 2).reshape(n, nu)  # 0.5 ||v - c||^2
         v_warm = warm_u.transpose(1, 0, 2).reshape(n, nu) @ self._m.T
         c_lo, c_hi = self._bounds(p0, u_prev)
-        if hard is None:
-            hard = np.zeros(singles.shape[0], dtype=bool)
-        sep_v, sep_end, sep_lo, sep_soft, counts = self._separation(n, singles, coeffs, lower, hard)
+        sep_c, sep_end, sep_lo, sep_soft, counts = self._separation(n, singles, coeffs, lower, hard, on)
         a, lo, hi = self._buffers(int(counts.max(initial=0)))
+        rows3 = a[n_const:].reshape(a.shape[0] - n_const, h, self.dim)  # row r: w_{e_r} (x) a_r, (H, d)
+        w_of_row = self._w_end[sep_end - 1] if sep_end.shape[0] * nu * 8 <= BATCH_BYTES else None
+        same_bounds = n > 0 and bool((c_lo == c_lo[0]).all() and (c_hi == c_hi[0]).all())
+        if same_bounds:  # no per-drone constant bounds (velocity rows only): written once
+            lo[:n_const], hi[:n_const] = c_lo[0], c_hi[0]
         offsets = [0, *np.cumsum(counts).tolist()]
         v_out, s_out = np.zeros((n, nu)), np.zeros((n, h))
-        flags, active = np.zeros(n, dtype=int), np.zeros(n, dtype=int)
+        flags, lams = np.zeros(n, dtype=int), [np.zeros(0)] * n
         iters, in_daqp = 0, 0.0
 
         def load(i: int) -> int:
             """Put drone i's rows and bounds into the buffers; return its number of rows."""
             first, last = offsets[i], offsets[i + 1]
             m = n_const + last - first
-            a[n_const:m] = sep_v[first:last]
-            lo[:n_const], hi[:n_const], lo[n_const:m] = c_lo[i], c_hi[i], sep_lo[first:last]
+            w = self._w_end[sep_end[first:last] - 1] if w_of_row is None else w_of_row[first:last]
+            np.multiply(w, sep_c[first:last, None, :], out=rows3[: last - first])
+            lo[n_const:m] = sep_lo[first:last]
+            if not same_bounds:
+                lo[:n_const], hi[:n_const] = c_lo[i], c_hi[i]
             return m
 
+        solve, eye, options = self._daqp.solve, self._eye, self._options
         for i in range(n):  # the hard QPs
             m = load(i)
             t0 = time.perf_counter()
-            v, _, flags[i], info = self._daqp.solve(
-                self._eye, f_v[i], a[:m], hi[:m], lo[:m], primal_start=v_warm[i], **self._options
+            v_out[i], _, flags[i], info = solve(
+                eye, f_v[i], a[:m], hi[:m], lo[:m], primal_start=v_warm[i], **options
             )  # fmt: skip
             in_daqp += time.perf_counter() - t0
-            iters += int(info["iterations"])
-            v_out[i], lam = v, info["lam"]
-            active[i] = np.count_nonzero(np.abs(lam) > ACTIVE_TOL)
+            iters += info["iterations"]
+            lams[i] = info["lam"]
         soft = flags != DAQP_OK  # the hard optimum (s = 0) wherever the hard QP is feasible
         for i in np.flatnonzero(soft).tolist():
             m = load(i)
@@ -140,8 +150,9 @@ class PerDroneQP(StepSolver):
                 sep_soft[offsets[i] : offsets[i + 1]], n_const,
             )  # fmt: skip
             in_daqp += time.perf_counter() - t0
-            iters += int(info["iterations"])
-            active[i] = np.count_nonzero(np.abs(info["lam"]) > ACTIVE_TOL)
+            iters += info["iterations"]
+            lams[i] = info["lam"]
+        iters = int(iters)
         bad = np.flatnonzero((flags != DAQP_OK) | ~np.isfinite(v_out).all(axis=1))
         if bad.size:
             status = f"daqp: exit flag {flags[bad[0]]} (drone {bad[0]})"
@@ -150,7 +161,8 @@ class PerDroneQP(StepSolver):
         x_out = u_out @ self._x_of_u.T
         flat = [v.reshape(n, h, -1).transpose(1, 0, 2).ravel() for v in (u_out, x_out, s_out)]
         sol = QPSolution(np.concatenate(flat), None, True, "daqp: optimal", iters, in_daqp)
-        return sol, int(active.sum())
+        active = np.count_nonzero(np.abs(np.concatenate(lams)) > ACTIVE_TOL) if n else 0
+        return sol, int(active)
 
     def _buffers(self, max_sep: int) -> tuple[Array, Array, Array]:
         """Row and bound buffers with room for ``max_sep`` separation rows after the constant ones
@@ -181,27 +193,31 @@ class PerDroneQP(StepSolver):
         return z[h:], z[:h], flag, info
 
     def _separation(
-        self, n: int, singles: Array, coeffs: Array, lower: Array, hard: Array
+        self, n: int, singles: Array, coeffs: Array, lower: Array, hard: Array | None, on: Array | None
     ) -> tuple[Array, Array, Array, Array, Array]:
-        """Separation rows in ``v``, their position steps, lower bounds and whether they have a
-        slack (not an item's hard first row), sorted by drone, and the number of rows per drone.
+        """The separation rows that can be active, sorted by drone (item order kept within a drone):
+        their coefficients ``a`` (K, d), position steps, lower bounds and whether they have a slack
+        (not an item's hard first row); and the number of rows per drone.
 
         A row ``a^T x_e + s_e >= b`` that every reachable ``x_e`` meets (``b <= -|a| e v_max dt``,
-        since the velocity set lies in the ball) is dropped: the optimum is unchanged.
+        since the velocity set lies in the ball) is left out, the optimum unchanged. The rows over
+        ``v`` are built drone by drone: ``a^T x_e = (w_e (x) a)^T v`` (see :attr:`_w_end`).
         """
-        order = np.argsort(singles, kind="stable")
-        singles, coeffs, lower, hard = singles[order], coeffs[order], lower[order], hard[order]
-        soft = np.ones(lower.shape, dtype=bool)
-        soft[hard, 0] = False
-        ends = self._ends
         keep = np.ones(lower.shape, dtype=bool)
+        if on is not None:
+            keep &= on[:, None]
+        ends = self._ends
         if self.limits.v_max_mps is not None:
             reach = np.linalg.norm(coeffs, axis=2) * (ends * (self.limits.v_max_mps * self.dt_s))
-            keep = lower > -reach
-        rows_v = np.matmul(coeffs.transpose(1, 0, 2), self._x_v[ends - 1]).transpose(1, 0, 2)  # (S, R, H d)
-        end = np.broadcast_to(ends, lower.shape)[keep]
-        counts = np.bincount(singles, keep.sum(axis=1), minlength=n).astype(np.intp)
-        return rows_v[keep], end, lower[keep], soft[keep], counts
+            keep &= lower > -reach
+        order = np.argsort(singles, kind="stable")
+        at, r = np.nonzero(keep[order])
+        item = order[at]
+        soft = r > 0
+        if hard is not None:
+            soft |= ~hard[item]
+        counts = np.bincount(singles[item], minlength=n).astype(np.intp)
+        return coeffs[item, r], ends[r], lower[item, r], soft, counts
 
     def _bounds(self, p0: Array, u_prev: Array) -> tuple[Array, Array]:
         """Lower and upper bounds (n, rows) of the constant rows for each drone."""

@@ -84,8 +84,7 @@ def segment_normals(rel: Array, segs: Array) -> Array:
     dist = np.linalg.norm(closest, axis=1)
     normal = np.zeros_like(closest)
     normal[:, 0] = 1.0  # a coincident guess: any fixed unit vector is a valid normal
-    ok = dist > 1e-9
-    normal[ok] = closest[ok] / dist[ok, None]
+    np.divide(closest, dist[:, None], out=normal, where=(dist > 1e-9)[:, None])
     normal = normal.reshape(rel.shape[0] - 1, rel.shape[1], d)  # (H, m, d)
     return normal.transpose(1, 0, 2)[:, segs]
 
@@ -95,33 +94,46 @@ class PairSeparation:
 
     def __init__(self, d_min_m: float, metric: Array, settings: MPCSettings) -> None:
         self.d_min_m, self.metric, self.margin_m = d_min_m, metric, settings.margin_m
+        self.unit_metric = bool(np.all(metric == 1.0))  # W = I: no scaling
         self.joint = settings.coupling == "joint"
         self.segs, self.ends = row_segments(settings.horizon), row_ends(settings.horizon)
 
     def relative(self, points: Array, i: Array, k: Array) -> Array:
         """``W (p_i - p_k)`` for positions (..., n, d): (..., P, d)."""
-        return (points[..., i, :] - points[..., k, :]) * self.metric
+        return self.scaled(points[..., i, :] - points[..., k, :])
 
-    def rows(self, p0: Array, guess: Array, pairs: Array, on: Array) -> tuple[RowPart | None, list[RowPart]]:
-        """The joint rows, or the decoupled one-drone rows, of ``pairs`` (P, 2) about ``guess``."""
+    def scaled(self, v: Array) -> Array:
+        """``W v`` for vectors (..., d) (``v`` itself when ``W = I``)."""
+        return v if self.unit_metric else v * self.metric
+
+    def rows(self, p0: Array, guess: Array, pairs: Array, on: Array) -> tuple[RowPart | None, RowPart | None]:
+        """The joint rows, or the decoupled one-drone rows (side i of every pair, then side k), of
+        ``pairs`` (P, 2) about ``guess``."""
         i, k = pairs[:, 0], pairs[:, 1]
-        rel = self.relative(guess, i, k)  # (H + 1, P, d), metric space
-        coeffs = segment_normals(rel, self.segs) * self.metric  # (P, R, d), world coordinates
+        g_i, g_k = guess[:, i], guess[:, k]
+        rel = self.scaled(g_i - g_k)  # (H + 1, P, d), metric space
+        coeffs = self.scaled(segment_normals(rel, self.segs))  # (P, R, d), world coordinates
         hard, c0 = inside(rel[0], self.d_min_m)
-        coeffs[hard, 0] = c0 * self.metric
+        coeffs[hard, 0] = self.scaled(c0)
         if self.joint:
             lower = self.d_min_m + self.margin_m - np.einsum("prd,pd->pr", coeffs, p0[i] - p0[k])
             lower[hard, 0] = 0.0
-            return (pairs, coeffs, lower, on, hard), []
-        singles = []  # two per-drone rows about the guess's midpoint at each row's position step
-        mid = 0.5 * (guess[:, i] + guess[:, k])[self.ends].transpose(1, 0, 2)  # (P, R, d)
+            return (pairs, coeffs, lower, on, hard), None
+        # two per-drone rows about the guess's midpoint at each row's position step:
+        # +-c^T (p0_side - m_e) >= half, side i with +c, side k with -c
+        mid = (0.5 * (g_i + g_k))[self.ends].transpose(1, 0, 2)  # (P, R, d)
         half = 0.5 * (self.d_min_m + self.margin_m)
-        for side, sign in ((i, 1.0), (k, -1.0)):
-            lower = half - np.einsum("prd,prd->pr", sign * coeffs, p0[side][:, None] - mid)
-            lower[hard, 0] = 0.0
-            labels = np.column_stack([side, i + k - side])
-            singles.append((labels, sign * coeffs, lower, on, hard))
-        return None, singles
+        p = pairs.shape[0]
+        both = np.empty((2 * p,) + coeffs.shape[1:])
+        both[:p] = coeffs
+        np.negative(coeffs, out=both[p:])
+        lower = np.empty((2 * p, coeffs.shape[1]))
+        np.subtract(half, np.einsum("prd,prd->pr", coeffs, p0[i][:, None] - mid), out=lower[:p])
+        np.add(half, np.einsum("prd,prd->pr", coeffs, p0[k][:, None] - mid), out=lower[p:])
+        hard2 = np.concatenate([hard, hard])
+        lower[hard2, 0] = 0.0
+        labels = np.concatenate([pairs, pairs[:, ::-1]])
+        return None, (labels, both, lower, np.concatenate([on, on]), hard2)
 
     def clear_test(self, p0: Array, guess: Array, pos: Array, spread: Array) -> Test:
         """The pairs that the per-drone spread bound (see :meth:`Separation.clear`) leaves in doubt."""
@@ -192,15 +204,18 @@ class Separation:
         r, d = self.n_rows, self.dim
         none, no = np.empty((0, 2), dtype=np.intp), np.empty(0, dtype=bool)
         empty = (none, np.empty((0, r, d)), np.empty((0, r)), no, no)
-        joint, singles = empty, [empty]
+        joint, singles = empty, []
         if cand.pairs.shape[0] and self.pairs is not None:
             two, one = self.pairs.rows(p0, guess, cand.pairs, cand.pair_on)
             joint = joint if two is None else two
-            singles += one
+            singles += [] if one is None else [one]
         if cand.obstacles.shape[0] and self.obstacles is not None:
             singles.append(self.obstacles.rows(p0, guess, cand.obstacles, cand.obstacle_on))
-        columns = (np.concatenate(parts) for parts in zip(*singles, strict=True))
-        labels, s_coeffs, s_lower, s_on, s_hard = columns
+        if len(singles) == 1:
+            labels, s_coeffs, s_lower, s_on, s_hard = singles[0]
+        else:
+            columns = (np.concatenate(parts) for parts in zip(*[empty, *singles], strict=True))
+            labels, s_coeffs, s_lower, s_on, s_hard = columns
         pairs, p_coeffs, p_lower, p_on, p_hard = joint
         return SeparationRows(
             pairs, p_coeffs, p_lower, p_on, labels[:, 0], labels, s_coeffs, s_lower, s_on, p_hard, s_hard
@@ -251,25 +266,37 @@ class Separation:
             missed.append(labels[short > tol])
         return worst, np.unique(np.concatenate(missed), axis=0)
 
-    def meets_joint(self, x: Array, rows: SeparationRows) -> bool:
+    def single_values(self, x: Array, rows: SeparationRows) -> Array:
+        """``c^T x_e - b`` (S, R) of the one-drone rows at positions ``x`` (H, n, d): negative where
+        a row is missed (inf for the items out of reach). Shared by :meth:`meets_joint` and
+        :meth:`conflicted`."""
+        xe = x[self.ends - 1]  # (R, n, d)
+        value = np.einsum("srd,rsd->sr", rows.single_coeffs, xe[:, rows.singles]) - rows.single_lower
+        return np.where(rows.single_on[:, None], value, np.inf)
+
+    def meets_joint(self, x: Array, rows: SeparationRows, values: Array | None = None) -> bool:
         """Whether positions ``x`` (H, n, d) meet the joint pair rows (and the obstacle rows) of the
         items within reach, given the decoupled ``rows`` of the whole candidate set: a pair's two
         sides share their normal and their lower bounds add up to the joint one, so the joint row
-        is the sum of its two sides' rows."""
-        xe = x[self.ends - 1]  # (R, n, d)
-        value = np.einsum("srd,rsd->sr", rows.single_coeffs, xe[:, rows.singles]) - rows.single_lower
-        value = np.where(rows.single_on[:, None], value, np.inf)
+        is the sum of its two sides' rows. ``values``: :meth:`single_values` when known."""
+        value = self.single_values(x, rows) if values is None else values
         pair = rows.labels[:, 1] >= 0
         first = pair & (rows.labels[:, 0] < rows.labels[:, 1])  # side i of pair (i, k), i < k
         joint = value[first] + value[pair & ~first]  # both sides in the candidates' pair order
         return bool(joint.min(initial=np.inf) >= 0.0 and value[~pair].min(initial=np.inf) >= 0.0)
 
-    def conflicted(self, x: Array, rows: SeparationRows) -> Array:
+    def conflicted(self, x: Array, rows: SeparationRows, values: Array | None = None) -> Array:
         """Drones (n,) of the items whose rows positions ``x`` (H, n, d) miss (an obstacle item
-        names only its drone)."""
+        names only its drone); ``values``: :meth:`single_values` when known."""
         conflicted = np.zeros(x.shape[1], dtype=bool)
-        labels = self.shortfall(x, rows, 0.0)[1]
+        value = self.single_values(x, rows) if values is None else values
+        labels = rows.labels[value.min(axis=1, initial=np.inf) < 0.0]
         conflicted[labels[labels >= 0]] = True
+        if rows.pair_on.any():
+            xe = x[self.ends - 1]  # (R, n, d)
+            rel = xe[:, rows.pairs[:, 0]] - xe[:, rows.pairs[:, 1]]
+            short = (rows.pair_lower - np.einsum("mrd,rmd->mr", rows.pair_coeffs, rel)).max(axis=1)
+            conflicted[rows.pairs[rows.pair_on & (short > 0.0)]] = True
         return conflicted
 
     def blocked_targets(self, targets: Array) -> Array:

@@ -84,7 +84,7 @@ def test_rows_at_both_segment_ends() -> None:
     guess = np.array([p0, p0 + [[0, 0], [0, 1]], p0 + [[0, 0], [0, 2]], p0 + [[0, 0], [0, 2]]])
     pairs = PairSeparation(0.5, np.ones(2), MPCSettings(horizon=3))
     (labels, coeffs, lower, on, _), singles = pairs.rows(p0, guess, np.array([[0, 1]]), np.ones(1, bool))
-    assert coeffs.shape == (1, 5, 2) and lower.shape == (1, 5) and singles == []
+    assert coeffs.shape == (1, 5, 2) and lower.shape == (1, 5) and singles is None
     np.testing.assert_allclose(coeffs[0, 0], [-1.0, 0.0])  # segment 0 starts at the closest point
     np.testing.assert_allclose(coeffs[0, 1], coeffs[0, 2])  # segment 1's two rows share a normal
     np.testing.assert_allclose(coeffs[0, 3], coeffs[0, 4])
