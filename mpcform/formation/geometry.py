@@ -16,11 +16,24 @@ BRUTE_FORCE_MAX_N = 48
 
 
 def closest_on_segments(start: Array, end: Array) -> Array:
-    """Point closest to the origin on each segment ``start -> end``; inputs and output (m, d)."""
+    """Point closest to the origin on each segment ``start -> end``; inputs and output (..., d)."""
     delta = end - start
-    den = np.einsum("ij,ij->i", delta, delta)
-    tau = np.clip(-np.einsum("ij,ij->i", start, delta) / np.where(den > 0, den, 1.0), 0.0, 1.0)
-    return start + tau[:, None] * delta
+    den = np.einsum("...j,...j->...", delta, delta)
+    tau = np.negative(np.einsum("...j,...j->...", start, delta))
+    tau /= np.where(den > 0, den, 1.0)
+    np.clip(tau, 0.0, 1.0, out=tau)
+    delta *= tau[..., None]
+    delta += start
+    return delta
+
+
+def vector_norms(v: Array) -> Array:
+    """Euclidean norms over the last axis of ``v`` (..., d), summed in order: bitwise
+    ``np.linalg.norm(v, axis=-1)``, without its slow reduction over a short axis."""
+    sq = v[..., 0] * v[..., 0]
+    for a in range(1, v.shape[-1]):
+        sq += v[..., a] * v[..., a]
+    return np.sqrt(sq)
 
 
 def min_pair_distance(points: Array) -> float:

@@ -30,6 +30,7 @@ import numpy as np
 from scipy.linalg import solve_triangular
 
 from mpcform._validate import Array
+from mpcform.formation.geometry import vector_norms
 from mpcform.mpc.limits import Limits
 from mpcform.mpc.problem import ACTIVE_TOL, StepQP, StepSolver
 from mpcform.mpc.rows import LimitRows, positions_of_inputs, row_ends
@@ -208,7 +209,7 @@ class PerDroneQP(StepSolver):
             keep &= on[:, None]
         ends = self._ends
         if self.limits.v_max_mps is not None:
-            reach = np.linalg.norm(coeffs, axis=2) * (ends * (self.limits.v_max_mps * self.dt_s))
+            reach = vector_norms(coeffs) * (ends * (self.limits.v_max_mps * self.dt_s))
             keep &= lower > -reach
         order = np.argsort(singles, kind="stable")
         at, r = np.nonzero(keep[order])
@@ -226,3 +227,4 @@ class PerDroneQP(StepSolver):
             return np.zeros((n, 0)), np.zeros((n, 0))
         lo, hi = zip(*(family.dense_bounds(p0, u_prev, DAQP_INF) for family in self.families), strict=True)
         return np.hstack(lo), np.hstack(hi)
+

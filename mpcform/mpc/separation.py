@@ -27,12 +27,14 @@ from dataclasses import dataclass
 import numpy as np
 
 from mpcform._validate import Array
-from mpcform.formation.geometry import closest_on_segments, pairs_within
+from mpcform.formation.geometry import closest_on_segments, pairs_within, vector_norms
 from mpcform.mpc.candidates import Candidates
 from mpcform.mpc.limits import Limits, SphereObstacle, obstacle_arrays
 from mpcform.mpc.rows import row_ends, row_segments
 from mpcform.mpc.settings import MPCSettings
 
+FIRST_TESTED = 32  # the clear test tries this many of the least clear items first
+BLOCK = 1024  # pairs whose decoupled rows are built at once (bounds the temporaries' size)
 RowPart = tuple[Array, Array, Array, Array, Array]  # (items or labels, coefficients, lower bounds, on, hard)
 Test = tuple[Array, Array, Array | float]  # (relative guess, relative positions, required distance)
 
@@ -76,17 +78,16 @@ class SeparationRows:
         )  # fmt: skip
 
 
-def segment_normals(rel: Array, segs: Array) -> Array:
+def segment_normals(rel: Array, segs: Array | None = None) -> Array:
     """Unit normals (m, R, d) per row: the direction to each guess segment's point closest to the
-    origin (``rel`` (H + 1, m, d) are the guess's relative positions, ``segs`` (R,) each row's segment)."""
-    d = rel.shape[-1]
-    closest = closest_on_segments(rel[:-1].reshape(-1, d), rel[1:].reshape(-1, d))
-    dist = np.linalg.norm(closest, axis=1)
-    normal = np.zeros_like(closest)
-    normal[:, 0] = 1.0  # a coincident guess: any fixed unit vector is a valid normal
-    np.divide(closest, dist[:, None], out=normal, where=(dist > 1e-9)[:, None])
-    normal = normal.reshape(rel.shape[0] - 1, rel.shape[1], d)  # (H, m, d)
-    return normal.transpose(1, 0, 2)[:, segs]
+    origin (``rel`` (m, H + 1, d) are the guess's relative positions, ``segs`` (R,) each row's
+    segment; without ``segs`` one normal per segment, (m, H, d))."""
+    normal = closest_on_segments(rel[:, :-1], rel[:, 1:])  # (m, H, d), divided in place
+    dist = vector_norms(normal)
+    ok = dist > 1e-9
+    np.divide(normal, dist[..., None], out=normal, where=ok[..., None])
+    normal[~ok] = np.eye(normal.shape[-1])[0]  # a coincident guess: any fixed unit vector is valid
+    return normal if segs is None else normal[:, segs]
 
 
 class PairSeparation:
@@ -106,44 +107,72 @@ class PairSeparation:
         """``W v`` for vectors (..., d) (``v`` itself when ``W = I``)."""
         return v if self.unit_metric else v * self.metric
 
-    def rows(self, p0: Array, guess: Array, pairs: Array, on: Array) -> tuple[RowPart | None, RowPart | None]:
+    def rows(self, p0: Array, path: Array, pairs: Array, on: Array) -> tuple[RowPart | None, RowPart | None]:
         """The joint rows, or the decoupled one-drone rows (side i of every pair, then side k), of
-        ``pairs`` (P, 2) about ``guess``."""
+        ``pairs`` (P, 2) about the guess ``path`` (n, H + 1, d) (drone-major)."""
+        if not self.joint:
+            return None, self._sides(p0, path, pairs, on)
         i, k = pairs[:, 0], pairs[:, 1]
-        g_i, g_k = guess[:, i], guess[:, k]
-        rel = self.scaled(g_i - g_k)  # (H + 1, P, d), metric space
+        rel = self.scaled(path[i] - path[k])  # (P, H + 1, d), metric space
         coeffs = self.scaled(segment_normals(rel, self.segs))  # (P, R, d), world coordinates
-        hard, c0 = inside(rel[0], self.d_min_m)
+        hard, c0 = inside(rel[:, 0], self.d_min_m)
         coeffs[hard, 0] = self.scaled(c0)
-        if self.joint:
-            lower = self.d_min_m + self.margin_m - np.einsum("prd,pd->pr", coeffs, p0[i] - p0[k])
-            lower[hard, 0] = 0.0
-            return (pairs, coeffs, lower, on, hard), None
-        # two per-drone rows about the guess's midpoint at each row's position step:
-        # +-c^T (p0_side - m_e) >= half, side i with +c, side k with -c
-        mid = (0.5 * (g_i + g_k))[self.ends].transpose(1, 0, 2)  # (P, R, d)
-        half = 0.5 * (self.d_min_m + self.margin_m)
-        p = pairs.shape[0]
-        both = np.empty((2 * p,) + coeffs.shape[1:])
-        both[:p] = coeffs
-        np.negative(coeffs, out=both[p:])
-        lower = np.empty((2 * p, coeffs.shape[1]))
-        np.subtract(half, np.einsum("prd,prd->pr", coeffs, p0[i][:, None] - mid), out=lower[:p])
-        np.add(half, np.einsum("prd,prd->pr", coeffs, p0[k][:, None] - mid), out=lower[p:])
-        hard2 = np.concatenate([hard, hard])
-        lower[hard2, 0] = 0.0
-        labels = np.concatenate([pairs, pairs[:, ::-1]])
-        return None, (labels, both, lower, np.concatenate([on, on]), hard2)
+        lower = self.d_min_m + self.margin_m - np.einsum("prd,pd->pr", coeffs, p0[i] - p0[k])
+        lower[hard, 0] = 0.0
+        return (pairs, coeffs, lower, on, hard), None
 
-    def clear_test(self, p0: Array, guess: Array, pos: Array, spread: Array) -> Test:
-        """The pairs that the per-drone spread bound (see :meth:`Separation.clear`) leaves in doubt."""
+    def _sides(self, p0: Array, path: Array, pairs: Array, on: Array) -> RowPart:
+        """The decoupled rows: two per-drone rows about the guess's midpoint ``m_e`` at each row's
+        position step, ``+-c^T (p0_side - m_e) >= (d_min + margin) / 2``, side i (+c) of every
+        pair, then side k (-c); built :data:`BLOCK` pairs at a time (the temporaries stay small)."""
+        p, r, d = pairs.shape[0], self.segs.shape[0], path.shape[2]
+        coeffs, lower, hard = np.empty((2 * p, r, d)), np.empty((2 * p, r)), np.empty(p, dtype=bool)
+        for a in range(0, p, BLOCK):
+            b = min(a + BLOCK, p)
+            hard[a:b] = self._side_block(p0, path, pairs[a:b], coeffs[a:b], coeffs[p + a : p + b],
+                                         lower[a:b], lower[p + a : p + b])  # fmt: skip
+        labels = np.concatenate([pairs, pairs[:, ::-1]])
+        return labels, coeffs, lower, np.concatenate([on, on]), np.concatenate([hard, hard])
+
+    def _side_block(
+        self, p0: Array, path: Array, pairs: Array, c_i: Array, c_k: Array, lower_i: Array, lower_k: Array
+    ) -> Array:
+        """Both sides' rows of ``pairs`` written into ``c_*`` (P, R, d) and ``lower_*`` (P, R); the
+        pairs that start inside ``d_min`` (P,). A segment's two rows share its normal."""
+        i, k = pairs[:, 0], pairs[:, 1]
+        g_i, g_k = path[i], path[k]  # (P, H + 1, d)
+        rel = self.scaled(g_i - g_k)  # metric space
+        normal = self.scaled(segment_normals(rel))  # (P, H, d), world coordinates
+        np.take(normal, self.segs, axis=1, out=c_i)
+        hard, c0 = inside(rel[:, 0], self.d_min_m)
+        c_i[hard, 0] = self.scaled(c0)
+        np.negative(c_i, out=c_k)
+        half, h = 0.5 * (self.d_min_m + self.margin_m), rel.shape[1] - 1
+        mid = np.add(g_i, g_k, out=g_i)  # the midpoints (P, H + 1, d), in place
+        mid *= 0.5
+        gap = np.empty_like(mid)
+        at_end, at_start = self.ends == self.segs + 1, self.ends == self.segs  # rows at x_{j+1}, at x_j
+        for side, out, fix in ((i, lower_i, np.subtract), (k, lower_k, np.add)):  # -(-c) = +c
+            np.subtract(p0[side][:, None], mid, out=gap)
+            out[:, at_end] = fix(half, np.einsum("pjd,pjd->pj", normal, gap[:, 1:]))
+            out[:, at_start] = fix(half, np.einsum("pjd,pjd->pj", normal[:, 1:], gap[:, 1:h]))
+            out[hard, 0] = 0.0
+        return hard
+
+    def doubtful(self, p0: Array, spread: Array) -> tuple[Array, Array, Array]:
+        """The pairs ``(i, k)`` that the per-drone spread bound (see :meth:`Separation.clear`) leaves
+        in doubt, and by how much their start distance clears the bound (negative: in doubt)."""
         scaled = p0 * self.metric  # the metric only shrinks lengths: world spreads bound it
         need = self.d_min_m + self.margin_m
         i, k = pairs_within(scaled, need + 2.0 * spread.max()).T
         clearance = np.linalg.norm(scaled[i] - scaled[k], axis=1) - spread[i] - spread[k]
         near = clearance < need
-        i, k = i[near], k[near]
-        return self.relative(guess, i, k), self.relative(pos, i, k), self.d_min_m
+        return i[near], k[near], clearance[near] - need
+
+    def clear_test(self, guess: Array, pos: Array, i: Array, k: Array) -> Test:
+        """Relative guess and positions (m, H + 1, d) of the pairs ``(i, k)``, from drone-major
+        ``guess`` and ``pos`` (n, H + 1, d)."""
+        return self.scaled(guess[i] - guess[k]), self.scaled(pos[i] - pos[k]), self.d_min_m
 
     def first_segment(self, p0: Array, p1: Array, pairs: Array) -> Test:
         """Relative positions of ``pairs`` at the start and the end of the first segment."""
@@ -160,23 +189,30 @@ class ObstacleSeparation:
         self.center_m, self.required_m = obstacle_arrays(obstacles, d_min_m)
         self.margin_m, self.segs = settings.margin_m, row_segments(settings.horizon)
 
-    def rows(self, p0: Array, guess: Array, items: Array, on: Array) -> RowPart:
-        """One-drone rows of the ``(drone, obstacle)`` items (O, 2) about ``guess``."""
+    def rows(self, p0: Array, path: Array, items: Array, on: Array) -> RowPart:
+        """One-drone rows of the ``(drone, obstacle)`` items (O, 2) about the guess ``path``
+        (n, H + 1, d) (drone-major)."""
         drone, ob = items[:, 0], items[:, 1]
         center, required = self.center_m[ob], self.required_m[ob]
-        coeffs = segment_normals(guess[:, drone] - center, self.segs)
+        coeffs = segment_normals(path[drone] - center[:, None], self.segs)
         hard, c0 = inside(p0[drone] - center, required)
         coeffs[hard, 0] = c0
         lower = required[:, None] + self.margin_m - np.einsum("ord,od->or", coeffs, p0[drone] - center)
         lower[hard, 0] = 0.0
         return np.column_stack([drone, -1 - ob]), coeffs, lower, on, hard
 
-    def clear_test(self, p0: Array, guess: Array, pos: Array, spread: Array) -> Test:
-        """The items that the per-drone spread bound (see :meth:`Separation.clear`) leaves in doubt."""
+    def doubtful(self, p0: Array, spread: Array) -> tuple[Array, Array, Array]:
+        """The ``(drone, obstacle)`` items that the per-drone spread bound (see
+        :meth:`Separation.clear`) leaves in doubt, and by how much they clear it (negative)."""
         gap = np.linalg.norm(p0[:, None] - self.center_m, axis=-1) - self.required_m - spread[:, None]
         i, m = np.nonzero(gap < self.margin_m)
-        center = self.center_m[m]
-        return guess[:, i] - center, pos[:, i] - center, self.required_m[m]
+        return i, m, gap[i, m] - self.margin_m
+
+    def clear_test(self, guess: Array, pos: Array, i: Array, m: Array) -> Test:
+        """Guess and positions (m, H + 1, d) of the items' drones relative to their obstacle, from
+        drone-major ``guess`` and ``pos`` (n, H + 1, d)."""
+        center = self.center_m[m][:, None]
+        return guess[i] - center, pos[i] - center, self.required_m[m]
 
     def first_segment(self, p0: Array, p1: Array, items: Array) -> Test:
         """Positions of the ``items``' drones relative to their obstacle at both ends of the first segment."""
@@ -205,12 +241,13 @@ class Separation:
         none, no = np.empty((0, 2), dtype=np.intp), np.empty(0, dtype=bool)
         empty = (none, np.empty((0, r, d)), np.empty((0, r)), no, no)
         joint, singles = empty, []
+        path = np.ascontiguousarray(guess.transpose(1, 0, 2))  # (n, H + 1, d): items gather rows
         if cand.pairs.shape[0] and self.pairs is not None:
-            two, one = self.pairs.rows(p0, guess, cand.pairs, cand.pair_on)
+            two, one = self.pairs.rows(p0, path, cand.pairs, cand.pair_on)
             joint = joint if two is None else two
             singles += [] if one is None else [one]
         if cand.obstacles.shape[0] and self.obstacles is not None:
-            singles.append(self.obstacles.rows(p0, guess, cand.obstacles, cand.obstacle_on))
+            singles.append(self.obstacles.rows(p0, path, cand.obstacles, cand.obstacle_on))
         if len(singles) == 1:
             labels, s_coeffs, s_lower, s_on, s_hard = singles[0]
         else:
@@ -235,18 +272,25 @@ class Separation:
         """
         pos = np.concatenate([p0[None], p0 + x])
         spread = _max_norm(guess - p0) + _max_norm(pos - guess)  # (n,) [m]
-        tests: list[Test] = []
-        if self.pairs is not None and p0.shape[0] > 1:
-            tests.append(self.pairs.clear_test(p0, guess, pos, spread))
-        if self.obstacles is not None:
-            tests.append(self.obstacles.clear_test(p0, guess, pos, spread))
-        for g, delta, required in tests:
-            g_norm = np.linalg.norm(g, axis=-1)
-            seg = np.maximum(g_norm[:-1], g_norm[1:]) - np.linalg.norm(np.diff(g, axis=0), axis=-1)
-            dev = np.linalg.norm(delta - g, axis=-1).max(axis=0, initial=0.0)
-            if np.any(seg.min(axis=0, initial=np.inf) - dev < required + self.margin_m):
+        units = [u for u in (self.pairs if p0.shape[0] > 1 else None, self.obstacles) if u is not None]
+        path_g, path_p = (np.ascontiguousarray(v.transpose(1, 0, 2)) for v in (guess, pos))  # drone-major
+        for unit in units:
+            i, k, slack = unit.doubtful(p0, spread)
+            if i.shape[0] > FIRST_TESTED:  # the least clear first: a miss among them answers early
+                first = np.argpartition(slack, FIRST_TESTED)[:FIRST_TESTED]
+                if not self._passes(*unit.clear_test(path_g, path_p, i[first], k[first])):
+                    return False
+            if not self._passes(*unit.clear_test(path_g, path_p, i, k)):
                 return False
         return True
+
+    def _passes(self, g: Array, delta: Array, required: Array | float) -> bool:
+        """Whether relative positions ``delta`` about the relative guess ``g`` (m, H + 1, d) meet
+        the per-segment bound of :meth:`clear` for every item."""
+        g_norm = vector_norms(g)
+        seg = np.maximum(g_norm[:, :-1], g_norm[:, 1:]) - vector_norms(np.diff(g, axis=1))
+        dev = vector_norms(delta - g).max(axis=1, initial=0.0)
+        return not np.any(seg.min(axis=1, initial=np.inf) - dev < required + self.margin_m)
 
     def shortfall(self, x: Array, rows: SeparationRows, tol: float) -> tuple[float, Array]:
         """Largest amount [m] by which positions ``x`` (H, n, d) miss an active separation row,
@@ -270,9 +314,14 @@ class Separation:
         """``c^T x_e - b`` (S, R) of the one-drone rows at positions ``x`` (H, n, d): negative where
         a row is missed (inf for the items out of reach). Shared by :meth:`meets_joint` and
         :meth:`conflicted`."""
-        xe = x[self.ends - 1]  # (R, n, d)
-        value = np.einsum("srd,rsd->sr", rows.single_coeffs, xe[:, rows.singles]) - rows.single_lower
-        return np.where(rows.single_on[:, None], value, np.inf)
+        xe = np.ascontiguousarray(x[self.ends - 1].transpose(1, 0, 2))  # (n, R, d)
+        value = np.empty_like(rows.single_lower, dtype=float)
+        for a in range(0, rows.singles.shape[0], 2 * BLOCK):  # in blocks: the gathered positions stay small
+            b = a + 2 * BLOCK
+            dot = np.einsum("srd,srd->sr", rows.single_coeffs[a:b], xe[rows.singles[a:b]])
+            np.subtract(dot, rows.single_lower[a:b], out=value[a:b])
+        value[~rows.single_on] = np.inf
+        return value
 
     def meets_joint(self, x: Array, rows: SeparationRows, values: Array | None = None) -> bool:
         """Whether positions ``x`` (H, n, d) meet the joint pair rows (and the obstacle rows) of the

@@ -28,7 +28,7 @@ def cand(pairs: list[list[int]], obstacles: list[list[int]] | None = None) -> Ca
 
 
 def test_segment_normals_by_hand() -> None:
-    rel = np.array([[[2.0, 1.0], [0.0, 0.0]], [[2.0, -1.0], [0.0, 0.0]]])  # (H + 1 = 2, m = 2, d)
+    rel = np.array([[[2.0, 1.0], [2.0, -1.0]], [[0.0, 0.0], [0.0, 0.0]]])  # (m = 2, H + 1 = 2, d)
     normals = segment_normals(rel, np.array([0]))
     np.testing.assert_allclose(normals[0, 0], [1.0, 0.0])  # closest point (2, 0)
     np.testing.assert_allclose(normals[1, 0], [1.0, 0.0])  # coincident: a fixed unit vector
@@ -83,7 +83,8 @@ def test_rows_at_both_segment_ends() -> None:
     p0 = np.array([[0.0, 0.0], [1.0, 0.0]])
     guess = np.array([p0, p0 + [[0, 0], [0, 1]], p0 + [[0, 0], [0, 2]], p0 + [[0, 0], [0, 2]]])
     pairs = PairSeparation(0.5, np.ones(2), MPCSettings(horizon=3))
-    (labels, coeffs, lower, on, _), singles = pairs.rows(p0, guess, np.array([[0, 1]]), np.ones(1, bool))
+    path = guess.transpose(1, 0, 2)  # drone-major
+    (labels, coeffs, lower, on, _), singles = pairs.rows(p0, path, np.array([[0, 1]]), np.ones(1, bool))
     assert coeffs.shape == (1, 5, 2) and lower.shape == (1, 5) and singles is None
     np.testing.assert_allclose(coeffs[0, 0], [-1.0, 0.0])  # segment 0 starts at the closest point
     np.testing.assert_allclose(coeffs[0, 1], coeffs[0, 2])  # segment 1's two rows share a normal
