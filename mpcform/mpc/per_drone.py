@@ -43,7 +43,7 @@ DAQP_INF = 1e30  # DAQP's "no bound"
 DAQP_OK = 1
 PRIMAL_TOL = 1e-9  # DAQP row feasibility tolerance (its default 1e-6 shows in the plans)
 MIN_SLACK_QUADRATIC = 1e-6  # keeps the soft QP's Hessian positive definite when w2 = 0
-BATCH_BYTES = 2**24  # the rows' w_e are gathered for all drones at once up to this size [bytes]
+ROW_BLOCK = 2048  # separation rows built at once (whole drones; a block stays in cache)
 
 
 class PerDroneQP(StepSolver):
@@ -72,14 +72,15 @@ class PerDroneQP(StepSolver):
         self._const_v = (np.vstack(rows) if rows else np.zeros((0, nu))) @ self._m_inv
         self._ends = row_ends(h)
         # x_e = dt sum_{j<e} u_j = (sum_{j<e} dt M^-1[(j, .), :]) v, and M^-1 = T (x) I_d, so
-        # x_e = (w_e (x) I_d) v, a^T x_e = (w_e (x) a)^T v: w_e (H, d) per end e (equal columns)
+        # x_e = (w_e (x) I_d) v and a^T x_e = (w_e (x) a)^T v: w_e (x) 1_d (H d,) per end e
         x_v = dt_s * np.cumsum(self._m_inv.reshape(h, dim, nu), axis=0)
-        self._w_end = np.einsum("echc->ehc", x_v.reshape(h, dim, h, dim)).copy()
+        self._w_rep = np.einsum("echc->ehc", x_v.reshape(h, dim, h, dim)).reshape(h, nu)
         self._eye = np.eye(nu)
         w2 = max(settings.slack_quadratic, MIN_SLACK_QUADRATIC)
         self._hess_soft = np.diag(np.concatenate([np.full(h, w2), np.ones(nu)]))
         self._options: dict[str, Any] = {"iter_limit": settings.max_iter, "primal_tol": PRIMAL_TOL}
         self._a, self._lo, self._hi = np.zeros((0, nu)), np.zeros(0), np.zeros(0)
+        self._fixed_bounds = all(family.fixed_bounds for family in families)
 
     def solve(self, qp: StepQP) -> tuple[QPSolution, int]:
         """Solve every drone's QP (the one-drone separation rows within reach of ``qp.rows``)."""
@@ -108,72 +109,79 @@ class PerDroneQP(StepSolver):
         h, n, nu, n_const = st.horizon, p0.shape[0], self._nu, self._const_v.shape[0]
         f_v = -c.transpose(1, 0, 2).reshape(n, nu)  # 0.5 ||v - c||^2
         v_warm = warm_u.transpose(1, 0, 2).reshape(n, nu) @ self._m.T
-        c_lo, c_hi = self._bounds(p0, u_prev)
         sep_c, sep_end, sep_lo, sep_soft, counts = self._separation(n, singles, coeffs, lower, hard, on)
         a, lo, hi = self._buffers(int(counts.max(initial=0)))
-        rows3 = a[n_const:].reshape(a.shape[0] - n_const, h, self.dim)  # row r: w_{e_r} (x) a_r, (H, d)
-        w_of_row = self._w_end[sep_end - 1] if sep_end.shape[0] * nu * 8 <= BATCH_BYTES else None
-        same_bounds = n > 0 and bool((c_lo == c_lo[0]).all() and (c_hi == c_hi[0]).all())
-        if same_bounds:  # no per-drone constant bounds (velocity rows only): written once
-            lo[:n_const], hi[:n_const] = c_lo[0], c_hi[0]
+        bounds = None if self._fixed_bounds else self._bounds(p0, u_prev)  # else in the buffers
         offsets = [0, *np.cumsum(counts).tolist()]
-        v_out, s_out = np.zeros((n, nu)), np.zeros((n, h))
-        flags, lams = np.zeros(n, dtype=int), [np.zeros(0)] * n
+        v_out, s_out, flags, lams = [np.empty(0)] * n, np.zeros((n, h)), [DAQP_OK] * n, [np.empty(0)] * n
         iters, in_daqp = 0, 0.0
 
-        def load(i: int) -> int:
-            """Put drone i's rows and bounds into the buffers; return its number of rows."""
-            first, last = offsets[i], offsets[i + 1]
-            m = n_const + last - first
-            w = self._w_end[sep_end[first:last] - 1] if w_of_row is None else w_of_row[first:last]
-            np.multiply(w, sep_c[first:last, None, :], out=rows3[: last - first])
-            lo[n_const:m] = sep_lo[first:last]
-            if not same_bounds:
-                lo[:n_const], hi[:n_const] = c_lo[i], c_hi[i]
+        def put(i: int, rows_v: Array) -> int:
+            """Put drone i's rows ``rows_v`` over v and its bounds into the buffers; return its
+            number of rows."""
+            m = n_const + rows_v.shape[0]
+            a[n_const:m] = rows_v
+            lo[n_const:m] = sep_lo[offsets[i] : offsets[i + 1]]
+            if bounds is not None:
+                lo[:n_const], hi[:n_const] = bounds[0][i], bounds[1][i]
             return m
 
         solve, eye, options = self._daqp.solve, self._eye, self._options
-        for i in range(n):  # the hard QPs
-            m = load(i)
-            t0 = time.perf_counter()
-            v_out[i], _, flags[i], info = solve(
-                eye, f_v[i], a[:m], hi[:m], lo[:m], primal_start=v_warm[i], **options
-            )  # fmt: skip
-            in_daqp += time.perf_counter() - t0
-            iters += info["iterations"]
-            lams[i] = info["lam"]
-        soft = flags != DAQP_OK  # the hard optimum (s = 0) wherever the hard QP is feasible
-        for i in np.flatnonzero(soft).tolist():
-            m = load(i)
+        for start, stop in _blocks(offsets, ROW_BLOCK):  # the hard QPs, rows built a block at a time
+            base = offsets[start]
+            rows_v = self._rows_v(sep_c[base : offsets[stop]], sep_end[base : offsets[stop]])
+            for i in range(start, stop):
+                m = put(i, rows_v[offsets[i] - base : offsets[i + 1] - base])
+                t0 = time.perf_counter()
+                v_out[i], _, flags[i], info = solve(
+                    eye, f_v[i], a[:m], hi[:m], lo[:m], primal_start=v_warm[i], **options
+                )  # fmt: skip
+                in_daqp += time.perf_counter() - t0
+                iters += info["iterations"]
+                lams[i] = info["lam"]
+        soft = [i for i in range(n) if flags[i] != DAQP_OK]  # else the hard optimum (s = 0)
+        for i in soft:
+            first, last = offsets[i], offsets[i + 1]
+            m = put(i, self._rows_v(sep_c[first:last], sep_end[first:last]))
             t0 = time.perf_counter()
             v_out[i], s_out[i], flags[i], info = self._solve_soft(
-                f_v[i], a[:m], hi[:m], lo[:m], sep_end[offsets[i] : offsets[i + 1]],
-                sep_soft[offsets[i] : offsets[i + 1]], n_const,
+                f_v[i], a[:m], hi[:m], lo[:m], sep_end[first:last], sep_soft[first:last], n_const
             )  # fmt: skip
             in_daqp += time.perf_counter() - t0
             iters += info["iterations"]
             lams[i] = info["lam"]
         iters = int(iters)
-        bad = np.flatnonzero((flags != DAQP_OK) | ~np.isfinite(v_out).all(axis=1))
+        v_all = np.array(v_out).reshape(n, nu)
+        bad = np.flatnonzero((np.array(flags) != DAQP_OK) | ~np.isfinite(v_all).all(axis=1))
         if bad.size:
             status = f"daqp: exit flag {flags[bad[0]]} (drone {bad[0]})"
             return failed(status, in_daqp, iters), 0
-        u_out = v_out @ self._m_inv.T
+        u_out = v_all @ self._m_inv.T
         x_out = u_out @ self._x_of_u.T
         flat = [v.reshape(n, h, -1).transpose(1, 0, 2).ravel() for v in (u_out, x_out, s_out)]
         sol = QPSolution(np.concatenate(flat), None, True, "daqp: optimal", iters, in_daqp)
         active = np.count_nonzero(np.abs(np.concatenate(lams)) > ACTIVE_TOL) if n else 0
         return sol, int(active)
 
+    def _rows_v(self, coeffs: Array, end: Array) -> Array:
+        """Separation rows (K, H d) over ``v`` of coefficients ``coeffs`` (K, d) at position steps
+        ``end`` (K,): ``a^T x_e = (w_e (x) a)^T v``."""
+        rows = np.repeat(coeffs[:, None, :], self.settings.horizon, axis=1).reshape(end.shape[0], self._nu)
+        rows *= self._w_rep[end - 1]
+        return rows
+
     def _buffers(self, max_sep: int) -> tuple[Array, Array, Array]:
         """Row and bound buffers with room for ``max_sep`` separation rows after the constant ones
-        (kept between calls; only the separation part and the per-drone bounds are rewritten)."""
+        (kept between calls; only the separation part and per-drone bounds are rewritten)."""
         n_const = self._const_v.shape[0]
         if self._a.shape[0] < n_const + max_sep:
             size = n_const + max(max_sep, 2 * (self._a.shape[0] - n_const))
             self._a = np.empty((size, self._nu))
             self._a[:n_const] = self._const_v
             self._lo, self._hi = np.empty(size), np.full(size, DAQP_INF)
+            if self._fixed_bounds:  # the same for every drone at every step
+                lo, hi = self._bounds(np.zeros((1, self.dim)), np.zeros((1, self.dim)))
+                self._lo[:n_const], self._hi[:n_const] = lo[0], hi[0]
         return self._a, self._lo, self._hi
 
     def _solve_soft(
@@ -202,7 +210,7 @@ class PerDroneQP(StepSolver):
 
         A row ``a^T x_e + s_e >= b`` that every reachable ``x_e`` meets (``b <= -|a| e v_max dt``,
         since the velocity set lies in the ball) is left out, the optimum unchanged. The rows over
-        ``v`` are built drone by drone: ``a^T x_e = (w_e (x) a)^T v`` (see :attr:`_w_end`).
+        ``v`` are built later, a block of drones at a time (:meth:`_rows_v`).
         """
         keep = np.ones(lower.shape, dtype=bool)
         if on is not None:
@@ -228,3 +236,13 @@ class PerDroneQP(StepSolver):
         lo, hi = zip(*(family.dense_bounds(p0, u_prev, DAQP_INF) for family in self.families), strict=True)
         return np.hstack(lo), np.hstack(hi)
 
+
+def _blocks(offsets: list[int], size: int) -> list[tuple[int, int]]:
+    """Runs ``[start, stop)`` of consecutive drones (drone i's rows ``offsets[i]:offsets[i + 1]``)
+    with at most ``size`` rows each (a drone with more runs alone)."""
+    runs, start = [], 0
+    for i in range(1, len(offsets) - 1):
+        if offsets[i + 1] - offsets[start] > size:
+            runs.append((start, i))
+            start = i
+    return [*runs, (start, len(offsets) - 1)] if len(offsets) > 1 else []

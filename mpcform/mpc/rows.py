@@ -150,6 +150,8 @@ def positions_of_inputs(horizon: int, dim: int, dt_s: float) -> Array:
 class LimitRows(ABC):
     """One limit's rows on every drone at every step, for the sparse and the per-drone QP."""
 
+    fixed_bounds = False  # whether the dense rows' bounds are the same for every drone and step
+
     @abstractmethod
     def sparse(self, lay: Layout) -> RowBlock:
         """Rows of the sparse QP, with the bounds that stay the same from step to step."""
@@ -173,6 +175,8 @@ class LimitRows(ABC):
 
 class VelocityRows(LimitRows):
     """Velocity set ``D u_{j,i} <= h`` [m/s] inside the ball ``||u|| <= v_max`` (:func:`velocity_set`)."""
+
+    fixed_bounds = True
 
     def __init__(self, dim: int, horizon: int, settings: MPCSettings, v_max_mps: float) -> None:
         self.horizon = horizon
