@@ -124,44 +124,35 @@ class PairSeparation:
     def _sides(self, p0: Array, path: Array, pairs: Array, on: Array) -> RowPart:
         """The decoupled rows: two per-drone rows about the guess's midpoint ``m_e`` at each row's
         position step, ``+-c^T (p0_side - m_e) >= (d_min + margin) / 2``, side i (+c) of every
-        pair, then side k (-c); built :data:`BLOCK` pairs at a time (the temporaries stay small)."""
-        p, r, d = pairs.shape[0], self.segs.shape[0], path.shape[2]
+        pair, then side k (-c); built per segment (its two rows share its normal), :data:`BLOCK`
+        pairs at a time (the temporaries stay small)."""
+        p, r, d, h = pairs.shape[0], self.segs.shape[0], path.shape[2], path.shape[1] - 1
         coeffs, lower, hard = np.empty((2 * p, r, d)), np.empty((2 * p, r)), np.empty(p, dtype=bool)
+        half = 0.5 * (self.d_min_m + self.margin_m)
+        at_end, at_start = self.ends == self.segs + 1, self.ends == self.segs  # rows at x_{j+1}, at x_j
         for a in range(0, p, BLOCK):
             b = min(a + BLOCK, p)
-            hard[a:b] = self._side_block(p0, path, pairs[a:b], coeffs[a:b], coeffs[p + a : p + b],
-                                         lower[a:b], lower[p + a : p + b])  # fmt: skip
-        labels = np.concatenate([pairs, pairs[:, ::-1]])
-        return labels, coeffs, lower, np.concatenate([on, on]), np.concatenate([hard, hard])
-
-    def _side_block(
-        self, p0: Array, path: Array, pairs: Array, c_i: Array, c_k: Array, lower_i: Array, lower_k: Array
-    ) -> Array:
-        """Both sides' rows of ``pairs`` written into ``c_*`` (P, R, d) and ``lower_*`` (P, R); the
-        pairs that start inside ``d_min`` (P,). A segment's two rows share its normal."""
-        i, k = pairs[:, 0], pairs[:, 1]
-        g_i, g_k = path[i], path[k]  # (P, H + 1, d)
-        rel = self.scaled(g_i - g_k)  # metric space
-        normal = self.scaled(segment_normals(rel))  # (P, H, d), world coordinates
-        np.take(normal, self.segs, axis=1, out=c_i)
-        hard, c0 = inside(rel[:, 0], self.d_min_m)
-        c_i[hard, 0] = self.scaled(c0)
-        np.negative(c_i, out=c_k)
-        half, h = 0.5 * (self.d_min_m + self.margin_m), rel.shape[1] - 1
-        mid = np.add(g_i, g_k, out=g_i)  # the midpoints (P, H + 1, d), in place
-        mid *= 0.5
-        gap = np.empty_like(mid)
-        at_end, at_start = self.ends == self.segs + 1, self.ends == self.segs  # rows at x_{j+1}, at x_j
-        for side, out, fix in ((i, lower_i, np.subtract), (k, lower_k, np.add)):  # -(-c) = +c
-            np.subtract(p0[side][:, None], mid, out=gap)
-            out[:, at_end] = fix(half, np.einsum("pjd,pjd->pj", normal, gap[:, 1:]))
-            out[:, at_start] = fix(half, np.einsum("pjd,pjd->pj", normal[:, 1:], gap[:, 1:h]))
-            out[hard, 0] = 0.0
-        return hard
+            i, k = pairs[a:b, 0], pairs[a:b, 1]
+            g_i, g_k = path[i], path[k]  # (B, H + 1, d)
+            rel = self.scaled(g_i - g_k)  # metric space
+            normal = self.scaled(segment_normals(rel))  # (B, H, d), world coordinates
+            np.take(normal, self.segs, axis=1, out=coeffs[a:b])
+            hard[a:b], c0 = inside(rel[:, 0], self.d_min_m)
+            coeffs[a:b][hard[a:b], 0] = self.scaled(c0)
+            np.negative(coeffs[a:b], out=coeffs[p + a : p + b])
+            mid = np.add(g_i, g_k, out=g_i)  # the midpoints (B, H + 1, d), in place
+            mid *= 0.5
+            for side, out, fix in ((i, lower[a:b], np.subtract), (k, lower[p + a : p + b], np.add)):
+                gap = p0[side][:, None] - mid  # -(-c)^T gap = +c^T gap on side k
+                out[:, at_end] = fix(half, np.einsum("pjd,pjd->pj", normal, gap[:, 1:]))
+                out[:, at_start] = fix(half, np.einsum("pjd,pjd->pj", normal[:, 1:], gap[:, 1:h]))
+        hard2 = np.concatenate([hard, hard])
+        lower[hard2, 0] = 0.0
+        return np.concatenate([pairs, pairs[:, ::-1]]), coeffs, lower, np.concatenate([on, on]), hard2
 
     def doubtful(self, p0: Array, spread: Array) -> tuple[Array, Array, Array]:
-        """The pairs ``(i, k)`` that the per-drone spread bound (see :meth:`Separation.clear`) leaves
-        in doubt, and by how much their start distance clears the bound (negative: in doubt)."""
+        """The pairs ``(i, k)`` the spread bound of :meth:`Separation.clear` leaves in doubt, and by
+        how much their start distance clears it (negative)."""
         scaled = p0 * self.metric  # the metric only shrinks lengths: world spreads bound it
         need = self.d_min_m + self.margin_m
         i, k = pairs_within(scaled, need + 2.0 * spread.max()).T
@@ -237,22 +228,16 @@ class Separation:
 
     def rows(self, p0: Array, guess: Array, cand: Candidates) -> SeparationRows:
         """Closest-point rows about ``guess`` (H + 1, n, d) for every candidate item."""
-        r, d = self.n_rows, self.dim
-        none, no = np.empty((0, 2), dtype=np.intp), np.empty(0, dtype=bool)
-        empty = (none, np.empty((0, r, d)), np.empty((0, r)), no, no)
-        joint, singles = empty, []
+        r, no, singles = self.n_rows, np.empty(0, dtype=bool), []
+        joint = empty = (np.empty((0, 2), np.intp), np.empty((0, r, self.dim)), np.empty((0, r)), no, no)
         path = np.ascontiguousarray(guess.transpose(1, 0, 2))  # (n, H + 1, d): items gather rows
         if cand.pairs.shape[0] and self.pairs is not None:
             two, one = self.pairs.rows(p0, path, cand.pairs, cand.pair_on)
-            joint = joint if two is None else two
-            singles += [] if one is None else [one]
+            joint, singles = joint if two is None else two, [] if one is None else [one]
         if cand.obstacles.shape[0] and self.obstacles is not None:
             singles.append(self.obstacles.rows(p0, path, cand.obstacles, cand.obstacle_on))
-        if len(singles) == 1:
-            labels, s_coeffs, s_lower, s_on, s_hard = singles[0]
-        else:
-            columns = (np.concatenate(parts) for parts in zip(*[empty, *singles], strict=True))
-            labels, s_coeffs, s_lower, s_on, s_hard = columns
+        parts = singles[0] if len(singles) == 1 else map(np.concatenate, zip(empty, *singles, strict=True))
+        labels, s_coeffs, s_lower, s_on, s_hard = parts
         pairs, p_coeffs, p_lower, p_on, p_hard = joint
         return SeparationRows(
             pairs, p_coeffs, p_lower, p_on, labels[:, 0], labels, s_coeffs, s_lower, s_on, p_hard, s_hard
@@ -295,31 +280,18 @@ class Separation:
     def shortfall(self, x: Array, rows: SeparationRows, tol: float) -> tuple[float, Array]:
         """Largest amount [m] by which positions ``x`` (H, n, d) miss an active separation row,
         and the labels (m, 2) of the items that miss by more than ``tol``."""
-        xe = x[self.ends - 1]  # (R, n, d)
-        worst, missed = -np.inf, [np.empty((0, 2), dtype=np.intp)]
-        pair_rel = xe[:, rows.pairs[:, 0]] - xe[:, rows.pairs[:, 1]]
-        parts = [
-            (rows.pair_coeffs, rows.pair_lower, rows.pair_on, rows.pairs, pair_rel),
-            (rows.single_coeffs, rows.single_lower, rows.single_on, rows.labels, xe[:, rows.singles]),
-        ]
-        for coeffs, lower, on, labels, rel in parts:
-            if not on.any():
-                continue
-            short = np.where(on, (lower - np.einsum("mrd,rmd->mr", coeffs, rel)).max(axis=1), -np.inf)
-            worst = max(worst, float(short.max()))
-            missed.append(labels[short > tol])
-        return worst, np.unique(np.concatenate(missed), axis=0)
+        least, labels = self._least(x, rows, None)
+        return -float(least.min(initial=np.inf)), np.unique(labels[least < -tol], axis=0)
 
     def single_values(self, x: Array, rows: SeparationRows) -> Array:
         """``c^T x_e - b`` (S, R) of the one-drone rows at positions ``x`` (H, n, d): negative where
-        a row is missed (inf for the items out of reach). Shared by :meth:`meets_joint` and
-        :meth:`conflicted`."""
+        a row is missed (inf for the items out of reach)."""
         xe = np.ascontiguousarray(x[self.ends - 1].transpose(1, 0, 2))  # (n, R, d)
         value = np.empty_like(rows.single_lower, dtype=float)
         for a in range(0, rows.singles.shape[0], 2 * BLOCK):  # in blocks: the gathered positions stay small
-            b = a + 2 * BLOCK
-            dot = np.einsum("srd,srd->sr", rows.single_coeffs[a:b], xe[rows.singles[a:b]])
-            np.subtract(dot, rows.single_lower[a:b], out=value[a:b])
+            b = slice(a, a + 2 * BLOCK)
+            dot = np.einsum("srd,srd->sr", rows.single_coeffs[b], xe[rows.singles[b]])
+            np.subtract(dot, rows.single_lower[b], out=value[b])
         value[~rows.single_on] = np.inf
         return value
 
@@ -337,16 +309,23 @@ class Separation:
     def conflicted(self, x: Array, rows: SeparationRows, values: Array | None = None) -> Array:
         """Drones (n,) of the items whose rows positions ``x`` (H, n, d) miss (an obstacle item
         names only its drone); ``values``: :meth:`single_values` when known."""
+        least, labels = self._least(x, rows, values)
+        labels = labels[least < 0.0]
         conflicted = np.zeros(x.shape[1], dtype=bool)
-        value = self.single_values(x, rows) if values is None else values
-        labels = rows.labels[value.min(axis=1, initial=np.inf) < 0.0]
         conflicted[labels[labels >= 0]] = True
+        return conflicted
+
+    def _least(self, x: Array, rows: SeparationRows, values: Array | None) -> tuple[Array, Array]:
+        """Each item's least row value ``c^T x_e - b`` (inf out of reach), joint pairs then
+        one-drone items, and their labels."""
+        single = (self.single_values(x, rows) if values is None else values).min(axis=1, initial=np.inf)
+        pair = np.full(rows.pairs.shape[0], np.inf)
         if rows.pair_on.any():
             xe = x[self.ends - 1]  # (R, n, d)
             rel = xe[:, rows.pairs[:, 0]] - xe[:, rows.pairs[:, 1]]
-            short = (rows.pair_lower - np.einsum("mrd,rmd->mr", rows.pair_coeffs, rel)).max(axis=1)
-            conflicted[rows.pairs[rows.pair_on & (short > 0.0)]] = True
-        return conflicted
+            value = np.einsum("mrd,rmd->mr", rows.pair_coeffs, rel) - rows.pair_lower
+            pair[rows.pair_on] = value[rows.pair_on].min(axis=1)
+        return np.concatenate([pair, single]), np.concatenate([rows.pairs, rows.labels])
 
     def blocked_targets(self, targets: Array) -> Array:
         """Drones (n,) whose target (n, d) lies within ``d_min`` (in the metric, with the margin)
