@@ -44,8 +44,9 @@ def min_pair_distance(points: Array) -> float:
     return float(dist[:, 1].min())
 
 
-def pairs_within(points: Array, radius: float) -> Array:
-    """Index pairs (m, 2), i < j, sorted, of rows of ``points`` closer than ``radius``."""
+def pairs_within(points: Array, radius: float, sort: bool = True) -> Array:
+    """Index pairs (m, 2), i < j, of rows of ``points`` closer than ``radius`` (sorted unless
+    ``sort`` is false: in the tree's order for more than :data:`BRUTE_FORCE_MAX_N` points)."""
     n = points.shape[0]
     if n < 2:
         return np.empty((0, 2), dtype=np.intp)
@@ -54,8 +55,9 @@ def pairs_within(points: Array, radius: float) -> Array:
         diff = points[i] - points[k]
         close = np.einsum("ij,ij->i", diff, diff) < radius * radius
         return np.column_stack([i[close], k[close]]).astype(np.intp)
-    pairs = cKDTree(points).query_pairs(radius, output_type="ndarray").astype(np.intp)
-    return pairs[np.lexsort((pairs[:, 1], pairs[:, 0]))]
+    tree = cKDTree(points, balanced_tree=False, compact_nodes=False)  # built faster; the same pairs
+    pairs = tree.query_pairs(radius, output_type="ndarray").astype(np.intp)
+    return pairs[np.lexsort((pairs[:, 1], pairs[:, 0]))] if sort else pairs
 
 
 @lru_cache(maxsize=32)

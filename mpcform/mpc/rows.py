@@ -25,6 +25,7 @@ from mpcform.mpc.limits import Limits
 from mpcform.mpc.settings import MPCSettings
 
 INF = np.inf
+INSCRIBED = 1.0 - 1e-9  # ||u||^2 below this times h^2: inside the velocity set, rounding included
 
 
 @dataclass(frozen=True)
@@ -197,7 +198,15 @@ class VelocityRows(LimitRows):
         return np.full(shape, -inf), np.full(shape, self.h_mps)
 
     def violators(self, p0: Array, u_prev: Array, u: Array, x: Array) -> Array:
-        return np.asarray((u @ self.normals.T > self.h_mps).any(axis=(0, 2)))
+        """Tested on the drones with an input outside the inscribed ball ``||u|| <= h`` (inside it,
+        every ``D_i^T u <= ||u|| <= h``, rounding included with the factor's margin)."""
+        sq = u[..., 0] * u[..., 0]
+        for a in range(1, u.shape[-1]):
+            sq += u[..., a] * u[..., a]
+        out = sq.max(axis=0, initial=0.0) > INSCRIBED * self.h_mps**2
+        if out.any():
+            out[out] = (u[:, out] @ self.normals.T > self.h_mps).any(axis=(0, 2))
+        return out
 
 
 class AccelerationRows(LimitRows):

@@ -155,15 +155,15 @@ class PairSeparation:
         how much their start distance clears it (negative)."""
         scaled = p0 * self.metric  # the metric only shrinks lengths: world spreads bound it
         need = self.d_min_m + self.margin_m
-        i, k = pairs_within(scaled, need + 2.0 * spread.max()).T
+        i, k = pairs_within(scaled, need + 2.0 * spread.max(), sort=False).T
         clearance = np.linalg.norm(scaled[i] - scaled[k], axis=1) - spread[i] - spread[k]
         near = clearance < need
         return i[near], k[near], clearance[near] - need
 
     def clear_test(self, guess: Array, pos: Array, i: Array, k: Array) -> Test:
-        """Relative guess and positions (m, H + 1, d) of the pairs ``(i, k)``, from drone-major
-        ``guess`` and ``pos`` (n, H + 1, d)."""
-        return self.scaled(guess[i] - guess[k]), self.scaled(pos[i] - pos[k]), self.d_min_m
+        """Relative guess and positions (H + 1, m, d) of the pairs ``(i, k)``."""
+        rel = (self.scaled(np.take(v, i, axis=1) - np.take(v, k, axis=1)) for v in (guess, pos))
+        return *rel, self.d_min_m
 
     def first_segment(self, p0: Array, p1: Array, pairs: Array) -> Test:
         """Relative positions of ``pairs`` at the start and the end of the first segment."""
@@ -200,10 +200,9 @@ class ObstacleSeparation:
         return i, m, gap[i, m] - self.margin_m
 
     def clear_test(self, guess: Array, pos: Array, i: Array, m: Array) -> Test:
-        """Guess and positions (m, H + 1, d) of the items' drones relative to their obstacle, from
-        drone-major ``guess`` and ``pos`` (n, H + 1, d)."""
-        center = self.center_m[m][:, None]
-        return guess[i] - center, pos[i] - center, self.required_m[m]
+        """Guess and positions (H + 1, m, d) of the items' drones relative to their obstacle."""
+        center = self.center_m[m]
+        return np.take(guess, i, axis=1) - center, np.take(pos, i, axis=1) - center, self.required_m[m]
 
     def first_segment(self, p0: Array, p1: Array, items: Array) -> Test:
         """Positions of the ``items``' drones relative to their obstacle at both ends of the first segment."""
@@ -258,24 +257,23 @@ class Separation:
         pos = np.concatenate([p0[None], p0 + x])
         spread = _max_norm(guess - p0) + _max_norm(pos - guess)  # (n,) [m]
         units = [u for u in (self.pairs if p0.shape[0] > 1 else None, self.obstacles) if u is not None]
-        path_g, path_p = (np.ascontiguousarray(v.transpose(1, 0, 2)) for v in (guess, pos))  # drone-major
         for unit in units:
             i, k, slack = unit.doubtful(p0, spread)
-            if i.shape[0] > FIRST_TESTED:  # the least clear first: a miss among them answers early
+            if i.shape[0] > 8 * FIRST_TESTED:  # the least clear first: a miss among them answers early
                 first = np.argpartition(slack, FIRST_TESTED)[:FIRST_TESTED]
-                if not self._passes(*unit.clear_test(path_g, path_p, i[first], k[first])):
+                if not self._passes(*unit.clear_test(guess, pos, i[first], k[first])):
                     return False
-            if not self._passes(*unit.clear_test(path_g, path_p, i, k)):
+            if not self._passes(*unit.clear_test(guess, pos, i, k)):
                 return False
         return True
 
     def _passes(self, g: Array, delta: Array, required: Array | float) -> bool:
-        """Whether relative positions ``delta`` about the relative guess ``g`` (m, H + 1, d) meet
+        """Whether relative positions ``delta`` about the relative guess ``g`` (H + 1, m, d) meet
         the per-segment bound of :meth:`clear` for every item."""
         g_norm = vector_norms(g)
-        seg = np.maximum(g_norm[:, :-1], g_norm[:, 1:]) - vector_norms(np.diff(g, axis=1))
-        dev = vector_norms(delta - g).max(axis=1, initial=0.0)
-        return not np.any(seg.min(axis=1, initial=np.inf) - dev < required + self.margin_m)
+        seg = np.maximum(g_norm[:-1], g_norm[1:]) - vector_norms(np.diff(g, axis=0))
+        dev = vector_norms(delta - g).max(axis=0, initial=0.0)
+        return not np.any(seg.min(axis=0, initial=np.inf) - dev < required + self.margin_m)
 
     def shortfall(self, x: Array, rows: SeparationRows, tol: float) -> tuple[float, Array]:
         """Largest amount [m] by which positions ``x`` (H, n, d) miss an active separation row,
