@@ -162,8 +162,8 @@ class PairSeparation:
 
     def clear_test(self, guess: Array, pos: Array, i: Array, k: Array) -> Test:
         """Relative guess and positions (H + 1, m, d) of the pairs ``(i, k)``."""
-        rel = (self.scaled(np.take(v, i, axis=1) - np.take(v, k, axis=1)) for v in (guess, pos))
-        return *rel, self.d_min_m
+        g, x = (self.scaled(np.take(v, i, axis=1) - np.take(v, k, axis=1)) for v in (guess, pos))
+        return g, x, self.d_min_m
 
     def first_segment(self, p0: Array, p1: Array, pairs: Array) -> Test:
         """Relative positions of ``pairs`` at the start and the end of the first segment."""
