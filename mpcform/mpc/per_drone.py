@@ -220,13 +220,15 @@ class PerDroneQP(StepSolver):
             reach = vector_norms(coeffs) * (ends * (self.limits.v_max_mps * self.dt_s))
             keep &= lower > -reach
         order = np.argsort(singles, kind="stable")
-        at, r = np.nonzero(keep[order])
-        item = order[at]
+        rows = ends.shape[0]
+        at = (order[:, None] * rows + np.arange(rows))[keep[order]]  # flat (item, row) indices
+        item, r = np.divmod(at, rows)
         soft = r > 0
         if hard is not None:
             soft |= ~hard[item]
         counts = np.bincount(singles[item], minlength=n).astype(np.intp)
-        return coeffs[item, r], ends[r], lower[item, r], soft, counts
+        sep_c = np.take(coeffs.reshape(-1, coeffs.shape[2]), at, axis=0)
+        return sep_c, ends[r], np.take(lower.reshape(-1), at), soft, counts
 
     def _bounds(self, p0: Array, u_prev: Array) -> tuple[Array, Array]:
         """Lower and upper bounds (n, rows) of the constant rows for each drone."""

@@ -124,12 +124,10 @@ class PairSeparation:
     def _sides(self, p0: Array, path: Array, pairs: Array, on: Array) -> RowPart:
         """The decoupled rows: two per-drone rows about the guess's midpoint ``m_e`` at each row's
         position step, ``+-c^T (p0_side - m_e) >= (d_min + margin) / 2``, side i (+c) of every
-        pair, then side k (-c); built per segment (its two rows share its normal), :data:`BLOCK`
-        pairs at a time (the temporaries stay small)."""
-        p, r, d, h = pairs.shape[0], self.segs.shape[0], path.shape[2], path.shape[1] - 1
+        pair, then side k (-c); built :data:`BLOCK` pairs at a time (the temporaries stay small)."""
+        p, r, d = pairs.shape[0], self.segs.shape[0], path.shape[2]
         coeffs, lower, hard = np.empty((2 * p, r, d)), np.empty((2 * p, r)), np.empty(p, dtype=bool)
         half = 0.5 * (self.d_min_m + self.margin_m)
-        at_end, at_start = self.ends == self.segs + 1, self.ends == self.segs  # rows at x_{j+1}, at x_j
         for a in range(0, p, BLOCK):
             b = min(a + BLOCK, p)
             i, k = pairs[a:b, 0], pairs[a:b, 1]
@@ -142,10 +140,10 @@ class PairSeparation:
             np.negative(coeffs[a:b], out=coeffs[p + a : p + b])
             mid = np.add(g_i, g_k, out=g_i)  # the midpoints (B, H + 1, d), in place
             mid *= 0.5
+            mid = mid[:, self.ends]  # at each row's position step (B, R, d)
             for side, out, fix in ((i, lower[a:b], np.subtract), (k, lower[p + a : p + b], np.add)):
                 gap = p0[side][:, None] - mid  # -(-c)^T gap = +c^T gap on side k
-                out[:, at_end] = fix(half, np.einsum("pjd,pjd->pj", normal, gap[:, 1:]))
-                out[:, at_start] = fix(half, np.einsum("pjd,pjd->pj", normal[:, 1:], gap[:, 1:h]))
+                fix(half, np.einsum("prd,prd->pr", coeffs[a:b], gap), out=out)
         hard2 = np.concatenate([hard, hard])
         lower[hard2, 0] = 0.0
         return np.concatenate([pairs, pairs[:, ::-1]]), coeffs, lower, np.concatenate([on, on]), hard2
