@@ -13,7 +13,8 @@ with a positive-definite Hessian. Two things make it cheap:
 
 - in the variables ``v = M u`` (``v_j = u_j + k x_j``, what the cost compares with ``c_j``) the
   cost is ``0.5 ||v - c||^2``: DAQP gets an identity Hessian (its cheapest setup), the constant
-  rows are transformed once and the separation rows of all drones in one matrix product;
+  rows are transformed once (with their bounds, when those are the same for every drone), and a
+  separation row is a Kronecker product ``(w_e (x) a)^T v``, built only where it can be active;
 - the slacks are almost always zero, so each drone is first solved without them: if that hard
   QP is feasible, its solution (``s = 0``) is the drone's plan, else the soft QP is solved. The
   L1 penalty is exact once ``w1`` exceeds the hard QP's multipliers at every step; those grow
