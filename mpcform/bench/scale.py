@@ -2,7 +2,8 @@
 
 The scenarios (``formation`` and ``crossing``, at constant density) are those of
 :mod:`mpcform.bench.scale_cases`, horizon 10 by default. Each case runs a fixed number of
-closed-loop steps with exact execution; only :meth:`MPCPlanner.step` is timed. Modes
+closed-loop steps with exact execution; only :meth:`MPCPlanner.step` is timed (wall clock, and
+the process's CPU time: on a loaded machine the CPU time is the steadier figure). Modes
 (:func:`mpcform.mpc.settings.mode_settings`): ``decoupled`` (``coupling="decoupled"``, grouping,
 each conflicted drone's QP solved by DAQP), ``decoupled-sparse`` (the same as one sparse QP with
 the ``--solver``), ``joint`` (joint rows, conflict grouping) and ``monolithic`` (``grouping=False``,
@@ -34,7 +35,7 @@ from typing import Any
 import numpy as np
 
 from mpcform._validate import Array
-from mpcform.bench.growth import growth_rows
+from mpcform.bench.growth import growth_exponent, growth_rows
 from mpcform.bench.scale_cases import DT_S, LIMITS, SCENARIOS, make_case
 from mpcform.bench.stats import median_p90
 from mpcform.errors import ValidationError
@@ -60,18 +61,21 @@ def _maxrss_mib() -> float:
 
 
 def _closed_loop(planner: MPCPlanner, p: Array, steps: int, budget_s: float) -> dict[str, Any]:
-    """Run ``steps`` steps (or until ``budget_s`` of planning time); time every planner call."""
+    """Run ``steps`` steps (or until ``budget_s`` of planning time); time every planner call (wall
+    clock, and the process's CPU time)."""
     planner.reset(0.0, p)
     times: dict[str, list[float]] = {"qp": [], "fast_path": [], "fallback": []}
+    cpu: dict[str, list[float]] = {"qp": [], "fast_path": [], "fallback": []}
     qp_drones: list[int] = []
     min_seg, max_slack, spent = float("inf"), 0.0, 0.0
     done = 0
     for j in range(steps):
-        start = time.perf_counter()
+        start, start_cpu = time.perf_counter(), time.process_time()
         out = planner.step(DT_S * j, p)
-        elapsed = time.perf_counter() - start
+        elapsed, elapsed_cpu = time.perf_counter() - start, time.process_time() - start_cpu
         spent += elapsed
         times[out.info.mode].append(1e3 * elapsed)
+        cpu[out.info.mode].append(1e3 * elapsed_cpu)
         if out.info.mode != "fast_path":
             qp_drones.append(out.info.qp_drones)
         max_slack = max(max_slack, out.info.max_slack_m)
@@ -81,7 +85,7 @@ def _closed_loop(planner: MPCPlanner, p: Array, steps: int, budget_s: float) -> 
         if spent > budget_s:
             break
     error = float(np.linalg.norm(p - planner.reference.targets(DT_S * done)[0][0], axis=1).max())
-    return {"times": times, "qp_drones": qp_drones, "min_seg": min_seg, "max_slack": max_slack,
+    return {"times": times, "cpu": cpu, "qp_drones": qp_drones, "min_seg": min_seg, "max_slack": max_slack,
             "steps_run": done, "spent": spent, "final_error": error}  # fmt: skip
 
 
@@ -118,6 +122,9 @@ def bench_case(
     row["step_ms_max"] = max(all_ms, default=float("nan"))
     row["qp_ms_median"], row["qp_ms_p90"] = median_p90(qp_ms)
     row["fast_ms_median"], row["fast_ms_p90"] = median_p90(times["fast_path"])
+    cpu = run["cpu"]
+    row["qp_cpu_ms_median"], row["qp_cpu_ms_p90"] = median_p90(cpu["qp"] + cpu["fallback"])
+    row["fast_cpu_ms_median"], row["fast_cpu_ms_p90"] = median_p90(cpu["fast_path"])
     row["planning_s"] = run["spent"]
     row["rss_peak_mib"], row["rss_delta_mib"] = rss_after, rss_after - rss_before
     row["tracemalloc_peak_mib"] = float("nan")
@@ -211,8 +218,10 @@ COLUMNS = [
     ("qp_steps", "QP", "{}"), ("fast_path_steps", "fast", "{}"), ("fallback_steps", "fallback", "{}"),
     ("qp_drones_mean", "QP drones", "{:.0f}"), ("step_ms_median", "step med [ms]", "{:.2f}"),
     ("step_ms_p90", "step p90", "{:.2f}"), ("qp_ms_median", "QP med [ms]", "{:.2f}"),
-    ("qp_ms_p90", "QP p90", "{:.2f}"), ("fast_ms_median", "fast med [ms]", "{:.2f}"),
-    ("fast_ms_p90", "fast p90", "{:.2f}"), ("rss_peak_mib", "peak RSS [MiB]", "{:.0f}"),
+    ("qp_ms_p90", "QP p90", "{:.2f}"), ("qp_cpu_ms_median", "QP CPU med", "{:.2f}"),
+    ("qp_cpu_ms_p90", "QP CPU p90", "{:.2f}"), ("fast_ms_median", "fast med [ms]", "{:.2f}"),
+    ("fast_ms_p90", "fast p90", "{:.2f}"), ("fast_cpu_ms_median", "fast CPU med", "{:.2f}"),
+    ("rss_peak_mib", "peak RSS [MiB]", "{:.0f}"),
     ("rss_delta_mib", "RSS growth", "{:.0f}"), ("tracemalloc_peak_mib", "traced peak", "{:.0f}"),
     ("min_separation_segments", "min sep [m]", "{:.3f}"), ("note", "note", "{}"),
 ]  # fmt: skip
@@ -223,6 +232,7 @@ GROWTH_COLUMNS = [
     ("step_exponent_100_1000", "step: 100->1000", "{:.2f}"),
     ("qp_exponent_fit", "QP step: fit n>=100", "{:.2f}"),
     ("qp_exponent_100_1000", "QP step: 100->1000", "{:.2f}"),
+    ("qp_cpu_exponent_fit", "QP CPU: fit n>=100", "{:.2f}"),
     ("partial", "stopped early (n)", "{}"),
 ]  # fmt: skip
 
@@ -262,6 +272,16 @@ def target_lines(rows: list[dict[str, Any]], growth: list[dict[str, Any]], coupl
             partial = f" (from cases stopped early: n = {g['partial']})" if g["partial"] else ""
             text = f"{g['scenario']} growth exponent 100->1000 (median step) {num(e, '{:.2f}')} <= 1.2"
             lines.append(f"{text}: {verdict(e, 1.2)}{partial}")
+    big = case("crossing", 1000)  # the performance targets (decoupled step at the solver floor)
+    qp, qp_cpu = big.get("qp_ms_median", math.nan), big.get("qp_cpu_ms_median", math.nan)
+    lines.append(f"crossing n=1000 median QP step {num(qp, '{:.1f}')} ms (CPU {num(qp_cpu, '{:.1f}')} ms) "
+                 f"<= 40 ms: {verdict(qp, 40.0, big)}")  # fmt: skip
+    for g in growth:
+        if g["mode"] == coupling and g["scenario"] == "crossing":
+            e = g.get("qp_cpu_exponent_fit", math.nan)
+            lines.append(f"crossing growth exponent (median CPU per QP step, fit n>=100) {num(e, '{:.2f}')} "
+                         f"<= 1.1: {verdict(e, 1.1)}")  # fmt: skip
+    lines.append(f"formation n=1000 median step {num(med, '{:.2f}')} ms <= 2 ms: {verdict(med, 2.0, form)}")
     peaks = [case(s, 1000).get("rss_peak_mib", math.nan) for s in SCENARIOS]
     peak = max((x for x in peaks if np.isfinite(x)), default=math.nan)
     lines.append(f"peak RSS of the n=1000 runs {num(peak, '{:.0f}')} MiB <= 1 GiB: {verdict(peak, 1024.0)}")
@@ -270,7 +290,12 @@ def target_lines(rows: list[dict[str, Any]], growth: list[dict[str, Any]], coupl
 
 def report(rows: list[dict[str, Any]], coupling: str) -> tuple[str, list[dict[str, Any]]]:
     """Markdown (cases, growth exponents, targets) and the growth records."""
-    growth = growth_rows([r for r in rows if r.get("steps_run")])
+    ran = [r for r in rows if r.get("steps_run")]
+    growth = growth_rows(ran)
+    for g in growth:  # the growth of the median CPU time per QP step too
+        case = [r for r in ran if (r["scenario"], r["mode"]) == (g["scenario"], g["mode"])]
+        cpu_ms = [r.get("qp_cpu_ms_median", math.nan) for r in case]
+        g["qp_cpu_exponent_fit"] = growth_exponent([r["n"] for r in case], cpu_ms)
     text = "\n\n".join([
         markdown_table(rows),
         markdown_table(growth, GROWTH_COLUMNS),

@@ -13,7 +13,8 @@ with a positive-definite Hessian. Two things make it cheap:
 
 - in the variables ``v = M u`` (``v_j = u_j + k x_j``, what the cost compares with ``c_j``) the
   cost is ``0.5 ||v - c||^2``: DAQP gets an identity Hessian (its cheapest setup), the constant
-  rows are transformed once and the separation rows of all drones in one matrix product;
+  rows are transformed once (with their bounds, when those are the same for every drone), and a
+  separation row is a Kronecker product ``(w_e (x) a)^T v``, built only where it can be active;
 - the slacks are almost always zero, so each drone is first solved without them: if that hard
   QP is feasible, its solution (``s = 0``) is the drone's plan, else the soft QP is solved. The
   L1 penalty is exact once ``w1`` exceeds the hard QP's multipliers at every step; those grow
@@ -30,6 +31,7 @@ import numpy as np
 from scipy.linalg import solve_triangular
 
 from mpcform._validate import Array
+from mpcform.formation.geometry import vector_norms
 from mpcform.mpc.limits import Limits
 from mpcform.mpc.problem import ACTIVE_TOL, StepQP, StepSolver
 from mpcform.mpc.rows import LimitRows, positions_of_inputs, row_ends
@@ -42,6 +44,7 @@ DAQP_INF = 1e30  # DAQP's "no bound"
 DAQP_OK = 1
 PRIMAL_TOL = 1e-9  # DAQP row feasibility tolerance (its default 1e-6 shows in the plans)
 MIN_SLACK_QUADRATIC = 1e-6  # keeps the soft QP's Hessian positive definite when w2 = 0
+ROW_BLOCK = 2048  # separation rows built at once (whole drones; a block stays in cache)
 
 
 class PerDroneQP(StepSolver):
@@ -69,33 +72,37 @@ class PerDroneQP(StepSolver):
         rows = [family.dense() for family in families]  # constant rows over u; bounds per drone from _bounds
         self._const_v = (np.vstack(rows) if rows else np.zeros((0, nu))) @ self._m_inv
         self._ends = row_ends(h)
-        # x_e = dt sum_{j<e} u_j, so a^T x_e = a^T (sum_{j<e} dt M^-1[(j, .), :]) v: (H, d, H d) per end e
-        self._x_v = dt_s * np.cumsum(self._m_inv.reshape(h, dim, nu), axis=0)
+        # x_e = dt sum_{j<e} u_j = (sum_{j<e} dt M^-1[(j, .), :]) v, and M^-1 = T (x) I_d, so
+        # x_e = (w_e (x) I_d) v and a^T x_e = (w_e (x) a)^T v: w_e (x) 1_d (H d,) per end e
+        x_v = dt_s * np.cumsum(self._m_inv.reshape(h, dim, nu), axis=0)
+        self._w_rep = np.einsum("echc->ehc", x_v.reshape(h, dim, h, dim)).reshape(h, nu)
         self._eye = np.eye(nu)
         w2 = max(settings.slack_quadratic, MIN_SLACK_QUADRATIC)
         self._hess_soft = np.diag(np.concatenate([np.full(h, w2), np.ones(nu)]))
         self._options: dict[str, Any] = {"iter_limit": settings.max_iter, "primal_tol": PRIMAL_TOL}
         self._a, self._lo, self._hi = np.zeros((0, nu)), np.zeros(0), np.zeros(0)
+        self._fixed_bounds = all(family.fixed_bounds for family in families)
 
     def solve(self, qp: StepQP) -> tuple[QPSolution, int]:
         """Solve every drone's QP (the one-drone separation rows within reach of ``qp.rows``)."""
-        rows, on = qp.rows, qp.rows.single_on
+        rows = qp.rows
         warm_u = np.zeros_like(qp.targets_mps) if qp.warm is None else qp.warm[0]  # inputs only
         return self.solve_drones(
-            qp.start_m, qp.targets_mps, qp.u_prev_mps, rows.singles[on], rows.single_coeffs[on],
-            rows.single_lower[on], warm_u, rows.single_hard[on],
+            qp.start_m, qp.targets_mps, qp.u_prev_mps, rows.singles, rows.single_coeffs, rows.single_lower,
+            warm_u, rows.single_hard, rows.single_on,
         )  # fmt: skip
 
     def solve_drones(
         self, p0: Array, c: Array, u_prev: Array, singles: Array, coeffs: Array, lower: Array, warm_u: Array,
-        hard: Array | None = None,
+        hard: Array | None = None, on: Array | None = None,
     ) -> tuple[QPSolution, int]:
         """Solve every drone's QP.
 
         ``p0`` (n, d) starts, ``c`` (H, n, d) targets, ``u_prev`` (n, d) last commands; separation
-        items (all within reach) ``singles`` (S,) drone index, ``coeffs`` (S, R, d), ``lower``
-        (S, R); ``warm_u`` (H, n, d) inputs whose nearly active rows start DAQP's active set;
-        ``hard`` (S,) the items whose first row is a hard no-approach row (no slack).
+        items ``singles`` (S,) drone index, ``coeffs`` (S, R, d), ``lower`` (S, R); ``warm_u``
+        (H, n, d) inputs whose nearly active rows start DAQP's active set; ``hard`` (S,) the items
+        whose first row is a hard no-approach row (no slack); ``on`` (S,) the items within reach
+        (the others are left out; all by default).
         Returns the solution in the sparse QP's layout ``[u | x | s]`` over these n drones (its
         ``solve_time_s`` is the time spent inside DAQP), and the number of active rows.
         """
@@ -103,64 +110,79 @@ class PerDroneQP(StepSolver):
         h, n, nu, n_const = st.horizon, p0.shape[0], self._nu, self._const_v.shape[0]
         f_v = -c.transpose(1, 0, 2).reshape(n, nu)  # 0.5 ||v - c||^2
         v_warm = warm_u.transpose(1, 0, 2).reshape(n, nu) @ self._m.T
-        c_lo, c_hi = self._bounds(p0, u_prev)
-        if hard is None:
-            hard = np.zeros(singles.shape[0], dtype=bool)
-        sep_v, sep_end, sep_lo, sep_soft, counts = self._separation(n, singles, coeffs, lower, hard)
+        sep_c, sep_end, sep_lo, sep_soft, counts = self._separation(n, singles, coeffs, lower, hard, on)
         a, lo, hi = self._buffers(int(counts.max(initial=0)))
+        bounds = None if self._fixed_bounds else self._bounds(p0, u_prev)  # else in the buffers
         offsets = [0, *np.cumsum(counts).tolist()]
-        v_out, s_out = np.zeros((n, nu)), np.zeros((n, h))
-        flags, active = np.zeros(n, dtype=int), np.zeros(n, dtype=int)
+        v_out, s_out, flags, lams = [np.empty(0)] * n, np.zeros((n, h)), [DAQP_OK] * n, [np.empty(0)] * n
         iters, in_daqp = 0, 0.0
 
-        def load(i: int) -> int:
-            """Put drone i's rows and bounds into the buffers; return its number of rows."""
-            first, last = offsets[i], offsets[i + 1]
-            m = n_const + last - first
-            a[n_const:m] = sep_v[first:last]
-            lo[:n_const], hi[:n_const], lo[n_const:m] = c_lo[i], c_hi[i], sep_lo[first:last]
+        def put(i: int, rows_v: Array) -> int:
+            """Put drone i's rows ``rows_v`` over v and its bounds into the buffers; return its
+            number of rows."""
+            m = n_const + rows_v.shape[0]
+            a[n_const:m] = rows_v
+            lo[n_const:m] = sep_lo[offsets[i] : offsets[i + 1]]
+            if bounds is not None:
+                lo[:n_const], hi[:n_const] = bounds[0][i], bounds[1][i]
             return m
 
-        for i in range(n):  # the hard QPs
-            m = load(i)
-            t0 = time.perf_counter()
-            v, _, flags[i], info = self._daqp.solve(
-                self._eye, f_v[i], a[:m], hi[:m], lo[:m], primal_start=v_warm[i], **self._options
-            )  # fmt: skip
-            in_daqp += time.perf_counter() - t0
-            iters += int(info["iterations"])
-            v_out[i], lam = v, info["lam"]
-            active[i] = np.count_nonzero(np.abs(lam) > ACTIVE_TOL)
-        soft = flags != DAQP_OK  # the hard optimum (s = 0) wherever the hard QP is feasible
-        for i in np.flatnonzero(soft).tolist():
-            m = load(i)
+        solve, eye, options = self._daqp.solve, self._eye, self._options
+        for start, stop in _blocks(offsets, ROW_BLOCK):  # the hard QPs, rows built a block at a time
+            base = offsets[start]
+            rows_v = self._rows_v(sep_c[base : offsets[stop]], sep_end[base : offsets[stop]])
+            for i in range(start, stop):
+                m = put(i, rows_v[offsets[i] - base : offsets[i + 1] - base])
+                t0 = time.perf_counter()
+                v_out[i], _, flags[i], info = solve(
+                    eye, f_v[i], a[:m], hi[:m], lo[:m], primal_start=v_warm[i], **options
+                )  # fmt: skip
+                in_daqp += time.perf_counter() - t0
+                iters += info["iterations"]
+                lams[i] = info["lam"]
+        soft = [i for i in range(n) if flags[i] != DAQP_OK]  # else the hard optimum (s = 0)
+        for i in soft:
+            first, last = offsets[i], offsets[i + 1]
+            m = put(i, self._rows_v(sep_c[first:last], sep_end[first:last]))
             t0 = time.perf_counter()
             v_out[i], s_out[i], flags[i], info = self._solve_soft(
-                f_v[i], a[:m], hi[:m], lo[:m], sep_end[offsets[i] : offsets[i + 1]],
-                sep_soft[offsets[i] : offsets[i + 1]], n_const,
+                f_v[i], a[:m], hi[:m], lo[:m], sep_end[first:last], sep_soft[first:last], n_const
             )  # fmt: skip
             in_daqp += time.perf_counter() - t0
-            iters += int(info["iterations"])
-            active[i] = np.count_nonzero(np.abs(info["lam"]) > ACTIVE_TOL)
-        bad = np.flatnonzero((flags != DAQP_OK) | ~np.isfinite(v_out).all(axis=1))
+            iters += info["iterations"]
+            lams[i] = info["lam"]
+        iters = int(iters)
+        v_all = np.array(v_out).reshape(n, nu)
+        bad = np.flatnonzero((np.array(flags) != DAQP_OK) | ~np.isfinite(v_all).all(axis=1))
         if bad.size:
             status = f"daqp: exit flag {flags[bad[0]]} (drone {bad[0]})"
             return failed(status, in_daqp, iters), 0
-        u_out = v_out @ self._m_inv.T
+        u_out = v_all @ self._m_inv.T
         x_out = u_out @ self._x_of_u.T
         flat = [v.reshape(n, h, -1).transpose(1, 0, 2).ravel() for v in (u_out, x_out, s_out)]
         sol = QPSolution(np.concatenate(flat), None, True, "daqp: optimal", iters, in_daqp)
-        return sol, int(active.sum())
+        active = np.count_nonzero(np.abs(np.concatenate(lams)) > ACTIVE_TOL) if n else 0
+        return sol, int(active)
+
+    def _rows_v(self, coeffs: Array, end: Array) -> Array:
+        """Separation rows (K, H d) over ``v`` of coefficients ``coeffs`` (K, d) at position steps
+        ``end`` (K,): ``a^T x_e = (w_e (x) a)^T v``."""
+        rows = np.repeat(coeffs[:, None, :], self.settings.horizon, axis=1).reshape(end.shape[0], self._nu)
+        rows *= self._w_rep[end - 1]
+        return rows
 
     def _buffers(self, max_sep: int) -> tuple[Array, Array, Array]:
         """Row and bound buffers with room for ``max_sep`` separation rows after the constant ones
-        (kept between calls; only the separation part and the per-drone bounds are rewritten)."""
+        (kept between calls; only the separation part and per-drone bounds are rewritten)."""
         n_const = self._const_v.shape[0]
         if self._a.shape[0] < n_const + max_sep:
             size = n_const + max(max_sep, 2 * (self._a.shape[0] - n_const))
             self._a = np.empty((size, self._nu))
             self._a[:n_const] = self._const_v
             self._lo, self._hi = np.empty(size), np.full(size, DAQP_INF)
+            if self._fixed_bounds:  # the same for every drone at every step
+                lo, hi = self._bounds(np.zeros((1, self.dim)), np.zeros((1, self.dim)))
+                self._lo[:n_const], self._hi[:n_const] = lo[0], hi[0]
         return self._a, self._lo, self._hi
 
     def _solve_soft(
@@ -181,27 +203,33 @@ class PerDroneQP(StepSolver):
         return z[h:], z[:h], flag, info
 
     def _separation(
-        self, n: int, singles: Array, coeffs: Array, lower: Array, hard: Array
+        self, n: int, singles: Array, coeffs: Array, lower: Array, hard: Array | None, on: Array | None
     ) -> tuple[Array, Array, Array, Array, Array]:
-        """Separation rows in ``v``, their position steps, lower bounds and whether they have a
-        slack (not an item's hard first row), sorted by drone, and the number of rows per drone.
+        """The separation rows that can be active, sorted by drone (item order kept within a drone):
+        their coefficients ``a`` (K, d), position steps, lower bounds and whether they have a slack
+        (not an item's hard first row); and the number of rows per drone.
 
         A row ``a^T x_e + s_e >= b`` that every reachable ``x_e`` meets (``b <= -|a| e v_max dt``,
-        since the velocity set lies in the ball) is dropped: the optimum is unchanged.
+        since the velocity set lies in the ball) is left out, the optimum unchanged. The rows over
+        ``v`` are built later, a block of drones at a time (:meth:`_rows_v`).
         """
-        order = np.argsort(singles, kind="stable")
-        singles, coeffs, lower, hard = singles[order], coeffs[order], lower[order], hard[order]
-        soft = np.ones(lower.shape, dtype=bool)
-        soft[hard, 0] = False
-        ends = self._ends
         keep = np.ones(lower.shape, dtype=bool)
+        if on is not None:
+            keep &= on[:, None]
+        ends = self._ends
         if self.limits.v_max_mps is not None:
-            reach = np.linalg.norm(coeffs, axis=2) * (ends * (self.limits.v_max_mps * self.dt_s))
-            keep = lower > -reach
-        rows_v = np.matmul(coeffs.transpose(1, 0, 2), self._x_v[ends - 1]).transpose(1, 0, 2)  # (S, R, H d)
-        end = np.broadcast_to(ends, lower.shape)[keep]
-        counts = np.bincount(singles, keep.sum(axis=1), minlength=n).astype(np.intp)
-        return rows_v[keep], end, lower[keep], soft[keep], counts
+            reach = vector_norms(coeffs) * (ends * (self.limits.v_max_mps * self.dt_s))
+            keep &= lower > -reach
+        order = np.argsort(singles, kind="stable")
+        rows = ends.shape[0]
+        at = (order[:, None] * rows + np.arange(rows))[keep[order]]  # flat (item, row) indices
+        item, r = np.divmod(at, rows)
+        soft = r > 0
+        if hard is not None:
+            soft |= ~hard[item]
+        counts = np.bincount(singles[item], minlength=n).astype(np.intp)
+        sep_c = np.take(coeffs.reshape(-1, coeffs.shape[2]), at, axis=0)
+        return sep_c, ends[r], np.take(lower.reshape(-1), at), soft, counts
 
     def _bounds(self, p0: Array, u_prev: Array) -> tuple[Array, Array]:
         """Lower and upper bounds (n, rows) of the constant rows for each drone."""
@@ -210,3 +238,14 @@ class PerDroneQP(StepSolver):
             return np.zeros((n, 0)), np.zeros((n, 0))
         lo, hi = zip(*(family.dense_bounds(p0, u_prev, DAQP_INF) for family in self.families), strict=True)
         return np.hstack(lo), np.hstack(hi)
+
+
+def _blocks(offsets: list[int], size: int) -> list[tuple[int, int]]:
+    """Runs ``[start, stop)`` of consecutive drones (drone i's rows ``offsets[i]:offsets[i + 1]``)
+    with at most ``size`` rows each (a drone with more runs alone)."""
+    runs, start = [], 0
+    for i in range(1, len(offsets) - 1):
+        if offsets[i + 1] - offsets[start] > size:
+            runs.append((start, i))
+            start = i
+    return [*runs, (start, len(offsets) - 1)] if len(offsets) > 1 else []

@@ -120,14 +120,15 @@ class MPCPlanner(Controller):
         if grouped or st.solves_per_drone:  # no fixed pattern: rows only within reach
             cand = cand.within_reach()
         rows = sep.rows(p0, about, cand)
-        if st.coupling == "decoupled" and not off_limits.any() and sep.meets_joint(x_nom, rows):
+        values: Array | None = sep.single_values(x_nom, rows)  # the rows at the rollout
+        if st.coupling == "decoupled" and not off_limits.any() and sep.meets_joint(x_nom, rows, values):
             # the rollout meets the limits and the joint rows: the decoupled rows are split about
             # the rollout itself, which meets them, so it is the optimum (see the module docstring)
             if st.fast_path:
                 return self._fast_path(p0, u_nom, x_nom)
             about = np.concatenate([p0[None], p0 + x_nom])
-            rows = sep.rows(p0, about, cand)
-        conflicted = sep.conflicted(x_nom, rows)
+            rows, values = sep.rows(p0, about, cand), None
+        conflicted = sep.conflicted(x_nom, rows, values)
         if st.fast_path and not (off_limits | conflicted).any():
             return self._fast_path(p0, u_nom, x_nom)
         blocked = sep.blocked_targets(targets[0]) if conflicted.any() else None

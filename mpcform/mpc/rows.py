@@ -25,6 +25,7 @@ from mpcform.mpc.limits import Limits
 from mpcform.mpc.settings import MPCSettings
 
 INF = np.inf
+INSCRIBED = 1.0 - 1e-9  # ||u||^2 below this times h^2: inside the velocity set, rounding included
 
 
 @dataclass(frozen=True)
@@ -150,6 +151,8 @@ def positions_of_inputs(horizon: int, dim: int, dt_s: float) -> Array:
 class LimitRows(ABC):
     """One limit's rows on every drone at every step, for the sparse and the per-drone QP."""
 
+    fixed_bounds = False  # whether the dense rows' bounds are the same for every drone and step
+
     @abstractmethod
     def sparse(self, lay: Layout) -> RowBlock:
         """Rows of the sparse QP, with the bounds that stay the same from step to step."""
@@ -174,6 +177,8 @@ class LimitRows(ABC):
 class VelocityRows(LimitRows):
     """Velocity set ``D u_{j,i} <= h`` [m/s] inside the ball ``||u|| <= v_max`` (:func:`velocity_set`)."""
 
+    fixed_bounds = True
+
     def __init__(self, dim: int, horizon: int, settings: MPCSettings, v_max_mps: float) -> None:
         self.horizon = horizon
         self.normals, self.h_mps = velocity_set(dim, settings, v_max_mps)
@@ -193,7 +198,15 @@ class VelocityRows(LimitRows):
         return np.full(shape, -inf), np.full(shape, self.h_mps)
 
     def violators(self, p0: Array, u_prev: Array, u: Array, x: Array) -> Array:
-        return np.asarray((u @ self.normals.T > self.h_mps).any(axis=(0, 2)))
+        """Tested on the drones with an input outside the inscribed ball ``||u|| <= h`` (inside it,
+        every ``D_i^T u <= ||u|| <= h``, rounding included with the factor's margin)."""
+        sq = u[..., 0] * u[..., 0]
+        for a in range(1, u.shape[-1]):
+            sq += u[..., a] * u[..., a]
+        out = sq.max(axis=0, initial=0.0) > INSCRIBED * self.h_mps**2
+        if out.any():
+            out[out] = (u[:, out] @ self.normals.T > self.h_mps).any(axis=(0, 2))
+        return out
 
 
 class AccelerationRows(LimitRows):

@@ -27,12 +27,14 @@ from dataclasses import dataclass
 import numpy as np
 
 from mpcform._validate import Array
-from mpcform.formation.geometry import closest_on_segments, pairs_within
+from mpcform.formation.geometry import closest_on_segments, pairs_within, vector_norms
 from mpcform.mpc.candidates import Candidates
 from mpcform.mpc.limits import Limits, SphereObstacle, obstacle_arrays
 from mpcform.mpc.rows import row_ends, row_segments
 from mpcform.mpc.settings import MPCSettings
 
+FIRST_TESTED = 32  # the clear test tries this many of the least clear items first
+BLOCK = 1024  # pairs whose decoupled rows are built at once (bounds the temporaries' size)
 RowPart = tuple[Array, Array, Array, Array, Array]  # (items or labels, coefficients, lower bounds, on, hard)
 Test = tuple[Array, Array, Array | float]  # (relative guess, relative positions, required distance)
 
@@ -76,18 +78,16 @@ class SeparationRows:
         )  # fmt: skip
 
 
-def segment_normals(rel: Array, segs: Array) -> Array:
+def segment_normals(rel: Array, segs: Array | None = None) -> Array:
     """Unit normals (m, R, d) per row: the direction to each guess segment's point closest to the
-    origin (``rel`` (H + 1, m, d) are the guess's relative positions, ``segs`` (R,) each row's segment)."""
-    d = rel.shape[-1]
-    closest = closest_on_segments(rel[:-1].reshape(-1, d), rel[1:].reshape(-1, d))
-    dist = np.linalg.norm(closest, axis=1)
-    normal = np.zeros_like(closest)
-    normal[:, 0] = 1.0  # a coincident guess: any fixed unit vector is a valid normal
+    origin (``rel`` (m, H + 1, d) are the guess's relative positions, ``segs`` (R,) each row's
+    segment; without ``segs`` one normal per segment, (m, H, d))."""
+    normal = closest_on_segments(rel[:, :-1], rel[:, 1:])  # (m, H, d), divided in place
+    dist = vector_norms(normal)
     ok = dist > 1e-9
-    normal[ok] = closest[ok] / dist[ok, None]
-    normal = normal.reshape(rel.shape[0] - 1, rel.shape[1], d)  # (H, m, d)
-    return normal.transpose(1, 0, 2)[:, segs]
+    np.divide(normal, dist[..., None], out=normal, where=ok[..., None])
+    normal[~ok] = np.eye(normal.shape[-1])[0]  # a coincident guess: any fixed unit vector is valid
+    return normal if segs is None else normal[:, segs]
 
 
 class PairSeparation:
@@ -95,43 +95,73 @@ class PairSeparation:
 
     def __init__(self, d_min_m: float, metric: Array, settings: MPCSettings) -> None:
         self.d_min_m, self.metric, self.margin_m = d_min_m, metric, settings.margin_m
+        self.unit_metric = bool(np.all(metric == 1.0))  # W = I: no scaling
         self.joint = settings.coupling == "joint"
         self.segs, self.ends = row_segments(settings.horizon), row_ends(settings.horizon)
 
     def relative(self, points: Array, i: Array, k: Array) -> Array:
         """``W (p_i - p_k)`` for positions (..., n, d): (..., P, d)."""
-        return (points[..., i, :] - points[..., k, :]) * self.metric
+        return self.scaled(points[..., i, :] - points[..., k, :])
 
-    def rows(self, p0: Array, guess: Array, pairs: Array, on: Array) -> tuple[RowPart | None, list[RowPart]]:
-        """The joint rows, or the decoupled one-drone rows, of ``pairs`` (P, 2) about ``guess``."""
+    def scaled(self, v: Array) -> Array:
+        """``W v`` for vectors (..., d) (``v`` itself when ``W = I``)."""
+        return v if self.unit_metric else v * self.metric
+
+    def rows(self, p0: Array, path: Array, pairs: Array, on: Array) -> tuple[RowPart | None, RowPart | None]:
+        """The joint rows, or the decoupled one-drone rows (side i of every pair, then side k), of
+        ``pairs`` (P, 2) about the guess ``path`` (n, H + 1, d) (drone-major)."""
+        if not self.joint:
+            return None, self._sides(p0, path, pairs, on)
         i, k = pairs[:, 0], pairs[:, 1]
-        rel = self.relative(guess, i, k)  # (H + 1, P, d), metric space
-        coeffs = segment_normals(rel, self.segs) * self.metric  # (P, R, d), world coordinates
-        hard, c0 = inside(rel[0], self.d_min_m)
-        coeffs[hard, 0] = c0 * self.metric
-        if self.joint:
-            lower = self.d_min_m + self.margin_m - np.einsum("prd,pd->pr", coeffs, p0[i] - p0[k])
-            lower[hard, 0] = 0.0
-            return (pairs, coeffs, lower, on, hard), []
-        singles = []  # two per-drone rows about the guess's midpoint at each row's position step
-        mid = 0.5 * (guess[:, i] + guess[:, k])[self.ends].transpose(1, 0, 2)  # (P, R, d)
-        half = 0.5 * (self.d_min_m + self.margin_m)
-        for side, sign in ((i, 1.0), (k, -1.0)):
-            lower = half - np.einsum("prd,prd->pr", sign * coeffs, p0[side][:, None] - mid)
-            lower[hard, 0] = 0.0
-            labels = np.column_stack([side, i + k - side])
-            singles.append((labels, sign * coeffs, lower, on, hard))
-        return None, singles
+        rel = self.scaled(path[i] - path[k])  # (P, H + 1, d), metric space
+        coeffs = self.scaled(segment_normals(rel, self.segs))  # (P, R, d), world coordinates
+        hard, c0 = inside(rel[:, 0], self.d_min_m)
+        coeffs[hard, 0] = self.scaled(c0)
+        lower = self.d_min_m + self.margin_m - np.einsum("prd,pd->pr", coeffs, p0[i] - p0[k])
+        lower[hard, 0] = 0.0
+        return (pairs, coeffs, lower, on, hard), None
 
-    def clear_test(self, p0: Array, guess: Array, pos: Array, spread: Array) -> Test:
-        """The pairs that the per-drone spread bound (see :meth:`Separation.clear`) leaves in doubt."""
+    def _sides(self, p0: Array, path: Array, pairs: Array, on: Array) -> RowPart:
+        """The decoupled rows: two per-drone rows about the guess's midpoint ``m_e`` at each row's
+        position step, ``+-c^T (p0_side - m_e) >= (d_min + margin) / 2``, side i (+c) of every
+        pair, then side k (-c); built :data:`BLOCK` pairs at a time (the temporaries stay small)."""
+        p, r, d = pairs.shape[0], self.segs.shape[0], path.shape[2]
+        coeffs, lower, hard = np.empty((2 * p, r, d)), np.empty((2 * p, r)), np.empty(p, dtype=bool)
+        half = 0.5 * (self.d_min_m + self.margin_m)
+        for a in range(0, p, BLOCK):
+            b = min(a + BLOCK, p)
+            i, k = pairs[a:b, 0], pairs[a:b, 1]
+            g_i, g_k = path[i], path[k]  # (B, H + 1, d)
+            rel = self.scaled(g_i - g_k)  # metric space
+            normal = self.scaled(segment_normals(rel))  # (B, H, d), world coordinates
+            np.take(normal, self.segs, axis=1, out=coeffs[a:b])
+            hard[a:b], c0 = inside(rel[:, 0], self.d_min_m)
+            coeffs[a:b][hard[a:b], 0] = self.scaled(c0)
+            np.negative(coeffs[a:b], out=coeffs[p + a : p + b])
+            mid = np.add(g_i, g_k, out=g_i)  # the midpoints (B, H + 1, d), in place
+            mid *= 0.5
+            mid = mid[:, self.ends]  # at each row's position step (B, R, d)
+            for side, out, fix in ((i, lower[a:b], np.subtract), (k, lower[p + a : p + b], np.add)):
+                gap = p0[side][:, None] - mid  # -(-c)^T gap = +c^T gap on side k
+                fix(half, np.einsum("prd,prd->pr", coeffs[a:b], gap), out=out)
+        hard2 = np.concatenate([hard, hard])
+        lower[hard2, 0] = 0.0
+        return np.concatenate([pairs, pairs[:, ::-1]]), coeffs, lower, np.concatenate([on, on]), hard2
+
+    def doubtful(self, p0: Array, spread: Array) -> tuple[Array, Array, Array]:
+        """The pairs ``(i, k)`` the spread bound of :meth:`Separation.clear` leaves in doubt, and by
+        how much their start distance clears it (negative)."""
         scaled = p0 * self.metric  # the metric only shrinks lengths: world spreads bound it
         need = self.d_min_m + self.margin_m
-        i, k = pairs_within(scaled, need + 2.0 * spread.max()).T
+        i, k = pairs_within(scaled, need + 2.0 * spread.max(), sort=False).T
         clearance = np.linalg.norm(scaled[i] - scaled[k], axis=1) - spread[i] - spread[k]
         near = clearance < need
-        i, k = i[near], k[near]
-        return self.relative(guess, i, k), self.relative(pos, i, k), self.d_min_m
+        return i[near], k[near], clearance[near] - need
+
+    def clear_test(self, guess: Array, pos: Array, i: Array, k: Array) -> Test:
+        """Relative guess and positions (H + 1, m, d) of the pairs ``(i, k)``."""
+        g, x = (self.scaled(np.take(v, i, axis=1) - np.take(v, k, axis=1)) for v in (guess, pos))
+        return g, x, self.d_min_m
 
     def first_segment(self, p0: Array, p1: Array, pairs: Array) -> Test:
         """Relative positions of ``pairs`` at the start and the end of the first segment."""
@@ -148,23 +178,29 @@ class ObstacleSeparation:
         self.center_m, self.required_m = obstacle_arrays(obstacles, d_min_m)
         self.margin_m, self.segs = settings.margin_m, row_segments(settings.horizon)
 
-    def rows(self, p0: Array, guess: Array, items: Array, on: Array) -> RowPart:
-        """One-drone rows of the ``(drone, obstacle)`` items (O, 2) about ``guess``."""
+    def rows(self, p0: Array, path: Array, items: Array, on: Array) -> RowPart:
+        """One-drone rows of the ``(drone, obstacle)`` items (O, 2) about the guess ``path``
+        (n, H + 1, d) (drone-major)."""
         drone, ob = items[:, 0], items[:, 1]
         center, required = self.center_m[ob], self.required_m[ob]
-        coeffs = segment_normals(guess[:, drone] - center, self.segs)
+        coeffs = segment_normals(path[drone] - center[:, None], self.segs)
         hard, c0 = inside(p0[drone] - center, required)
         coeffs[hard, 0] = c0
         lower = required[:, None] + self.margin_m - np.einsum("ord,od->or", coeffs, p0[drone] - center)
         lower[hard, 0] = 0.0
         return np.column_stack([drone, -1 - ob]), coeffs, lower, on, hard
 
-    def clear_test(self, p0: Array, guess: Array, pos: Array, spread: Array) -> Test:
-        """The items that the per-drone spread bound (see :meth:`Separation.clear`) leaves in doubt."""
+    def doubtful(self, p0: Array, spread: Array) -> tuple[Array, Array, Array]:
+        """The ``(drone, obstacle)`` items that the per-drone spread bound (see
+        :meth:`Separation.clear`) leaves in doubt, and by how much they clear it (negative)."""
         gap = np.linalg.norm(p0[:, None] - self.center_m, axis=-1) - self.required_m - spread[:, None]
         i, m = np.nonzero(gap < self.margin_m)
+        return i, m, gap[i, m] - self.margin_m
+
+    def clear_test(self, guess: Array, pos: Array, i: Array, m: Array) -> Test:
+        """Guess and positions (H + 1, m, d) of the items' drones relative to their obstacle."""
         center = self.center_m[m]
-        return guess[:, i] - center, pos[:, i] - center, self.required_m[m]
+        return np.take(guess, i, axis=1) - center, np.take(pos, i, axis=1) - center, self.required_m[m]
 
     def first_segment(self, p0: Array, p1: Array, items: Array) -> Test:
         """Positions of the ``items``' drones relative to their obstacle at both ends of the first segment."""
@@ -189,18 +225,16 @@ class Separation:
 
     def rows(self, p0: Array, guess: Array, cand: Candidates) -> SeparationRows:
         """Closest-point rows about ``guess`` (H + 1, n, d) for every candidate item."""
-        r, d = self.n_rows, self.dim
-        none, no = np.empty((0, 2), dtype=np.intp), np.empty(0, dtype=bool)
-        empty = (none, np.empty((0, r, d)), np.empty((0, r)), no, no)
-        joint, singles = empty, [empty]
+        r, no, singles = self.n_rows, np.empty(0, dtype=bool), []
+        joint = empty = (np.empty((0, 2), np.intp), np.empty((0, r, self.dim)), np.empty((0, r)), no, no)
+        path = np.ascontiguousarray(guess.transpose(1, 0, 2))  # (n, H + 1, d): items gather rows
         if cand.pairs.shape[0] and self.pairs is not None:
-            two, one = self.pairs.rows(p0, guess, cand.pairs, cand.pair_on)
-            joint = joint if two is None else two
-            singles += one
+            two, one = self.pairs.rows(p0, path, cand.pairs, cand.pair_on)
+            joint, singles = joint if two is None else two, [] if one is None else [one]
         if cand.obstacles.shape[0] and self.obstacles is not None:
-            singles.append(self.obstacles.rows(p0, guess, cand.obstacles, cand.obstacle_on))
-        columns = (np.concatenate(parts) for parts in zip(*singles, strict=True))
-        labels, s_coeffs, s_lower, s_on, s_hard = columns
+            singles.append(self.obstacles.rows(p0, path, cand.obstacles, cand.obstacle_on))
+        parts = singles[0] if len(singles) == 1 else map(np.concatenate, zip(empty, *singles, strict=True))
+        labels, s_coeffs, s_lower, s_on, s_hard = parts
         pairs, p_coeffs, p_lower, p_on, p_hard = joint
         return SeparationRows(
             pairs, p_coeffs, p_lower, p_on, labels[:, 0], labels, s_coeffs, s_lower, s_on, p_hard, s_hard
@@ -220,57 +254,74 @@ class Separation:
         """
         pos = np.concatenate([p0[None], p0 + x])
         spread = _max_norm(guess - p0) + _max_norm(pos - guess)  # (n,) [m]
-        tests: list[Test] = []
-        if self.pairs is not None and p0.shape[0] > 1:
-            tests.append(self.pairs.clear_test(p0, guess, pos, spread))
-        if self.obstacles is not None:
-            tests.append(self.obstacles.clear_test(p0, guess, pos, spread))
-        for g, delta, required in tests:
-            g_norm = np.linalg.norm(g, axis=-1)
-            seg = np.maximum(g_norm[:-1], g_norm[1:]) - np.linalg.norm(np.diff(g, axis=0), axis=-1)
-            dev = np.linalg.norm(delta - g, axis=-1).max(axis=0, initial=0.0)
-            if np.any(seg.min(axis=0, initial=np.inf) - dev < required + self.margin_m):
+        units = [u for u in (self.pairs if p0.shape[0] > 1 else None, self.obstacles) if u is not None]
+        for unit in units:
+            i, k, slack = unit.doubtful(p0, spread)
+            if i.shape[0] > 8 * FIRST_TESTED:  # the least clear first: a miss among them answers early
+                first = np.argpartition(slack, FIRST_TESTED)[:FIRST_TESTED]
+                if not self._passes(*unit.clear_test(guess, pos, i[first], k[first])):
+                    return False
+            if not self._passes(*unit.clear_test(guess, pos, i, k)):
                 return False
         return True
+
+    def _passes(self, g: Array, delta: Array, required: Array | float) -> bool:
+        """Whether relative positions ``delta`` about the relative guess ``g`` (H + 1, m, d) meet
+        the per-segment bound of :meth:`clear` for every item."""
+        g_norm = vector_norms(g)
+        seg = np.maximum(g_norm[:-1], g_norm[1:]) - vector_norms(np.diff(g, axis=0))
+        dev = vector_norms(delta - g).max(axis=0, initial=0.0)
+        return not np.any(seg.min(axis=0, initial=np.inf) - dev < required + self.margin_m)
 
     def shortfall(self, x: Array, rows: SeparationRows, tol: float) -> tuple[float, Array]:
         """Largest amount [m] by which positions ``x`` (H, n, d) miss an active separation row,
         and the labels (m, 2) of the items that miss by more than ``tol``."""
-        xe = x[self.ends - 1]  # (R, n, d)
-        worst, missed = -np.inf, [np.empty((0, 2), dtype=np.intp)]
-        pair_rel = xe[:, rows.pairs[:, 0]] - xe[:, rows.pairs[:, 1]]
-        parts = [
-            (rows.pair_coeffs, rows.pair_lower, rows.pair_on, rows.pairs, pair_rel),
-            (rows.single_coeffs, rows.single_lower, rows.single_on, rows.labels, xe[:, rows.singles]),
-        ]
-        for coeffs, lower, on, labels, rel in parts:
-            if not on.any():
-                continue
-            short = np.where(on, (lower - np.einsum("mrd,rmd->mr", coeffs, rel)).max(axis=1), -np.inf)
-            worst = max(worst, float(short.max()))
-            missed.append(labels[short > tol])
-        return worst, np.unique(np.concatenate(missed), axis=0)
+        least, labels = self._least(x, rows, None)
+        return -float(least.min(initial=np.inf)), np.unique(labels[least < -tol], axis=0)
 
-    def meets_joint(self, x: Array, rows: SeparationRows) -> bool:
+    def single_values(self, x: Array, rows: SeparationRows) -> Array:
+        """``c^T x_e - b`` (S, R) of the one-drone rows at positions ``x`` (H, n, d): negative where
+        a row is missed (inf for the items out of reach)."""
+        xe = np.ascontiguousarray(x[self.ends - 1].transpose(1, 0, 2))  # (n, R, d)
+        value = np.empty_like(rows.single_lower, dtype=float)
+        for a in range(0, rows.singles.shape[0], 2 * BLOCK):  # in blocks: the gathered positions stay small
+            b = slice(a, a + 2 * BLOCK)
+            dot = np.einsum("srd,srd->sr", rows.single_coeffs[b], xe[rows.singles[b]])
+            np.subtract(dot, rows.single_lower[b], out=value[b])
+        value[~rows.single_on] = np.inf
+        return value
+
+    def meets_joint(self, x: Array, rows: SeparationRows, values: Array | None = None) -> bool:
         """Whether positions ``x`` (H, n, d) meet the joint pair rows (and the obstacle rows) of the
         items within reach, given the decoupled ``rows`` of the whole candidate set: a pair's two
         sides share their normal and their lower bounds add up to the joint one, so the joint row
-        is the sum of its two sides' rows."""
-        xe = x[self.ends - 1]  # (R, n, d)
-        value = np.einsum("srd,rsd->sr", rows.single_coeffs, xe[:, rows.singles]) - rows.single_lower
-        value = np.where(rows.single_on[:, None], value, np.inf)
+        is the sum of its two sides' rows. ``values``: :meth:`single_values` when known."""
+        value = self.single_values(x, rows) if values is None else values
         pair = rows.labels[:, 1] >= 0
         first = pair & (rows.labels[:, 0] < rows.labels[:, 1])  # side i of pair (i, k), i < k
         joint = value[first] + value[pair & ~first]  # both sides in the candidates' pair order
         return bool(joint.min(initial=np.inf) >= 0.0 and value[~pair].min(initial=np.inf) >= 0.0)
 
-    def conflicted(self, x: Array, rows: SeparationRows) -> Array:
+    def conflicted(self, x: Array, rows: SeparationRows, values: Array | None = None) -> Array:
         """Drones (n,) of the items whose rows positions ``x`` (H, n, d) miss (an obstacle item
-        names only its drone)."""
+        names only its drone); ``values``: :meth:`single_values` when known."""
+        least, labels = self._least(x, rows, values)
+        labels = labels[least < 0.0]
         conflicted = np.zeros(x.shape[1], dtype=bool)
-        labels = self.shortfall(x, rows, 0.0)[1]
         conflicted[labels[labels >= 0]] = True
         return conflicted
+
+    def _least(self, x: Array, rows: SeparationRows, values: Array | None) -> tuple[Array, Array]:
+        """Each item's least row value ``c^T x_e - b`` (inf out of reach), joint pairs then
+        one-drone items, and their labels."""
+        single = (self.single_values(x, rows) if values is None else values).min(axis=1, initial=np.inf)
+        pair = np.full(rows.pairs.shape[0], np.inf)
+        if rows.pair_on.any():
+            xe = x[self.ends - 1]  # (R, n, d)
+            rel = xe[:, rows.pairs[:, 0]] - xe[:, rows.pairs[:, 1]]
+            value = np.einsum("mrd,rmd->mr", rows.pair_coeffs, rel) - rows.pair_lower
+            pair[rows.pair_on] = value[rows.pair_on].min(axis=1)
+        return np.concatenate([pair, single]), np.concatenate([rows.pairs, rows.labels])
 
     def blocked_targets(self, targets: Array) -> Array:
         """Drones (n,) whose target (n, d) lies within ``d_min`` (in the metric, with the margin)

@@ -14,7 +14,8 @@ from mpcform.bench.scale_cases import LIMITS
 from mpcform.cli.main import main
 
 CASE_FIELDS = (
-    "step_ms_median", "step_ms_p90", "step_ms_max", "fast_ms_median", "fast_ms_p90", "rss_peak_mib",
+    "step_ms_median", "step_ms_p90", "step_ms_max", "fast_ms_median", "fast_ms_p90", "fast_cpu_ms_median",
+    "rss_peak_mib",
     "rss_delta_mib", "planning_s", "min_separation_segments", "final_tracking_error", "max_slack_m",
 )  # fmt: skip
 
@@ -30,6 +31,7 @@ def test_bench_case_returns_every_field(scenario: str) -> None:
     assert row["separation_ok"] and row["min_separation_segments"] >= LIMITS.d_min_m
     if row["qp_steps"]:
         assert np.isfinite(row["qp_ms_median"]) and row["qp_drones_max"] >= 1
+        assert 0 < row["qp_cpu_ms_median"] <= row["qp_cpu_ms_p90"]
 
 
 def test_crossing_has_qp_steps_and_formation_flight_takes_the_fast_path() -> None:
@@ -47,6 +49,7 @@ def test_run_in_process_skips_monolithic_sizes_after_the_budget() -> None:
     assert rows[3]["steps_run"] == 0 and rows[3]["note"].startswith("skipped: n = 6")
     text, growth = report(rows, "decoupled")
     assert text.count("| crossing |") == 4 + len(growth) and "not measured" in text
+    assert "median CPU per QP step" in text and all("qp_cpu_exponent_fit" in g for g in growth)
     assert markdown_table(rows).splitlines()[-1].count(" - ") > 5  # a skipped row shows dashes
 
 

@@ -11,6 +11,7 @@ from mpcform.formation.geometry import (
     min_pair_distance,
     min_segment_distance,
     pairs_within,
+    vector_norms,
 )
 
 TAU = np.linspace(0.0, 1.0, 2001)
@@ -92,3 +93,29 @@ def test_pair_queries_match_brute_force(seed, n, dim):
     pairs = pairs_within(points, radius)
     assert pairs.shape == (len(expected), 2) and np.all(pairs[:, 0] < pairs[:, 1])
     assert {tuple(p) for p in pairs.tolist()} == expected
+
+
+@given(seeds, st.integers(49, 120), st.sampled_from([2, 3]))
+def test_unsorted_pairs_are_the_same_pairs(seed, n, dim):
+    """More than BRUTE_FORCE_MAX_N points go through the k-d tree: unsorted, the same pairs."""
+    points = np.random.default_rng(seed).uniform(-3.0, 3.0, (n, dim))
+    pairs, unsorted = pairs_within(points, 0.8), pairs_within(points, 0.8, sort=False)
+    assert {tuple(p) for p in unsorted.tolist()} == {tuple(p) for p in pairs.tolist()}
+    assert unsorted.shape == pairs.shape and np.all(np.diff(pairs[:, 0]) >= 0)
+
+
+@pytest.mark.parametrize("shape", [(7, 3), (5, 2), (4, 6, 3), (3, 4, 5, 2)])
+def test_vector_norms_are_numpys_bitwise(shape):
+    rng = np.random.default_rng(1)
+    v = rng.normal(size=shape) * rng.uniform(1e-3, 1e3, shape)
+    assert np.array_equal(vector_norms(v), np.linalg.norm(v, axis=-1))
+    assert np.array_equal(vector_norms(v[::2]), np.linalg.norm(v[::2], axis=-1))  # a strided view
+
+
+def test_closest_on_segments_of_stacked_segments():
+    """Segments stacked along leading axes give the same points as one by one."""
+    rng = np.random.default_rng(2)
+    start, end = rng.normal(size=(2, 4, 5, 3))
+    stacked = closest_on_segments(start, end)
+    flat = closest_on_segments(start.reshape(-1, 3), end.reshape(-1, 3)).reshape(stacked.shape)
+    assert np.array_equal(stacked, flat)

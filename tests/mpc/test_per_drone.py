@@ -177,3 +177,51 @@ def test_a_failed_drone_solve_falls_back(monkeypatch: pytest.MonkeyPatch) -> Non
     assert failed and all("daqp: exit flag -6" in i.status for i in failed)
     assert np.all(np.isfinite(res.commands_mps))
     assert np.linalg.norm(res.commands_mps, axis=-1).max() <= 1.0 + 1e-12
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_rows_over_v_are_the_rows_over_positions(dim: int) -> None:
+    """A separation row ``a^T x_e`` over ``v = M u``: ``(w_e (x) a)^T v`` equals ``a^T x_e`` with
+    ``u = M^-1 v`` and ``x_e = dt sum_{j<e} u_j`` (built here from scratch)."""
+    h, dt, k = 4, 0.1, 1.3
+    settings = MPCSettings(horizon=h, gain_per_s=k, coupling="decoupled")
+    qp = PerDroneQP(dim, dt, LIMITS, settings, ())
+    rng = np.random.default_rng(dim)
+    a, end, v = rng.normal(size=(9, dim)), rng.integers(1, h + 1, 9), rng.normal(size=h * dim)
+    m = np.eye(h * dim) + k * dt * np.kron(np.tril(np.ones((h, h)), -1), np.eye(dim))
+    x = dt * np.cumsum(np.linalg.solve(m, v).reshape(h, dim), axis=0)  # x_1 .. x_H
+    np.testing.assert_allclose(qp._rows_v(a, end) @ v, np.einsum("kd,kd->k", a, x[end - 1]), atol=1e-13)
+
+
+def test_only_the_rows_that_can_be_active_are_built() -> None:
+    """Rows of items within reach with ``b > -|a| e v_max dt``, by drone (item order kept), are
+    kept; an item's hard first row has no slack."""
+    h, dim, n = 3, 2, 4
+    qp = PerDroneQP(dim, 0.1, LIMITS, MPCSettings(horizon=h, coupling="decoupled"), ())
+    rng = np.random.default_rng(5)
+    s, r = 12, 5  # items, rows per item (horizon 3)
+    singles, on, hard = rng.integers(0, n, s), rng.random(s) < 0.8, rng.random(s) < 0.3
+    coeffs = rng.normal(size=(s, r, dim)) * rng.uniform(0.5, 1.0, (s, r, 1))
+    ends = np.array([1, 2, 1, 3, 2])  # row_ends(3)
+    reach = np.linalg.norm(coeffs, axis=2) * ends * 0.1  # v_max 1, dt 0.1
+    lower = -reach * rng.uniform(0.5, 1.5, (s, r))
+    expect = [(i, item, row) for i in range(n) for item in range(s) for row in range(r)
+              if singles[item] == i and on[item] and lower[item, row] > -reach[item, row]]  # fmt: skip
+    c, end, lo, soft, counts = qp._separation(n, singles, coeffs, lower, hard, on)
+    assert c.shape[0] == len(expect) and counts.tolist() == [sum(e[0] == i for e in expect) for i in range(n)]
+    for got, (_, item, row) in enumerate(expect):
+        assert np.array_equal(c[got], coeffs[item, row]) and lo[got] == lower[item, row]
+        assert end[got] == ends[row] and soft[got] == (row > 0 or not hard[item])
+
+
+def test_the_row_block_size_does_not_change_the_solution(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Rows built one drone at a time or all at once: the same plans, bit for bit."""
+    ref, start = crowd(11, 6, 3)
+    plans = []
+    for block in (1, 100_000):
+        monkeypatch.setattr("mpcform.mpc.per_drone.ROW_BLOCK", block)
+        planner = MPCPlanner(ref, 0.1, LIMITS, MPCSettings(coupling="decoupled"))
+        res = simulate(planner, start, 1.0)
+        assert any(i.mode == "qp" for i in res.infos)
+        plans.append(res.commands_mps)
+    assert np.array_equal(*plans)

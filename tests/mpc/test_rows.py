@@ -216,3 +216,21 @@ def test_slack_rows() -> None:
     lay = Layout(2, 3, 2)
     a = dense_matrix(slack_rows(lay), lay)
     np.testing.assert_array_equal(a[:, 2 * lay.nud :], np.eye(4))
+
+
+@pytest.mark.parametrize("velocity_set", ["polytope", "box"])
+def test_velocity_violators_near_the_inscribed_ball(velocity_set: str) -> None:
+    """The test skips drones inside the inscribed ball ``||u|| <= h``: the same answer as every
+    facet checked, also for inputs within rounding of the ball and of a facet."""
+    rng = np.random.default_rng(3)
+    rows = VelocityRows(3, 4, MPCSettings(velocity_set=velocity_set), 1.0)
+    direction = rng.normal(size=(4, 200, 3))
+    direction /= np.linalg.norm(direction, axis=-1, keepdims=True)
+    scale = rows.h_mps * (1.0 + rng.choice([-0.3, -1e-9, -1e-15, 0.0, 1e-15, 0.3], (1, 200, 1)))  # per drone
+    near = np.array([[1 - 1e-16], [1.0], [1 + 1e-15]])  # three drones on the first facet, within rounding
+    on_facet = np.broadcast_to(rows.normals[0] * rows.h_mps, (4, 3, 3)) * near
+    for u in (direction * scale, on_facet):
+        brute = (u @ rows.normals.T > rows.h_mps).any(axis=(0, 2))
+        got = rows.violators(np.zeros(u.shape[1:]), np.zeros(u.shape[1:]), u, np.zeros_like(u))
+        np.testing.assert_array_equal(got, brute)
+        assert brute.any() and not brute.all()  # both answers occur
