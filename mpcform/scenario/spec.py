@@ -8,15 +8,15 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from scipy.spatial.distance import pdist
 
 from mpcform._validate import Array
 from mpcform.control.consensus import ConsensusSettings, Network
 from mpcform.control.graph import Graph
 from mpcform.control.nullspace import NullSpaceSettings
+from mpcform.formation.geometry import min_pair_distance
 from mpcform.formation.state import FormationState
 from mpcform.formation.template import Template
-from mpcform.mpc.limits import Limits, SphereObstacle
+from mpcform.mpc.limits import Limits, SphereObstacle, tightened
 from mpcform.mpc.settings import MPCSettings
 from mpcform.reference.base import Reference
 from mpcform.sim.plant_spec import PlantSpec, Robustness
@@ -90,18 +90,18 @@ class Scenario:
         (:func:`mpcform.mpc.limits.tightened`); those drones then stop short of their targets.
         None otherwise (an ideal plant, no d_min, a controller other than ``controller`` or the
         file's ``mpc``)."""
-        d_min, margin = self.limits.d_min_m, self.robustness.margin_m
-        if (controller or self.controller.kind) != "mpc" or d_min is None or margin == 0.0 or self.n < 2:
+        rob = self.robustness
+        if (controller or self.controller.kind) != "mpc" or rob.margin_m == 0.0:
             return None
+        keep = tightened(self.limits, (), rob.margin_m, rob.a_max_mps2)[0].d_min_m
         final = self.reference.targets(np.array([self.simulation.duration_s]))[0][0]
-        closest = float(np.min(pdist(final)))
-        keep = d_min + 2.0 * margin
-        if closest >= keep:
+        closest = min_pair_distance(final)  # inf for one drone
+        if keep is None or closest >= keep:
             return None
         return (f"plant: the final formation's closest pair is {closest:.3g} m apart, below the "
-                f"{keep:.3g} m (d_min + 2 x margin {margin:.3g} m) the MPC keeps under this plant: "
-                "those drones stop short of their targets (widen the formation, lower limits.a_max "
-                "or set plant.margin)")  # fmt: skip
+                f"{keep:.3g} m (d_min + 2 x margin {rob.margin_m:.3g} m) the MPC keeps under this "
+                "plant: those drones stop short of their targets (widen the formation, lower "
+                "limits.a_max or set plant.margin)")  # fmt: skip
 
     @property
     def steps(self) -> int:

@@ -89,7 +89,7 @@ class PIQPBackend(QPBackend):
         import piqp
 
         self._piqp = piqp
-        self._solver: Any = None
+        self._obj: _PIQPObject | None = None  # the current pattern's solver object
         self._objects: OrderedDict[bytes, _PIQPObject] = OrderedDict()  # least recently used first
         self.keep_nnz = keep_nnz  # nonzeros of the patterns kept besides the current one
         self.reused = 0  # setups served by a kept solver object
@@ -103,7 +103,7 @@ class PIQPBackend(QPBackend):
         others = sum(o.nnz for o in self._objects.values()) - obj.nnz
         while others > self.keep_nnz:  # the least recently used first (never the current one)
             others -= self._objects.popitem(last=False)[1].nnz
-        self._obj, self._solver, self._nnz_a = obj, obj.solver, A.nnz
+        self._obj = obj
         if found is not None:  # set up before: an update with this data
             self.reused += 1
             if not np.array_equal(obj.p_data, P.data):
@@ -124,23 +124,28 @@ class PIQPBackend(QPBackend):
         return _PIQPObject(solver, eq, a_eq, eq_ids, g, g_ids, P.data.copy())
 
     def update(self, q: Array, lo: Array, hi: Array, A_data: Array) -> None:
-        if A_data.shape[0] != self._nnz_a:
-            raise SolverError(self.name, f"A has {A_data.shape[0]} values, the pattern has {self._nnz_a}")
-        obj = self._obj
+        obj = self._current()
+        nnz_a = obj.eq_ids.shape[0] + obj.g_ids.shape[0]
+        if A_data.shape[0] != nnz_a:
+            raise SolverError(self.name, f"A has {A_data.shape[0]} values, the pattern has {nnz_a}")
         obj.a_eq.data, obj.g.data = A_data[obj.eq_ids], A_data[obj.g_ids]
         eq = obj.eq
-        self._solver.update(c=q, A=obj.a_eq, b=lo[eq], G=obj.g, h_l=lo[~eq], h_u=hi[~eq])
+        obj.solver.update(c=q, A=obj.a_eq, b=lo[eq], G=obj.g, h_l=lo[~eq], h_u=hi[~eq])
+
+    def _current(self) -> _PIQPObject:
+        if self._obj is None:
+            raise SolverError(self.name, "update() or solve() before setup()")
+        return self._obj
 
     def solve(self, x0: Array | None = None) -> QPSolution:
-        solver = self._solver
-        if solver is None:
-            raise SolverError(self.name, "solve() before setup()")
+        obj = self._current()
+        solver = obj.solver
         start = time.perf_counter()
         status = solver.solve()
         elapsed = time.perf_counter() - start
         res = solver.result
         ok = status == self._piqp.PIQP_SOLVED and bool(np.all(np.isfinite(res.x)))
-        eq = self._obj.eq
+        eq = obj.eq
         y = np.zeros(eq.shape[0])
         if ok:
             y[eq] = res.y
