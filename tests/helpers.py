@@ -7,6 +7,7 @@ from scipy.spatial.transform import Rotation
 
 from mpcform.formation.state import FormationState
 from mpcform.formation.template import Template
+from mpcform.reference.base import ConstantReference
 
 
 def random_template(rng: np.random.Generator, n: int, dim: int) -> Template:
@@ -52,3 +53,13 @@ horizon = {horizon}
 dt = 0.1
 duration = {duration_s}
 """
+
+
+def crowd_and_swap(dim: int = 2) -> list[tuple[ConstantReference, np.ndarray]]:
+    """A crowd of 6 drones 0.3-0.6 m apart crossing to a line 1 m apart, and an antipodal swap of 4."""
+    rng = np.random.default_rng(7)
+    crowd_start = np.array([[0.0, 0.0], [0.6, 0.0], [1.2, 0.0], [0.0, 0.6], [0.6, 0.6], [1.2, 0.6]])
+    crowd = ConstantReference(Template.line(6, 5.0), FormationState.from_param([0.6, 0.3], 1.0))
+    ring = Template.polygon(4, 1.5)
+    swap = ConstantReference(ring, FormationState.from_param([0.0, 0.0]))
+    return [(crowd, crowd_start + rng.normal(0, 0.01, (6, 2))), (swap, -ring.offsets.copy())]

@@ -7,6 +7,7 @@ from typing import Any
 import numpy as np
 import pytest
 import scipy.sparse as sp
+from helpers import crowd_and_swap
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -225,3 +226,58 @@ def test_the_row_block_size_does_not_change_the_solution(monkeypatch: pytest.Mon
         assert any(i.mode == "qp" for i in res.infos)
         plans.append(res.commands_mps)
     assert np.array_equal(*plans)
+
+
+class HardFeasibility:
+    """DAQP, and at each drone's slack-free solve whether that QP is feasible (Clarabel): the
+    decoupled QP is block-diagonal, so its hard version is feasible iff every drone's is."""
+
+    def __init__(self, daqp: Any, nu: int) -> None:
+        self.daqp, self.nu, self.steps = daqp, nu, []  # type: list[bool]
+
+    def solve(self, H: np.ndarray, f: np.ndarray, A: np.ndarray, upper: np.ndarray, lower: np.ndarray,
+              **options: Any) -> Any:  # fmt: skip
+        if H.shape[0] == self.nu:  # the slack-free QP (the soft one has H more variables)
+            self.steps[-1] &= self.feasible(f, A, upper, lower)
+        return self.daqp.solve(H, f, A, upper, lower, **options)
+
+    @staticmethod
+    def feasible(f: np.ndarray, A: np.ndarray, upper: np.ndarray, lower: np.ndarray) -> bool:
+        from qpsolvers import Problem, solve_problem
+
+        up, down = upper < 1e29, lower > -1e29
+        G = sp.csc_matrix(np.vstack([A[up], -A[down]]))
+        h = np.concatenate([upper[up], -lower[down]])
+        problem = Problem(sp.identity(f.shape[0], format="csc"), f, G, h)
+        return bool(solve_problem(problem, solver="clarabel").found)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("v_max", [1.0, 5.0, 10.0, 20.0])
+def test_no_slack_where_the_drone_qps_are_feasible(v_max: float, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Per-drone mode at every dt in {0.1, 0.05, 0.02, 0.01} on a crowd and a swap (gain 2): wherever
+    every drone's QP without slack is feasible (Clarabel), the planner's slack is at most 1e-6 m."""
+    import daqp
+
+    checked = 0
+    for dt in (0.1, 0.05, 0.02, 0.01):
+        for ref, start in crowd_and_swap():
+            st_ = MPCSettings(horizon=8, gain_per_s=2.0, coupling="decoupled", grouping=False)
+            planner = MPCPlanner(ref, dt, Limits(v_max_mps=v_max, d_min_m=0.3), st_)
+            check = HardFeasibility(daqp, 8 * 2)
+            solve = PerDroneQP.solve
+
+            def counted(self: PerDroneQP, qp: Any, check: HardFeasibility = check, solve: Any = solve) -> Any:
+                self._daqp = check
+                check.steps.append(True)
+                return solve(self, qp)
+
+            monkeypatch.setattr(PerDroneQP, "solve", counted)
+            res = simulate(planner, start, 60 * dt)
+            solved = [i for i in res.infos if i.mode != "fast_path"]
+            assert planner.solver_name == PER_DRONE_SOLVER and len(solved) == len(check.steps)
+            for info, feasible in zip(solved, check.steps, strict=True):
+                if feasible:
+                    assert info.max_slack_m <= 1e-6, (dt, info)
+                    checked += 1
+    assert checked > 0

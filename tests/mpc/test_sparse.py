@@ -7,6 +7,7 @@ from typing import Any
 import numpy as np
 import pytest
 import scipy.sparse as sp
+from helpers import crowd_and_swap
 
 from mpcform.mpc.candidates import Candidates
 from mpcform.mpc.limits import Limits, SphereObstacle
@@ -153,20 +154,6 @@ class HardCheck(QPBackend):
         P = (P + P.T - sp.diags(P.diagonal())).tocsc()
         problem = Problem(P, self.q[:keep], G, np.concatenate([hi[up], -lo[down]]), A[eq].tocsc(), lo[eq])
         return bool(solve_problem(problem, solver="clarabel").found)
-
-
-def crowd_and_swap(dim: int = 2) -> list[tuple[Any, np.ndarray]]:
-    """A crowd of 6 drones 0.3-0.6 m apart crossing to a line 1 m apart, and an antipodal swap of 4."""
-    from mpcform.formation.state import FormationState
-    from mpcform.formation.template import Template
-    from mpcform.reference.base import ConstantReference
-
-    rng = np.random.default_rng(7)
-    crowd_start = np.array([[0.0, 0.0], [0.6, 0.0], [1.2, 0.0], [0.0, 0.6], [0.6, 0.6], [1.2, 0.6]])
-    crowd = ConstantReference(Template.line(6, 5.0), FormationState.from_param([0.6, 0.3], 1.0))
-    ring = Template.polygon(4, 1.5)
-    swap = ConstantReference(ring, FormationState.from_param([0.0, 0.0]))
-    return [(crowd, crowd_start + rng.normal(0, 0.01, (6, 2))), (swap, -ring.offsets.copy())]
 
 
 @pytest.mark.slow
