@@ -2,7 +2,9 @@
 
 A command is certified when it lies in the ball ``||u_i|| <= v_max`` (it is scaled into it,
 eq. 7) and, along the first segment ``p0 -> p0 + dt u``, no pair (or drone-obstacle item) within
-reach gets closer than ``d_min`` (its required distance), or than it already was.
+reach gets closer than ``d_min`` (its required distance), or than it already was. With a velocity
+loop (:mod:`mpcform.mpc.loop`) the segment ends where the loop takes the drone,
+``p0 + dt u + F_1 xi_0 + G_{1,0} u`` (the chord of the interval's true motion).
 
 The fallback, when a solve fails or does not certify, is the first of these
 that certifies: the previous plan's next input; the solved command scaled back (1, 1/2, 1/4,
@@ -16,6 +18,8 @@ that starts too close separates even when the QP fails.
 """
 
 from __future__ import annotations
+
+from collections.abc import Callable
 
 import numpy as np
 
@@ -37,6 +41,8 @@ class Certifier:
     ) -> None:
         self.dt_s, self.v_max_mps, self.separation = dt_s, v_max_mps, separation
         self.a_step_mps = None if a_max_mps2 is None else a_max_mps2 * dt_s  # largest change per step
+        self.drift: Callable[[Array], Array] | None = None
+        """With a velocity loop: where a command takes the drones beyond ``dt u`` in the interval."""
 
     def certify(self, p0: Array, u: Array, cand: Candidates) -> Array | None:
         """The command ``u`` (n, d) scaled into the ball, if it is safe from ``p0`` (n, d), else None."""
@@ -47,6 +53,8 @@ class Certifier:
         """Along ``p0 -> p0 + dt u0`` no item within reach gets closer than required, or than it
         already was (up to :data:`CERTIFY_TOL_M`)."""
         p1 = p0 + self.dt_s * u0
+        if self.drift is not None:
+            p1 = p1 + self.drift(u0)
         for a, b, required in self.separation.first_segment(p0, p1, cand):
             d_seg = np.linalg.norm(closest_on_segments(a, b), axis=1)
             if np.any(d_seg < np.minimum(required, np.linalg.norm(a, axis=1)) - CERTIFY_TOL_M):

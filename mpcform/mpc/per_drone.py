@@ -33,6 +33,7 @@ from scipy.linalg import solve_triangular
 from mpcform._validate import Array
 from mpcform.formation.geometry import vector_norms
 from mpcform.mpc.limits import Limits
+from mpcform.mpc.loop import VelocityLoop
 from mpcform.mpc.problem import ACTIVE_TOL, StepQP, StepSolver
 from mpcform.mpc.rows import LimitRows, positions_of_inputs, row_ends
 from mpcform.mpc.settings import MPCSettings
@@ -57,7 +58,8 @@ class PerDroneQP(StepSolver):
     warm_starts = True  # nearly active rows of the warm start start DAQP's active set
 
     def __init__(
-        self, dim: int, dt_s: float, limits: Limits, settings: MPCSettings, families: tuple[LimitRows, ...]
+        self, dim: int, dt_s: float, limits: Limits, settings: MPCSettings, families: tuple[LimitRows, ...],
+        loop: VelocityLoop | None = None,
     ) -> None:
         import daqp
 
@@ -76,6 +78,10 @@ class PerDroneQP(StepSolver):
         # x_e = (w_e (x) I_d) v and a^T x_e = (w_e (x) a)^T v: w_e (x) 1_d (H d,) per end e
         x_v = dt_s * np.cumsum(self._m_inv.reshape(h, dim, nu), axis=0)
         self._w_rep = np.einsum("echc->ehc", x_v.reshape(h, dim, h, dim)).reshape(h, nu)
+        self._reach = 1.0 if loop is None else loop.reach_factor
+        if loop is not None:  # rows on the true positions: + sum_j G_{e,j} u_j, u_j = sum_m T[j, m] v_m
+            t = self._m_inv.reshape(h, dim, h, dim)[:, 0, :, 0]
+            self._w_rep += np.einsum("ejd,jm->emd", loop.forced[1:], t).reshape(h, nu)
         self._eye = np.eye(nu)
         w2 = max(settings.slack_quadratic, MIN_SLACK_QUADRATIC)
         self._hess_soft = np.diag(np.concatenate([np.full(h, w2), np.ones(nu)]))
@@ -218,7 +224,7 @@ class PerDroneQP(StepSolver):
             keep &= on[:, None]
         ends = self._ends
         if self.limits.v_max_mps is not None:
-            reach = vector_norms(coeffs) * (ends * (self.limits.v_max_mps * self.dt_s))
+            reach = vector_norms(coeffs) * (ends * (self.limits.v_max_mps * self.dt_s * self._reach))
             keep &= lower > -reach
         order = np.argsort(singles, kind="stable")
         rows = ends.shape[0]

@@ -18,20 +18,23 @@ breaks a limit row is never a linearisation point (the plan could not follow it)
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
 from mpcform._validate import Array, positive
 from mpcform.control.base import Controller, ControlStep, StepInfo, feedforward_targets
 from mpcform.control.laws import check_gain_dt
 from mpcform.errors import ValidationError
-from mpcform.mpc.candidates import CandidateSelector, qp_drones
+from mpcform.mpc.candidates import Candidates, CandidateSelector, qp_drones
 from mpcform.mpc.certify import Certifier
 from mpcform.mpc.limits import Limits, SphereObstacle
 from mpcform.mpc.liveness import TieBreak
+from mpcform.mpc.loop import VelocityLoop
 from mpcform.mpc.per_drone import PerDroneQP
 from mpcform.mpc.plan import Plan, guess, rollout, warm_start
 from mpcform.mpc.problem import StepQP, StepSolver
-from mpcform.mpc.rows import limit_rows, violators
+from mpcform.mpc.rows import limit_rows, row_ends, violators
 from mpcform.mpc.separation import Separation, SeparationRows
 from mpcform.mpc.settings import MPCSettings
 from mpcform.mpc.sparse import SparseSolver
@@ -60,6 +63,7 @@ class MPCPlanner(Controller):
         settings: MPCSettings | None = None,
         obstacles: tuple[SphereObstacle, ...] = (),
         solver: str | QPBackend = DEFAULT_SOLVER,
+        loop: VelocityLoop | None = None,
     ) -> None:
         self.reference, self.dt_s = reference, positive("simulation.dt", dt_s)
         self.limits = limits = limits or Limits()
@@ -68,18 +72,19 @@ class MPCPlanner(Controller):
         self.n, self.dim = reference.template.n, reference.template.dim
         self.obstacles = tuple(obstacles)
         _check_limits(self.dim, limits, self.obstacles, solver, settings)
+        self.loop = _check_loop(loop, self.dim, settings)
         self._families = limit_rows(self.dim, dt_s, limits, settings)
         self._separation = sep = Separation(self.dim, limits, settings, self.obstacles)
         self._candidates = CandidateSelector(self.n, dt_s, limits, settings, self.obstacles)
         self._certifier = Certifier(dt_s, limits.v_max_mps, sep, limits.a_max_mps2)
         self._solver: StepSolver  # the sparse QP with a backend, or DAQP per drone
         if settings.solves_per_drone:
-            self._solver = PerDroneQP(self.dim, dt_s, limits, settings, self._families)
+            self._solver = PerDroneQP(self.dim, dt_s, limits, settings, self._families, loop)
         else:
             st = settings
             options = SolverOptions(st.eps_abs, st.eps_rel, st.max_iter, st.time_limit_s)
             backend = solver if isinstance(solver, QPBackend) else make_backend(solver, options)
-            self._solver = SparseSolver(backend, self.dim, dt_s, limits, settings, self._families, sep)
+            self._solver = SparseSolver(backend, self.dim, dt_s, limits, settings, self._families, sep, loop)
         self.solver_name = self._solver.name
         self._tie_break = TieBreak(self.n, settings.tie_break_rad, dt_s)
         self.reset(0.0, np.zeros((self.n, self.dim)))
@@ -92,6 +97,10 @@ class MPCPlanner(Controller):
         self._plan: Plan | None = None
         self._u_prev = np.zeros((self.n, self.dim))
         self._tie_break.reset()
+        self._loop_state = None if self.loop is None else self.loop.rest(self.n)  # drones at rest
+        if self.loop is not None:  # certify where the loop takes the drones in the interval
+            loop = self.loop
+            self._certifier.drift = lambda u0: loop.first(self._loop_state, u0)
 
     @property
     def plan(self) -> Plan | None:
@@ -105,34 +114,43 @@ class MPCPlanner(Controller):
         than its limit along the first segment, or than it already was) and the step's information
         (mode ``fast_path`` | ``qp`` | ``fallback``, solver status, slack and the pairs that needed it,
         liveness events). With none of the QP's rows active the command is exactly eq. 14."""
-        p0 = self._check_positions(positions_m)
+        out = self._step(t_s, self._check_positions(positions_m))
+        if self.loop is not None:
+            self._loop_state = self.loop.advance(self._loop_state, out.command_mps)
+        return out
+
+    def _step(self, t_s: float, p0: Array) -> ControlStep:
         st, sep = self.settings, self._separation
         k, dt, horizon = st.gain_per_s, self.dt_s, st.horizon
         targets, ff = feedforward_targets(self.reference, t_s, dt, horizon, st.feedforward)
         c = ff + k * (targets[:-1] - p0)  # u_j = c_j - k x_j is the eq. 14 rollout
         u_nom, x_nom = rollout(c, k, dt)
-        about = guess(self._plan, p0, horizon)
+        x_true = self._true(u_nom, x_nom)  # where the rollout takes the drones
+        about = self._guess(p0)
         off_limits = violators(self._families, p0, self._u_prev, u_nom, x_nom)
-        if st.fast_path and not off_limits.any() and sep.clear(p0, about, x_nom):
+        if st.fast_path and not off_limits.any() and sep.clear(p0, about, x_true):
             return self._fast_path(p0, u_nom, x_nom)
         cand = self._candidates.select(p0)
         grouped = st.fast_path and st.grouping
         if grouped or st.solves_per_drone:  # no fixed pattern: rows only within reach
             cand = cand.within_reach()
-        rows = sep.rows(p0, about, cand)
-        values: Array | None = sep.single_values(x_nom, rows)  # the rows at the rollout
-        if st.coupling == "decoupled" and not off_limits.any() and sep.meets_joint(x_nom, rows, values):
+        rows = self._rows(p0, about, cand)
+        values: Array | None = sep.single_values(x_true, rows)  # the rows at the rollout
+        if st.coupling == "decoupled" and not off_limits.any() and sep.meets_joint(x_true, rows, values):
             # the rollout meets the limits and the joint rows: the decoupled rows are split about
             # the rollout itself, which meets them, so it is the optimum (see the module docstring)
             if st.fast_path:
                 return self._fast_path(p0, u_nom, x_nom)
-            about = np.concatenate([p0[None], p0 + x_nom])
-            rows, values = sep.rows(p0, about, cand), None
-        conflicted = sep.conflicted(x_nom, rows, values)
+            about = np.concatenate([p0[None], p0 + x_true])
+            rows, values = self._rows(p0, about, cand), None
+        conflicted = sep.conflicted(x_true, rows, values)
         if st.fast_path and not (off_limits | conflicted).any():
             return self._fast_path(p0, u_nom, x_nom)
         blocked = sep.blocked_targets(targets[0]) if conflicted.any() else None
-        c = self._tie_break.turn(c, conflicted, p0, targets[0] - p0, self._plan is not None, blocked)
+        turned = conflicted
+        if self.loop is not None and conflicted.any():  # only encounters, not a lagging drone's overshoot
+            turned = conflicted & sep.conflicted(x_nom - self.loop.free(self._loop_state)[1:], rows)
+        c = self._tie_break.turn(c, turned, p0, targets[0] - p0, self._plan is not None, blocked)
         bad = off_limits | conflicted
         drones = qp_drones(bad, rows.pairs[rows.pair_on]) if grouped else np.arange(self.n)
         sub = rows.subset(drones, self.n, on_only=grouped)  # grouped: the pattern follows the groups
@@ -146,7 +164,7 @@ class MPCPlanner(Controller):
             u0 = self._certifier.certify(p0, u[0], cand)
             if u0 is not None:
                 self._accept(p0, u, x)
-                info = self._qp_info(sol, sol.x, active, drones, x, rows, inside_m, inside)
+                info = self._qp_info(sol, sol.x, active, drones, self._true(u, x), rows, inside_m, inside)
                 return ControlStep(u0, info)
             status, solved = status + "; command failed certification", u[0]
         u, x, note = self._certifier.fallback(self._plan, p0, cand, horizon, solved, self._u_prev)
@@ -155,6 +173,38 @@ class MPCPlanner(Controller):
                         solve_time_s=sol.solve_time_s, max_slack_m=inside_m,
                         slack_pairs=_pairs_of(inside), **self._liveness())  # fmt: skip
         return ControlStep(u[0].copy(), info)
+
+    def _true(self, u: Array, x: Array) -> Array:
+        """Relative positions (H, n, d) the drones reach with the inputs ``u``: the single
+        integrator's ``x``, plus the velocity loop's offsets with a loop (:mod:`mpcform.mpc.loop`)."""
+        if self.loop is None:
+            return x
+        return x + self.loop.offsets(self._loop_state, u)[1:]
+
+    def _guess(self, p0: Array) -> Array:
+        """The guess (H + 1, n, d) the rows are linearised about (:func:`mpcform.mpc.plan.guess`);
+        with a loop, where the previous plan shifted takes the drones from ``p0`` (it meets its own
+        rows, as the single integrator's guess does)."""
+        if self.loop is None:
+            return guess(self._plan, p0, self.settings.horizon)
+        h = self.settings.horizon
+        u = np.zeros((h, self.n, self.dim)) if self._plan is None else self._plan.shifted_inputs()
+        return np.concatenate([p0[None], p0 + self._true(u, self.dt_s * np.cumsum(u, axis=0))])
+
+    def _rows(self, p0: Array, about: Array, cand: Candidates) -> SeparationRows:
+        """The separation rows about ``about``; with a loop, on the true positions: the QP's rows
+        carry the forced response, the bounds here the free one (not in the hard no-approach rows:
+        a drone cannot undo the velocity it has)."""
+        rows = self._separation.rows(p0, about, cand)
+        if self.loop is None:
+            return rows
+        ends = row_ends(self.settings.horizon)
+        free = self.loop.free(self._loop_state)[ends].transpose(1, 0, 2)  # (n, R, d)
+        shift_p = np.einsum("prd,prd->pr", rows.pair_coeffs, free[rows.pairs[:, 0]] - free[rows.pairs[:, 1]])
+        shift_s = np.einsum("srd,srd->sr", rows.single_coeffs, free[rows.singles])
+        shift_p[rows.pair_hard, 0] = 0.0
+        shift_s[rows.single_hard, 0] = 0.0
+        return replace(rows, pair_lower=rows.pair_lower - shift_p, single_lower=rows.single_lower - shift_s)
 
     def _liveness(self) -> dict[str, int]:
         """The tie-break's events of this step (StepInfo fields)."""
@@ -184,7 +234,7 @@ class MPCPlanner(Controller):
         items whose rows positions ``x`` (H, n, d) miss, and the items ``inside`` that start
         ``inside_m`` inside their required distance)."""
         nud = self.settings.horizon * drones.shape[0] * self.dim
-        slack = z[2 * nud :]
+        slack = z[2 * nud : 2 * nud + self.settings.horizon * drones.shape[0]]
         shortfall, missed = inside_m, inside
         if slack.max(initial=0.0) > SLACK_REPORT_M / 2:
             planned, missed = self._separation.shortfall(x, rows, SLACK_REPORT_M)
@@ -198,6 +248,15 @@ class MPCPlanner(Controller):
     def _accept(self, p0: Array, u: Array, x: Array) -> None:
         self._plan = Plan.from_relative(p0, u, x)
         self._u_prev = u[0].copy()
+
+
+def _check_loop(loop: VelocityLoop | None, dim: int, settings: MPCSettings) -> VelocityLoop | None:
+    """The planner's velocity loop fits its dimension and horizon."""
+    if loop is not None and loop.forced.shape[1:] != (settings.horizon, dim):
+        raise ValidationError("plant", f"the velocity loop is for {loop.forced.shape[2]} dimensions and "
+                              f"a horizon of {loop.forced.shape[1]}, the planner has {dim} and "
+                              f"{settings.horizon}")  # fmt: skip
+    return loop
 
 
 def _pairs_of(labels: Array) -> tuple[tuple[int, int], ...]:

@@ -6,6 +6,9 @@ tolerances mean something::
 
     z = [u_0 .. u_{H-1} | x_1 .. x_H | s_1 .. s_H]      x_j = p_j - p0,  x_0 = 0
 
+(with a velocity loop, then ``y_1 .. y_H``: where the loop takes the drones, the separation rows
+on them; :mod:`mpcform.mpc.loop`).
+
 with one separation slack ``s_{e,i} >= 0`` [m] per drone and position step (shared by the
 drone's pair and obstacle rows at that step), so the slack keeps the problem stage-wise
 sparse: a slack per pair over the whole horizon would couple all steps and fill the KKT
@@ -28,7 +31,16 @@ import scipy.sparse as sp
 
 from mpcform._validate import Array
 from mpcform.mpc.limits import Limits
-from mpcform.mpc.rows import Layout, LimitRows, RowBlock, dynamics_rows, separation_pattern, slack_rows
+from mpcform.mpc.loop import VelocityLoop
+from mpcform.mpc.rows import (
+    Layout,
+    LimitRows,
+    RowBlock,
+    dynamics_rows,
+    separation_pattern,
+    slack_rows,
+    true_position_rows,
+)
 from mpcform.mpc.settings import MPCSettings
 
 
@@ -51,11 +63,14 @@ class MPCQP:
         pairs: Array,
         singles: Array,
         families: tuple[LimitRows, ...],
+        loop: VelocityLoop | None = None,
     ) -> None:
         h = settings.horizon
-        self.layout = lay = Layout(n, dim, h)
+        self.layout = lay = Layout(n, dim, h, loop is not None)
         self.settings = settings
         blocks = [dynamics_rows(lay, dt_s), *(f.sparse(lay) for f in families)]
+        if loop is not None:
+            blocks.append(true_position_rows(lay, loop.forced))
         blocks += [separation_pattern(lay, pairs, singles), slack_rows(lay)]
         rows_all, cols_all, vals, row_slices, entry_slices = _stack(blocks)
         self._families = tuple(zip(families, row_slices[1 : 1 + len(families)], strict=True))
@@ -83,7 +98,8 @@ class MPCQP:
         q[: lay.nud] = -c.ravel()
         q[lay.nud : 2 * lay.nud - lay.n * lay.dim] = -k * c[1:].ravel()
         q[2 * lay.nud - lay.n * lay.dim : 2 * lay.nud] = 0.0
-        q[2 * lay.nud :] = self.settings.slack_weight if slack_weight is None else slack_weight
+        q[lay.slack_slice()] = self.settings.slack_weight if slack_weight is None else slack_weight
+        q[lay.slack_slice().stop :] = 0.0
         return q
 
     def bounds(self, p0: Array, u_prev: Array, sep_lower: Array, sep_active: Array) -> tuple[Array, Array]:
@@ -144,7 +160,8 @@ def _cost_hessian(lay: Layout, settings: MPCSettings) -> sp.csc_matrix:
         (np.full(nud - n * dim, k), (np.arange(n * dim, nud), nud + np.arange(nud - n * dim))),
         shape=(lay.n_var, lay.n_var),
     )
-    diag = np.concatenate([diag_u, diag_x, np.full(ns, settings.slack_quadratic)])
+    diag_y = np.zeros(nud if lay.true_positions else 0)
+    diag = np.concatenate([diag_u, diag_x, np.full(ns, settings.slack_quadratic), diag_y])
     P = sp.triu(sp.diags(diag) + cross, format="csc")
     P.sort_indices()
     return P

@@ -3,7 +3,10 @@
 Variables, all drones stacked (n drones, d dims, horizon H), positions relative to the start
 ``p0`` (``x_j = p_j - p0``, ``x_0 = 0``)::
 
-    z = [u_0 .. u_{H-1} | x_1 .. x_H | s_1 .. s_H]
+    z = [u_0 .. u_{H-1} | x_1 .. x_H | s_1 .. s_H]   (then y_1 .. y_H with a velocity loop)
+
+With a velocity loop (:mod:`mpcform.mpc.loop`) ``y_e = x_e + sum_j G_{e,j} u_j`` are where the loop
+takes the drones (less its free response, which is in the bounds); the separation rows are on y.
 
 A limit's family (:class:`LimitRows`) builds its rows for the sparse QP of all drones
 (:mod:`mpcform.mpc.qp`) and for one drone's dense QP over its inputs (:mod:`mpcform.mpc.per_drone`),
@@ -30,11 +33,13 @@ INSCRIBED = 1.0 - 1e-9  # ||u||^2 below this times h^2: inside the velocity set,
 
 @dataclass(frozen=True)
 class Layout:
-    """Sizes of the QP's variable blocks: inputs and positions (H n d each), slacks (H n)."""
+    """Sizes of the QP's variable blocks: inputs and positions (H n d each), slacks (H n), and with
+    ``true_positions`` the velocity loop's positions (H n d)."""
 
     n: int
     dim: int
     horizon: int
+    true_positions: bool = False
 
     @property
     def nud(self) -> int:
@@ -46,7 +51,7 @@ class Layout:
 
     @property
     def n_var(self) -> int:
-        return 2 * self.nud + self.n_slack
+        return (3 if self.true_positions else 2) * self.nud + self.n_slack
 
     def u_cols(self) -> Array:
         """Columns (H, n, d) of the inputs u_0 .. u_{H-1}."""
@@ -59,6 +64,14 @@ class Layout:
     def s_cols(self) -> Array:
         """Columns (H, n) of the slacks s_1 .. s_H."""
         return 2 * self.nud + np.arange(self.n_slack).reshape(self.horizon, self.n)
+
+    def y_cols(self) -> Array:
+        """Columns (H, n, d) of the velocity loop's positions y_1 .. y_H (``true_positions``)."""
+        return 2 * self.nud + self.n_slack + self.u_cols()
+
+    def slack_slice(self) -> slice:
+        """Where the slacks are in z."""
+        return slice(2 * self.nud, 2 * self.nud + self.n_slack)
 
 
 @dataclass(frozen=True)
@@ -89,6 +102,24 @@ def dynamics_rows(lay: Layout, dt_s: float) -> RowBlock:
     )
 
 
+def true_position_rows(lay: Layout, forced: Array) -> RowBlock:
+    """``y_e - x_e - sum_{j<e} G_{e,j} u_j = 0`` with the forced response ``forced`` (H + 1, H, d)
+    of :class:`mpcform.mpc.loop.VelocityLoop`."""
+    h, n, dim = lay.horizon, lay.n, lay.dim
+    u_col, x_col, y_col = lay.u_cols(), lay.x_cols(), lay.y_cols()
+    r = np.arange(lay.nud).reshape(h, n, dim)
+    e, j = np.tril_indices(h)  # row e - 1 (e = 1..H), input j < e
+    u_rows = np.broadcast_to(r[e][:, :, :], (e.shape[0], n, dim))
+    g = np.broadcast_to(forced[e + 1, j][:, None, :], u_rows.shape)
+    return RowBlock(
+        np.concatenate([r.ravel(), r.ravel(), u_rows.ravel()]),
+        np.concatenate([y_col.ravel(), x_col.ravel(), u_col[j].ravel()]),
+        np.concatenate([np.ones(lay.nud), -np.ones(lay.nud), -g.ravel()]),
+        np.zeros(lay.nud),
+        np.zeros(lay.nud),
+    )
+
+
 def slack_rows(lay: Layout) -> RowBlock:
     """``s >= 0``."""
     ns = lay.n_slack
@@ -100,11 +131,11 @@ def separation_pattern(lay: Layout, pairs: Array, singles: Array) -> RowBlock:
 
     Pairs ``(i, k)`` (P, 2) first: ``c^T (x_{e,i} - x_{e,k}) + s_{e,i} + s_{e,k} >= b``; then the
     one-drone items ``singles`` (S,) (decoupled pair sides, obstacles): ``c^T x_{e,i} + s_{e,i} >= b``;
-    at the position steps e of :func:`row_ends`.
+    at the position steps e of :func:`row_ends` (on y instead of x with ``lay.true_positions``).
     """
     e = row_ends(lay.horizon)  # (R,) position index 1..H of each row (x_e)
     nr = e.shape[0]
-    x_col, s_col = lay.x_cols(), lay.s_cols()
+    x_col, s_col = lay.y_cols() if lay.true_positions else lay.x_cols(), lay.s_cols()
     rows: list[Array] = [np.empty(0, dtype=np.intp)]
     cols: list[Array] = [np.empty(0, dtype=np.intp)]
     count = 0

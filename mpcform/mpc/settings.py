@@ -45,6 +45,9 @@ class MPCSettings:
       hold a conflict; the other groups' optimum is their eq. 14 rollout (needs ``fast_path``).
       Equal to the monolithic QP up to solver tolerance.
     - ``fast_path``: return the eq. 14 rollout without a solver call when it meets every row.
+    - ``plant_model``: with a linear plant (``lag``, ``second_order``), write the separation rows
+      on where its velocity loop really takes the drones (:mod:`mpcform.mpc.loop`); the cost and
+      eq. 14 are unchanged. No effect on the ideal plant and the quadrotor.
     - ``eps_abs`` / ``eps_rel`` / ``max_iter`` / ``time_limit_s``: solver tolerances and limits.
     """
 
@@ -61,6 +64,7 @@ class MPCSettings:
     per_drone: bool = True
     grouping: bool = True
     fast_path: bool = True
+    plant_model: bool = True
     eps_abs: float = 1e-4
     eps_rel: float = 1e-4
     max_iter: int = 4000

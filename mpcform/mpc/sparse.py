@@ -16,7 +16,9 @@ from __future__ import annotations
 import numpy as np
 
 from mpcform._validate import Array
+from mpcform.errors import ValidationError
 from mpcform.mpc.limits import Limits
+from mpcform.mpc.loop import VelocityLoop
 from mpcform.mpc.problem import ACTIVE_TOL, StepQP, StepSolver
 from mpcform.mpc.qp import MPCQP
 from mpcform.mpc.rows import LimitRows
@@ -41,10 +43,15 @@ class SparseSolver(StepSolver):
         settings: MPCSettings,
         families: tuple[LimitRows, ...],
         separation: Separation,
+        loop: VelocityLoop | None = None,
     ) -> None:
         self.backend, self.name, self.warm_starts = backend, backend.name, backend.warm_starts
         self.dim, self.dt_s, self.limits, self.settings = dim, dt_s, limits, settings
-        self.families, self.separation = families, separation
+        self.families, self.separation, self.loop = families, separation, loop
+        if loop is not None and backend.needs_context:
+            raise ValidationError("controller.solver", f"{backend.name!r} models the separation itself "
+                                  "and cannot take the plant's velocity loop; set controller.plant_model "
+                                  "= false")  # fmt: skip
         self.reset()
 
     def reset(self) -> None:
@@ -73,7 +80,10 @@ class SparseSolver(StepSolver):
             backend.set_context(self._context(mpc_qp, qp))
         x0 = None
         if qp.warm is not None:
-            x0 = np.concatenate([qp.warm.ravel(), np.zeros(mpc_qp.layout.n_slack)])
+            y = []  # with a loop, the warm start's true positions y = x + G u
+            if self.loop is not None:
+                y = [(qp.warm[1] + np.einsum("ejd,jnd->end", self.loop.forced[1:], qp.warm[0])).ravel()]
+            x0 = np.concatenate([qp.warm.ravel(), np.zeros(mpc_qp.layout.n_slack), *y])
         sol = backend.solve(x0)
         sol = self._exact(sol, mpc_qp, qp, lo, hi, a_data, x0)
         nud = mpc_qp.layout.nud
@@ -86,14 +96,14 @@ class SparseSolver(StepSolver):
     ) -> QPSolution:
         """``sol``, or a re-solve with a raised slack weight that needs less slack (module docstring)."""
         lay, weight = mpc_qp.layout, self.settings.slack_weight
-        nud = 2 * lay.nud
+        slack = lay.slack_slice()
         for _ in range(MAX_RAISES):
             if not sol.success or sol.x is None or not self._short(sol.x, mpc_qp, qp):
                 return sol
             weight *= RAISE
             self.backend.update(mpc_qp.cost_vector(qp.targets_mps, weight), lo, hi, a_data)
             again = self.backend.solve(x0)
-            if not again.success or again.x is None or again.x[nud:].sum() >= sol.x[nud:].sum():
+            if not again.success or again.x is None or again.x[slack].sum() >= sol.x[slack].sum():
                 return sol
             sol = QPSolution(again.x, again.y, True, again.status, sol.iterations + again.iterations,
                              sol.solve_time_s + again.solve_time_s)  # fmt: skip
@@ -103,9 +113,10 @@ class SparseSolver(StepSolver):
         """Whether the solution ``z`` misses a separation row by more than :data:`SLACK_TOL_M` (an
         interior-point solver leaves slacks of its tolerance's order at zero: not counted)."""
         lay = mpc_qp.layout
-        if z[2 * lay.nud :].max(initial=0.0) <= SLACK_TOL_M:
+        if z[lay.slack_slice()].max(initial=0.0) <= SLACK_TOL_M:
             return False
-        x = z[lay.nud : 2 * lay.nud].reshape(lay.horizon, lay.n, lay.dim)
+        at = lay.y_cols() if lay.true_positions else lay.x_cols()  # the rows' positions
+        x = z[at.ravel()].reshape(lay.horizon, lay.n, lay.dim)
         return self.separation.shortfall(x, qp.rows, SLACK_TOL_M)[0] > SLACK_TOL_M
 
     def _sub_qp(self, drones: Array, rows: SeparationRows, rebuilt: bool) -> MPCQP:
@@ -114,7 +125,7 @@ class SparseSolver(StepSolver):
         if rebuilt or self._qp is None or key != self._qp_key:
             self._qp = MPCQP(
                 drones.shape[0], self.dim, self.dt_s, self.limits, self.settings, rows.pairs, rows.singles,
-                self.families,
+                self.families, self.loop,
             )  # fmt: skip
             self._qp_key = key
         return self._qp

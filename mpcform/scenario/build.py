@@ -9,6 +9,7 @@ from mpcform.control.nullspace import NullSpaceController, NullSpaceSettings
 from mpcform.control.tracking import ProportionalController, TrackingController
 from mpcform.errors import ScenarioError, SolverError
 from mpcform.mpc.limits import tightened
+from mpcform.mpc.loop import VelocityLoop
 from mpcform.mpc.settings import MPCSettings
 from mpcform.scenario.parse import as_scenario_error
 from mpcform.scenario.schema import CONTROLLER_KINDS, did_you_mean, listing
@@ -62,8 +63,11 @@ def build_controller(
     rob = scenario.robustness
     with as_scenario_error("plant"):
         planned, obstacles = tightened(limits, scenario.obstacles, rob.margin_m, rob.a_max_mps2)
+    loop = None
+    if rob.loop and spec.mpc.plant_model:
+        loop = VelocityLoop.from_groups(list(rob.loop), scenario.dim, dt, spec.mpc.horizon)
     with as_scenario_error("controller"):
-        planner: Controller = MPCPlanner(ref, dt, planned, spec.mpc, obstacles=obstacles, solver=backend)
+        planner: Controller = MPCPlanner(ref, dt, planned, spec.mpc, obstacles, backend, loop)
     return planner
 
 

@@ -15,6 +15,7 @@ import numpy as np
 
 from mpcform._validate import positive
 from mpcform.errors import ValidationError
+from mpcform.mpc.loop import LoopGroup
 from mpcform.sim.plants import KINDS, SAMPLES_PER_STEP, IdealPlant, Plant, lag_plant, second_order_plant
 from mpcform.sim.wind import Wind
 
@@ -35,6 +36,9 @@ class Robustness:
     margin_m: float
     a_max_mps2: float | None
     valid_speed_mps: float = float("inf")
+    loop: tuple[LoopGroup, ...] = ()
+    """The linear plants' velocity loops ``(A, B, c, axes)`` per axis group, which the planner
+    can model (:mod:`mpcform.mpc.loop`); empty for the ideal plant and the quadrotor."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -99,7 +103,9 @@ class PlantSpec:
         a_max = default_a_max(plant) if a_max_mps2 is None else a_max_mps2
         margin = plant_margin(plant, dt_s, a_max)
         chosen = margin.norm_m if self.margin_m is None else self.margin_m
-        return Robustness(chosen, a_max, margin.valid_speed_mps)
+        linear = self.kind != "quadrotor"  # the quadrotor's loops are a linearisation: not modelled
+        loop = tuple((a, b, c, axes) for a, b, _, c, axes in plant.velocity_loops()) if linear else ()
+        return Robustness(chosen, a_max, margin.valid_speed_mps, loop)
 
     def build(self, n: int, dim: int, seed: int | np.random.SeedSequence = 0) -> Plant:
         """The plant for ``n`` drones in ``dim`` dimensions; ``seed`` feeds its wind and noise."""

@@ -281,3 +281,24 @@ def test_no_slack_where_the_drone_qps_are_feasible(v_max: float, monkeypatch: py
                     assert info.max_slack_m <= 1e-6, (dt, info)
                     checked += 1
     assert checked > 0
+
+
+def test_rows_with_a_velocity_loop_are_on_the_true_positions() -> None:
+    """With a lag model the rows over v are ``a^T (x_e + sum_j G_{e,j} u_j)`` for ``u = M^-1 v``."""
+    from mpcform.mpc.loop import VelocityLoop
+
+    tau, h, dim = 0.2, 6, 3
+    lag = (np.array([[-1 / tau]]), np.array([1 / tau]), np.array([1.0]), (0, 1, 2))
+    loop = VelocityLoop.from_groups([lag], dim, 0.1, h)
+    st = MPCSettings(horizon=h, coupling="decoupled")
+    from mpcform.mpc.rows import limit_rows
+
+    per = PerDroneQP(dim, 0.1, LIMITS, st, limit_rows(dim, 0.1, LIMITS, st), loop)
+    rng = np.random.default_rng(5)
+    v = rng.normal(size=h * dim)
+    u = (per._m_inv @ v).reshape(h, dim)
+    x = 0.1 * np.cumsum(u, axis=0)
+    true = x + np.einsum("ejd,jd->ed", loop.forced[1:], u)
+    coeffs, ends = rng.normal(size=(7, dim)), rng.integers(1, h + 1, 7)
+    want = np.einsum("kd,kd->k", coeffs, true[ends - 1])
+    np.testing.assert_allclose(per._rows_v(coeffs, ends) @ v, want, atol=1e-12)

@@ -75,3 +75,32 @@ def test_limit_bounds_follow_the_start_and_the_last_command() -> None:
     assert changed.size == 2 + 4  # u_0 - u_{-1} (2 components), the fence rows of x_1 and x_2 (2 each)
     np.testing.assert_allclose(lo_b[changed], [-4.5, -5.25, -10.0, -8.0, -10.0, -8.0])
     np.testing.assert_allclose(hi_b[changed], [5.5, 4.75, 8.0, 10.0, 8.0, 10.0])
+
+
+def test_separation_rows_with_a_velocity_loop_carry_its_forced_response() -> None:
+    """With a lag model the QP has the loop's positions ``y_e = x_e + sum_j G_{e,j} u_j`` (equality
+    rows), and a pair row is ``c^T (y_{e,i} - y_{e,k})``, a single's ``a^T y_{e,i}``."""
+    from mpcform.mpc.loop import VelocityLoop
+
+    h, tau = 3, 0.2
+    loop = VelocityLoop.from_groups([(np.array([[-1 / tau]]), np.array([1 / tau]), np.array([1.0]), (0, 1))],
+                                    2, DT, h)  # fmt: skip
+    st = MPCSettings(horizon=h)
+    m = MPCQP(3, 2, DT, LIMITS, st, np.array([[0, 2]]), np.array([1]), limit_rows(2, DT, LIMITS, st), loop)
+    rng = np.random.default_rng(2)
+    r = row_ends(h).shape[0]
+    c, a = rng.normal(size=(1, r, 2)), rng.normal(size=(1, r, 2))
+    m.A.data = m.separation_values(c, a)
+    u = rng.normal(size=(h, 3, 2))
+    x = DT * np.cumsum(u, axis=0)
+    y = x + np.einsum("ejd,jnd->end", loop.forced[1:], u)
+    z = np.concatenate([u.ravel(), x.ravel(), np.zeros(3 * h), y.ravel()])
+    lo, hi = m.bounds(np.zeros((3, 2)), u[0], np.zeros((2, r)), np.array([False, False]))
+    rows = m.A @ z
+    eq = lo == hi  # dynamics and the loop's positions: met
+    np.testing.assert_allclose(rows[eq], lo[eq], atol=1e-12)
+    got = rows[m.sep_rows]
+    e = row_ends(h) - 1
+    pair, single = np.einsum("rd,rd->r", c[0], y[e, 0] - y[e, 2]), np.einsum("rd,rd->r", a[0], y[e, 1])
+    want = np.concatenate([pair, single])
+    np.testing.assert_allclose(got, want, atol=1e-12)

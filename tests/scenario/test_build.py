@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+from pathlib import Path
 
 import pytest
 from saved_runs import SCENARIOS
@@ -67,3 +68,67 @@ def test_a_solver_for_a_planner_solving_per_drone_is_an_error() -> None:
         with pytest.raises(ScenarioError, match="'osqp' solves the sparse QP.*per_drone = false") as err:
             build_controller(s, "mpc", solver=solver)
         assert err.value.field == "solver"
+
+
+BRAKE = """version = 1
+name = "brake"
+dim = 2
+[template]
+shape = "explicit"
+offsets = [[-0.35, 0.0], [0.35, 0.0]]
+[initial]
+positions = [[-5.0, 0.0], [0.35, 0.0]]
+[reference]
+kind = "constant"
+centroid = [0.0, 0.0]
+rotation = 0.0
+scale = 1.0
+[limits]
+v_max = 2.0
+d_min = 0.5
+[controller]
+kind = "mpc"
+gain = 2.0
+horizon = 10
+[simulation]
+dt = 0.1
+duration = 6.0
+"""
+
+
+@pytest.mark.parametrize(("plant", "modelled"), [("lag", True), ("second_order", True), ("quadrotor", False),
+                                                 ("ideal", False)])  # fmt: skip
+def test_the_planner_models_a_linear_plants_velocity_loop(plant: str, modelled: bool, tmp_path: Path) -> None:
+    """A lag or second-order plant gives the planner its velocity loop (``plant_model = false``:
+    none); the ideal plant and the quadrotor give none."""
+    from importlib import metadata
+
+    try:
+        metadata.distribution("drone-models")
+    except metadata.PackageNotFoundError:
+        if plant == "quadrotor":
+            pytest.skip("needs drone-models: pip install -e '.[flight]'")
+    path, table = tmp_path / "brake.toml", f'[plant]\nkind = "{plant}"\n'
+    path.write_text(BRAKE + table)
+    planner = build_controller(load_scenario(path))
+    assert (planner.loop is not None) == modelled  # type: ignore[attr-defined]
+    path.write_text(BRAKE.replace('kind = "mpc"', 'kind = "mpc"\nplant_model = false') + table)
+    assert build_controller(load_scenario(path)).loop is None  # type: ignore[attr-defined]
+
+
+def test_a_braking_drone_keeps_d_min_on_a_lag_only_with_the_loop_model(tmp_path: Path) -> None:
+    """A drone braking at 2 m/s onto its goal 0.7 m from a parked partner, lag 0.3 s: planned as a
+    single integrator it overshoots into the partner (true separation below d_min 0.5 m); with the
+    velocity loop in the rows it brakes in time, and it still arrives."""
+    from mpcform.run.runner import run_scenario
+
+    lag = '[plant]\nkind = "lag"\ntime_constant = 0.3\n'
+    path = tmp_path / "brake.toml"
+    results = []
+    for flag in ("false", "true"):
+        path.write_text(BRAKE.replace('kind = "mpc"', f'kind = "mpc"\nplant_model = {flag}') + lag)
+        results.append(run_scenario(load_scenario(path)).summary["metrics"])
+    without, with_loop = results
+    assert without["min_separation_true"] < 0.5 and without["separation_violations_true"] > 0
+    assert with_loop["min_separation_true"] >= 0.5 and with_loop["separation_violations_true"] == 0
+    assert with_loop["completion"] == 1.0
