@@ -15,6 +15,8 @@ with a positive-definite Hessian. Two things make it cheap:
   cost is ``0.5 ||v - c||^2``: DAQP gets an identity Hessian (its cheapest setup), the constant
   rows are transformed once (with their bounds, when those are the same for every drone), and a
   separation row is a Kronecker product ``(w_e (x) a)^T v``, built only where it can be active;
+- with a velocity loop (:mod:`mpcform.mpc.loop`) the rows are on the loop's positions
+  ``x_e + sum_j G_{e,j} u_j``: only the table ``w_e`` changes (``u = M^-1 v`` is linear in v);
 - the slacks are almost always zero, so each drone is first solved without them: if that hard
   QP is feasible, its solution (``s = 0``) is the drone's plan, else the soft QP is solved. The
   L1 penalty is exact once ``w1`` exceeds the hard QP's multipliers at every step; those grow

@@ -14,6 +14,14 @@ the rollout stays ``d_min + margin`` apart along each segment, and the split row
 the rollout itself, which meets them exactly; so the rollout is the decoupled QP's optimum, and
 the fast path (which tests the joint rows) returns the same command as a solve. A rollout that
 breaks a limit row is never a linearisation point (the plan could not follow it).
+
+With a velocity loop (``loop``, :mod:`mpcform.mpc.loop`: a linear plant's) every separation test
+is on where the loop takes the drones: the rows (the forced response in the QP, the free one in
+their bounds), the rollout's tests, the guess (the true path of the shifted plan) and the
+certification (the interval's true chord). The cost, and so eq. 14, stay on the single
+integrator; the tie-break turns only drones whose single-integrator rollout conflicts (an
+encounter), not a drone whose own overshoot does (the QP brakes it). The loop state is run on
+the commands sent, from rest.
 """
 
 from __future__ import annotations
@@ -97,7 +105,8 @@ class MPCPlanner(Controller):
         self._plan: Plan | None = None
         self._u_prev = np.zeros((self.n, self.dim))
         self._tie_break.reset()
-        self._loop_state = None if self.loop is None else self.loop.rest(self.n)  # drones at rest
+        # the velocity loop's state (n, d, s), drones at rest (no states without a loop)
+        self._loop_state = np.zeros((self.n, self.dim, 0)) if self.loop is None else self.loop.rest(self.n)
         if self.loop is not None:  # certify where the loop takes the drones in the interval
             loop = self.loop
             self._certifier.drift = lambda u0: loop.first(self._loop_state, u0)
@@ -148,8 +157,9 @@ class MPCPlanner(Controller):
             return self._fast_path(p0, u_nom, x_nom)
         blocked = sep.blocked_targets(targets[0]) if conflicted.any() else None
         turned = conflicted
-        if self.loop is not None and conflicted.any():  # only encounters, not a lagging drone's overshoot
-            turned = conflicted & sep.conflicted(x_nom - self.loop.free(self._loop_state)[1:], rows)
+        if self.loop is not None and conflicted.any():  # the single integrator's conflicts: encounters
+            plain = sep.rows(p0, guess(self._plan, p0, horizon), cand)
+            turned = conflicted & sep.conflicted(x_nom, plain)
         c = self._tie_break.turn(c, turned, p0, targets[0] - p0, self._plan is not None, blocked)
         bad = off_limits | conflicted
         drones = qp_drones(bad, rows.pairs[rows.pair_on]) if grouped else np.arange(self.n)

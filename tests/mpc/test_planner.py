@@ -45,11 +45,20 @@ def check_limits(res: SimulationResult, v_max: float, d_min: float) -> None:
     assert seg >= d_min - 1e-6
 
 
+@pytest.mark.parametrize("loop", [False, True])
 @pytest.mark.parametrize("solver", SOLVERS)
 @pytest.mark.parametrize("fast_path", [True, False])
 @pytest.mark.parametrize("dim", [2, 3])
-def test_first_input_is_eq14_when_no_row_is_active(dim: int, fast_path: bool, solver: str) -> None:
+def test_first_input_is_eq14_when_no_row_is_active(
+    dim: int, fast_path: bool, solver: str, loop: bool
+) -> None:
+    """Also with a lag's velocity loop in the rows (the cost is still eq. 14's, the loop moved by
+    earlier commands)."""
+    from mpcform.mpc.loop import VelocityLoop
+
     rng = np.random.default_rng(dim)
+    lag = (np.array([[-5.0]]), np.array([5.0]), np.array([1.0]), (0, 1, 2))
+    model = VelocityLoop.from_groups([lag], dim, 0.05, 8) if loop else None
     tol = 1e-9 if fast_path else 1e-6
     for _ in range(8):
         tpl = Template.polygon(6, 3.0, dim)
@@ -58,9 +67,12 @@ def test_first_input_is_eq14_when_no_row_is_active(dim: int, fast_path: bool, so
         ref = ExponentialReference(tpl, start, goal, 0.5)
         p = forward_kinematics(tpl, start) + rng.normal(0, 0.1, (6, dim))
         settings_ = MPCSettings(horizon=8, gain_per_s=2.0, fast_path=fast_path)
-        planner = MPCPlanner(ref, 0.05, Limits(v_max_mps=100.0, d_min_m=0.2), settings_, solver=solver)
+        planner = MPCPlanner(ref, 0.05, Limits(v_max_mps=100.0, d_min_m=0.2), settings_, solver=solver,
+                             loop=model)  # fmt: skip
         planner.reset(0.0, p)
         t = float(rng.uniform(0, 3))
+        if loop:  # the drones moving: the loop has a state
+            planner.step(t - 0.05, p)
         out = planner.step(t, p)
         want = TrackingController(ref, 2.0, 0.05).step(t, p).command_mps
         assert out.info.mode == ("fast_path" if fast_path else "qp")
