@@ -190,7 +190,8 @@ def format_summary(summary: dict[str, Any]) -> str:
                                   f"{m['obstacle_violations']} violations"))
     plant = summary.get("plant")
     if plant is not None and plant.get("kind") != "ideal" and "min_separation_true" in m:
-        rows.append(("true motion", f"{plant['kind']} plant (margin {_m(plant['margin'], 'm')}): min "
+        model = ", its velocity loop in the rows" if plant.get("velocity_loop_modelled") else ""
+        rows.append(("true motion", f"{plant['kind']} plant (margin {_m(plant['margin'], 'm')}{model}): min "
                      f"separation {_m(m['min_separation_true'], 'm')}, {m['separation_violations_true']} "
                      f"violations, max speed {_m(m['max_speed_true'], 'm/s')}"))
     for mode, st in m["step_time_ms"].items():

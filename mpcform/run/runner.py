@@ -69,11 +69,13 @@ def run_scenario(
 
 def plant_record(scenario: Scenario, wind_clip_fraction: float) -> dict[str, Any]:
     """``summary.json``'s ``plant``: kind, robust margin [m] per drone, the acceleration bound it
-    assumes [m/s^2], the speed it is valid below [m/s], and the share of clipped gust samples."""
-    rob = scenario.robustness
+    assumes [m/s^2], the speed it is valid below [m/s], the share of clipped gust samples, and
+    whether the MPC's rows model the plant's velocity loop (``controller.plant_model``)."""
+    rob, spec = scenario.robustness, scenario.controller
     return {
         "kind": scenario.plant.kind, "margin": rob.margin_m, "a_max": rob.a_max_mps2,
         "margin_valid_below_speed": rob.valid_speed_mps, "wind_clip_fraction": wind_clip_fraction,
+        "velocity_loop_modelled": bool(rob.loop) and spec.kind == "mpc" and spec.mpc.plant_model,
     }  # fmt: skip
 
 

@@ -292,7 +292,8 @@ def test_run_with_a_plant_override_reports_the_true_motion(tmp_path, capsys):
     assert status == 0
     out = capsys.readouterr().out
     assert "true motion" in out and "lag plant" in out
-    assert json.loads((tmp_path / "summary.json").read_text())["plant"]["kind"] == "lag"
+    plant = json.loads((tmp_path / "summary.json").read_text())["plant"]
+    assert plant["kind"] == "lag" and plant["velocity_loop_modelled"] is True
 
 
 def test_unknown_plant_kind_is_a_usage_error(capsys):
