@@ -111,10 +111,11 @@ class MPCPlanner(Controller):
         targets, ff = feedforward_targets(self.reference, t_s, dt, horizon, st.feedforward)
         c = ff + k * (targets[:-1] - p0)  # u_j = c_j - k x_j is the eq. 14 rollout
         u_nom, x_nom = rollout(c, k, dt)
+        nominal = Plan.from_relative(p0, u_nom, x_nom)  # the fast path's plan
         about = guess(self._plan, p0, horizon)
         off_limits = violators(self._families, p0, self._u_prev, u_nom, x_nom)
-        if st.fast_path and not off_limits.any() and sep.clear(p0, about, x_nom):
-            return self._fast_path(p0, u_nom, x_nom)
+        if st.fast_path and not off_limits.any() and sep.clear(about, nominal.positions_m):
+            return self._fast_path(nominal)
         cand = self._candidates.select(p0)
         grouped = st.fast_path and st.grouping
         if grouped or st.solves_per_drone:  # no fixed pattern: rows only within reach
@@ -125,12 +126,12 @@ class MPCPlanner(Controller):
             # the rollout meets the limits and the joint rows: the decoupled rows are split about
             # the rollout itself, which meets them, so it is the optimum (see the module docstring)
             if st.fast_path:
-                return self._fast_path(p0, u_nom, x_nom)
+                return self._fast_path(nominal)
             about = np.concatenate([p0[None], p0 + x_nom])
             rows, values = sep.rows(p0, about, cand), None
         conflicted = sep.conflicted(x_nom, rows, values)
         if st.fast_path and not (off_limits | conflicted).any():
-            return self._fast_path(p0, u_nom, x_nom)
+            return self._fast_path(nominal)
         blocked = sep.blocked_targets(targets[0]) if conflicted.any() else None
         c = self._tie_break.turn(c, conflicted, p0, targets[0] - p0, self._plan is not None, blocked)
         bad = off_limits | conflicted
@@ -161,10 +162,12 @@ class MPCPlanner(Controller):
         tb = self._tie_break
         return {"stalled": tb.new_stalls, "resolving": tb.resolving, "resolved": tb.resolved}
 
-    def _fast_path(self, p0: Array, u_nom: Array, x_nom: Array) -> ControlStep:
+    def _fast_path(self, nominal: Plan) -> ControlStep:
+        """Accept the rollout's plan: its first input is the command."""
         self._tie_break.clear()
-        self._accept(p0, u_nom, x_nom)
-        return ControlStep(u_nom[0].copy(), StepInfo("fast_path", resolved=self._tie_break.resolved))
+        self._plan, self._u_prev = nominal, nominal.inputs_mps[0].copy()
+        info = StepInfo("fast_path", resolved=self._tie_break.resolved)
+        return ControlStep(nominal.inputs_mps[0].copy(), info)
 
     def _merge(self, drones: Array, z: Array, u_nom: Array, x_nom: Array) -> tuple[Array, Array]:
         """Inputs and relative positions (H, n, d): the solution ``z``'s for ``drones``, the

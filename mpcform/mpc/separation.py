@@ -27,7 +27,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from mpcform._validate import Array
-from mpcform.formation.geometry import closest_on_segments, pairs_within, vector_norms
+from mpcform.formation.geometry import NearPairs, closest_on_segments, pairs_within, vector_norms
 from mpcform.mpc.candidates import Candidates
 from mpcform.mpc.limits import Limits, SphereObstacle, obstacle_arrays
 from mpcform.mpc.rows import row_ends, row_segments
@@ -98,6 +98,7 @@ class PairSeparation:
         self.unit_metric = bool(np.all(metric == 1.0))  # W = I: no scaling
         self.joint = settings.coupling == "joint"
         self.segs, self.ends = row_segments(settings.horizon), row_ends(settings.horizon)
+        self.near = NearPairs()  # the clear test's neighbour list, kept between steps
 
     def relative(self, points: Array, i: Array, k: Array) -> Array:
         """``W (p_i - p_k)`` for positions (..., n, d): (..., P, d)."""
@@ -150,11 +151,12 @@ class PairSeparation:
 
     def doubtful(self, p0: Array, spread: Array) -> tuple[Array, Array, Array]:
         """The pairs ``(i, k)`` the spread bound of :meth:`Separation.clear` leaves in doubt, and by
-        how much their start distance clears it (negative)."""
+        how much their start distance clears it (negative); measured on the pairs of the
+        neighbour list that may lie within ``d_min + margin`` plus twice the largest spread."""
         scaled = p0 * self.metric  # the metric only shrinks lengths: world spreads bound it
         need = self.d_min_m + self.margin_m
-        i, k = pairs_within(scaled, need + 2.0 * spread.max(), sort=False).T
-        clearance = np.linalg.norm(scaled[i] - scaled[k], axis=1) - spread[i] - spread[k]
+        i, k = self.near.within(scaled, need + 2.0 * spread.max()).T
+        clearance = vector_norms(scaled[i] - scaled[k]) - spread[i] - spread[k]
         near = clearance < need
         return i[near], k[near], clearance[near] - need
 
@@ -240,9 +242,10 @@ class Separation:
             pairs, p_coeffs, p_lower, p_on, labels[:, 0], labels, s_coeffs, s_lower, s_on, p_hard, s_hard
         )
 
-    def clear(self, p0: Array, guess: Array, x: Array) -> bool:
-        """A cheap sufficient test that positions ``x`` (H, n, d) meet every joint pair row and
-        obstacle row (so every pair stays ``d_min`` apart over each step). It does not cover the
+    def clear(self, guess: Array, positions: Array) -> bool:
+        """A cheap sufficient test that the plan's ``positions`` (H + 1, n, d) (row 0 the start
+        ``p0``) meet every joint pair row and obstacle row about ``guess`` (H + 1, n, d) (so every
+        pair stays ``d_min`` apart over each step). It does not cover the
         decoupled pair-side rows: two drones moving side by side can pass it while crossing the
         guess's midpoint plane.
 
@@ -252,16 +255,18 @@ class Separation:
         of its start and its positions within ``spread_i`` of the guess, so an item whose start
         distance clears the requirement by the spreads of its drones is clear. No row is built.
         """
-        pos = np.concatenate([p0[None], p0 + x])
-        spread = _max_norm(guess - p0) + _max_norm(pos - guess)  # (n,) [m]
+        p0 = positions[0]
+        spread = _max_norm(guess - p0) + _max_norm(positions - guess)  # (n,) [m]
         units = [u for u in (self.pairs if p0.shape[0] > 1 else None, self.obstacles) if u is not None]
         for unit in units:
             i, k, slack = unit.doubtful(p0, spread)
+            if i.shape[0] == 0:  # every item clear by the spreads
+                continue
             if i.shape[0] > 8 * FIRST_TESTED:  # the least clear first: a miss among them answers early
                 first = np.argpartition(slack, FIRST_TESTED)[:FIRST_TESTED]
-                if not self._passes(*unit.clear_test(guess, pos, i[first], k[first])):
+                if not self._passes(*unit.clear_test(guess, positions, i[first], k[first])):
                     return False
-            if not self._passes(*unit.clear_test(guess, pos, i, k)):
+            if not self._passes(*unit.clear_test(guess, positions, i, k)):
                 return False
         return True
 

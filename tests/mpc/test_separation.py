@@ -20,6 +20,11 @@ def still(p0: np.ndarray, horizon: int) -> np.ndarray:
     return np.broadcast_to(p0, (horizon + 1,) + p0.shape)
 
 
+def planned(p0: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """The plan's positions (H + 1, n, d) of relative positions ``x`` (H, n, d) from ``p0``."""
+    return np.concatenate([p0[None], p0 + x])
+
+
 def cand(pairs: list[list[int]], obstacles: list[list[int]] | None = None) -> Candidates:
     """Every item within reach."""
     p = np.array(pairs, dtype=np.intp).reshape(-1, 2)
@@ -131,7 +136,7 @@ def test_clear_means_no_joint_or_obstacle_row_is_missed(seed: int) -> None:
     sep = Separation(2, Limits(v_max_mps=1.0, d_min_m=0.5), MPCSettings(horizon=h), (ob,))
     everything = cand([[i, k] for i in range(n) for k in range(i + 1, n)], [[i, 0] for i in range(n)])
     rows = sep.rows(p0, guess, everything)
-    if sep.clear(p0, guess, x):
+    if sep.clear(guess, planned(p0, x)):
         assert sep.shortfall(x, rows, 0.0)[0] <= 1e-12
 
 
@@ -142,7 +147,7 @@ def test_clear_does_not_cover_the_decoupled_rows() -> None:
     x = np.broadcast_to([0.1, 0.0], (2, 2, 2)) * np.array([1.0, 2.0])[:, None, None]
     for coupling, missed in (("joint", False), ("decoupled", True)):
         sep = Separation(2, Limits(v_max_mps=1.0, d_min_m=0.5), MPCSettings(horizon=2, coupling=coupling), ())
-        assert sep.clear(p0, still(p0, 2), x)
+        assert sep.clear(still(p0, 2), planned(p0, x))
         rows = sep.rows(p0, still(p0, 2), cand([[0, 1]]))
         assert (sep.shortfall(x, rows, 0.0)[0] > 0) == missed
 
@@ -151,9 +156,9 @@ def test_clear_fails_head_on() -> None:
     p0 = np.array([[0.0, 0.0], [1.0, 0.0]])
     sep = Separation(2, Limits(v_max_mps=1.0, d_min_m=0.5), MPCSettings(horizon=2), ())
     apart = np.zeros((2, 2, 2))
-    assert sep.clear(p0, still(p0, 2), apart)
+    assert sep.clear(still(p0, 2), planned(p0, apart))
     towards = np.array([[[0.2, 0.0], [-0.2, 0.0]], [[0.4, 0.0], [-0.4, 0.0]]])
-    assert not sep.clear(p0, still(p0, 2), towards)
+    assert not sep.clear(still(p0, 2), planned(p0, towards))
 
 
 def test_first_segment_items_within_reach() -> None:
@@ -257,6 +262,6 @@ def test_the_clear_test_answers_the_same_when_it_tries_the_least_clear_first(see
     answers = []
     for first in (1, 10_000):
         monkey.setattr("mpcform.mpc.separation.FIRST_TESTED", first)
-        answers.append(sep.clear(p0, guess, x))
+        answers.append(sep.clear(guess, planned(p0, x)))
     monkey.undo()
     assert answers[0] == answers[1]
