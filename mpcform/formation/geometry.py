@@ -72,12 +72,13 @@ class NearPairs:
 
     :meth:`within` returns the pairs (m, 2), i < j, closer than the list's radius at the points
     it was last built from: a superset of the pairs now within ``radius``, for the caller to
-    measure. A pair's distance changes by at most the sum of its two points' displacements
-    relative to any common shift (the mean displacement here, so a formation flying as one keeps
-    its list), hence the list holds every pair within ``radius`` while ``radius`` plus twice the
-    largest such displacement stays within the list's radius (less a relative ``ROUNDING``).
-    Otherwise, or when the list's radius exceeds twice ``REBUILD_FACTOR * radius`` (too many
-    pairs to measure), it is rebuilt (:func:`pairs_within`) with the radius ``REBUILD_FACTOR * radius``.
+    measure (every pair, for at most :data:`BRUTE_FORCE_MAX_N` points). A pair's distance changes
+    by at most the sum of its two points' displacements relative to any common shift (the mean
+    displacement here, so a formation flying as one keeps its list), hence the list holds every
+    pair within ``radius`` while ``radius`` plus twice the largest such displacement stays within
+    the list's radius (less a relative ``ROUNDING``). Otherwise, or when the list's radius exceeds
+    twice ``REBUILD_FACTOR * radius`` (too many pairs to measure), it is rebuilt
+    (:func:`pairs_within`) with the radius ``REBUILD_FACTOR * radius``.
     """
 
     REBUILD_FACTOR = 1.25
@@ -90,6 +91,8 @@ class NearPairs:
 
     def within(self, points: Array, radius: float) -> Array:
         """A superset (m, 2) of the pairs of rows of ``points`` (n, d) within ``radius``, in no set order."""
+        if points.shape[0] <= BRUTE_FORCE_MAX_N:  # measuring every pair is cheaper than keeping a list
+            return _upper_pairs(points.shape[0])
         rebuild_m = self.REBUILD_FACTOR * radius
         if points.shape == self._points.shape and self._radius <= 2.0 * rebuild_m:
             shift = points - self._points
