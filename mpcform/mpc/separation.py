@@ -85,9 +85,9 @@ def segment_normals(rel: Array, segs: Array | None = None) -> Array:
     normal = closest_on_segments(rel[:, :-1], rel[:, 1:])  # (m, H, d), divided in place
     dist = vector_norms(normal)
     ok = dist > 1e-9
-    np.divide(normal, dist[..., None], out=normal, where=ok[..., None])
+    normal /= np.where(ok, dist, 1.0)[..., None]
     normal[~ok] = np.eye(normal.shape[-1])[0]  # a coincident guess: any fixed unit vector is valid
-    return normal if segs is None else normal[:, segs]
+    return normal if segs is None else np.take(normal, segs, axis=1)
 
 
 class PairSeparation:
@@ -141,7 +141,7 @@ class PairSeparation:
             np.negative(coeffs[a:b], out=coeffs[p + a : p + b])
             mid = np.add(g_i, g_k, out=g_i)  # the midpoints (B, H + 1, d), in place
             mid *= 0.5
-            mid = mid[:, self.ends]  # at each row's position step (B, R, d)
+            mid = np.take(mid, self.ends, axis=1)  # at each row's position step (B, R, d)
             for side, out, fix in ((i, lower[a:b], np.subtract), (k, lower[p + a : p + b], np.add)):
                 gap = p0[side][:, None] - mid  # -(-c)^T gap = +c^T gap on side k
                 fix(half, np.einsum("prd,prd->pr", coeffs[a:b], gap), out=out)
