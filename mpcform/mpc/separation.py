@@ -195,7 +195,7 @@ class ObstacleSeparation:
     def doubtful(self, p0: Array, spread: Array) -> tuple[Array, Array, Array]:
         """The ``(drone, obstacle)`` items that the per-drone spread bound (see
         :meth:`Separation.clear`) leaves in doubt, and by how much they clear it (negative)."""
-        gap = np.linalg.norm(p0[:, None] - self.center_m, axis=-1) - self.required_m - spread[:, None]
+        gap = vector_norms(p0[:, None] - self.center_m) - self.required_m - spread[:, None]
         i, m = np.nonzero(gap < self.margin_m)
         return i, m, gap[i, m] - self.margin_m
 
@@ -366,11 +366,11 @@ class Separation:
         pair, worst = labels[:, 1] >= 0, 0.0
         if pair.any() and self.pairs is not None:
             i, k = labels[pair].T
-            dist = np.linalg.norm(self.pairs.relative(p0, i, k), axis=1)
+            dist = vector_norms(self.pairs.relative(p0, i, k))
             worst = max(worst, float((self.pairs.d_min_m - dist).max()))
         if (~pair).any() and self.obstacles is not None:
             i, m = labels[~pair, 0], -1 - labels[~pair, 1]
-            dist = np.linalg.norm(p0[i] - self.obstacles.center_m[m], axis=1)
+            dist = vector_norms(p0[i] - self.obstacles.center_m[m])
             worst = max(worst, float((self.obstacles.required_m[m] - dist).max()))
         return worst, labels
 
@@ -387,7 +387,7 @@ class Separation:
 def inside(rel0: Array, required: Array | float) -> tuple[Array, Array]:
     """Which items (m,) start inside their required distance (relative start positions ``rel0``
     (m, d)), and their unit start normals (h, d) ``rel0 / |rel0|`` (a fixed axis if coincident)."""
-    dist = np.linalg.norm(rel0, axis=1)
+    dist = vector_norms(rel0)
     hard = dist < np.broadcast_to(required, dist.shape)
     c0 = np.zeros((int(hard.sum()), rel0.shape[1]))
     c0[:, 0] = 1.0
