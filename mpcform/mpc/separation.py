@@ -256,7 +256,7 @@ class Separation:
         distance clears the requirement by the spreads of its drones is clear. No row is built.
         """
         p0 = positions[0]
-        spread = _max_norm(guess - p0) + _max_norm(positions - guess)  # (n,) [m]
+        spread = _spread(guess, positions)  # (n,) [m]
         units = [u for u in (self.pairs if p0.shape[0] > 1 else None, self.obstacles) if u is not None]
         for unit in units:
             i, k, slack = unit.doubtful(p0, spread)
@@ -396,6 +396,11 @@ def inside(rel0: Array, required: Array | float) -> tuple[Array, Array]:
     return hard, c0
 
 
-def _max_norm(v: Array) -> Array:
-    """``max_e |v_e,i|`` over the first axis of ``v`` (T, n, d) -> (n,)."""
-    return np.sqrt(np.einsum("tnd,tnd->tn", v, v).max(axis=0))
+def _spread(guess: Array, positions: Array) -> Array:
+    """Per drone (n,): how far its ``guess`` (T, n, d) strays from its start ``positions[0]``, at
+    most, plus how far its ``positions`` (T, n, d) stray from the guess (both norms in one pass)."""
+    dev = np.empty((2,) + guess.shape)
+    np.subtract(guess, positions[0], out=dev[0])
+    np.subtract(positions, guess, out=dev[1])
+    far = np.sqrt(np.einsum("stnd,stnd->stn", dev, dev).max(axis=1))  # (2, n)
+    return far[0] + far[1]
