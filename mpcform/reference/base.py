@@ -48,12 +48,17 @@ class Reference(ABC):
         pr = self.profile(np.atleast_1d(np.asarray(times_s, dtype=float)))
         q = np.einsum("tij,nj->tni", pr.rotation_body_to_world, self.template.offsets)
         s = pr.scale[:, None, None]
-        pos = pr.centroid_m[:, None, :] + s * q
         if q.shape[-1] == 2:
             spin = pr.omega_world_radps[:, :, None] * (q @ S_PLANAR.T)
         else:
             spin = spin_world(pr.omega_world_radps, q)
-        vel = pr.centroid_velocity_mps[:, None, :] + pr.scale_rate_per_s[:, None, None] * q + s * spin
+        # c + s q and c_dot + s_dot q + s (omega x q), summed in place (no (T, n, d) temporaries)
+        pos = s * q
+        pos += pr.centroid_m[:, None, :]
+        vel = pr.scale_rate_per_s[:, None, None] * q
+        vel += pr.centroid_velocity_mps[:, None, :]
+        spin *= s
+        vel += spin
         return pos, vel
 
     def start_positions_m(self) -> Array:
