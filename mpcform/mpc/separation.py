@@ -150,9 +150,8 @@ class PairSeparation:
         return np.concatenate([pairs, pairs[:, ::-1]]), coeffs, lower, np.concatenate([on, on]), hard2
 
     def doubtful(self, p0: Array, spread: Array) -> tuple[Array, Array, Array]:
-        """The pairs ``(i, k)`` the spread bound of :meth:`Separation.clear` leaves in doubt, and by
-        how much their start distance clears it (negative); measured on the pairs of the
-        neighbour list that may lie within ``d_min + margin`` plus twice the largest spread."""
+        """The pairs ``(i, k)`` (of the neighbour list) the spread bound of :meth:`Separation.clear`
+        leaves in doubt, and by how much their start distance clears it (negative)."""
         scaled = p0 * self.metric  # the metric only shrinks lengths: world spreads bound it
         need = self.d_min_m + self.margin_m
         i, k = self.near.within(scaled, need + 2.0 * spread.max()).T
@@ -243,11 +242,10 @@ class Separation:
         )
 
     def clear(self, guess: Array, positions: Array) -> bool:
-        """A cheap sufficient test that the plan's ``positions`` (H + 1, n, d) (row 0 the start
-        ``p0``) meet every joint pair row and obstacle row about ``guess`` (H + 1, n, d) (so every
-        pair stays ``d_min`` apart over each step). It does not cover the
-        decoupled pair-side rows: two drones moving side by side can pass it while crossing the
-        guess's midpoint plane.
+        """A cheap sufficient test that the plan's ``positions`` (H + 1, n, d) (row 0 the start)
+        meet every joint pair row and obstacle row about ``guess`` (so every pair stays ``d_min``
+        apart over each step). It does not cover the decoupled pair-side rows: two drones moving
+        side by side can pass it while crossing the guess's midpoint plane.
 
         A row's normal c is a unit vector with ``c^T g >= |closest point of its guess segment|
         >= max(|g_j|, |g_j+1|) - |g_j+1 - g_j|``, so ``c^T delta_e >= that - |delta_e - g_e|``.
@@ -255,19 +253,16 @@ class Separation:
         of its start and its positions within ``spread_i`` of the guess, so an item whose start
         distance clears the requirement by the spreads of its drones is clear. No row is built.
         """
-        p0 = positions[0]
-        spread = _spread(guess, positions)  # (n,) [m]
+        p0, spread = positions[0], _spread(guess, positions)  # spread (n,) [m]
         units = [u for u in (self.pairs if p0.shape[0] > 1 else None, self.obstacles) if u is not None]
         for unit in units:
             i, k, slack = unit.doubtful(p0, spread)
-            if i.shape[0] == 0:  # every item clear by the spreads
-                continue
             if i.shape[0] > 8 * FIRST_TESTED:  # the least clear first: a miss among them answers early
                 first = np.argpartition(slack, FIRST_TESTED)[:FIRST_TESTED]
                 if not self._passes(*unit.clear_test(guess, positions, i[first], k[first])):
                     return False
-            if not self._passes(*unit.clear_test(guess, positions, i, k)):
-                return False
+            if i.shape[0] and not self._passes(*unit.clear_test(guess, positions, i, k)):
+                return False  # (no item in doubt: all clear by the spreads)
         return True
 
     def _passes(self, g: Array, delta: Array, required: Array | float) -> bool:
@@ -397,8 +392,7 @@ def inside(rel0: Array, required: Array | float) -> tuple[Array, Array]:
 
 
 def _spread(guess: Array, positions: Array) -> Array:
-    """Per drone (n,): how far its ``guess`` (T, n, d) strays from its start ``positions[0]``, at
-    most, plus how far its ``positions`` (T, n, d) stray from the guess (both norms in one pass)."""
+    """Per drone (n,): its guess's largest distance from its start plus its positions' from the guess."""
     dev = np.empty((2,) + guess.shape)
     np.subtract(guess, positions[0], out=dev[0])
     np.subtract(positions, guess, out=dev[1])
