@@ -127,7 +127,7 @@ class MPCPlanner(Controller):
             # the rollout itself, which meets them, so it is the optimum (see the module docstring)
             if st.fast_path:
                 return self._fast_path(nominal)
-            about = np.concatenate([p0[None], p0 + x_nom])
+            about = nominal.positions_m
             rows, values = sep.rows(p0, about, cand), None
         conflicted = sep.conflicted(x_nom, rows, values)
         if st.fast_path and not (off_limits | conflicted).any():
