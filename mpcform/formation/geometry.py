@@ -1,5 +1,6 @@
-"""Distances between drones at samples and along straight segments (zero-order hold paths), and
-the edges that draw a template's shape."""
+"""Distances between drones at samples and along straight segments (zero-order hold paths), the
+pairs within a radius (a k-d tree, or a neighbour list kept between calls), and the edges that
+draw a template's shape."""
 
 from __future__ import annotations
 
