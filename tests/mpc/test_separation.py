@@ -265,3 +265,22 @@ def test_the_clear_test_answers_the_same_when_it_tries_the_least_clear_first(see
         answers.append(sep.clear(guess, planned(p0, x)))
     monkey.undo()
     assert answers[0] == answers[1]
+
+
+@settings(max_examples=10, deadline=None)
+@given(seed=st.integers(0, 10_000))
+def test_the_clear_test_answers_the_same_with_its_neighbour_list_kept_between_steps(seed: int) -> None:
+    """A jittered grid drifting over several steps: one Separation (its neighbour list kept) answers
+    as a fresh one at every step."""
+    rng = np.random.default_rng(seed)
+    n, h = 100, 3
+    grid = 0.6 * np.stack(np.meshgrid(np.arange(10), np.arange(10)), -1).reshape(-1, 2)
+    p0 = grid + rng.uniform(-0.08, 0.08, (n, 2))
+    limits, st_h = Limits(v_max_mps=1.0, d_min_m=0.35), MPCSettings(horizon=h)
+    kept = Separation(2, limits, st_h, ())
+    for _ in range(8):
+        steps = np.concatenate([np.zeros((1, n, 2)), rng.uniform(-0.02, 0.02, (h, n, 2))])
+        guess, x = p0 + np.cumsum(steps, axis=0), np.cumsum(rng.uniform(-0.03, 0.03, (h, n, 2)), axis=0)
+        fresh = Separation(2, limits, st_h, ())
+        assert kept.clear(guess, planned(p0, x)) == fresh.clear(guess, planned(p0, x))
+        p0 = p0 + 0.1 + rng.uniform(-0.03, 0.03, (n, 2))
