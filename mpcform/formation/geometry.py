@@ -1,5 +1,6 @@
-"""Distances between drones at samples and along straight segments (zero-order hold paths), and
-the edges that draw a template's shape."""
+"""Distances between drones at samples and along straight segments (zero-order hold paths), the
+pairs within a radius (a k-d tree, or a neighbour list kept between calls), and the edges that
+draw a template's shape."""
 
 from __future__ import annotations
 
@@ -51,18 +52,59 @@ def pairs_within(points: Array, radius: float, sort: bool = True) -> Array:
     if n < 2:
         return np.empty((0, 2), dtype=np.intp)
     if n <= BRUTE_FORCE_MAX_N:  # cheaper than building a tree
-        i, k = _upper_pairs(n)
-        diff = points[i] - points[k]
-        close = np.einsum("ij,ij->i", diff, diff) < radius * radius
-        return np.column_stack([i[close], k[close]]).astype(np.intp)
+        pairs = _upper_pairs(n)
+        diff = points[pairs[:, 0]] - points[pairs[:, 1]]
+        return pairs[np.einsum("ij,ij->i", diff, diff) < radius * radius]
     tree = cKDTree(points, balanced_tree=False, compact_nodes=False)  # built faster; the same pairs
     pairs = tree.query_pairs(radius, output_type="ndarray").astype(np.intp)
     return pairs[np.lexsort((pairs[:, 1], pairs[:, 0]))] if sort else pairs
 
 
 @lru_cache(maxsize=32)
-def _upper_pairs(n: int) -> tuple[Array, Array]:
-    return np.triu_indices(n, 1)
+def _upper_pairs(n: int) -> Array:
+    """Every index pair (n (n - 1) / 2, 2), i < j, sorted (read-only: it is shared)."""
+    pairs = np.column_stack(np.triu_indices(n, 1)).astype(np.intp)
+    pairs.flags.writeable = False
+    return pairs
+
+
+class NearPairs:
+    """Pairs of points that may lie within a radius, kept between calls (a Verlet list).
+
+    :meth:`within` returns the pairs (m, 2), i < j, closer than the list's radius at the points
+    it was last built from: a superset of the pairs now within ``radius``, for the caller to
+    measure (every pair, for at most :data:`BRUTE_FORCE_MAX_N` points). A pair's distance changes
+    by at most the sum of its two points' displacements relative to any common shift (the mean
+    displacement here, so a formation flying as one keeps its list), hence the list holds every
+    pair within ``radius`` while ``radius`` plus twice the largest such displacement stays within
+    the list's radius (less a relative ``ROUNDING``). Otherwise, or when the list's radius exceeds
+    twice ``REBUILD_FACTOR * radius`` (too many pairs to measure), it is rebuilt
+    (:func:`pairs_within`) with the radius ``REBUILD_FACTOR * radius``.
+    """
+
+    REBUILD_FACTOR = 1.25
+    ROUNDING = 1e-9
+
+    def __init__(self) -> None:
+        self._points = np.empty((0, 0))  # the points the list was built from
+        self._radius = -np.inf
+        self._pairs = np.empty((0, 2), dtype=np.intp)
+
+    def within(self, points: Array, radius: float) -> Array:
+        """A superset (m, 2) of the pairs of rows of ``points`` (n, d) within ``radius``, in no set order."""
+        if points.shape[0] <= BRUTE_FORCE_MAX_N:  # measuring every pair is cheaper than keeping a list
+            return _upper_pairs(points.shape[0])
+        rebuild_m = self.REBUILD_FACTOR * radius
+        if points.shape == self._points.shape and self._radius <= 2.0 * rebuild_m:
+            shift = points - self._points
+            shift -= shift.mean(axis=0)
+            reach_m = radius + 2.0 * vector_norms(shift).max(initial=0.0)
+            if reach_m <= (1.0 - self.ROUNDING) * self._radius:
+                return self._pairs
+        self._points, self._radius = points.copy(), rebuild_m
+        self._pairs = pairs_within(points, self._radius, sort=False)
+        self._pairs.flags.writeable = False  # shared with the callers until the next rebuild
+        return self._pairs
 
 
 def min_segment_distance(start: Array, end: Array) -> float:

@@ -16,7 +16,7 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
 from mpcform._validate import Array
-from mpcform.formation.geometry import pairs_within
+from mpcform.formation.geometry import pairs_within, vector_norms
 from mpcform.mpc.limits import Limits, SphereObstacle, obstacle_arrays
 from mpcform.mpc.settings import MPCSettings
 
@@ -84,7 +84,7 @@ class CandidateSelector:
         m = self.ob_required_m.shape[0]
         ob_on: Array | None = np.zeros(self._obstacle_items.shape[0], dtype=bool)
         if m:
-            dist = np.linalg.norm(p0[:, None, :] - self.ob_center_m[None], axis=-1)
+            dist = vector_norms(p0[:, None, :] - self.ob_center_m[None])
             gap = (dist - self.ob_required_m).ravel()  # item code: drone * m + obstacle
             need_codes = np.flatnonzero(gap <= st.margin_m + travel)
             ob_on = mask_of(self._ob_codes, need_codes)

@@ -25,7 +25,7 @@ import numpy as np
 
 from mpcform._validate import Array
 from mpcform.control.laws import saturate
-from mpcform.formation.geometry import closest_on_segments
+from mpcform.formation.geometry import closest_on_segments, vector_norms
 from mpcform.mpc.candidates import Candidates
 from mpcform.mpc.plan import Plan
 from mpcform.mpc.separation import Separation
@@ -56,8 +56,8 @@ class Certifier:
         if self.drift is not None:
             p1 = p1 + self.drift(u0)
         for a, b, required in self.separation.first_segment(p0, p1, cand):
-            d_seg = np.linalg.norm(closest_on_segments(a, b), axis=1)
-            if np.any(d_seg < np.minimum(required, np.linalg.norm(a, axis=1)) - CERTIFY_TOL_M):
+            d_seg = vector_norms(closest_on_segments(a, b))
+            if np.any(d_seg < np.minimum(required, vector_norms(a)) - CERTIFY_TOL_M):
                 return False
         return True
 

@@ -135,10 +135,12 @@ class MPCPlanner(Controller):
         c = ff + k * (targets[:-1] - p0)  # u_j = c_j - k x_j is the eq. 14 rollout
         u_nom, x_nom = rollout(c, k, dt)
         x_true = self._true(u_nom, x_nom)  # where the rollout takes the drones
+        nominal = Plan.from_relative(p0, u_nom, x_nom)  # the fast path's plan
+        true_path = nominal.positions_m if self.loop is None else np.concatenate([p0[None], p0 + x_true])
         about = self._guess(p0)
         off_limits = violators(self._families, p0, self._u_prev, u_nom, x_nom)
-        if st.fast_path and not off_limits.any() and sep.clear(p0, about, x_true):
-            return self._fast_path(p0, u_nom, x_nom)
+        if st.fast_path and not off_limits.any() and sep.clear(about, true_path):
+            return self._fast_path(nominal)
         cand = self._candidates.select(p0)
         grouped = st.fast_path and st.grouping
         if grouped or st.solves_per_drone:  # no fixed pattern: rows only within reach
@@ -149,12 +151,12 @@ class MPCPlanner(Controller):
             # the rollout meets the limits and the joint rows: the decoupled rows are split about
             # the rollout itself, which meets them, so it is the optimum (see the module docstring)
             if st.fast_path:
-                return self._fast_path(p0, u_nom, x_nom)
-            about = np.concatenate([p0[None], p0 + x_true])
+                return self._fast_path(nominal)
+            about = true_path
             rows, values = self._rows(p0, about, cand), None
         conflicted = sep.conflicted(x_true, rows, values)
         if st.fast_path and not (off_limits | conflicted).any():
-            return self._fast_path(p0, u_nom, x_nom)
+            return self._fast_path(nominal)
         blocked = sep.blocked_targets(targets[0]) if conflicted.any() else None
         turned = conflicted
         if self.loop is not None and conflicted.any():  # the single integrator's conflicts: encounters
@@ -221,10 +223,12 @@ class MPCPlanner(Controller):
         tb = self._tie_break
         return {"stalled": tb.new_stalls, "resolving": tb.resolving, "resolved": tb.resolved}
 
-    def _fast_path(self, p0: Array, u_nom: Array, x_nom: Array) -> ControlStep:
+    def _fast_path(self, nominal: Plan) -> ControlStep:
+        """Accept the rollout's plan: its first input is the command."""
         self._tie_break.clear()
-        self._accept(p0, u_nom, x_nom)
-        return ControlStep(u_nom[0].copy(), StepInfo("fast_path", resolved=self._tie_break.resolved))
+        self._plan, self._u_prev = nominal, nominal.inputs_mps[0].copy()
+        info = StepInfo("fast_path", resolved=self._tie_break.resolved)
+        return ControlStep(nominal.inputs_mps[0].copy(), info)
 
     def _merge(self, drones: Array, z: Array, u_nom: Array, x_nom: Array) -> tuple[Array, Array]:
         """Inputs and relative positions (H, n, d): the solution ``z``'s for ``drones``, the

@@ -27,7 +27,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from mpcform._validate import Array
-from mpcform.formation.geometry import closest_on_segments, pairs_within, vector_norms
+from mpcform.formation.geometry import NearPairs, closest_on_segments, pairs_within, vector_norms
 from mpcform.mpc.candidates import Candidates
 from mpcform.mpc.limits import Limits, SphereObstacle, obstacle_arrays
 from mpcform.mpc.rows import row_ends, row_segments
@@ -85,9 +85,9 @@ def segment_normals(rel: Array, segs: Array | None = None) -> Array:
     normal = closest_on_segments(rel[:, :-1], rel[:, 1:])  # (m, H, d), divided in place
     dist = vector_norms(normal)
     ok = dist > 1e-9
-    np.divide(normal, dist[..., None], out=normal, where=ok[..., None])
+    normal /= np.where(ok, dist, 1.0)[..., None]
     normal[~ok] = np.eye(normal.shape[-1])[0]  # a coincident guess: any fixed unit vector is valid
-    return normal if segs is None else normal[:, segs]
+    return normal if segs is None else np.take(normal, segs, axis=1)
 
 
 class PairSeparation:
@@ -98,6 +98,7 @@ class PairSeparation:
         self.unit_metric = bool(np.all(metric == 1.0))  # W = I: no scaling
         self.joint = settings.coupling == "joint"
         self.segs, self.ends = row_segments(settings.horizon), row_ends(settings.horizon)
+        self.near = NearPairs()  # the clear test's neighbour list, kept between steps
 
     def relative(self, points: Array, i: Array, k: Array) -> Array:
         """``W (p_i - p_k)`` for positions (..., n, d): (..., P, d)."""
@@ -140,7 +141,7 @@ class PairSeparation:
             np.negative(coeffs[a:b], out=coeffs[p + a : p + b])
             mid = np.add(g_i, g_k, out=g_i)  # the midpoints (B, H + 1, d), in place
             mid *= 0.5
-            mid = mid[:, self.ends]  # at each row's position step (B, R, d)
+            mid = np.take(mid, self.ends, axis=1)  # at each row's position step (B, R, d)
             for side, out, fix in ((i, lower[a:b], np.subtract), (k, lower[p + a : p + b], np.add)):
                 gap = p0[side][:, None] - mid  # -(-c)^T gap = +c^T gap on side k
                 fix(half, np.einsum("prd,prd->pr", coeffs[a:b], gap), out=out)
@@ -149,12 +150,12 @@ class PairSeparation:
         return np.concatenate([pairs, pairs[:, ::-1]]), coeffs, lower, np.concatenate([on, on]), hard2
 
     def doubtful(self, p0: Array, spread: Array) -> tuple[Array, Array, Array]:
-        """The pairs ``(i, k)`` the spread bound of :meth:`Separation.clear` leaves in doubt, and by
-        how much their start distance clears it (negative)."""
+        """The pairs ``(i, k)`` (of the neighbour list) the spread bound of :meth:`Separation.clear`
+        leaves in doubt, and by how much their start distance clears it (negative)."""
         scaled = p0 * self.metric  # the metric only shrinks lengths: world spreads bound it
         need = self.d_min_m + self.margin_m
-        i, k = pairs_within(scaled, need + 2.0 * spread.max(), sort=False).T
-        clearance = np.linalg.norm(scaled[i] - scaled[k], axis=1) - spread[i] - spread[k]
+        i, k = self.near.within(scaled, need + 2.0 * spread.max()).T
+        clearance = vector_norms(scaled[i] - scaled[k]) - spread[i] - spread[k]
         near = clearance < need
         return i[near], k[near], clearance[near] - need
 
@@ -193,7 +194,7 @@ class ObstacleSeparation:
     def doubtful(self, p0: Array, spread: Array) -> tuple[Array, Array, Array]:
         """The ``(drone, obstacle)`` items that the per-drone spread bound (see
         :meth:`Separation.clear`) leaves in doubt, and by how much they clear it (negative)."""
-        gap = np.linalg.norm(p0[:, None] - self.center_m, axis=-1) - self.required_m - spread[:, None]
+        gap = vector_norms(p0[:, None] - self.center_m) - self.required_m - spread[:, None]
         i, m = np.nonzero(gap < self.margin_m)
         return i, m, gap[i, m] - self.margin_m
 
@@ -240,11 +241,11 @@ class Separation:
             pairs, p_coeffs, p_lower, p_on, labels[:, 0], labels, s_coeffs, s_lower, s_on, p_hard, s_hard
         )
 
-    def clear(self, p0: Array, guess: Array, x: Array) -> bool:
-        """A cheap sufficient test that positions ``x`` (H, n, d) meet every joint pair row and
-        obstacle row (so every pair stays ``d_min`` apart over each step). It does not cover the
-        decoupled pair-side rows: two drones moving side by side can pass it while crossing the
-        guess's midpoint plane.
+    def clear(self, guess: Array, positions: Array) -> bool:
+        """A cheap sufficient test that the plan's ``positions`` (H + 1, n, d) (row 0 the start)
+        meet every joint pair row and obstacle row about ``guess`` (so every pair stays ``d_min``
+        apart over each step). It does not cover the decoupled pair-side rows: two drones moving
+        side by side can pass it while crossing the guess's midpoint plane.
 
         A row's normal c is a unit vector with ``c^T g >= |closest point of its guess segment|
         >= max(|g_j|, |g_j+1|) - |g_j+1 - g_j|``, so ``c^T delta_e >= that - |delta_e - g_e|``.
@@ -252,17 +253,16 @@ class Separation:
         of its start and its positions within ``spread_i`` of the guess, so an item whose start
         distance clears the requirement by the spreads of its drones is clear. No row is built.
         """
-        pos = np.concatenate([p0[None], p0 + x])
-        spread = _max_norm(guess - p0) + _max_norm(pos - guess)  # (n,) [m]
+        p0, spread = positions[0], _spread(guess, positions)  # spread (n,) [m]
         units = [u for u in (self.pairs if p0.shape[0] > 1 else None, self.obstacles) if u is not None]
         for unit in units:
             i, k, slack = unit.doubtful(p0, spread)
             if i.shape[0] > 8 * FIRST_TESTED:  # the least clear first: a miss among them answers early
                 first = np.argpartition(slack, FIRST_TESTED)[:FIRST_TESTED]
-                if not self._passes(*unit.clear_test(guess, pos, i[first], k[first])):
+                if not self._passes(*unit.clear_test(guess, positions, i[first], k[first])):
                     return False
-            if not self._passes(*unit.clear_test(guess, pos, i, k)):
-                return False
+            if i.shape[0] and not self._passes(*unit.clear_test(guess, positions, i, k)):
+                return False  # (no item in doubt: all clear by the spreads)
         return True
 
     def _passes(self, g: Array, delta: Array, required: Array | float) -> bool:
@@ -361,11 +361,11 @@ class Separation:
         pair, worst = labels[:, 1] >= 0, 0.0
         if pair.any() and self.pairs is not None:
             i, k = labels[pair].T
-            dist = np.linalg.norm(self.pairs.relative(p0, i, k), axis=1)
+            dist = vector_norms(self.pairs.relative(p0, i, k))
             worst = max(worst, float((self.pairs.d_min_m - dist).max()))
         if (~pair).any() and self.obstacles is not None:
             i, m = labels[~pair, 0], -1 - labels[~pair, 1]
-            dist = np.linalg.norm(p0[i] - self.obstacles.center_m[m], axis=1)
+            dist = vector_norms(p0[i] - self.obstacles.center_m[m])
             worst = max(worst, float((self.obstacles.required_m[m] - dist).max()))
         return worst, labels
 
@@ -382,7 +382,7 @@ class Separation:
 def inside(rel0: Array, required: Array | float) -> tuple[Array, Array]:
     """Which items (m,) start inside their required distance (relative start positions ``rel0``
     (m, d)), and their unit start normals (h, d) ``rel0 / |rel0|`` (a fixed axis if coincident)."""
-    dist = np.linalg.norm(rel0, axis=1)
+    dist = vector_norms(rel0)
     hard = dist < np.broadcast_to(required, dist.shape)
     c0 = np.zeros((int(hard.sum()), rel0.shape[1]))
     c0[:, 0] = 1.0
@@ -391,6 +391,10 @@ def inside(rel0: Array, required: Array | float) -> tuple[Array, Array]:
     return hard, c0
 
 
-def _max_norm(v: Array) -> Array:
-    """``max_e |v_e,i|`` over the first axis of ``v`` (T, n, d) -> (n,)."""
-    return np.sqrt(np.einsum("tnd,tnd->tn", v, v).max(axis=0))
+def _spread(guess: Array, positions: Array) -> Array:
+    """Per drone (n,): its guess's largest distance from its start plus its positions' from the guess."""
+    dev = np.empty((2,) + guess.shape)
+    np.subtract(guess, positions[0], out=dev[0])
+    np.subtract(positions, guess, out=dev[1])
+    far = np.sqrt(np.einsum("stnd,stnd->stn", dev, dev).max(axis=1))  # (2, n)
+    return far[0] + far[1]

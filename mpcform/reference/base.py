@@ -48,12 +48,17 @@ class Reference(ABC):
         pr = self.profile(np.atleast_1d(np.asarray(times_s, dtype=float)))
         q = np.einsum("tij,nj->tni", pr.rotation_body_to_world, self.template.offsets)
         s = pr.scale[:, None, None]
-        pos = pr.centroid_m[:, None, :] + s * q
         if q.shape[-1] == 2:
             spin = pr.omega_world_radps[:, :, None] * (q @ S_PLANAR.T)
         else:
-            spin = np.cross(pr.omega_world_radps[:, None, :], q)
-        vel = pr.centroid_velocity_mps[:, None, :] + pr.scale_rate_per_s[:, None, None] * q + s * spin
+            spin = spin_world(pr.omega_world_radps, q)
+        # c + s q and c_dot + s_dot q + s (omega x q), summed in place (no (T, n, d) temporaries)
+        pos = s * q
+        pos += pr.centroid_m[:, None, :]
+        vel = pr.scale_rate_per_s[:, None, None] * q
+        vel += pr.centroid_velocity_mps[:, None, :]
+        spin *= s
+        vel += spin
         return pos, vel
 
     def start_positions_m(self) -> Array:
@@ -75,6 +80,20 @@ class Reference(ABC):
         """The desired formation velocity ``xi_dot_d`` (4 or 7) at ``t_s``."""
         pr = self.profile(np.array([t_s], dtype=float))
         return np.concatenate([pr.centroid_velocity_mps[0], pr.omega_world_radps[0], pr.scale_rate_per_s[:1]])
+
+
+def spin_world(omega_world_radps: Array, q: Array) -> Array:
+    """``omega_t x q_t,i`` (T, n, 3) for angular velocities (T, 3) and rows ``q`` (T, n, 3): the
+    products and differences of ``np.cross``, component by component, without its generic
+    overhead (axis moves, broadcast copies)."""
+    w = omega_world_radps[:, None, :]
+    w0, w1, w2 = w[..., 0], w[..., 1], w[..., 2]
+    q0, q1, q2 = q[..., 0], q[..., 1], q[..., 2]
+    spin = np.empty(q.shape)
+    np.subtract(w1 * q2, w2 * q1, out=spin[..., 0])
+    np.subtract(w2 * q0, w0 * q2, out=spin[..., 1])
+    np.subtract(w0 * q1, w1 * q0, out=spin[..., 2])
+    return spin
 
 
 class ConstantReference(Reference):

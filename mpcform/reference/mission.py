@@ -28,7 +28,7 @@ from mpcform.errors import ValidationError
 from mpcform.formation.rotation import omega_size
 from mpcform.formation.state import FormationState
 from mpcform.formation.template import Template
-from mpcform.reference.base import Profile, Reference
+from mpcform.reference.base import Profile, Reference, spin_world
 from mpcform.reference.keyframes import (
     Keyframe,
     MissionLimits,
@@ -309,7 +309,7 @@ class MissionReference(Reference):
         if q.shape[-1] == 2:
             spin = pr.omega_world_radps[:, :, None] * np.stack([-q[..., 1], q[..., 0]], -1)
         else:
-            spin = np.cross(pr.omega_world_radps[:, None, :], q)
+            spin = spin_world(pr.omega_world_radps, q)
         vel = (
             pr.centroid_velocity_mps[:, None, :]
             + pr.scale_rate_per_s[:, None, None] * q

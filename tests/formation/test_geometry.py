@@ -7,6 +7,7 @@ from hypothesis import strategies as st
 from scipy.spatial.distance import pdist
 
 from mpcform.formation.geometry import (
+    NearPairs,
     closest_on_segments,
     min_pair_distance,
     min_segment_distance,
@@ -119,3 +120,28 @@ def test_closest_on_segments_of_stacked_segments():
     stacked = closest_on_segments(start, end)
     flat = closest_on_segments(start.reshape(-1, 3), end.reshape(-1, 3)).reshape(stacked.shape)
     assert np.array_equal(stacked, flat)
+
+
+@given(seeds, st.sampled_from([5, 60, 150]), st.sampled_from([2, 3]))
+def test_near_pairs_hold_every_pair_within_the_radius_as_points_move(seed, n, dim):
+    """A Verlet list over a moving swarm: at every call, every pair within the radius (brute force)
+    is among the pairs returned."""
+    rng = np.random.default_rng(seed)
+    points, near = rng.uniform(-4.0, 4.0, (n, dim)), NearPairs()
+    for _ in range(12):
+        radius = rng.uniform(0.5, 1.5)
+        pairs = near.within(points, radius)
+        dist = np.linalg.norm(points[:, None] - points[None], axis=-1)
+        i, j = np.nonzero(np.triu(dist <= radius, 1))
+        assert {(a, b) for a, b in zip(i, j, strict=True)} <= {tuple(p) for p in pairs.tolist()}
+        assert np.all(pairs[:, 0] < pairs[:, 1])
+        points = points + rng.uniform(-1.0, 1.0, dim) + rng.normal(0.0, 0.1, points.shape)
+
+
+def test_near_pairs_keep_their_list_while_the_swarm_drifts_as_one():
+    rng = np.random.default_rng(3)
+    points, near = rng.uniform(-4.0, 4.0, (100, 3)), NearPairs()
+    pairs = near.within(points, 1.0)  # built for 1.25 m
+    moved = points + 7.0 + rng.uniform(-0.05, 0.05, points.shape)  # a drift, small relative moves
+    assert near.within(moved, 1.0) is pairs
+    assert near.within(moved + rng.uniform(-0.3, 0.3, points.shape), 1.0) is not pairs  # rebuilt

@@ -20,6 +20,11 @@ def still(p0: np.ndarray, horizon: int) -> np.ndarray:
     return np.broadcast_to(p0, (horizon + 1,) + p0.shape)
 
 
+def planned(p0: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """The plan's positions (H + 1, n, d) of relative positions ``x`` (H, n, d) from ``p0``."""
+    return np.concatenate([p0[None], p0 + x])
+
+
 def cand(pairs: list[list[int]], obstacles: list[list[int]] | None = None) -> Candidates:
     """Every item within reach."""
     p = np.array(pairs, dtype=np.intp).reshape(-1, 2)
@@ -131,7 +136,7 @@ def test_clear_means_no_joint_or_obstacle_row_is_missed(seed: int) -> None:
     sep = Separation(2, Limits(v_max_mps=1.0, d_min_m=0.5), MPCSettings(horizon=h), (ob,))
     everything = cand([[i, k] for i in range(n) for k in range(i + 1, n)], [[i, 0] for i in range(n)])
     rows = sep.rows(p0, guess, everything)
-    if sep.clear(p0, guess, x):
+    if sep.clear(guess, planned(p0, x)):
         assert sep.shortfall(x, rows, 0.0)[0] <= 1e-12
 
 
@@ -142,7 +147,7 @@ def test_clear_does_not_cover_the_decoupled_rows() -> None:
     x = np.broadcast_to([0.1, 0.0], (2, 2, 2)) * np.array([1.0, 2.0])[:, None, None]
     for coupling, missed in (("joint", False), ("decoupled", True)):
         sep = Separation(2, Limits(v_max_mps=1.0, d_min_m=0.5), MPCSettings(horizon=2, coupling=coupling), ())
-        assert sep.clear(p0, still(p0, 2), x)
+        assert sep.clear(still(p0, 2), planned(p0, x))
         rows = sep.rows(p0, still(p0, 2), cand([[0, 1]]))
         assert (sep.shortfall(x, rows, 0.0)[0] > 0) == missed
 
@@ -151,9 +156,9 @@ def test_clear_fails_head_on() -> None:
     p0 = np.array([[0.0, 0.0], [1.0, 0.0]])
     sep = Separation(2, Limits(v_max_mps=1.0, d_min_m=0.5), MPCSettings(horizon=2), ())
     apart = np.zeros((2, 2, 2))
-    assert sep.clear(p0, still(p0, 2), apart)
+    assert sep.clear(still(p0, 2), planned(p0, apart))
     towards = np.array([[[0.2, 0.0], [-0.2, 0.0]], [[0.4, 0.0], [-0.4, 0.0]]])
-    assert not sep.clear(p0, still(p0, 2), towards)
+    assert not sep.clear(still(p0, 2), planned(p0, towards))
 
 
 def test_first_segment_items_within_reach() -> None:
@@ -257,6 +262,25 @@ def test_the_clear_test_answers_the_same_when_it_tries_the_least_clear_first(see
     answers = []
     for first in (1, 10_000):
         monkey.setattr("mpcform.mpc.separation.FIRST_TESTED", first)
-        answers.append(sep.clear(p0, guess, x))
+        answers.append(sep.clear(guess, planned(p0, x)))
     monkey.undo()
     assert answers[0] == answers[1]
+
+
+@settings(max_examples=10, deadline=None)
+@given(seed=st.integers(0, 10_000))
+def test_the_clear_test_answers_the_same_with_its_neighbour_list_kept_between_steps(seed: int) -> None:
+    """A jittered grid drifting over several steps: one Separation (its neighbour list kept) answers
+    as a fresh one at every step."""
+    rng = np.random.default_rng(seed)
+    n, h = 100, 3
+    grid = 0.6 * np.stack(np.meshgrid(np.arange(10), np.arange(10)), -1).reshape(-1, 2)
+    p0 = grid + rng.uniform(-0.08, 0.08, (n, 2))
+    limits, st_h = Limits(v_max_mps=1.0, d_min_m=0.35), MPCSettings(horizon=h)
+    kept = Separation(2, limits, st_h, ())
+    for _ in range(8):
+        steps = np.concatenate([np.zeros((1, n, 2)), rng.uniform(-0.02, 0.02, (h, n, 2))])
+        guess, x = p0 + np.cumsum(steps, axis=0), np.cumsum(rng.uniform(-0.03, 0.03, (h, n, 2)), axis=0)
+        fresh = Separation(2, limits, st_h, ())
+        assert kept.clear(guess, planned(p0, x)) == fresh.clear(guess, planned(p0, x))
+        p0 = p0 + 0.1 + rng.uniform(-0.03, 0.03, (n, 2))

@@ -12,7 +12,7 @@ from mpcform.errors import ValidationError
 from mpcform.formation.kinematics import drone_velocities, forward_kinematics
 from mpcform.formation.state import FormationState
 from mpcform.formation.template import Template
-from mpcform.reference.base import ConstantReference, ExponentialReference
+from mpcform.reference.base import ConstantReference, ExponentialReference, spin_world
 
 H = 1e-5
 TIMES = np.array([0.05, 0.3, 1.0, 2.5, 6.0])
@@ -130,3 +130,13 @@ def test_a_swap_starts_away_from_its_reference() -> None:
 
     s = load_scenario(Path(__file__).resolve().parents[2] / "scenarios" / "swap_planar_8.toml")
     assert np.allclose(s.initial_positions_m, -s.reference.start_positions_m())  # p_i(0) = -r_i, p*_i = r_i
+
+
+@given(st.integers(0, 10_000))
+def test_spin_is_numpys_cross_product_bitwise(seed):
+    """``omega x q`` component by component: the same bits as ``np.cross`` (signed zeros included)."""
+    rng = np.random.default_rng(seed)
+    omega, q = rng.normal(size=(4, 3)), rng.normal(size=(4, 6, 3)) * rng.uniform(1e-3, 1e3, (4, 6, 1))
+    omega[0], q[1, :, 2] = 0.0, -0.0  # zero rates and zero components
+    spin = spin_world(omega, q)
+    assert spin.tobytes() == np.cross(omega[:, None, :], q).tobytes()
