@@ -43,7 +43,8 @@ class CandidateSelector:
 
     Reach over the horizon: a pair within ``d_min kappa + margin + 2 v_max H dt`` (both drones
     fly towards each other), a drone within ``margin + v_max H dt`` of its required distance from
-    an obstacle's centre.
+    an obstacle's centre; ``v_max`` times ``speed_gain`` for a velocity loop that overshoots
+    (:attr:`mpcform.mpc.loop.VelocityLoop.speed_gain`).
     """
 
     def __init__(
@@ -53,9 +54,10 @@ class CandidateSelector:
         limits: Limits,
         settings: MPCSettings,
         obstacles: tuple[SphereObstacle, ...],
+        speed_gain: float = 1.0,
     ) -> None:
         self.n, self.limits, self.settings = n, limits, settings
-        self.travel_m = (limits.v_max_mps or 0.0) * settings.horizon * dt_s  # farthest flight [m]
+        self.travel_m = (limits.v_max_mps or 0.0) * speed_gain * settings.horizon * dt_s  # farthest [m]
         self.ob_center_m, self.ob_required_m = obstacle_arrays(obstacles, limits.d_min_m)
         self.reset()
 

@@ -37,7 +37,9 @@ class VelocityLoop:
     """Per-axis linear velocity loop discretised at ``dt_s`` over ``horizon`` intervals.
 
     ``free_m`` (H + 1, d, s): ``F_e``; ``forced`` (H + 1, H, d): ``G_{e,j}`` (zero for ``j >= e``);
-    ``step_state`` (d, s, s) and ``step_input`` (d, s): one interval of the loop state.
+    ``step_state`` (d, s, s) and ``step_input`` (d, s): one interval of the loop state;
+    ``speed_gain``: the L1 norm of the velocity's impulse response (the total variation of its step
+    response), so ``|v| <= speed_gain v_max`` for commands within ``v_max`` (1 for a lag).
     """
 
     dt_s: float
@@ -45,6 +47,7 @@ class VelocityLoop:
     forced: Array
     step_state: Array
     step_input: Array
+    speed_gain: float
 
     @classmethod
     def from_groups(cls, groups: list[LoopGroup], dim: int, dt_s: float, horizon: int) -> VelocityLoop:
@@ -52,7 +55,7 @@ class VelocityLoop:
         s = max(a.shape[0] for a, _, _, _ in groups)
         free, forced = np.zeros((horizon + 1, dim, s)), np.zeros((horizon + 1, horizon, dim))
         step_state, step_input = np.zeros((dim, s, s)), np.zeros((dim, s))
-        covered = np.zeros(dim, dtype=bool)
+        covered, gain = np.zeros(dim, dtype=bool), 1.0
         for a, b, c, axes in groups:
             k = a.shape[0]
             m = np.zeros((k + 2, k + 2))  # (p, xi, u): p' = c^T xi, xi' = A xi + B u, u' = 0
@@ -70,15 +73,11 @@ class VelocityLoop:
                 for e in range(1, horizon + 1):
                     forced[e, :e, ax] = g_m[e - 1 :: -1][:e]
                 step_state[ax, :k, :k], step_input[ax, :k] = phi[1:, 1:], gam[1:]
+            gain = max(gain, _step_variation(a, b, c))
         if not covered.all():
             axes_given = np.flatnonzero(covered).tolist()
             raise ValidationError("plant", f"the loop covers axes {axes_given}, expected 0..{dim - 1}")
-        return cls(dt_s, free, forced, step_state, step_input)
-
-    @property
-    def states(self) -> int:
-        """Loop states per axis."""
-        return self.step_input.shape[1]
+        return cls(dt_s, free, forced, step_state, step_input, gain)
 
     @property
     def reach_factor(self) -> float:
@@ -109,3 +108,17 @@ class VelocityLoop:
     def offsets(self, state: Array, u: Array) -> Array:
         """``p_e - p0 - x_e`` (H + 1, n, d) [m] for the inputs ``u`` (H, n, d) from ``state``."""
         return self.free(state) + np.einsum("ejd,jnd->end", self.forced, u)
+
+
+def _step_variation(a: Array, b: Array, c: Array, samples: int = 4000) -> float:
+    """Total variation of the velocity's unit step response ``c^T xi`` from rest (until it settles:
+    20 of the slowest time constants), sampled finely."""
+    slowest = 1.0 / min(abs(np.linalg.eigvals(a).real))
+    phi = expm(np.block([[a, b[:, None]], [np.zeros((1, a.shape[0] + 1))]]) * (20.0 * slowest / samples))
+    z, g = np.zeros(a.shape[0] + 1), np.empty(samples + 1)
+    z[-1] = 1.0
+    for i in range(samples + 1):
+        g[i] = c @ z[:-1]
+        z = phi @ z
+    return float(np.abs(np.diff(g)).sum())
+

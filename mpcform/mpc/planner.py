@@ -83,7 +83,8 @@ class MPCPlanner(Controller):
         self.loop = _check_loop(loop, self.dim, settings)
         self._families = limit_rows(self.dim, dt_s, limits, settings)
         self._separation = sep = Separation(self.dim, limits, settings, self.obstacles)
-        self._candidates = CandidateSelector(self.n, dt_s, limits, settings, self.obstacles)
+        gain = 1.0 if self.loop is None else self.loop.speed_gain
+        self._candidates = CandidateSelector(self.n, dt_s, limits, settings, self.obstacles, gain)
         self._certifier = Certifier(dt_s, limits.v_max_mps, sep, limits.a_max_mps2)
         self._solver: StepSolver  # the sparse QP with a backend, or DAQP per drone
         if settings.solves_per_drone:

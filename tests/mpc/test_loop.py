@@ -59,3 +59,13 @@ def test_an_axis_without_a_loop_is_refused() -> None:
     a, b, c = np.array([[-5.0]]), np.array([5.0]), np.array([1.0])
     with pytest.raises(ValidationError, match="axes"):
         VelocityLoop.from_groups([(a, b, c, (0, 1))], 3, DT, H)
+
+
+def test_speed_gain_is_the_step_responses_total_variation() -> None:
+    """A lag never exceeds its commands (gain 1); a damped second-order loop overshoots by
+    ``exp(-pi zeta / sqrt(1 - zeta^2))`` and undershoots back: gain about 1 + 2 overshoot."""
+    assert loop_of(lag_plant(1, 3, 0.2)).speed_gain == pytest.approx(1.0, abs=1e-9)
+    zeta = 0.7
+    over = np.exp(-np.pi * zeta / np.sqrt(1 - zeta**2))
+    gain = loop_of(second_order_plant(1, 3, zeta, 6.0)).speed_gain
+    assert 1 + 2 * over - 1e-3 < gain < 1 + 2 * over + 2 * over**2 + 1e-3
