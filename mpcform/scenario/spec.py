@@ -81,8 +81,11 @@ class Scenario:
 
     @functools.cached_property
     def robustness(self) -> Robustness:
-        """The plant's robust margin and the acceleration bound it assumes (zero for the ideal plant)."""
-        return self.plant.robustness(self.dim, self.simulation.dt_s, self.limits.a_max_mps2)
+        """The plant's robust margin and the acceleration bound it assumes (zero for the ideal plant;
+        the wind part only when the MPC models a linear plant's velocity loop)."""
+        spec = self.controller
+        modelled = spec.kind == "mpc" and spec.mpc.plant_model
+        return self.plant.robustness(self.dim, self.simulation.dt_s, self.limits.a_max_mps2, modelled)
 
     def spacing_warning(self, controller: str | None = None) -> str | None:
         """A line when the MPC cannot reach the final formation under the plant: its closest pair

@@ -90,11 +90,15 @@ class PlantSpec:
         """True for the exact single integrator without measurement noise (the planner's model)."""
         return self.kind == "ideal" and self.measurement_noise_m == 0.0
 
-    def robustness(self, dim: int, dt_s: float, a_max_mps2: float | None) -> Robustness:
+    def robustness(
+        self, dim: int, dt_s: float, a_max_mps2: float | None, loop_modelled: bool = False
+    ) -> Robustness:
         """The margin and acceleration bound the planner uses for this plant (module
         :mod:`mpcform.sim.margin`): zero for the ideal plant; otherwise ``margin_m`` if given, else
         the plant's margin over one control interval of ``dt_s`` with ``a_max_mps2`` (None: the
-        plant's default). Measurement noise is not part of it."""
+        plant's default); with ``loop_modelled`` (the MPC's rows model a linear plant's velocity
+        loop exactly, :mod:`mpcform.mpc.loop`) only its wind part. Measurement noise is not part
+        of it."""
         if self.kind == "ideal":
             return Robustness(self.margin_m or 0.0, a_max_mps2)
         from mpcform.sim.margin import default_a_max, plant_margin
@@ -102,9 +106,10 @@ class PlantSpec:
         plant = self.build(1, dim)
         a_max = default_a_max(plant) if a_max_mps2 is None else a_max_mps2
         margin = plant_margin(plant, dt_s, a_max)
-        chosen = margin.norm_m if self.margin_m is None else self.margin_m
         linear = self.kind != "quadrotor"  # the quadrotor's loops are a linearisation: not modelled
         loop = tuple((a, b, c, axes) for a, b, _, c, axes in plant.velocity_loops()) if linear else ()
+        computed = float(np.linalg.norm(margin.wind_m)) if loop and loop_modelled else margin.norm_m
+        chosen = computed if self.margin_m is None else self.margin_m
         return Robustness(chosen, a_max, margin.valid_speed_mps, loop)
 
     def build(self, n: int, dim: int, seed: int | np.random.SeedSequence = 0) -> Plant:

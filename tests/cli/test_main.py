@@ -82,7 +82,8 @@ def test_validate_warns_when_the_plant_margin_exceeds_the_final_spacing(
     """OK and exit 0, plus one warning line naming the spacing, the kept distance and the remedies."""
     flight = Path(WORKED).parent / "formation_flight_100.toml"
     path = tmp_path / "slow.toml"
-    path.write_text(flight.read_text() + '\n[plant]\nkind = "lag"\ntime_constant = 0.3\n')
+    text = flight.read_text().replace('kind = "mpc"', 'kind = "mpc"\nplant_model = false')
+    path.write_text(text + '\n[plant]\nkind = "lag"\ntime_constant = 0.3\n')
     assert main(["validate", str(path)]) == 0
     captured = capsys.readouterr()
     assert captured.out.startswith("OK formation_flight_100")

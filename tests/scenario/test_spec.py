@@ -39,8 +39,30 @@ def test_spacing_warning_when_the_plant_margin_exceeds_the_final_spacing() -> No
     data["plant"] = {"kind": "lag", "time_constant": 0.1}
     assert scenario_from_dict(data).spacing_warning() is None
     data["plant"] = {"kind": "lag", "time_constant": 0.3}
+    assert scenario_from_dict(data).spacing_warning() is None  # the loop modelled: no margin
+    data["controller"]["plant_model"] = False
     slow = scenario_from_dict(data)
     text = slow.spacing_warning()
     assert text is not None and "0.6 m apart" in text and "0.651 m" in text
     assert abs(0.5 + 2 * slow.robustness.margin_m - 0.651) < 5e-4
     assert slow.spacing_warning("tracking") is None  # only the MPC keeps the margin
+
+
+def test_a_modelled_loop_keeps_only_the_winds_margin() -> None:
+    """With the velocity loop in the MPC's rows a linear plant's margin is its wind part: zero in
+    still air; the quadrotor (not modelled) keeps its whole margin."""
+    import tomllib
+
+    from mpcform.scenario.load import scenario_from_dict
+
+    data = tomllib.loads((SCENARIOS / "swap_planar_8.toml").read_text())
+    margins = {}
+    for wind in (False, True):
+        for model in (False, True):
+            data["plant"] = {"kind": "lag", "time_constant": 0.2}
+            if wind:
+                data["plant"]["wind"] = {"mean": [1.0, 0.0], "gust_std": 0.5}
+            data["controller"]["plant_model"] = model
+            margins[wind, model] = scenario_from_dict(data).robustness.margin_m
+    assert margins[False, True] == 0.0 and margins[False, False] > 0.04
+    assert 0.0 < margins[True, True] < margins[True, False]
