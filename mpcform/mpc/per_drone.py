@@ -25,6 +25,7 @@ with a positive-definite Hessian. Two things make it cheap:
 from __future__ import annotations
 
 import time
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -45,6 +46,25 @@ DAQP_OK = 1
 PRIMAL_TOL = 1e-9  # DAQP row feasibility tolerance (its default 1e-6 shows in the plans)
 MIN_SLACK_QUADRATIC = 1e-6  # keeps the soft QP's Hessian positive definite when w2 = 0
 ROW_BLOCK = 2048  # separation rows built at once (whole drones; a block stays in cache)
+
+
+@dataclass(frozen=True)
+class DroneSolves:
+    """Every drone's DAQP solve (n drones, K separation rows kept, in drone order)."""
+
+    v: Array  # (n, H d) the solutions in v = M u
+    s: Array  # (n, H) slacks (zero where the hard QP was feasible)
+    cost: Array  # (n,) objective values 0.5 ||v||^2 - c^T v (+ the slack penalty)
+    flags: Array  # (n,) DAQP exit flags
+    soft: Array  # (n,) the drones solved with slacks
+    lams: list[Array]  # per drone, the rows' multipliers (soft: the slacks' H bounds, then constant
+    # rows, then separation rows; a row at its lower bound has a multiplier <= 0)
+    rows: Array  # (K,) the separation rows kept, as flat ``item * R + row`` indices
+    offsets: Array  # (n + 1,) drone i's rows are ``rows[offsets[i]:offsets[i + 1]]``
+    sep_c: Array  # (K, d) their coefficients
+    sep_end: Array  # (K,) their position steps
+    iterations: int
+    time_s: float  # inside DAQP
 
 
 class PerDroneQP(StepSolver):
@@ -106,15 +126,23 @@ class PerDroneQP(StepSolver):
         Returns the solution in the sparse QP's layout ``[u | x | s]`` over these n drones (its
         ``solve_time_s`` is the time spent inside DAQP), and the number of active rows.
         """
+        return self.solution(self.solve_each(p0, c, u_prev, singles, coeffs, lower, warm_u, hard, on))
+
+    def solve_each(
+        self, p0: Array, c: Array, u_prev: Array, singles: Array, coeffs: Array, lower: Array, warm_u: Array,
+        hard: Array | None = None, on: Array | None = None,
+    ) -> DroneSolves:
+        """Every drone's solve as DAQP returns it (arguments as :meth:`solve_drones`)."""
         st = self.settings
         h, n, nu, n_const = st.horizon, p0.shape[0], self._nu, self._const_v.shape[0]
         f_v = -c.transpose(1, 0, 2).reshape(n, nu)  # 0.5 ||v - c||^2
         v_warm = warm_u.transpose(1, 0, 2).reshape(n, nu) @ self._m.T
-        sep_c, sep_end, sep_lo, sep_soft, counts = self._separation(n, singles, coeffs, lower, hard, on)
+        sep_c, sep_end, sep_lo, sep_soft, counts, at = self._separation(n, singles, coeffs, lower, hard, on)
         a, lo, hi = self._buffers(int(counts.max(initial=0)))
         bounds = None if self._fixed_bounds else self._bounds(p0, u_prev)  # else in the buffers
         offsets = [0, *np.cumsum(counts).tolist()]
         v_out, s_out, flags, lams = [np.empty(0)] * n, np.zeros((n, h)), [DAQP_OK] * n, [np.empty(0)] * n
+        cost = np.zeros(n)
         iters, in_daqp = 0, 0.0
 
         def put(i: int, rows_v: Array) -> int:
@@ -134,7 +162,7 @@ class PerDroneQP(StepSolver):
             for i in range(start, stop):
                 m = put(i, rows_v[offsets[i] - base : offsets[i + 1] - base])
                 t0 = time.perf_counter()
-                v_out[i], _, flags[i], info = solve(
+                v_out[i], cost[i], flags[i], info = solve(
                     eye, f_v[i], a[:m], hi[:m], lo[:m], primal_start=v_warm[i], **options
                 )  # fmt: skip
                 in_daqp += time.perf_counter() - t0
@@ -145,24 +173,56 @@ class PerDroneQP(StepSolver):
             first, last = offsets[i], offsets[i + 1]
             m = put(i, self._rows_v(sep_c[first:last], sep_end[first:last]))
             t0 = time.perf_counter()
-            v_out[i], s_out[i], flags[i], info = self._solve_soft(
+            v_out[i], s_out[i], flags[i], cost[i], info = self._solve_soft(
                 f_v[i], a[:m], hi[:m], lo[:m], sep_end[first:last], sep_soft[first:last], n_const
             )  # fmt: skip
             in_daqp += time.perf_counter() - t0
             iters += info["iterations"]
             lams[i] = info["lam"]
-        iters = int(iters)
         v_all = np.array(v_out).reshape(n, nu)
-        bad = np.flatnonzero((np.array(flags) != DAQP_OK) | ~np.isfinite(v_all).all(axis=1))
+        is_soft = np.zeros(n, dtype=bool)
+        is_soft[soft] = True
+        return DroneSolves(v_all, s_out, cost, np.array(flags), is_soft, lams, at, np.array(offsets), sep_c,
+                           sep_end, int(iters), in_daqp)  # fmt: skip
+
+    def solution(self, solves: DroneSolves) -> tuple[QPSolution, int]:
+        """The drones' solves as one solution ``[u | x | s]`` (as :meth:`solve_drones` returns it)."""
+        h, n, iters, in_daqp = self.settings.horizon, solves.v.shape[0], solves.iterations, solves.time_s
+        bad = np.flatnonzero((solves.flags != DAQP_OK) | ~np.isfinite(solves.v).all(axis=1))
         if bad.size:
-            status = f"daqp: exit flag {flags[bad[0]]} (drone {bad[0]})"
+            status = f"daqp: exit flag {solves.flags[bad[0]]} (drone {bad[0]})"
             return failed(status, in_daqp, iters), 0
-        u_out = v_all @ self._m_inv.T
-        x_out = u_out @ self._x_of_u.T
-        flat = [v.reshape(n, h, -1).transpose(1, 0, 2).ravel() for v in (u_out, x_out, s_out)]
+        u_out, x_out = self.inputs_positions(solves.v)
+        flat = [v.reshape(n, h, -1).transpose(1, 0, 2).ravel() for v in (u_out, x_out, solves.s)]
         sol = QPSolution(np.concatenate(flat), None, True, "daqp: optimal", iters, in_daqp)
-        active = np.count_nonzero(np.abs(np.concatenate(lams)) > ACTIVE_TOL) if n else 0
+        active = np.count_nonzero(np.abs(np.concatenate(solves.lams)) > ACTIVE_TOL) if n else 0
         return sol, int(active)
+
+    def inputs_positions(self, v: Array) -> tuple[Array, Array]:
+        """Inputs and relative positions (n, H d) (step-major within a drone) of solutions ``v``
+        (n, H d): ``u = M^-1 v``, ``x_e = dt sum_{j<e} u_j``."""
+        u = v @ self._m_inv.T
+        return u, u @ self._x_of_u.T
+
+    def multipliers(self, solves: DroneSolves, i: int, everything: bool = False) -> Array:
+        """Drone i's multipliers of its separation rows (>= 0: the derivative of its optimal cost in
+        the rows' lower bounds), or with ``everything`` of its constant rows first."""
+        lam = solves.lams[i][self.settings.horizon if solves.soft[i] else 0 :]
+        return lam if everything else -lam[self._const_v.shape[0] :]
+
+    def curvature(self, solves: DroneSolves, i: int) -> tuple[Array, Array]:
+        """Drone i's active separation rows (indices into its rows ``solves.rows[offsets[i]:]``) and
+        the Hessian of its optimal cost in their lower bounds, ``(A A^T)^+`` over the rows ``A``
+        (over ``v``, identity Hessian) with a multiplier (a soft drone's slacks are ignored)."""
+        n_const, first, last = self._const_v.shape[0], solves.offsets[i], solves.offsets[i + 1]
+        lam = self.multipliers(solves, i, everything=True)
+        on_const = np.abs(lam[:n_const]) > ACTIVE_TOL
+        on_sep = np.flatnonzero(np.abs(lam[n_const:]) > ACTIVE_TOL)
+        rows = np.vstack([self._const_v[on_const], self._rows_v(solves.sep_c[first:last][on_sep],
+                                                                solves.sep_end[first:last][on_sep])])
+        k = np.linalg.pinv(rows @ rows.T, hermitian=True)
+        skip = int(on_const.sum())
+        return on_sep, k[skip:, skip:]
 
     def _rows_v(self, coeffs: Array, end: Array) -> Array:
         """Separation rows (K, H d) over ``v`` of coefficients ``coeffs`` (K, d) at position steps
@@ -187,7 +247,7 @@ class PerDroneQP(StepSolver):
 
     def _solve_soft(
         self, f_v: Array, a: Array, hi: Array, lo: Array, end: Array, soft: Array, n_const: int
-    ) -> tuple[Array, Array, int, dict[str, Any]]:
+    ) -> tuple[Array, Array, int, float, dict[str, Any]]:
         """The drone's QP with its slacks (first, simple bounds ``s >= 0``; Hessian ``diag(w2, I)``).
 
         The slacks are not scaled to a unit Hessian: a column ``1 / sqrt(w2)`` would scale DAQP's
@@ -196,18 +256,19 @@ class PerDroneQP(StepSolver):
         a_s = np.zeros((a.shape[0], h))
         a_s[n_const + np.arange(end.shape[0]), end - 1] = soft
         f = np.concatenate([np.full(h, st.slack_weight), f_v])
-        z, _, flag, info = self._daqp.solve(
+        z, cost, flag, info = self._daqp.solve(
             self._hess_soft, f, np.hstack([a_s, a]), np.concatenate([np.full(h, DAQP_INF), hi]),
             np.concatenate([np.zeros(h), lo]), **self._options,
         )  # fmt: skip
-        return z[h:], z[:h], flag, info
+        return z[h:], z[:h], flag, cost, info
 
     def _separation(
         self, n: int, singles: Array, coeffs: Array, lower: Array, hard: Array | None, on: Array | None
-    ) -> tuple[Array, Array, Array, Array, Array]:
+    ) -> tuple[Array, Array, Array, Array, Array, Array]:
         """The separation rows that can be active, sorted by drone (item order kept within a drone):
         their coefficients ``a`` (K, d), position steps, lower bounds and whether they have a slack
-        (not an item's hard first row); and the number of rows per drone.
+        (not an item's hard first row); the number of rows per drone; and which they are (K,), as
+        flat ``item * R + row`` indices.
 
         A row ``a^T x_e + s_e >= b`` that every reachable ``x_e`` meets (``b <= -|a| e v_max dt``,
         since the velocity set lies in the ball) is left out, the optimum unchanged. The rows over
@@ -229,7 +290,7 @@ class PerDroneQP(StepSolver):
             soft |= ~hard[item]
         counts = np.bincount(singles[item], minlength=n).astype(np.intp)
         sep_c = np.take(coeffs.reshape(-1, coeffs.shape[2]), at, axis=0)
-        return sep_c, ends[r], np.take(lower.reshape(-1), at), soft, counts
+        return sep_c, ends[r], np.take(lower.reshape(-1), at), soft, counts, at
 
     def _bounds(self, p0: Array, u_prev: Array) -> tuple[Array, Array]:
         """Lower and upper bounds (n, rows) of the constant rows for each drone."""

@@ -1,0 +1,293 @@
+"""Decoupled mode with iterated split points: the joint pair rows' optimum at per-drone cost.
+
+A joint pair row ``a^T (x_{e,i} - x_{e,k}) >= b`` (``a = W c``, :mod:`mpcform.mpc.separation`) is
+split into two one-drone rows ``a^T x_{e,i} >= b_i + t`` and ``-a^T x_{e,k} >= b_k - t``, where
+``b_i + b_k = b`` is the midpoint split and ``t`` the row's split shift (0: the midpoint). For
+every ``t`` the two rows add up to the joint row (the slacks ``s_{e,i} + s_{e,k}`` as the joint QP
+carries them): every iterate's plans meet the joint rows, so it is safe whenever it stops. The pair
+rows are the only coupling, so the joint QP's optimum is ``min_t V(t)``, ``V = sum_i f_i`` the
+drones' optimal costs: convex and piecewise quadratic in ``t`` (primal decomposition), with
+
+    dV/dt_r = mu_{i,r} - mu_{k,r}        d^2V/dt^2 = sum_i S_i^T (A_i A_i^T)^+ S_i
+
+(``mu`` the sides' multipliers, ``A_i`` drone i's active rows over ``v`` on its current active set,
+``S_i`` its split rows' signs). Each round takes a Newton step in ``t`` from the best iterate (halved
+while it does not decrease ``V``), re-centres the rows inactive on both sides (equal slack on both:
+the solutions are unchanged), and re-solves only the drones whose rows moved, warm-started. It
+stops after ``split_iterations`` rounds, at ``split_budget_s`` or at convergence, and returns the
+best iterate.
+
+A close start's hard no-approach first row stays at ``t = 0`` (its safety argument needs
+``+-c0^T W x_1 >= 0`` per drone): the limit is the joint QP's optimum with those rows split so.
+The per-drone QP takes the hard optimum whenever it exists (:mod:`mpcform.mpc.per_drone`), so the
+limit is the joint optimum where the joint QP needs no slack.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from mpcform._validate import Array
+from mpcform.mpc.per_drone import DAQP_OK, DroneSolves, PerDroneQP
+from mpcform.mpc.problem import StepQP, StepSolver
+from mpcform.mpc.rows import row_ends
+from mpcform.mpc.separation import SeparationRows
+from mpcform.solvers.base import QPSolution
+
+SPLIT_SOLVER = "daqp (per drone, iterated split)"
+GRAD_TOL = 1e-8  # |dV/dt| below this on every row: converged
+MIN_STEP = 1e-6  # the Newton step is halved down to this fraction, then the iteration stops
+ARMIJO = 1e-4  # sufficient decrease: V(t + s d) <= V(t) + ARMIJO s dV^T d
+RIDGE = 1e-12  # relative, on the Newton system (singular where rows are redundant)
+
+
+@dataclass
+class Iterate:
+    """The drones' solves at one split ``shift`` (P, R): per drone its ``v`` (m, H d), slacks
+    (m, H), cost, multipliers and separation rows (flat ``item * R + row``), and curvature."""
+
+    shift: Array
+    v: Array
+    s: Array
+    cost: Array
+    soft: Array
+    lams: list[Array]
+    rows: list[Array]
+    mu: list[Array]
+    curv: list[tuple[Array, Array] | None] = field(default_factory=list)
+
+    @property
+    def value(self) -> float:
+        return float(self.cost.sum())
+
+
+@dataclass(frozen=True)
+class SplitRun:
+    """An iterated split solve: the best iterate's ``solution`` and active rows, the number of
+    re-solve ``rounds`` after the midpoint, ``history`` (rounds + 1, 3): the best QP objective
+    ``sum_i 0.5 ||v_i - c_i||^2`` (+ slack penalty) and the wall and CPU seconds after each round,
+    and (when recorded) every round's positions (H, m, d)."""
+
+    solution: QPSolution
+    active: int
+    rounds: int
+    history: Array
+    positions: list[Array]
+
+
+class SplitQP(StepSolver):
+    """The per-drone QPs with their pair rows' split points iterated towards the joint optimum.
+
+    ``iterations``: rounds after the midpoint solve; ``budget_s``: wall time of a step's solve
+    after which no new round starts (None: none).
+    """
+
+    name = SPLIT_SOLVER
+    warm_starts = True
+
+    def __init__(self, per_drone: PerDroneQP, iterations: int, budget_s: float | None) -> None:
+        self.per_drone, self.iterations, self.budget_s = per_drone, iterations, budget_s
+
+    def reset(self) -> None:
+        self.per_drone.reset()
+
+    def solve(self, qp: StepQP) -> tuple[QPSolution, int]:
+        run = self.run(qp)
+        return run.solution, run.active
+
+    def run(self, qp: StepQP, record: bool = False) -> SplitRun:
+        """Iterate the split of ``qp``'s pair rows (see the module docstring); ``record`` keeps
+        every round's positions."""
+        t0, c0 = time.perf_counter(), time.process_time()
+        step_qp = SplitStep(self.per_drone, qp)
+        m = qp.start_m.shape[0]
+        warm = np.zeros_like(qp.targets_mps) if qp.warm is None else qp.warm[0]
+        best = step_qp.solve(np.arange(m), step_qp.midpoint(), warm, None)
+        history = [(best.value, time.perf_counter() - t0, time.process_time() - c0)]
+        seen = [step_qp.positions(best)] if record else []
+        size, direction, rounds = 1.0, step_qp.direction(best), 0
+        while rounds < self.iterations and direction is not None and np.isfinite(best.value):
+            if self.budget_s is not None and time.perf_counter() - t0 >= self.budget_s:
+                break
+            newton, slope, recentre = direction
+            trial = step_qp.solve(None, best.shift + size * newton + recentre, step_qp.inputs(best), best)
+            rounds += 1
+            if record:
+                seen.append(step_qp.positions(trial))
+            if trial.value <= best.value + ARMIJO * size * slope:
+                best, size = trial, 1.0
+                direction = step_qp.direction(best)
+            else:  # the quadratic through V(best), its slope and V(trial), kept within [0.1, 0.5] x
+                curve = trial.value - best.value - size * slope
+                size *= min(0.5, max(0.1, -0.5 * size * slope / curve)) if np.isfinite(curve) else 0.1
+                if size < MIN_STEP:
+                    break
+            history.append((best.value, time.perf_counter() - t0, time.process_time() - c0))
+        sol, active = step_qp.solution(best)
+        if sol.success and self.iterations:
+            sol = QPSolution(sol.x, sol.y, True, f"{sol.status}; split {rounds} rounds", sol.iterations,
+                             sol.solve_time_s)  # fmt: skip
+        hist = np.array(history)
+        hist[:, 0] += step_qp.c_sq
+        return SplitRun(sol, active, rounds, hist, seen)
+
+
+class SplitStep:
+    """One step's split problem: the pair sides of ``qp.rows`` (side i ``first``, side k ``second``,
+    matched per pair), which rows may move, and the drones' solves at a split."""
+
+    def __init__(self, per_drone: PerDroneQP, qp: StepQP) -> None:
+        self.pd, self.qp, rows = per_drone, qp, qp.rows
+        self.m, self.r = qp.start_m.shape[0], rows.single_lower.shape[1]
+        self.first, self.second = first, second = _sides(rows.labels)
+        self.splittable = np.repeat(rows.single_on[first][:, None], self.r, axis=1)
+        self.splittable[rows.single_hard[first], 0] = False
+        self.pair_of = np.full(rows.singles.shape[0], -1)  # item -> its pair, side sign
+        self.pair_of[first], self.pair_of[second] = np.arange(first.shape[0]), np.arange(second.shape[0])
+        self.sign = np.zeros(rows.singles.shape[0])
+        self.sign[first], self.sign[second] = 1.0, -1.0
+        self.c_sq = 0.5 * float(np.sum(qp.targets_mps**2))
+        self.ends = row_ends(per_drone.settings.horizon)
+        self.iterations, self.time_s = 0, 0.0
+
+    def midpoint(self) -> Array:
+        return np.zeros(self.splittable.shape)
+
+    def lower(self, shift: Array) -> Array:
+        """The one-drone rows' lower bounds (S, R) at split ``shift`` (P, R)."""
+        low = self.qp.rows.single_lower.copy()
+        low[self.first] += shift
+        low[self.second] -= shift
+        return low
+
+    def solve(self, drones: Array | None, shift: Array, warm_u: Array, base: Iterate | None) -> Iterate:
+        """Solve ``drones`` (None: those whose rows differ from ``base``'s) at ``shift``; the
+        others keep ``base``'s solves."""
+        qp, rows, r, pd = self.qp, self.qp.rows, self.r, self.pd
+        if drones is None:
+            assert base is not None
+            moved, changed = np.zeros(self.m, dtype=bool), (shift != base.shift).any(axis=1)
+            moved[rows.singles[self.first[changed]]] = moved[rows.singles[self.second[changed]]] = True
+            drones = np.flatnonzero(moved)
+        local = np.full(self.m, -1)
+        local[drones] = np.arange(drones.shape[0])
+        keep = np.flatnonzero(local[rows.singles] >= 0)
+        got = pd.solve_each(
+            qp.start_m[drones], qp.targets_mps[:, drones], qp.u_prev_mps[drones], local[rows.singles[keep]],
+            rows.single_coeffs[keep], self.lower(shift)[keep], warm_u[:, drones], rows.single_hard[keep],
+            rows.single_on[keep],
+        )  # fmt: skip
+        self.iterations, self.time_s = self.iterations + got.iterations, self.time_s + got.time_s
+        it = self._copy(base, shift)
+        for j, i in enumerate(drones):
+            item, row = np.divmod(got.rows[got.offsets[j] : got.offsets[j + 1]], r)
+            it.rows[i] = keep[item] * r + row  # global flat indices
+            it.v[i], it.s[i], it.cost[i], it.soft[i] = got.v[j], got.s[j], got.cost[j], got.soft[j]
+            it.lams[i], it.mu[i] = got.lams[j], pd.multipliers(got, j)
+            it.curv[i] = pd.curvature(got, j) if got.flags[j] == DAQP_OK else None
+        it.cost[drones[got.flags != DAQP_OK]] = np.inf
+        return it
+
+    def _copy(self, base: Iterate | None, shift: Array) -> Iterate:
+        """``base``'s solves (or empty ones) at a new ``shift``, to be partly overwritten."""
+        m = self.m
+        if base is None:
+            nu, h = self.pd.settings.horizon * self.pd.dim, self.pd.settings.horizon
+            return Iterate(shift, np.zeros((m, nu)), np.zeros((m, h)), np.zeros(m), np.zeros(m, dtype=bool),
+                           [np.empty(0)] * m, [np.empty(0, np.intp)] * m, [np.empty(0)] * m, [None] * m)  # fmt: skip
+        return Iterate(shift, base.v.copy(), base.s.copy(), base.cost.copy(), base.soft.copy(),
+                       list(base.lams), list(base.rows), list(base.mu), list(base.curv))  # fmt: skip
+
+    def positions(self, it: Iterate) -> Array:
+        """The iterate's relative positions (H, m, d)."""
+        x = self.pd.inputs_positions(it.v)[1]
+        return x.reshape(self.m, self.pd.settings.horizon, -1).transpose(1, 0, 2)
+
+    def inputs(self, it: Iterate) -> Array:
+        """The iterate's inputs (H, m, d): the warm start of a re-solve."""
+        u = self.pd.inputs_positions(it.v)[0]
+        return u.reshape(self.m, self.pd.settings.horizon, -1).transpose(1, 0, 2)
+
+    def direction(self, it: Iterate, curved: Iterate | None = None) -> tuple[Array, float, Array] | None:
+        """The Newton step (P, R) in the split from ``it``, its slope ``dV^T step``, and the
+        re-centring of the rows inactive on both sides; None at convergence. ``curved``: the
+        iterate whose active sets give the Hessian (default ``it``)."""
+        shape, r = self.splittable.shape, self.r
+        curved = it if curved is None else curved
+        grad, blocks = np.zeros(shape), []
+        for i in range(self.m):
+            item, row = np.divmod(it.rows[i], r)
+            pair = self.pair_of[item]
+            ok = pair >= 0
+            ok[ok] = self.splittable[pair[ok], row[ok]]
+            np.add.at(grad, (pair[ok], row[ok]), self.sign[item[ok]] * it.mu[i][ok])
+            cv = curved.curv[i]
+            if cv is not None:
+                act, k = cv
+                item_c, row_c = np.divmod(curved.rows[i][act], r)
+                pair_c = self.pair_of[item_c]
+                use = pair_c >= 0
+                use[use] = self.splittable[pair_c[use], row_c[use]]
+                blocks.append((pair_c[use] * r + row_c[use], self.sign[item_c[use]], k[np.ix_(use, use)]))
+        used = np.unique(np.concatenate([b[0] for b in blocks])) if blocks else np.empty(0, np.intp)
+        hess = np.zeros((used.shape[0], used.shape[0]))
+        for flat, sign, k in blocks:
+            at = np.searchsorted(used, flat)
+            hess[np.ix_(at, at)] += np.outer(sign, sign) * k
+        g = grad.ravel()[used]
+        newton = np.zeros(shape)
+        if used.shape[0]:
+            ridge = RIDGE * max(1.0, float(np.abs(np.diag(hess)).max()))
+            newton.ravel()[used] = np.linalg.solve(hess + ridge * np.eye(used.shape[0]), -g)
+        recentre = self._recentre(it, grad, newton)
+        if np.abs(grad).max(initial=0.0) <= GRAD_TOL and not recentre.any():
+            return None
+        return newton, float(g @ newton.ravel()[used]), recentre
+
+    def _recentre(self, it: Iterate, grad: Array, newton: Array) -> Array:
+        """Shifts that give both sides of each splittable row inactive on both sides (no
+        multiplier, no Newton step) equal slack, for the pairs a Newton step moves anyway."""
+        rows = self.qp.rows
+        x = self.positions(it)[self.ends - 1]  # (R, m, d)
+        value = np.einsum("srd,rsd->sr", rows.single_coeffs, x[:, rows.singles]) - self.lower(it.shift)
+        gap_i, gap_k = value[self.first], value[self.second]
+        moving = (newton != 0.0).any(axis=1)[:, None]
+        free = self.splittable & moving & (grad == 0.0) & (newton == 0.0) & (gap_i > 0.0) & (gap_k > 0.0)
+        return np.where(free, 0.5 * (gap_i - gap_k), 0.0)
+
+    def solution(self, it: Iterate) -> tuple[QPSolution, int]:
+        """The iterate as the planner's solution ``[u | x | s]`` and its number of active rows."""
+        pd, flags = self.pd, np.where(np.isfinite(it.cost), DAQP_OK, -1)
+        none = np.empty(0, np.intp)
+        solves = DroneSolves(it.v, it.s, it.cost, flags, it.soft, it.lams, none, np.zeros(1, np.intp),
+                             np.empty((0, pd.dim)), none, self.iterations, self.time_s)  # fmt: skip
+        return pd.solution(solves)
+
+
+def _sides(labels: Array) -> tuple[Array, Array]:
+    """The pair sides among one-drone items of ``labels`` (S, 2): side i (``(i, k)``, i < k) and
+    side k (``(k, i)``) of each pair, in the same pair order."""
+    n = int(labels.max(initial=0)) + 1
+    key = np.where(labels[:, 1] >= 0, np.minimum(labels[:, 0], labels[:, 1]) * n + labels.max(axis=1), -1)
+    first = np.flatnonzero((labels[:, 1] >= 0) & (labels[:, 0] < labels[:, 1]))
+    second = np.flatnonzero((labels[:, 1] >= 0) & (labels[:, 0] > labels[:, 1]))
+    both = np.intersect1d(key[first], key[second])  # a side whose partner is not solved stays put
+    first, second = first[np.isin(key[first], both)], second[np.isin(key[second], both)]
+    return first[np.argsort(key[first])], second[np.argsort(key[second])]
+
+
+def joint_rows(rows: SeparationRows) -> SeparationRows:
+    """The joint pair rows whose split the decoupled ``rows`` are: per pair side i's normal and the
+    sum of both sides' lower bounds (the obstacle items stay one-drone items)."""
+    first, second = _sides(rows.labels)
+    ob = np.flatnonzero(rows.labels[:, 1] < 0)
+    pairs = np.column_stack([rows.singles[first], rows.singles[second]])
+    lower = rows.single_lower[first] + rows.single_lower[second]
+    return SeparationRows(
+        pairs, rows.single_coeffs[first], lower, rows.single_on[first], rows.singles[ob], rows.labels[ob],
+        rows.single_coeffs[ob], rows.single_lower[ob], rows.single_on[ob], rows.single_hard[first],
+        rows.single_hard[ob],
+    )  # fmt: skip
