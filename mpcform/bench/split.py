@@ -20,7 +20,6 @@ import numpy as np
 
 from mpcform.mpc.planner import MPCPlanner
 from mpcform.mpc.problem import StepQP
-from mpcform.mpc.settings import MPCSettings
 from mpcform.mpc.sparse import SparseSolver
 from mpcform.mpc.split import SplitQP, joint_rows
 from mpcform.scenario.build import build_controller
@@ -63,11 +62,12 @@ def curves(planner: MPCPlanner, qps: list[StepQP], rounds: int) -> dict[str, Arr
     and the joint backend's wall seconds (Q,)."""
     st = planner.settings
     split = SplitQP(planner._solver.per_drone, rounds, None)  # type: ignore[attr-defined]
-    joint_st = MPCSettings(horizon=st.horizon, gain_per_s=st.gain_per_s, coupling="joint", margin_m=st.margin_m,
-                           velocity_set=st.velocity_set, facets=st.facets)  # fmt: skip
+    joint_st = replace(st, coupling="joint", split_iterations=0, split_budget_s=None)
     args = (planner.dim, planner.dt_s, planner.limits, joint_st, planner._families, planner._separation)
     accurate = SparseSolver(make_backend("qpsolvers:clarabel", ACCURATE), *args)
-    fast = SparseSolver(make_backend(DEFAULT_SOLVER, SolverOptions(st.eps_abs, st.eps_rel, st.max_iter, 0.0)), *args)
+    fast = SparseSolver(
+        make_backend(DEFAULT_SOLVER, SolverOptions(st.eps_abs, st.eps_rel, st.max_iter, 0.0)), *args
+    )
     out: dict[str, list[Any]] = {"cost": [], "wall": [], "cpu": [], "joint": [], "joint_wall": []}
     for qp in qps:
         hist = split.run(qp).history
@@ -99,8 +99,10 @@ def _objective(planner: MPCPlanner, qp: StepQP, z: Array) -> float:
 
 
 def run(
-    scenarios: tuple[str, ...] = DEFAULT_SCENARIOS, rounds: tuple[int, ...] = DEFAULT_ROUNDS,
-    steps: int | None = None, figure: str | None = None,
+    scenarios: tuple[str, ...] = DEFAULT_SCENARIOS,
+    rounds: tuple[int, ...] = DEFAULT_ROUNDS,
+    steps: int | None = None,
+    figure: str | None = None,
 ) -> list[dict[str, Any]]:
     """The table's rows (and the figure at ``figure``, a PNG)."""
     rows, drawn = [], []
@@ -112,8 +114,10 @@ def run(
         drawn.append((name, gap.mean(axis=0), 1e3 * got["wall"].mean(axis=0)))
         for k in rounds:
             rows.append({"scenario": name, "rounds": k, "qp_steps": len(qps),
-                         "wall_ms": 1e3 * float(got["wall"][:, k].mean()), "cpu_ms": 1e3 * float(got["cpu"][:, k].mean()),
-                         "gap_mean_pct": 100 * float(gap[:, k].mean()), "gap_max_pct": 100 * float(gap[:, k].max()),
+                         "wall_ms": 1e3 * float(got["wall"][:, k].mean()),
+                         "cpu_ms": 1e3 * float(got["cpu"][:, k].mean()),
+                         "gap_mean_pct": 100 * float(gap[:, k].mean()),
+                         "gap_max_pct": 100 * float(gap[:, k].max()),
                          "joint_wall_ms": 1e3 * float(got["joint_wall"].mean())})  # fmt: skip
     if figure:
         draw(drawn, figure)
@@ -147,8 +151,9 @@ def markdown_table(rows: list[dict[str, Any]]) -> str:
     """The rows as a markdown table."""
     head = ("| scenario | rounds | QP steps | wall ms/step | CPU ms/step | gap mean % | gap max % | "
             "joint (PIQP) ms/step |\n|---|---:|---:|---:|---:|---:|---:|---:|")  # fmt: skip
-    body = [f"| {r['scenario']} | {r['rounds']} | {r['qp_steps']} | {r['wall_ms']:.2f} | {r['cpu_ms']:.2f} | "
-            f"{r['gap_mean_pct']:.4f} | {r['gap_max_pct']:.4f} | {r['joint_wall_ms']:.2f} |" for r in rows]  # fmt: skip
+    body = [f"| {r['scenario']} | {r['rounds']} | {r['qp_steps']} | {r['wall_ms']:.2f} | "
+            f"{r['cpu_ms']:.2f} | {r['gap_mean_pct']:.4f} | {r['gap_max_pct']:.4f} | "
+            f"{r['joint_wall_ms']:.2f} |" for r in rows]  # fmt: skip
     return "\n".join([head, *body])
 
 

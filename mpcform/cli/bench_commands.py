@@ -100,7 +100,7 @@ def add_bench(sub: argparse._SubParsersAction) -> None:
     mpc.add_argument("--json", metavar="PATH", help="also write the rows as a JSON list of records")
     _add_bench_solvers(kinds)
     _add_bench_scale(kinds)
-    split = kinds.add_parser("split", help="iterated split points: QP cost gap to the joint QP vs rounds and time")
+    split = kinds.add_parser("split", help="iterated split points: QP cost gap to the joint vs rounds, time")
     split.set_defaults(func=_bench_split)
     split.add_argument("--scenarios", nargs="+", metavar="SCENARIO", help="scenario files, flown decoupled "
                        "(default: swap_planar_8, swap_spatial_12, swap_spatial_20)")  # fmt: skip

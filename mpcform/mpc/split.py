@@ -196,8 +196,9 @@ class SplitStep:
         m = self.m
         if base is None:
             nu, h = self.pd.settings.horizon * self.pd.dim, self.pd.settings.horizon
+            empty: list[Array] = [np.empty(0)] * m
             return Iterate(shift, np.zeros((m, nu)), np.zeros((m, h)), np.zeros(m), np.zeros(m, dtype=bool),
-                           [np.empty(0)] * m, [np.empty(0, np.intp)] * m, [np.empty(0)] * m, [None] * m)  # fmt: skip
+                           list(empty), [np.empty(0, np.intp)] * m, list(empty), [None] * m)  # fmt: skip
         return Iterate(shift, base.v.copy(), base.s.copy(), base.cost.copy(), base.soft.copy(),
                        list(base.lams), list(base.rows), list(base.mu), list(base.curv))  # fmt: skip
 

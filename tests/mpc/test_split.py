@@ -32,7 +32,9 @@ def swap(n: int, dim: int, seed: int, noise_m: float = 0.3) -> tuple[ConstantRef
     angle = 2 * np.pi * np.arange(n) / n
     ring = 1.2 * np.column_stack([np.cos(angle), np.sin(angle)] + [0.3 * np.sin(angle)] * (dim - 2))
     start = -ring + rng.normal(0.0, noise_m, ring.shape)
-    return ConstantReference(Template(ring - ring.mean(axis=0)), FormationState.from_param(np.zeros(dim))), start
+    return ConstantReference(
+        Template(ring - ring.mean(axis=0)), FormationState.from_param(np.zeros(dim))
+    ), start
 
 
 def step_qps(n: int, dim: int, seed: int, steps: int) -> tuple[MPCPlanner, list[StepQP]]:
@@ -96,7 +98,9 @@ def test_every_iterate_meets_the_joint_rows_and_the_cost_falls_to_no_less_than_t
         assert best >= joint_optimum(planner, qp) * (1.0 - 1e-8)
 
 
-@pytest.mark.parametrize(("n", "dim", "seed", "steps"), [(2, 3, 2, 8), (3, 2, 1, 8), (3, 3, 5, 8), (4, 2, 6, 5)])
+@pytest.mark.parametrize(
+    ("n", "dim", "seed", "steps"), [(2, 3, 2, 8), (3, 2, 1, 8), (3, 3, 5, 8), (4, 2, 6, 5)]
+)
 def test_small_encounters_reach_the_joint_optimum(n: int, dim: int, seed: int, steps: int) -> None:
     """Every step's iterated split ends within 1e-4 of the joint optimum (the midpoint split is
     up to 40 % above it at the encounter's first step)."""
