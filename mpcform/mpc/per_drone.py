@@ -45,6 +45,8 @@ DAQP_INF = 1e30  # DAQP's "no bound"
 DAQP_OK = 1
 PRIMAL_TOL = 1e-9  # DAQP row feasibility tolerance (its default 1e-6 shows in the plans)
 MIN_SLACK_QUADRATIC = 1e-6  # keeps the soft QP's Hessian positive definite when w2 = 0
+AT_BOUND_M = 1e-7  # a separation row this close to its bound counts as active (sensitivity)
+GRAM_EPS = 1e-9  # relative regularisation of the active rows' Gram matrix (sensitivity)
 ROW_BLOCK = 2048  # separation rows built at once (whole drones; a block stays in cache)
 
 
@@ -63,8 +65,27 @@ class DroneSolves:
     offsets: Array  # (n + 1,) drone i's rows are ``rows[offsets[i]:offsets[i + 1]]``
     sep_c: Array  # (K, d) their coefficients
     sep_end: Array  # (K,) their position steps
+    sep_lo: Array  # (K,) their lower bounds
+    const_lo: Array  # (n or 1, rows) the constant rows' bounds (one row: the same for every drone)
+    const_hi: Array
     iterations: int
     time_s: float  # inside DAQP
+
+
+@dataclass(frozen=True)
+class Sensitivity:
+    """How one drone's optimum moves with its separation rows' lower bounds ``b`` on its active
+    set (:meth:`PerDroneQP.sensitivity`): a rows active, r rows active in all, q rows inactive."""
+
+    active: Array  # (a,) the active separation rows (indices into the drone's rows)
+    hessian: Array  # (a, a) d^2 f / db^2
+    dv: Array  # (H d, a) dv / db
+    dual: Array  # (r,) the active rows' multipliers y (constant rows first; > 0 at a lower bound)
+    ddual: Array  # (r, a) dy / db
+    dual_sign: Array  # (r,) +1 at a lower bound, -1 at an upper one
+    rows: Array  # (q, H d) the inactive rows, one-sided ``rows v >= bound``
+    slack: Array  # (q,) how far they are from their bounds
+    sep_index: Array  # (q,) an inactive separation row's index in the drone's rows, else -1
 
 
 class PerDroneQP(StepSolver):
@@ -180,10 +201,11 @@ class PerDroneQP(StepSolver):
             iters += info["iterations"]
             lams[i] = info["lam"]
         v_all = np.array(v_out).reshape(n, nu)
+        const_bounds = (lo[None, :n_const].copy(), hi[None, :n_const].copy()) if bounds is None else bounds
         is_soft = np.zeros(n, dtype=bool)
         is_soft[soft] = True
         return DroneSolves(v_all, s_out, cost, np.array(flags), is_soft, lams, at, np.array(offsets), sep_c,
-                           sep_end, int(iters), in_daqp)  # fmt: skip
+                           sep_end, sep_lo, *const_bounds, int(iters), in_daqp)  # fmt: skip
 
     def solution(self, solves: DroneSolves) -> tuple[QPSolution, int]:
         """The drones' solves as one solution ``[u | x | s]`` (as :meth:`solve_drones` returns it)."""
@@ -210,19 +232,40 @@ class PerDroneQP(StepSolver):
         lam = solves.lams[i][self.settings.horizon if solves.soft[i] else 0 :]
         return lam if everything else -lam[self._const_v.shape[0] :]
 
-    def curvature(self, solves: DroneSolves, i: int) -> tuple[Array, Array]:
-        """Drone i's active separation rows (indices into its rows ``solves.rows[offsets[i]:]``) and
-        the Hessian of its optimal cost in their lower bounds, ``(A A^T)^+`` over the rows ``A``
-        (over ``v``, identity Hessian) with a multiplier (a soft drone's slacks are ignored)."""
+    def sensitivity(self, solves: DroneSolves, i: int) -> Sensitivity:
+        """How drone i's optimum moves with its separation rows' lower bounds on its active set
+        ``A`` (the rows with a multiplier, and the separation rows within :data:`AT_BOUND_M` of
+        their bound): with ``y = (A A^T + eps I)^-1 (b - A c)`` and ``v = c + A^T y`` (identity
+        Hessian; a soft drone's slacks are ignored), ``d^2 f / db^2 = (A A^T)^-1`` and
+        ``dv / db = A^T (A A^T)^-1``. ``eps`` (relative :data:`GRAM_EPS`) gives dependent rows (a
+        segment's two ends at one step) a large curvature instead of none. The inactive rows, one
+        sided, with their slacks, bound how far the bounds can move on this active set."""
         n_const, first, last = self._const_v.shape[0], solves.offsets[i], solves.offsets[i + 1]
-        lam = self.multipliers(solves, i, everything=True)
-        on_const = np.abs(lam[:n_const]) > ACTIVE_TOL
-        on_sep = np.flatnonzero(np.abs(lam[n_const:]) > ACTIVE_TOL)
-        rows = np.vstack([self._const_v[on_const], self._rows_v(solves.sep_c[first:last][on_sep],
-                                                                solves.sep_end[first:last][on_sep])])
-        k = np.linalg.pinv(rows @ rows.T, hermitian=True)
-        skip = int(on_const.sum())
-        return on_sep, k[skip:, skip:]
+        lam, v = self.multipliers(solves, i, everything=True), solves.v[i]
+        sep = self._rows_v(solves.sep_c[first:last], solves.sep_end[first:last])
+        sep_gap = sep @ v - solves.sep_lo[first:last]
+        lo, hi = (b[min(i, b.shape[0] - 1)] for b in (solves.const_lo, solves.const_hi))
+        value = self._const_v @ v
+        at_lo, at_hi = value - lo <= AT_BOUND_M, hi - value <= AT_BOUND_M
+        on_const = (np.abs(lam[:n_const]) > ACTIVE_TOL) | at_lo | at_hi
+        on_sep = (np.abs(lam[n_const:]) > ACTIVE_TOL) | (sep_gap <= AT_BOUND_M)
+        rows = np.vstack([self._const_v[on_const], sep[on_sep]])
+        gram = rows @ rows.T
+        gram[np.diag_indices_from(gram)] += GRAM_EPS * max(1.0, float(np.diag(gram).max(initial=0.0)))
+        k = np.linalg.inv(gram)[:, int(on_const.sum()) :]
+        off = ~on_const
+        gaps = [value - lo, hi - value, sep_gap]
+        free = [off & (lo > -DAQP_INF / 2), off & (hi < DAQP_INF / 2), ~on_sep]
+        signs = [1.0, -1.0, 1.0]
+        inactive = np.vstack([sg * r[f] for sg, r, f in zip(signs, (self._const_v, self._const_v, sep), free,
+                                                             strict=True)])  # fmt: skip
+        sep_index = np.concatenate([np.full(int(free[0].sum() + free[1].sum()), -1), np.flatnonzero(~on_sep)])
+        y = -np.concatenate([lam[:n_const][on_const], lam[n_const:][on_sep]])  # >= 0 at a lower bound
+        upper = np.concatenate([(y[: int(on_const.sum())] < 0) | (at_hi & ~at_lo)[on_const],
+                                np.zeros(int(on_sep.sum()), dtype=bool)])  # fmt: skip
+        return Sensitivity(np.flatnonzero(on_sep), k[-int(on_sep.sum()) :] if on_sep.any() else k[:0], rows.T @ k,
+                           y, k, np.where(upper, -1.0, 1.0), inactive, np.concatenate([g[f] for g, f in zip(gaps, free,
+                           strict=True)]), sep_index)  # fmt: skip
 
     def _rows_v(self, coeffs: Array, end: Array) -> Array:
         """Separation rows (K, H d) over ``v`` of coefficients ``coeffs`` (K, d) at position steps

@@ -31,7 +31,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from mpcform._validate import Array
-from mpcform.mpc.per_drone import DAQP_OK, DroneSolves, PerDroneQP
+from mpcform.mpc.per_drone import DAQP_OK, DroneSolves, PerDroneQP, Sensitivity
 from mpcform.mpc.problem import StepQP, StepSolver
 from mpcform.mpc.rows import row_ends
 from mpcform.mpc.separation import SeparationRows
@@ -39,6 +39,8 @@ from mpcform.solvers.base import QPSolution
 
 SPLIT_SOLVER = "daqp (per drone, iterated split)"
 GRAD_TOL = 1e-8  # |dV/dt| below this on every row: converged
+SLOPE_TOL = 1e-12  # relative: a Newton step predicting less decrease than this ends the iteration
+BREAK_TOL = 1e-9  # rows nearer than this to a breakpoint (slack or multiplier) do not bound the step
 MIN_STEP = 1e-6  # the Newton step is halved down to this fraction, then the iteration stops
 ARMIJO = 1e-4  # sufficient decrease: V(t + s d) <= V(t) + ARMIJO s dV^T d
 RIDGE = 1e-12  # relative, on the Newton system (singular where rows are redundant)
@@ -57,7 +59,7 @@ class Iterate:
     lams: list[Array]
     rows: list[Array]
     mu: list[Array]
-    curv: list[tuple[Array, Array] | None] = field(default_factory=list)
+    sens: list[Sensitivity | None] = field(default_factory=list)
 
     @property
     def value(self) -> float:
@@ -108,22 +110,24 @@ class SplitQP(StepSolver):
         best = step_qp.solve(np.arange(m), step_qp.midpoint(), warm, None)
         history = [(best.value, time.perf_counter() - t0, time.process_time() - c0)]
         seen = [step_qp.positions(best)] if record else []
-        size, direction, rounds = 1.0, step_qp.direction(best), 0
+        reach, direction, rounds = 1.0, step_qp.direction(best), 0
         while rounds < self.iterations and direction is not None and np.isfinite(best.value):
             if self.budget_s is not None and time.perf_counter() - t0 >= self.budget_s:
                 break
-            newton, slope, recentre = direction
-            trial = step_qp.solve(None, best.shift + size * newton + recentre, step_qp.inputs(best), best)
+            newton, slope, longest = direction
+            size = min(1.0, max(longest, reach))  # past the first breakpoint while that pays
+            trial = step_qp.solve(None, best.shift + size * newton, step_qp.inputs(best), best)
             rounds += 1
             if record:
                 seen.append(step_qp.positions(trial))
+            model = size * slope * (1.0 - 0.5 * size)  # the Newton model's decrease (< 0)
             if trial.value <= best.value + ARMIJO * size * slope:
-                best, size = trial, 1.0
+                good = trial.value - best.value <= 0.5 * model
+                best, reach = trial, min(1.0, 4.0 * size) if good else size
                 direction = step_qp.direction(best)
-            else:  # the quadratic through V(best), its slope and V(trial), kept within [0.1, 0.5] x
-                curve = trial.value - best.value - size * slope
-                size *= min(0.5, max(0.1, -0.5 * size * slope / curve)) if np.isfinite(curve) else 0.1
-                if size < MIN_STEP:
+            else:  # the active sets changed too much within the step: shorter
+                reach = 0.25 * size
+                if size <= longest:
                     break
             history.append((best.value, time.perf_counter() - t0, time.process_time() - c0))
         sol, active = step_qp.solution(best)
@@ -187,7 +191,7 @@ class SplitStep:
             it.rows[i] = keep[item] * r + row  # global flat indices
             it.v[i], it.s[i], it.cost[i], it.soft[i] = got.v[j], got.s[j], got.cost[j], got.soft[j]
             it.lams[i], it.mu[i] = got.lams[j], pd.multipliers(got, j)
-            it.curv[i] = pd.curvature(got, j) if got.flags[j] == DAQP_OK else None
+            it.sens[i] = pd.sensitivity(got, j) if got.flags[j] == DAQP_OK else None
         it.cost[drones[got.flags != DAQP_OK]] = np.inf
         return it
 
@@ -200,7 +204,7 @@ class SplitStep:
             return Iterate(shift, np.zeros((m, nu)), np.zeros((m, h)), np.zeros(m), np.zeros(m, dtype=bool),
                            list(empty), [np.empty(0, np.intp)] * m, list(empty), [None] * m)  # fmt: skip
         return Iterate(shift, base.v.copy(), base.s.copy(), base.cost.copy(), base.soft.copy(),
-                       list(base.lams), list(base.rows), list(base.mu), list(base.curv))  # fmt: skip
+                       list(base.lams), list(base.rows), list(base.mu), list(base.sens))  # fmt: skip
 
     def positions(self, it: Iterate) -> Array:
         """The iterate's relative positions (H, m, d)."""
@@ -212,59 +216,66 @@ class SplitStep:
         u = self.pd.inputs_positions(it.v)[0]
         return u.reshape(self.m, self.pd.settings.horizon, -1).transpose(1, 0, 2)
 
-    def direction(self, it: Iterate, curved: Iterate | None = None) -> tuple[Array, float, Array] | None:
-        """The Newton step (P, R) in the split from ``it``, its slope ``dV^T step``, and the
-        re-centring of the rows inactive on both sides; None at convergence. ``curved``: the
-        iterate whose active sets give the Hessian (default ``it``)."""
+    def direction(self, it: Iterate) -> tuple[Array, float, float] | None:
+        """The Newton step (P, R) in the split from ``it`` on its active sets, its slope ``dV^T
+        step``, and the fraction of it to the first breakpoint (a row's slack or multiplier
+        reaching zero, 1 at most); None at convergence."""
         shape, r = self.splittable.shape, self.r
-        curved = it if curved is None else curved
-        grad, blocks = np.zeros(shape), []
+        grad, blocks, moves = np.zeros(shape), [], []
         for i in range(self.m):
-            item, row = np.divmod(it.rows[i], r)
-            pair = self.pair_of[item]
-            ok = pair >= 0
-            ok[ok] = self.splittable[pair[ok], row[ok]]
-            np.add.at(grad, (pair[ok], row[ok]), self.sign[item[ok]] * it.mu[i][ok])
-            cv = curved.curv[i]
-            if cv is not None:
-                act, k = cv
-                item_c, row_c = np.divmod(curved.rows[i][act], r)
-                pair_c = self.pair_of[item_c]
-                use = pair_c >= 0
-                use[use] = self.splittable[pair_c[use], row_c[use]]
-                blocks.append((pair_c[use] * r + row_c[use], self.sign[item_c[use]], k[np.ix_(use, use)]))
-        used = np.unique(np.concatenate([b[0] for b in blocks])) if blocks else np.empty(0, np.intp)
+            pair, row, sign, ok = self._split_rows(it.rows[i])
+            np.add.at(grad, (pair[ok], row[ok]), sign[ok] * it.mu[i][ok])
+            sens = it.sens[i]
+            if sens is not None:
+                use = ok[sens.active]
+                act = sens.active[use]
+                blocks.append((pair[act] * r + row[act], sign[act], sens.hessian[np.ix_(use, use)]))
+                moves.append((i, pair, row, sign, ok))
+        if np.abs(grad).max(initial=0.0) <= GRAD_TOL or not blocks:
+            return None
+        used = np.unique(np.concatenate([b[0] for b in blocks]))
         hess = np.zeros((used.shape[0], used.shape[0]))
         for flat, sign, k in blocks:
             at = np.searchsorted(used, flat)
             hess[np.ix_(at, at)] += np.outer(sign, sign) * k
         g = grad.ravel()[used]
         newton = np.zeros(shape)
-        if used.shape[0]:
-            ridge = RIDGE * max(1.0, float(np.abs(np.diag(hess)).max()))
-            newton.ravel()[used] = np.linalg.solve(hess + ridge * np.eye(used.shape[0]), -g)
-        recentre = self._recentre(it, grad, newton)
-        if np.abs(grad).max(initial=0.0) <= GRAD_TOL and not recentre.any():
+        ridge = RIDGE * max(1.0, float(np.abs(np.diag(hess)).max(initial=0.0)))
+        newton.ravel()[used] = np.linalg.solve(hess + ridge * np.eye(used.shape[0]), -g)
+        slope = float(g @ newton.ravel()[used])
+        if slope >= -SLOPE_TOL * (1.0 + abs(it.value)):  # no decrease left above rounding
             return None
-        return newton, float(g @ newton.ravel()[used]), recentre
+        longest = 1.0
+        for i, pair, row, sign, ok in moves:
+            sens = it.sens[i]
+            assert sens is not None
+            db = np.zeros(pair.shape[0])
+            db[ok] = sign[ok] * newton[pair[ok], row[ok]]
+            dv = sens.dv @ db[sens.active]
+            rate = sens.rows @ dv
+            on = sens.sep_index >= 0
+            rate[on] -= db[sens.sep_index[on]]
+            dual, ddual = sens.dual_sign * sens.dual, sens.dual_sign * (sens.ddual @ db[sens.active])
+            for have, change in ((sens.slack, rate), (dual, ddual)):
+                shrink = (change < 0.0) & (have > BREAK_TOL)
+                longest = min(longest, float((have[shrink] / -change[shrink]).min(initial=1.0)))
+        return newton, slope, max(longest, MIN_STEP)
 
-    def _recentre(self, it: Iterate, grad: Array, newton: Array) -> Array:
-        """Shifts that give both sides of each splittable row inactive on both sides (no
-        multiplier, no Newton step) equal slack, for the pairs a Newton step moves anyway."""
-        rows = self.qp.rows
-        x = self.positions(it)[self.ends - 1]  # (R, m, d)
-        value = np.einsum("srd,rsd->sr", rows.single_coeffs, x[:, rows.singles]) - self.lower(it.shift)
-        gap_i, gap_k = value[self.first], value[self.second]
-        moving = (newton != 0.0).any(axis=1)[:, None]
-        free = self.splittable & moving & (grad == 0.0) & (newton == 0.0) & (gap_i > 0.0) & (gap_k > 0.0)
-        return np.where(free, 0.5 * (gap_i - gap_k), 0.0)
+    def _split_rows(self, ids: Array) -> tuple[Array, Array, Array, Array]:
+        """For a drone's rows (flat ``item * R + row``): their pair, row, side sign, and whether
+        they are a split row that moves."""
+        item, row = np.divmod(ids, self.r)
+        pair = self.pair_of[item]
+        ok = pair >= 0
+        ok[ok] = self.splittable[pair[ok], row[ok]]
+        return pair, row, self.sign[item], ok
 
     def solution(self, it: Iterate) -> tuple[QPSolution, int]:
         """The iterate as the planner's solution ``[u | x | s]`` and its number of active rows."""
         pd, flags = self.pd, np.where(np.isfinite(it.cost), DAQP_OK, -1)
         none = np.empty(0, np.intp)
         solves = DroneSolves(it.v, it.s, it.cost, flags, it.soft, it.lams, none, np.zeros(1, np.intp),
-                             np.empty((0, pd.dim)), none, self.iterations, self.time_s)  # fmt: skip
+                             np.empty((0, pd.dim)), none, np.empty(0), np.empty((1, 0)), np.empty((1, 0)), self.iterations, self.time_s)  # fmt: skip
         return pd.solution(solves)
 
 
