@@ -75,14 +75,14 @@ class DroneSolves:
 @dataclass(frozen=True)
 class Sensitivity:
     """How one drone's optimum moves with its separation rows' lower bounds ``b`` on its active
-    set (:meth:`PerDroneQP.sensitivity`): a rows active, r rows active in all, q rows inactive."""
+    set (:meth:`PerDroneQP.sensitivity`): a separation rows active, r rows active in all (one-sided),
+    q rows inactive."""
 
     active: Array  # (a,) the active separation rows (indices into the drone's rows)
     hessian: Array  # (a, a) d^2 f / db^2
     dv: Array  # (H d, a) dv / db
-    dual: Array  # (r,) the active rows' multipliers y (constant rows first; > 0 at a lower bound)
+    dual: Array  # (r,) the active rows' multipliers y >= 0 (constant rows first)
     ddual: Array  # (r, a) dy / db
-    dual_sign: Array  # (r,) +1 at a lower bound, -1 at an upper one
     rows: Array  # (q, H d) the inactive rows, one-sided ``rows v >= bound``
     slack: Array  # (q,) how far they are from their bounds
     sep_index: Array  # (q,) an inactive separation row's index in the drone's rows, else -1
@@ -147,13 +147,15 @@ class PerDroneQP(StepSolver):
         Returns the solution in the sparse QP's layout ``[u | x | s]`` over these n drones (its
         ``solve_time_s`` is the time spent inside DAQP), and the number of active rows.
         """
-        return self.solution(self.solve_each(p0, c, u_prev, singles, coeffs, lower, warm_u, hard, on))
+        got = self.solve_each(p0, c, u_prev, singles, coeffs, lower, warm_u, hard, on)
+        return self.solution(got.v, got.s, got.flags, got.lams, got.iterations, got.time_s)
 
     def solve_each(
         self, p0: Array, c: Array, u_prev: Array, singles: Array, coeffs: Array, lower: Array, warm_u: Array,
-        hard: Array | None = None, on: Array | None = None,
+        hard: Array | None = None, on: Array | None = None, soft_too: bool = True,
     ) -> DroneSolves:
-        """Every drone's solve as DAQP returns it (arguments as :meth:`solve_drones`)."""
+        """Every drone's solve as DAQP returns it (arguments as :meth:`solve_drones`); without
+        ``soft_too`` a drone whose hard QP is infeasible is left failed (no soft solve)."""
         st = self.settings
         h, n, nu, n_const = st.horizon, p0.shape[0], self._nu, self._const_v.shape[0]
         f_v = -c.transpose(1, 0, 2).reshape(n, nu)  # 0.5 ||v - c||^2
@@ -189,7 +191,7 @@ class PerDroneQP(StepSolver):
                 in_daqp += time.perf_counter() - t0
                 iters += info["iterations"]
                 lams[i] = info["lam"]
-        soft = [i for i in range(n) if flags[i] != DAQP_OK]  # else the hard optimum (s = 0)
+        soft = [i for i in range(n) if flags[i] != DAQP_OK and soft_too]  # else the hard optimum (s = 0)
         for i in soft:
             first, last = offsets[i], offsets[i + 1]
             m = put(i, self._rows_v(sep_c[first:last], sep_end[first:last]))
@@ -207,17 +209,20 @@ class PerDroneQP(StepSolver):
         return DroneSolves(v_all, s_out, cost, np.array(flags), is_soft, lams, at, np.array(offsets), sep_c,
                            sep_end, sep_lo, *const_bounds, int(iters), in_daqp)  # fmt: skip
 
-    def solution(self, solves: DroneSolves) -> tuple[QPSolution, int]:
-        """The drones' solves as one solution ``[u | x | s]`` (as :meth:`solve_drones` returns it)."""
-        h, n, iters, in_daqp = self.settings.horizon, solves.v.shape[0], solves.iterations, solves.time_s
-        bad = np.flatnonzero((solves.flags != DAQP_OK) | ~np.isfinite(solves.v).all(axis=1))
+    def solution(
+        self, v: Array, s: Array, flags: Array, lams: list[Array], iters: int, in_daqp: float
+    ) -> tuple[QPSolution, int]:
+        """The drones' solves (``v`` (n, H d), slacks ``s`` (n, H), DAQP's exit flags and
+        multipliers) as one solution ``[u | x | s]`` (as :meth:`solve_drones` returns it)."""
+        h, n = self.settings.horizon, v.shape[0]
+        bad = np.flatnonzero((flags != DAQP_OK) | ~np.isfinite(v).all(axis=1))
         if bad.size:
-            status = f"daqp: exit flag {solves.flags[bad[0]]} (drone {bad[0]})"
+            status = f"daqp: exit flag {flags[bad[0]]} (drone {bad[0]})"
             return failed(status, in_daqp, iters), 0
-        u_out, x_out = self.inputs_positions(solves.v)
-        flat = [v.reshape(n, h, -1).transpose(1, 0, 2).ravel() for v in (u_out, x_out, solves.s)]
+        u_out, x_out = self.inputs_positions(v)
+        flat = [w.reshape(n, h, -1).transpose(1, 0, 2).ravel() for w in (u_out, x_out, s)]
         sol = QPSolution(np.concatenate(flat), None, True, "daqp: optimal", iters, in_daqp)
-        active = np.count_nonzero(np.abs(np.concatenate(solves.lams)) > ACTIVE_TOL) if n else 0
+        active = np.count_nonzero(np.abs(np.concatenate(lams)) > ACTIVE_TOL) if n else 0
         return sol, int(active)
 
     def inputs_positions(self, v: Array) -> tuple[Array, Array]:
@@ -233,39 +238,34 @@ class PerDroneQP(StepSolver):
         return lam if everything else -lam[self._const_v.shape[0] :]
 
     def sensitivity(self, solves: DroneSolves, i: int) -> Sensitivity:
-        """How drone i's optimum moves with its separation rows' lower bounds on its active set
-        ``A`` (the rows with a multiplier, and the separation rows within :data:`AT_BOUND_M` of
-        their bound): with ``y = (A A^T + eps I)^-1 (b - A c)`` and ``v = c + A^T y`` (identity
-        Hessian; a soft drone's slacks are ignored), ``d^2 f / db^2 = (A A^T)^-1`` and
-        ``dv / db = A^T (A A^T)^-1``. ``eps`` (relative :data:`GRAM_EPS`) gives dependent rows (a
-        segment's two ends at one step) a large curvature instead of none. The inactive rows, one
-        sided, with their slacks, bound how far the bounds can move on this active set."""
+        """How drone i's optimum moves with its separation rows' lower bounds on its active set.
+
+        Every row one-sided, ``a^T v >= b`` (a constant row's two bounds as two rows), with
+        multiplier ``y >= 0``; the active set ``A`` holds the rows with a multiplier and those
+        within :data:`AT_BOUND_M` of their bound. On it (identity Hessian; a soft drone's slacks
+        ignored) ``v = c + A^T y``, ``y = (A A^T)^-1 (b - A c)``: ``d^2 f / db^2 = dy / db =
+        (A A^T)^-1`` and ``dv / db = A^T (A A^T)^-1``, regularised by :data:`GRAM_EPS` (relative)
+        so that dependent rows (a segment's two ends at one step) get a large curvature, not none.
+        """
         n_const, first, last = self._const_v.shape[0], solves.offsets[i], solves.offsets[i + 1]
         lam, v = self.multipliers(solves, i, everything=True), solves.v[i]
-        sep = self._rows_v(solves.sep_c[first:last], solves.sep_end[first:last])
-        sep_gap = sep @ v - solves.sep_lo[first:last]
         lo, hi = (b[min(i, b.shape[0] - 1)] for b in (solves.const_lo, solves.const_hi))
-        value = self._const_v @ v
-        at_lo, at_hi = value - lo <= AT_BOUND_M, hi - value <= AT_BOUND_M
-        on_const = (np.abs(lam[:n_const]) > ACTIVE_TOL) | at_lo | at_hi
-        on_sep = (np.abs(lam[n_const:]) > ACTIVE_TOL) | (sep_gap <= AT_BOUND_M)
-        rows = np.vstack([self._const_v[on_const], sep[on_sep]])
-        gram = rows @ rows.T
+        sep = self._rows_v(solves.sep_c[first:last], solves.sep_end[first:last])
+        rows = np.vstack([self._const_v, -self._const_v, sep])
+        bound = np.concatenate([lo, -hi, solves.sep_lo[first:last]])
+        y = np.concatenate([np.maximum(-lam[:n_const], 0.0), np.maximum(lam[:n_const], 0.0), -lam[n_const:]])
+        gap = rows @ v - bound
+        real = np.abs(bound) < DAQP_INF / 2
+        on = real & ((y > ACTIVE_TOL) | (gap <= AT_BOUND_M))
+        active = rows[on]
+        gram = active @ active.T
         gram[np.diag_indices_from(gram)] += GRAM_EPS * max(1.0, float(np.diag(gram).max(initial=0.0)))
-        k = np.linalg.inv(gram)[:, int(on_const.sum()) :]
-        off = ~on_const
-        gaps = [value - lo, hi - value, sep_gap]
-        free = [off & (lo > -DAQP_INF / 2), off & (hi < DAQP_INF / 2), ~on_sep]
-        signs = [1.0, -1.0, 1.0]
-        inactive = np.vstack([sg * r[f] for sg, r, f in zip(signs, (self._const_v, self._const_v, sep), free,
-                                                             strict=True)])  # fmt: skip
-        sep_index = np.concatenate([np.full(int(free[0].sum() + free[1].sum()), -1), np.flatnonzero(~on_sep)])
-        y = -np.concatenate([lam[:n_const][on_const], lam[n_const:][on_sep]])  # >= 0 at a lower bound
-        upper = np.concatenate([(y[: int(on_const.sum())] < 0) | (at_hi & ~at_lo)[on_const],
-                                np.zeros(int(on_sep.sum()), dtype=bool)])  # fmt: skip
-        return Sensitivity(np.flatnonzero(on_sep), k[-int(on_sep.sum()) :] if on_sep.any() else k[:0], rows.T @ k,
-                           y, k, np.where(upper, -1.0, 1.0), inactive, np.concatenate([g[f] for g, f in zip(gaps, free,
-                           strict=True)]), sep_index)  # fmt: skip
+        sep_on = np.flatnonzero(on[2 * n_const :])
+        k = np.linalg.inv(gram)[:, on[: 2 * n_const].sum() :]  # columns: the active separation rows
+        off = real & ~on
+        sep_index = np.concatenate([np.full(2 * n_const, -1), np.arange(last - first)])[off]
+        return Sensitivity(sep_on, k[-sep_on.shape[0] :] if sep_on.size else k[:0], active.T @ k, y[on], k,
+                           rows[off], gap[off], sep_index)  # fmt: skip
 
     def _rows_v(self, coeffs: Array, end: Array) -> Array:
         """Separation rows (K, H d) over ``v`` of coefficients ``coeffs`` (K, d) at position steps

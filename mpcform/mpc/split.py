@@ -59,7 +59,8 @@ class Iterate:
     lams: list[Array]
     rows: list[Array]
     mu: list[Array]
-    sens: list[Sensitivity | None] = field(default_factory=list)
+    solves: list[tuple[DroneSolves, int] | None] = field(default_factory=list)
+    sens: dict[int, Sensitivity] = field(default_factory=dict)
 
     @property
     def value(self) -> float:
@@ -71,7 +72,8 @@ class SplitRun:
     """An iterated split solve: the best iterate's ``solution`` and active rows, the number of
     re-solve ``rounds`` after the midpoint, ``history`` (rounds + 1, 3): the best QP objective
     ``sum_i 0.5 ||v_i - c_i||^2`` (+ slack penalty) and the wall and CPU seconds after each round,
-    and (when recorded) every round's positions (H, m, d)."""
+    and (when recorded) the positions (H, m, d) of every round that gave plans (not of a trial
+    split at which a drone's hard QP is infeasible: it is rejected unsolved)."""
 
     solution: QPSolution
     active: int
@@ -118,7 +120,7 @@ class SplitQP(StepSolver):
             size = min(1.0, max(longest, reach))  # past the first breakpoint while that pays
             trial = step_qp.solve(None, best.shift + size * newton, step_qp.inputs(best), best)
             rounds += 1
-            if record:
+            if record and np.isfinite(trial.value):  # a trial whose hard QP is infeasible has no plan
                 seen.append(step_qp.positions(trial))
             model = size * slope * (1.0 - 0.5 * size)  # the Newton model's decrease (< 0)
             if trial.value <= best.value + ARMIJO * size * slope:
@@ -182,21 +184,21 @@ class SplitStep:
         got = pd.solve_each(
             qp.start_m[drones], qp.targets_mps[:, drones], qp.u_prev_mps[drones], local[rows.singles[keep]],
             rows.single_coeffs[keep], self.lower(shift)[keep], warm_u[:, drones], rows.single_hard[keep],
-            rows.single_on[keep],
+            rows.single_on[keep], soft_too=base is None,  # a trial that needs slack is rejected anyway
         )  # fmt: skip
         self.iterations, self.time_s = self.iterations + got.iterations, self.time_s + got.time_s
-        it = self._copy(base, shift)
+        it = self._copy(base, shift, drones)
         for j, i in enumerate(drones):
             item, row = np.divmod(got.rows[got.offsets[j] : got.offsets[j + 1]], r)
             it.rows[i] = keep[item] * r + row  # global flat indices
             it.v[i], it.s[i], it.cost[i], it.soft[i] = got.v[j], got.s[j], got.cost[j], got.soft[j]
             it.lams[i], it.mu[i] = got.lams[j], pd.multipliers(got, j)
-            it.sens[i] = pd.sensitivity(got, j) if got.flags[j] == DAQP_OK else None
+            it.solves[i] = (got, j) if got.flags[j] == DAQP_OK else None
         it.cost[drones[got.flags != DAQP_OK]] = np.inf
         return it
 
-    def _copy(self, base: Iterate | None, shift: Array) -> Iterate:
-        """``base``'s solves (or empty ones) at a new ``shift``, to be partly overwritten."""
+    def _copy(self, base: Iterate | None, shift: Array, drones: Array) -> Iterate:
+        """``base``'s solves (or empty ones) at a new ``shift``, those of ``drones`` to be overwritten."""
         m = self.m
         if base is None:
             nu, h = self.pd.settings.horizon * self.pd.dim, self.pd.settings.horizon
@@ -204,7 +206,15 @@ class SplitStep:
             return Iterate(shift, np.zeros((m, nu)), np.zeros((m, h)), np.zeros(m), np.zeros(m, dtype=bool),
                            list(empty), [np.empty(0, np.intp)] * m, list(empty), [None] * m)  # fmt: skip
         return Iterate(shift, base.v.copy(), base.s.copy(), base.cost.copy(), base.soft.copy(),
-                       list(base.lams), list(base.rows), list(base.mu), list(base.sens))  # fmt: skip
+                       list(base.lams), list(base.rows), list(base.mu), list(base.solves),
+                       {i: v for i, v in base.sens.items() if i not in set(drones.tolist())})  # fmt: skip
+
+    def sensitivity(self, it: Iterate, i: int) -> Sensitivity | None:
+        """Drone i's sensitivity in ``it`` (computed once; None for a failed solve)."""
+        if i not in it.sens and it.solves[i] is not None:
+            got, j = it.solves[i]  # type: ignore[misc]
+            it.sens[i] = self.pd.sensitivity(got, j)
+        return it.sens.get(i)
 
     def positions(self, it: Iterate) -> Array:
         """The iterate's relative positions (H, m, d)."""
@@ -216,21 +226,26 @@ class SplitStep:
         u = self.pd.inputs_positions(it.v)[0]
         return u.reshape(self.m, self.pd.settings.horizon, -1).transpose(1, 0, 2)
 
-    def direction(self, it: Iterate) -> tuple[Array, float, float] | None:
+    def direction(self, it: Iterate) -> tuple[Array, float, float] | None:  # noqa: C901
         """The Newton step (P, R) in the split from ``it`` on its active sets, its slope ``dV^T
         step``, and the fraction of it to the first breakpoint (a row's slack or multiplier
         reaching zero, 1 at most); None at convergence."""
         shape, r = self.splittable.shape, self.r
-        grad, blocks, moves = np.zeros(shape), [], []
+        grad, blocks, moves, split = np.zeros(shape), [], [], []
         for i in range(self.m):
-            pair, row, sign, ok = self._split_rows(it.rows[i])
+            split.append(self._split_rows(it.rows[i]))
+            pair, row, sign, ok = split[-1]
             np.add.at(grad, (pair[ok], row[ok]), sign[ok] * it.mu[i][ok])
-            sens = it.sens[i]
+        for i in range(self.m):  # the drones of rows with a gradient: the others stay put
+            pair, row, sign, ok = split[i]
+            if not (grad[pair[ok], row[ok]] != 0.0).any():
+                continue
+            sens = self.sensitivity(it, i)
             if sens is not None:
                 use = ok[sens.active]
                 act = sens.active[use]
                 blocks.append((pair[act] * r + row[act], sign[act], sens.hessian[np.ix_(use, use)]))
-                moves.append((i, pair, row, sign, ok))
+                moves.append((sens, pair, row, sign, ok))
         if np.abs(grad).max(initial=0.0) <= GRAD_TOL or not blocks:
             return None
         used = np.unique(np.concatenate([b[0] for b in blocks]))
@@ -246,17 +261,14 @@ class SplitStep:
         if slope >= -SLOPE_TOL * (1.0 + abs(it.value)):  # no decrease left above rounding
             return None
         longest = 1.0
-        for i, pair, row, sign, ok in moves:
-            sens = it.sens[i]
-            assert sens is not None
+        for sens, pair, row, sign, ok in moves:
             db = np.zeros(pair.shape[0])
             db[ok] = sign[ok] * newton[pair[ok], row[ok]]
             dv = sens.dv @ db[sens.active]
             rate = sens.rows @ dv
             on = sens.sep_index >= 0
             rate[on] -= db[sens.sep_index[on]]
-            dual, ddual = sens.dual_sign * sens.dual, sens.dual_sign * (sens.ddual @ db[sens.active])
-            for have, change in ((sens.slack, rate), (dual, ddual)):
+            for have, change in ((sens.slack, rate), (sens.dual, sens.ddual @ db[sens.active])):
                 shrink = (change < 0.0) & (have > BREAK_TOL)
                 longest = min(longest, float((have[shrink] / -change[shrink]).min(initial=1.0)))
         return newton, slope, max(longest, MIN_STEP)
@@ -272,11 +284,8 @@ class SplitStep:
 
     def solution(self, it: Iterate) -> tuple[QPSolution, int]:
         """The iterate as the planner's solution ``[u | x | s]`` and its number of active rows."""
-        pd, flags = self.pd, np.where(np.isfinite(it.cost), DAQP_OK, -1)
-        none = np.empty(0, np.intp)
-        solves = DroneSolves(it.v, it.s, it.cost, flags, it.soft, it.lams, none, np.zeros(1, np.intp),
-                             np.empty((0, pd.dim)), none, np.empty(0), np.empty((1, 0)), np.empty((1, 0)), self.iterations, self.time_s)  # fmt: skip
-        return pd.solution(solves)
+        flags = np.where(np.isfinite(it.cost), DAQP_OK, -1)
+        return self.pd.solution(it.v, it.s, flags, it.lams, self.iterations, self.time_s)
 
 
 def _sides(labels: Array) -> tuple[Array, Array]:
