@@ -152,10 +152,9 @@ class PerDroneQP(StepSolver):
 
     def solve_each(
         self, p0: Array, c: Array, u_prev: Array, singles: Array, coeffs: Array, lower: Array, warm_u: Array,
-        hard: Array | None = None, on: Array | None = None, soft_too: bool = True,
+        hard: Array | None = None, on: Array | None = None,
     ) -> DroneSolves:
-        """Every drone's solve as DAQP returns it (arguments as :meth:`solve_drones`); without
-        ``soft_too`` a drone whose hard QP is infeasible is left failed (no soft solve)."""
+        """Every drone's solve as DAQP returns it (arguments as :meth:`solve_drones`)."""
         st = self.settings
         h, n, nu, n_const = st.horizon, p0.shape[0], self._nu, self._const_v.shape[0]
         f_v = -c.transpose(1, 0, 2).reshape(n, nu)  # 0.5 ||v - c||^2
@@ -191,7 +190,7 @@ class PerDroneQP(StepSolver):
                 in_daqp += time.perf_counter() - t0
                 iters += info["iterations"]
                 lams[i] = info["lam"]
-        soft = [i for i in range(n) if flags[i] != DAQP_OK and soft_too]  # else the hard optimum (s = 0)
+        soft = [i for i in range(n) if flags[i] != DAQP_OK]  # else the hard optimum (s = 0)
         for i in soft:
             first, last = offsets[i], offsets[i + 1]
             m = put(i, self._rows_v(sep_c[first:last], sep_end[first:last]))

@@ -39,6 +39,7 @@ from mpcform.solvers.base import QPSolution
 
 SPLIT_SOLVER = "daqp (per drone, iterated split)"
 GRAD_TOL = 1e-8  # |dV/dt| below this on every row: converged
+SLACK_TOL_M = 1e-9  # a trial whose drone needs more slack than the midpoint by this is rejected
 SLOPE_TOL = 1e-12  # relative: a Newton step predicting less decrease than this ends the iteration
 BREAK_TOL = 1e-9  # rows nearer than this to a breakpoint (slack or multiplier) do not bound the step
 MIN_STEP = 1e-6  # the Newton step is halved down to this fraction, then the iteration stops
@@ -72,8 +73,7 @@ class SplitRun:
     """An iterated split solve: the best iterate's ``solution`` and active rows, the number of
     re-solve ``rounds`` after the midpoint, ``history`` (rounds + 1, 3): the best QP objective
     ``sum_i 0.5 ||v_i - c_i||^2`` (+ slack penalty) and the wall and CPU seconds after each round,
-    and (when recorded) the positions (H, m, d) of every round that gave plans (not of a trial
-    split at which a drone's hard QP is infeasible: it is rejected unsolved)."""
+    and (when recorded) every round's positions (H, m, d)."""
 
     solution: QPSolution
     active: int
@@ -112,25 +112,26 @@ class SplitQP(StepSolver):
         best = step_qp.solve(np.arange(m), step_qp.midpoint(), warm, None)
         history = [(best.value, time.perf_counter() - t0, time.process_time() - c0)]
         seen = [step_qp.positions(best)] if record else []
-        reach, direction, rounds = 1.0, step_qp.direction(best), 0
+        bend, direction, rounds = 1.0, step_qp.direction(best), 0
         while rounds < self.iterations and direction is not None and np.isfinite(best.value):
             if self.budget_s is not None and time.perf_counter() - t0 >= self.budget_s:
                 break
             newton, slope, longest = direction
-            size = min(1.0, max(longest, reach))  # past the first breakpoint while that pays
+            size = min(1.0, max(longest, 1.0 / bend))  # the model's minimiser, its curvature scaled
             trial = step_qp.solve(None, best.shift + size * newton, step_qp.inputs(best), best)
             rounds += 1
-            if record and np.isfinite(trial.value):  # a trial whose hard QP is infeasible has no plan
+            if record:
                 seen.append(step_qp.positions(trial))
-            model = size * slope * (1.0 - 0.5 * size)  # the Newton model's decrease (< 0)
-            if trial.value <= best.value + ARMIJO * size * slope:
-                good = trial.value - best.value <= 0.5 * model
-                best, reach = trial, min(1.0, 4.0 * size) if good else size
+            change = trial.value - best.value
+            if np.isfinite(change):  # the curvature seen: V(best + a d) = V + a slope - a^2 bend slope / 2
+                bend = float(np.clip(2.0 * (change - size * slope) / (-slope * size**2), 1.0, 1e6))
+            else:
+                bend = 4.0 / size
+            if change <= ARMIJO * size * slope:
+                best = trial
                 direction = step_qp.direction(best)
-            else:  # the active sets changed too much within the step: shorter
-                reach = 0.25 * size
-                if size <= longest:
-                    break
+            elif size <= longest:
+                break
             history.append((best.value, time.perf_counter() - t0, time.process_time() - c0))
         sol, active = step_qp.solution(best)
         if sol.success and self.iterations:
@@ -184,7 +185,7 @@ class SplitStep:
         got = pd.solve_each(
             qp.start_m[drones], qp.targets_mps[:, drones], qp.u_prev_mps[drones], local[rows.singles[keep]],
             rows.single_coeffs[keep], self.lower(shift)[keep], warm_u[:, drones], rows.single_hard[keep],
-            rows.single_on[keep], soft_too=base is None,  # a trial that needs slack is rejected anyway
+            rows.single_on[keep],
         )  # fmt: skip
         self.iterations, self.time_s = self.iterations + got.iterations, self.time_s + got.time_s
         it = self._copy(base, shift, drones)
@@ -195,6 +196,9 @@ class SplitStep:
             it.lams[i], it.mu[i] = got.lams[j], pd.multipliers(got, j)
             it.solves[i] = (got, j) if got.flags[j] == DAQP_OK else None
         it.cost[drones[got.flags != DAQP_OK]] = np.inf
+        if base is not None:  # a trial may not need more slack than the midpoint (the joint rows hold)
+            more = got.s.max(axis=1, initial=0.0) > base.s[drones].max(axis=1, initial=0.0) + SLACK_TOL_M
+            it.cost[drones[more]] = np.inf
         return it
 
     def _copy(self, base: Iterate | None, shift: Array, drones: Array) -> Iterate:

@@ -88,7 +88,7 @@ def test_every_iterate_meets_the_joint_rows_and_the_cost_falls_to_no_less_than_t
         run = split.run(qp, record=True)
         joint = joint_rows(qp.rows)
         i, k = joint.pairs.T
-        assert 1 <= len(run.positions) <= run.rounds + 1
+        assert len(run.positions) == run.rounds + 1
         for x in run.positions:  # (H, m, d), every round's plans, accepted or not
             rel = x[ends - 1][:, i] - x[ends - 1][:, k]  # (R, P, d)
             value = np.einsum("prd,rpd->pr", joint.pair_coeffs, rel) - joint.pair_lower
