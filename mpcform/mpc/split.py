@@ -8,14 +8,18 @@ carries them): every iterate's plans meet the joint rows, so it is safe whenever
 rows are the only coupling, so the joint QP's optimum is ``min_t V(t)``, ``V = sum_i f_i`` the
 drones' optimal costs: convex and piecewise quadratic in ``t`` (primal decomposition), with
 
-    dV/dt_r = mu_{i,r} - mu_{k,r}        d^2V/dt^2 = sum_i S_i^T (A_i A_i^T)^+ S_i
+    dV/dt_r = mu_{i,r} - mu_{k,r}        d^2V/dt^2 = sum_i S_i^T (A_i A_i^T)^-1 S_i
 
-(``mu`` the sides' multipliers, ``A_i`` drone i's active rows over ``v`` on its current active set,
-``S_i`` its split rows' signs). Each round takes a Newton step in ``t`` from the best iterate (halved
-while it does not decrease ``V``), re-centres the rows inactive on both sides (equal slack on both:
-the solutions are unchanged), and re-solves only the drones whose rows moved, warm-started. It
-stops after ``split_iterations`` rounds, at ``split_budget_s`` or at convergence, and returns the
-best iterate.
+(``mu`` the sides' multipliers, ``A_i`` drone i's active rows over ``v``, identity Hessian, ``S_i``
+its split rows' signs; :meth:`~mpcform.mpc.per_drone.PerDroneQP.sensitivity`). Each round takes a
+step along the Newton direction in ``t`` from the best iterate and re-solves the drones whose rows
+moved, warm-started; the trial becomes the best iterate if it lowers ``V`` enough (Armijo) and
+needs no more slack than the midpoint split. The step length is the model's minimiser with its
+curvature scaled by what the last trial showed (drones' active sets change along the way, so the
+active-set Hessian underestimates it), but at least the distance to the first breakpoint (a row's
+slack or multiplier reaching zero: on that piece the model is exact, so it always decreases ``V``).
+The iteration stops after ``split_iterations`` rounds, when a round would start after
+``split_budget_s``, or at convergence, and returns the best iterate.
 
 A close start's hard no-approach first row stays at ``t = 0`` (its safety argument needs
 ``+-c0^T W x_1 >= 0`` per drone): the limit is the joint QP's optimum with those rows split so.
@@ -42,15 +46,17 @@ GRAD_TOL = 1e-8  # |dV/dt| below this on every row: converged
 SLACK_TOL_M = 1e-9  # a trial whose drone needs more slack than the midpoint by this is rejected
 SLOPE_TOL = 1e-12  # relative: a Newton step predicting less decrease than this ends the iteration
 BREAK_TOL = 1e-9  # rows nearer than this to a breakpoint (slack or multiplier) do not bound the step
-MIN_STEP = 1e-6  # the Newton step is halved down to this fraction, then the iteration stops
+MIN_STEP = 1e-6  # the shortest step (a fraction of the Newton step) taken
 ARMIJO = 1e-4  # sufficient decrease: V(t + s d) <= V(t) + ARMIJO s dV^T d
 RIDGE = 1e-12  # relative, on the Newton system (singular where rows are redundant)
+BEND_MAX = 1e6  # the largest curvature scale
 
 
 @dataclass
 class Iterate:
     """The drones' solves at one split ``shift`` (P, R): per drone its ``v`` (m, H d), slacks
-    (m, H), cost, multipliers and separation rows (flat ``item * R + row``), and curvature."""
+    (m, H), cost, DAQP multipliers, separation rows (flat ``item * R + row``) and their
+    multipliers ``mu``, its solve (for its sensitivity) and the sensitivities computed so far."""
 
     shift: Array
     v: Array
@@ -124,7 +130,7 @@ class SplitQP(StepSolver):
                 seen.append(step_qp.positions(trial))
             change = trial.value - best.value
             if np.isfinite(change):  # the curvature seen: V(best + a d) = V + a slope - a^2 bend slope / 2
-                bend = float(np.clip(2.0 * (change - size * slope) / (-slope * size**2), 1.0, 1e6))
+                bend = float(np.clip(2.0 * (change - size * slope) / (-slope * size**2), 1.0, BEND_MAX))
             else:
                 bend = 4.0 / size
             if change <= ARMIJO * size * slope:
