@@ -140,12 +140,12 @@ def test_a_budget_stops_the_rounds() -> None:
 
 @pytest.mark.slow
 def test_every_run_of_the_random_families_completes_safely_with_split_rounds() -> None:
-    """The first 40 runs of ``tests/families.py``, all decoupled with 10 split rounds per step: no
+    """The first 80 runs of ``tests/families.py``, all decoupled with 10 split rounds per step: no
     separation, approach or obstacle violation, every drone ends within 0.1 m of its target."""
     from families import family, outcome
 
     bad = []
-    for sc in family(1, 40):
+    for sc in family(1, 80):
         sc["controller"].update(coupling="decoupled", split_iterations=10)
         out = outcome(sc)
         checks = ("separation_violations", "approached", "unseparated", "obstacle_violations")
