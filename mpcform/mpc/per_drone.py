@@ -48,6 +48,7 @@ MIN_SLACK_QUADRATIC = 1e-6  # keeps the soft QP's Hessian positive definite when
 AT_BOUND_M = 1e-7  # a separation row this close to its bound counts as active (sensitivity)
 GRAM_EPS = 1e-9  # relative regularisation of the active rows' Gram matrix (sensitivity)
 ROW_BLOCK = 2048  # separation rows built at once (whole drones; a block stays in cache)
+Solved = tuple[QPSolution, int]  # a solution and its number of active rows
 
 
 @dataclass(frozen=True)
@@ -208,19 +209,18 @@ class PerDroneQP(StepSolver):
         return DroneSolves(v_all, s_out, cost, np.array(flags), is_soft, lams, at, np.array(offsets), sep_c,
                            sep_end, sep_lo, *const_bounds, int(iters), in_daqp)  # fmt: skip
 
-    def solution(
-        self, v: Array, s: Array, flags: Array, lams: list[Array], iters: int, in_daqp: float
-    ) -> tuple[QPSolution, int]:
+    def solution(self, v: Array, s: Array, flags: Array, lams: list[Array], iters: int, t_s: float) -> Solved:
         """The drones' solves (``v`` (n, H d), slacks ``s`` (n, H), DAQP's exit flags and
-        multipliers) as one solution ``[u | x | s]`` (as :meth:`solve_drones` returns it)."""
+        multipliers; ``t_s`` the time in DAQP) as one solution ``[u | x | s]`` (as :meth:`solve_drones`
+        returns it)."""
         h, n = self.settings.horizon, v.shape[0]
         bad = np.flatnonzero((flags != DAQP_OK) | ~np.isfinite(v).all(axis=1))
         if bad.size:
             status = f"daqp: exit flag {flags[bad[0]]} (drone {bad[0]})"
-            return failed(status, in_daqp, iters), 0
+            return failed(status, t_s, iters), 0
         u_out, x_out = self.inputs_positions(v)
         flat = [w.reshape(n, h, -1).transpose(1, 0, 2).ravel() for w in (u_out, x_out, s)]
-        sol = QPSolution(np.concatenate(flat), None, True, "daqp: optimal", iters, in_daqp)
+        sol = QPSolution(np.concatenate(flat), None, True, "daqp: optimal", iters, t_s)
         active = np.count_nonzero(np.abs(np.concatenate(lams)) > ACTIVE_TOL) if n else 0
         return sol, int(active)
 
@@ -237,15 +237,13 @@ class PerDroneQP(StepSolver):
         return lam if everything else -lam[self._const_v.shape[0] :]
 
     def sensitivity(self, solves: DroneSolves, i: int) -> Sensitivity:
-        """How drone i's optimum moves with its separation rows' lower bounds on its active set.
-
-        Every row one-sided, ``a^T v >= b`` (a constant row's two bounds as two rows), with
-        multiplier ``y >= 0``; the active set ``A`` holds the rows with a multiplier and those
-        within :data:`AT_BOUND_M` of their bound. On it (identity Hessian; a soft drone's slacks
-        ignored) ``v = c + A^T y``, ``y = (A A^T)^-1 (b - A c)``: ``d^2 f / db^2 = dy / db =
-        (A A^T)^-1`` and ``dv / db = A^T (A A^T)^-1``, regularised by :data:`GRAM_EPS` (relative)
-        so that dependent rows (a segment's two ends at one step) get a large curvature, not none.
-        """
+        """How drone i's optimum moves with its separation rows' lower bounds on its active set:
+        every row one-sided, ``a^T v >= b`` (a constant row's bounds as two rows), multiplier
+        ``y >= 0``; active: a multiplier, or within :data:`AT_BOUND_M` of the bound. There
+        (identity Hessian; a soft drone's slacks ignored) ``v = c + A^T y``, ``y = (A A^T)^-1 (b -
+        A c)``: ``d^2 f / db^2 = dy / db = (A A^T)^-1``, ``dv / db = A^T (A A^T)^-1``; regularised
+        (:data:`GRAM_EPS`) so that dependent rows (a segment's two ends at one step) get a large
+        curvature, not none."""
         n_const, first, last = self._const_v.shape[0], solves.offsets[i], solves.offsets[i + 1]
         lam, v = self.multipliers(solves, i, everything=True), solves.v[i]
         lo, hi = (b[min(i, b.shape[0] - 1)] for b in (solves.const_lo, solves.const_hi))
