@@ -119,6 +119,7 @@ class SplitQP(StepSolver):
         history = [(best.value, time.perf_counter() - t0, time.process_time() - c0)]
         seen = [step_qp.positions(best)] if record else []
         bend, direction, rounds = 1.0, step_qp.direction(best), 0
+        frozen = np.zeros(best.shift.shape, dtype=bool)  # rows kept where they are until a step succeeds
         while rounds < self.iterations and direction is not None and np.isfinite(best.value):
             if self.budget_s is not None and time.perf_counter() - t0 >= self.budget_s:
                 break
@@ -134,10 +135,14 @@ class SplitQP(StepSolver):
             else:
                 bend = 4.0 / size
             if change <= ARMIJO * size * slope:
-                best = trial
+                best, frozen[:] = trial, False
                 direction = step_qp.direction(best)
-            elif size <= longest:
-                break
+            elif size <= longest:  # failed where the model is exact: drone QPs DAQP cannot solve
+                failed = np.flatnonzero(~np.isfinite(trial.cost))  # there: the others move on
+                if not failed.size:
+                    break
+                frozen |= step_qp.rows_of(failed)
+                direction, bend = step_qp.direction(best, frozen), 1.0
             history.append((best.value, time.perf_counter() - t0, time.process_time() - c0))
         sol, active = step_qp.solution(best)
         if sol.success and self.iterations:
@@ -236,7 +241,13 @@ class SplitStep:
         u = self.pd.inputs_positions(it.v)[0]
         return u.reshape(self.m, self.pd.settings.horizon, -1).transpose(1, 0, 2)
 
-    def direction(self, it: Iterate) -> tuple[Array, float, float] | None:  # noqa: C901
+    def rows_of(self, drones: Array) -> Array:
+        """The split rows (P, R) of pairs with a side on one of ``drones``."""
+        singles = self.qp.rows.singles
+        sides = np.isin(singles[self.first], drones) | np.isin(singles[self.second], drones)
+        return np.repeat(sides[:, None], self.r, axis=1)
+
+    def direction(self, it: Iterate, frozen: Array | None = None) -> tuple[Array, float, float] | None:  # noqa: C901
         """The Newton step (P, R) in the split from ``it`` on its active sets, its slope ``dV^T
         step``, and the fraction of it to the first breakpoint (a row's slack or multiplier
         reaching zero, 1 at most); None at convergence."""
@@ -259,6 +270,10 @@ class SplitStep:
         if np.abs(grad).max(initial=0.0) <= GRAD_TOL or not blocks:
             return None
         used = np.unique(np.concatenate([b[0] for b in blocks]))
+        if frozen is not None:
+            used = used[~frozen.ravel()[used]]
+            if not used.size:
+                return None
         hess = np.zeros((used.shape[0], used.shape[0]))
         for flat, sign, k in blocks:
             at = np.searchsorted(used, flat)
