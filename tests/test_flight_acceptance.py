@@ -57,10 +57,6 @@ def check(data: dict) -> dict:
 
 UNREACHABLE = "the flight ends at a spacing of 0.6 m < d_min + 2 margin: the robust rows cannot reach it"
 OPEN = {  # measured on this commit: the open part of the acceptance (strict: a fix makes the test fail)
-    ("formation_flight_100", "lag0.2"): "the flight ends at a spacing of 0.6 m = d_min + 2 margin (0.05 m): "
-    "with the velocity-loop rows its last shrink starts the tie-break, completion 0.84 at 25 s",
-    ("formation_flight_100", "lag0.3"): UNREACHABLE + " (margin 0.076 m; completion 0.2)",
-    ("formation_flight_100", "second_order"): UNREACHABLE + " (margin 0.067 m; completion 0.36)",
     ("formation_flight_100", "quadrotor_wind"): UNREACHABLE + " (margin 0.148 m; completion 0)",
     ("obstacles_planar", "quadrotor_wind"): "completion 0.6 at the end of its 30 s",
     ("swap_spatial_20", "quadrotor_wind"): "completion 0.75 at the end of its 12 s",
@@ -68,8 +64,6 @@ OPEN = {  # measured on this commit: the open part of the acceptance (strict: a 
 OPEN_RANDOM = {
     0: "quadrotor: completion 0.5",
     3: "quadrotor: completion 0.27",
-    5: "lag 0.2, decoupled, n = 15: safe with the velocity-loop rows (true separation 0.774 m, d_min "
-    "0.672 m), completion 0.2 (a crowded decoupled ring)",
     9: "quadrotor: completion 0.2",
 }
 

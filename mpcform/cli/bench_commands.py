@@ -78,7 +78,8 @@ def _bench_mpc(args: argparse.Namespace) -> int:
 
 
 def add_bench(sub: argparse._SubParsersAction) -> None:
-    """``bench mpc``, ``bench solvers``, ``bench closed-loop``, ``bench scale``, ``bench plant``."""
+    """``bench mpc``, ``bench solvers``, ``bench closed-loop``, ``bench scale``, ``bench split``,
+    ``bench plant``."""
     bench = sub.add_parser("bench", help="benchmarks (markdown table; --json PATH for records)")
     kinds = bench.add_subparsers(dest="bench", required=True, metavar="BENCH")
     mpc = kinds.add_parser("mpc", help="planner step times vs raw solver, numpy rollout and cvxpy")
@@ -99,6 +100,15 @@ def add_bench(sub: argparse._SubParsersAction) -> None:
     mpc.add_argument("--json", metavar="PATH", help="also write the rows as a JSON list of records")
     _add_bench_solvers(kinds)
     _add_bench_scale(kinds)
+    split = kinds.add_parser("split", help="iterated split points: QP cost gap to the joint vs rounds, time")
+    split.set_defaults(func=_bench_split)
+    split.add_argument("--scenarios", nargs="+", metavar="SCENARIO", help="scenario files, flown decoupled "
+                       "(default: swap_planar_8, swap_spatial_12, swap_spatial_20)")  # fmt: skip
+    split.add_argument("--rounds", type=int, nargs="+", default=[0, 1, 2, 5, 10, 20, 50],
+                       help="split rounds per step (the table's rows; the planner flies with the most)")
+    split.add_argument("--steps", type=int, help="closed-loop steps per scenario (default: its duration)")
+    split.add_argument("--figure", metavar="PNG", help="write the convergence curves to this PNG")
+    split.add_argument("--json", metavar="PATH", help="also write the rows as a JSON list of records")
     plant = kinds.add_parser("plant", help="the quadrotor plant alone: n drones, a fixed command sequence")
     plant.set_defaults(func=_bench_plant)
     plant.add_argument("--n", type=int, default=20, help="drones")
@@ -107,6 +117,18 @@ def add_bench(sub: argparse._SubParsersAction) -> None:
     plant.add_argument("--repeats", type=int, default=3, help="runs (median and max are reported)")
     plant.add_argument("--no-wind", action="store_true", help="still air (default: gusts of 0.5 m/s)")
     plant.add_argument("--json", metavar="PATH", help="also write the rows as a JSON list of records")
+
+
+def _bench_split(args: argparse.Namespace) -> int:
+    from mpcform.bench import split as bench_split
+
+    if min(args.rounds) < 0 or (args.steps is not None and args.steps < 1):
+        print("mpcform: error: --rounds must be >= 0 and --steps >= 1", file=sys.stderr)
+        return 2
+    scenarios = bench_split.DEFAULT_SCENARIOS if args.scenarios is None else tuple(args.scenarios)
+    rows = bench_split.run(scenarios, tuple(args.rounds), args.steps, args.figure)
+    print_bench(bench_split.markdown_table(rows), rows, args.json)
+    return 0
 
 
 def _bench_plant(args: argparse.Namespace) -> int:

@@ -27,6 +27,7 @@ with a positive-definite Hessian. Two things make it cheap:
 from __future__ import annotations
 
 import time
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -47,7 +48,48 @@ DAQP_INF = 1e30  # DAQP's "no bound"
 DAQP_OK = 1
 PRIMAL_TOL = 1e-9  # DAQP row feasibility tolerance (its default 1e-6 shows in the plans)
 MIN_SLACK_QUADRATIC = 1e-6  # keeps the soft QP's Hessian positive definite when w2 = 0
+AT_BOUND_M = 1e-7  # a separation row this close to its bound counts as active (sensitivity)
+GRAM_EPS = 1e-9  # relative regularisation of the active rows' Gram matrix (sensitivity)
 ROW_BLOCK = 2048  # separation rows built at once (whole drones; a block stays in cache)
+Solved = tuple[QPSolution, int]  # a solution and its number of active rows
+
+
+@dataclass(frozen=True)
+class DroneSolves:
+    """Every drone's DAQP solve (n drones, K separation rows kept, in drone order)."""
+
+    v: Array  # (n, H d) the solutions in v = M u
+    s: Array  # (n, H) slacks (zero where the hard QP was feasible)
+    cost: Array  # (n,) objective values 0.5 ||v||^2 - c^T v (+ the slack penalty)
+    flags: Array  # (n,) DAQP exit flags
+    soft: Array  # (n,) the drones solved with slacks
+    lams: list[Array]  # per drone, the rows' multipliers (soft: the slacks' H bounds, then constant
+    # rows, then separation rows; a row at its lower bound has a multiplier <= 0)
+    rows: Array  # (K,) the separation rows kept, as flat ``item * R + row`` indices
+    offsets: Array  # (n + 1,) drone i's rows are ``rows[offsets[i]:offsets[i + 1]]``
+    sep_c: Array  # (K, d) their coefficients
+    sep_end: Array  # (K,) their position steps
+    sep_lo: Array  # (K,) their lower bounds
+    const_lo: Array  # (n or 1, rows) the constant rows' bounds (one row: the same for every drone)
+    const_hi: Array
+    iterations: int
+    time_s: float  # inside DAQP
+
+
+@dataclass(frozen=True)
+class Sensitivity:
+    """How one drone's optimum moves with its separation rows' lower bounds ``b`` on its active
+    set (:meth:`PerDroneQP.sensitivity`): a separation rows active, r rows active in all (one-sided),
+    q rows inactive."""
+
+    active: Array  # (a,) the active separation rows (indices into the drone's rows)
+    hessian: Array  # (a, a) d^2 f / db^2
+    dv: Array  # (H d, a) dv / db
+    dual: Array  # (r,) the active rows' multipliers y >= 0 (constant rows first)
+    ddual: Array  # (r, a) dy / db
+    rows: Array  # (q, H d) the inactive rows, one-sided ``rows v >= bound``
+    slack: Array  # (q,) how far they are from their bounds
+    sep_index: Array  # (q,) an inactive separation row's index in the drone's rows, else -1
 
 
 class PerDroneQP(StepSolver):
@@ -76,14 +118,8 @@ class PerDroneQP(StepSolver):
         rows = [family.dense() for family in families]  # constant rows over u; bounds per drone from _bounds
         self._const_v = (np.vstack(rows) if rows else np.zeros((0, nu))) @ self._m_inv
         self._ends = row_ends(h)
-        # x_e = dt sum_{j<e} u_j = (sum_{j<e} dt M^-1[(j, .), :]) v, and M^-1 = T (x) I_d, so
-        # x_e = (w_e (x) I_d) v and a^T x_e = (w_e (x) a)^T v: w_e (x) 1_d (H d,) per end e
-        x_v = dt_s * np.cumsum(self._m_inv.reshape(h, dim, nu), axis=0)
-        self._w_rep = np.einsum("echc->ehc", x_v.reshape(h, dim, h, dim)).reshape(h, nu)
+        self._w_rep = position_table(self._m_inv, h, dim, dt_s, loop)
         self._reach = 1.0 if loop is None else loop.reach_factor
-        if loop is not None:  # rows on the true positions: + sum_j G_{e,j} u_j, u_j = sum_m T[j, m] v_m
-            t = self._m_inv.reshape(h, dim, h, dim)[:, 0, :, 0]
-            self._w_rep += np.einsum("ejd,jm->emd", loop.forced[1:], t).reshape(h, nu)
         self._eye = np.eye(nu)
         w2 = max(settings.slack_quadratic, MIN_SLACK_QUADRATIC)
         self._hess_soft = np.diag(np.concatenate([np.full(h, w2), np.ones(nu)]))
@@ -114,15 +150,24 @@ class PerDroneQP(StepSolver):
         Returns the solution in the sparse QP's layout ``[u | x | s]`` over these n drones (its
         ``solve_time_s`` is the time spent inside DAQP), and the number of active rows.
         """
+        got = self.solve_each(p0, c, u_prev, singles, coeffs, lower, warm_u, hard, on)
+        return self.solution(got.v, got.s, got.flags, got.lams, got.iterations, got.time_s)
+
+    def solve_each(
+        self, p0: Array, c: Array, u_prev: Array, singles: Array, coeffs: Array, lower: Array, warm_u: Array,
+        hard: Array | None = None, on: Array | None = None,
+    ) -> DroneSolves:
+        """Every drone's solve as DAQP returns it (arguments as :meth:`solve_drones`)."""
         st = self.settings
         h, n, nu, n_const = st.horizon, p0.shape[0], self._nu, self._const_v.shape[0]
         f_v = -c.transpose(1, 0, 2).reshape(n, nu)  # 0.5 ||v - c||^2
         v_warm = warm_u.transpose(1, 0, 2).reshape(n, nu) @ self._m.T
-        sep_c, sep_end, sep_lo, sep_soft, counts = self._separation(n, singles, coeffs, lower, hard, on)
+        sep_c, sep_end, sep_lo, sep_soft, counts, at = self._separation(n, singles, coeffs, lower, hard, on)
         a, lo, hi = self._buffers(int(counts.max(initial=0)))
         bounds = None if self._fixed_bounds else self._bounds(p0, u_prev)  # else in the buffers
         offsets = [0, *np.cumsum(counts).tolist()]
         v_out, s_out, flags, lams = [np.empty(0)] * n, np.zeros((n, h)), [DAQP_OK] * n, [np.empty(0)] * n
+        cost = np.zeros(n)
         iters, in_daqp = 0, 0.0
 
         def put(i: int, rows_v: Array) -> int:
@@ -142,7 +187,7 @@ class PerDroneQP(StepSolver):
             for i in range(start, stop):
                 m = put(i, rows_v[offsets[i] - base : offsets[i + 1] - base])
                 t0 = time.perf_counter()
-                v_out[i], _, flags[i], info = solve(
+                v_out[i], cost[i], flags[i], info = solve(
                     eye, f_v[i], a[:m], hi[:m], lo[:m], primal_start=v_warm[i], **options
                 )  # fmt: skip
                 in_daqp += time.perf_counter() - t0
@@ -153,24 +198,73 @@ class PerDroneQP(StepSolver):
             first, last = offsets[i], offsets[i + 1]
             m = put(i, self._rows_v(sep_c[first:last], sep_end[first:last]))
             t0 = time.perf_counter()
-            v_out[i], s_out[i], flags[i], info = self._solve_soft(
+            v_out[i], s_out[i], flags[i], cost[i], info = self._solve_soft(
                 f_v[i], a[:m], hi[:m], lo[:m], sep_end[first:last], sep_soft[first:last], n_const
             )  # fmt: skip
             in_daqp += time.perf_counter() - t0
             iters += info["iterations"]
             lams[i] = info["lam"]
-        iters = int(iters)
         v_all = np.array(v_out).reshape(n, nu)
-        bad = np.flatnonzero((np.array(flags) != DAQP_OK) | ~np.isfinite(v_all).all(axis=1))
+        const_bounds = (lo[None, :n_const].copy(), hi[None, :n_const].copy()) if bounds is None else bounds
+        is_soft = np.zeros(n, dtype=bool)
+        is_soft[soft] = True
+        return DroneSolves(v_all, s_out, cost, np.array(flags), is_soft, lams, at, np.array(offsets), sep_c,
+                           sep_end, sep_lo, *const_bounds, int(iters), in_daqp)  # fmt: skip
+
+    def solution(self, v: Array, s: Array, flags: Array, lams: list[Array], iters: int, t_s: float) -> Solved:
+        """The drones' solves (``v`` (n, H d), slacks ``s`` (n, H), DAQP's exit flags and
+        multipliers; ``t_s`` the time in DAQP) as one solution ``[u | x | s]`` (as :meth:`solve_drones`
+        returns it)."""
+        h, n = self.settings.horizon, v.shape[0]
+        bad = np.flatnonzero((flags != DAQP_OK) | ~np.isfinite(v).all(axis=1))
         if bad.size:
             status = f"daqp: exit flag {flags[bad[0]]} (drone {bad[0]})"
-            return failed(status, in_daqp, iters), 0
-        u_out = v_all @ self._m_inv.T
-        x_out = u_out @ self._x_of_u.T
-        flat = [v.reshape(n, h, -1).transpose(1, 0, 2).ravel() for v in (u_out, x_out, s_out)]
-        sol = QPSolution(np.concatenate(flat), None, True, "daqp: optimal", iters, in_daqp)
+            return failed(status, t_s, iters), 0
+        u_out, x_out = self.inputs_positions(v)
+        flat = [w.reshape(n, h, -1).transpose(1, 0, 2).ravel() for w in (u_out, x_out, s)]
+        sol = QPSolution(np.concatenate(flat), None, True, "daqp: optimal", iters, t_s)
         active = np.count_nonzero(np.abs(np.concatenate(lams)) > ACTIVE_TOL) if n else 0
         return sol, int(active)
+
+    def inputs_positions(self, v: Array) -> tuple[Array, Array]:
+        """Inputs and relative positions (n, H d) (step-major within a drone) of solutions ``v``
+        (n, H d): ``u = M^-1 v``, ``x_e = dt sum_{j<e} u_j``."""
+        u = v @ self._m_inv.T
+        return u, u @ self._x_of_u.T
+
+    def multipliers(self, solves: DroneSolves, i: int, everything: bool = False) -> Array:
+        """Drone i's multipliers of its separation rows (>= 0: the derivative of its optimal cost in
+        the rows' lower bounds), or with ``everything`` of its constant rows first."""
+        lam = solves.lams[i][self.settings.horizon if solves.soft[i] else 0 :]
+        return lam if everything else -lam[self._const_v.shape[0] :]
+
+    def sensitivity(self, solves: DroneSolves, i: int) -> Sensitivity:
+        """How drone i's optimum moves with its separation rows' lower bounds on its active set:
+        every row one-sided, ``a^T v >= b`` (a constant row's bounds as two rows), multiplier
+        ``y >= 0``; active: a multiplier, or within :data:`AT_BOUND_M` of the bound. There
+        (identity Hessian; a soft drone's slacks ignored) ``v = c + A^T y``, ``y = (A A^T)^-1 (b -
+        A c)``: ``d^2 f / db^2 = dy / db = (A A^T)^-1``, ``dv / db = A^T (A A^T)^-1``; regularised
+        (:data:`GRAM_EPS`) so that dependent rows (a segment's two ends at one step) get a large
+        curvature, not none."""
+        n_const, first, last = self._const_v.shape[0], solves.offsets[i], solves.offsets[i + 1]
+        lam, v = self.multipliers(solves, i, everything=True), solves.v[i]
+        lo, hi = (b[min(i, b.shape[0] - 1)] for b in (solves.const_lo, solves.const_hi))
+        sep = self._rows_v(solves.sep_c[first:last], solves.sep_end[first:last])
+        rows = np.vstack([self._const_v, -self._const_v, sep])
+        bound = np.concatenate([lo, -hi, solves.sep_lo[first:last]])
+        y = np.concatenate([np.maximum(-lam[:n_const], 0.0), np.maximum(lam[:n_const], 0.0), -lam[n_const:]])
+        gap = rows @ v - bound
+        real = np.abs(bound) < DAQP_INF / 2
+        on = real & ((y > ACTIVE_TOL) | (gap <= AT_BOUND_M))
+        active = rows[on]
+        gram = active @ active.T
+        gram[np.diag_indices_from(gram)] += GRAM_EPS * max(1.0, float(np.diag(gram).max(initial=0.0)))
+        sep_on = np.flatnonzero(on[2 * n_const :])
+        k = np.linalg.inv(gram)[:, on[: 2 * n_const].sum() :]  # columns: the active separation rows
+        off = real & ~on
+        sep_index = np.concatenate([np.full(2 * n_const, -1), np.arange(last - first)])[off]
+        return Sensitivity(sep_on, k[-sep_on.shape[0] :] if sep_on.size else k[:0], active.T @ k, y[on], k,
+                           rows[off], gap[off], sep_index)  # fmt: skip
 
     def _rows_v(self, coeffs: Array, end: Array) -> Array:
         """Separation rows (K, H d) over ``v`` of coefficients ``coeffs`` (K, d) at position steps
@@ -195,7 +289,7 @@ class PerDroneQP(StepSolver):
 
     def _solve_soft(
         self, f_v: Array, a: Array, hi: Array, lo: Array, end: Array, soft: Array, n_const: int
-    ) -> tuple[Array, Array, int, dict[str, Any]]:
+    ) -> tuple[Array, Array, int, float, dict[str, Any]]:
         """The drone's QP with its slacks (first, simple bounds ``s >= 0``; Hessian ``diag(w2, I)``).
 
         The slacks are not scaled to a unit Hessian: a column ``1 / sqrt(w2)`` would scale DAQP's
@@ -204,18 +298,19 @@ class PerDroneQP(StepSolver):
         a_s = np.zeros((a.shape[0], h))
         a_s[n_const + np.arange(end.shape[0]), end - 1] = soft
         f = np.concatenate([np.full(h, st.slack_weight), f_v])
-        z, _, flag, info = self._daqp.solve(
+        z, cost, flag, info = self._daqp.solve(
             self._hess_soft, f, np.hstack([a_s, a]), np.concatenate([np.full(h, DAQP_INF), hi]),
             np.concatenate([np.zeros(h), lo]), **self._options,
         )  # fmt: skip
-        return z[h:], z[:h], flag, info
+        return z[h:], z[:h], flag, cost, info
 
     def _separation(
         self, n: int, singles: Array, coeffs: Array, lower: Array, hard: Array | None, on: Array | None
-    ) -> tuple[Array, Array, Array, Array, Array]:
+    ) -> tuple[Array, Array, Array, Array, Array, Array]:
         """The separation rows that can be active, sorted by drone (item order kept within a drone):
         their coefficients ``a`` (K, d), position steps, lower bounds and whether they have a slack
-        (not an item's hard first row); and the number of rows per drone.
+        (not an item's hard first row); the number of rows per drone; and which they are (K,), as
+        flat ``item * R + row`` indices.
 
         A row ``a^T x_e + s_e >= b`` that every reachable ``x_e`` meets (``b <= -|a| e v_max dt``,
         since the velocity set lies in the ball) is left out, the optimum unchanged. The rows over
@@ -237,7 +332,7 @@ class PerDroneQP(StepSolver):
             soft |= ~hard[item]
         counts = np.bincount(singles[item], minlength=n).astype(np.intp)
         sep_c = np.take(coeffs.reshape(-1, coeffs.shape[2]), at, axis=0)
-        return sep_c, ends[r], np.take(lower.reshape(-1), at), soft, counts
+        return sep_c, ends[r], np.take(lower.reshape(-1), at), soft, counts, at
 
     def _bounds(self, p0: Array, u_prev: Array) -> tuple[Array, Array]:
         """Lower and upper bounds (n, rows) of the constant rows for each drone."""
@@ -246,6 +341,21 @@ class PerDroneQP(StepSolver):
             return np.zeros((n, 0)), np.zeros((n, 0))
         lo, hi = zip(*(family.dense_bounds(p0, u_prev, DAQP_INF) for family in self.families), strict=True)
         return np.hstack(lo), np.hstack(hi)
+
+
+def position_table(m_inv: Array, h: int, dim: int, dt_s: float, loop: VelocityLoop | None) -> Array:
+    """The table (H, H d) of ``w_e (x) 1_d`` per position step e, rows over ``v``.
+
+    ``x_e = dt sum_{j<e} u_j = (sum_{j<e} dt M^-1[(j, .), :]) v`` and ``M^-1 = T (x) I_d``, so
+    ``x_e = (w_e (x) I_d) v`` and ``a^T x_e = (w_e (x) a)^T v``. With a velocity ``loop`` the rows
+    are on its positions, ``+ sum_j G_{e,j} u_j`` with ``u_j = sum_m T[j, m] v_m`` (per axis)."""
+    nu = h * dim
+    x_v = dt_s * np.cumsum(m_inv.reshape(h, dim, nu), axis=0)
+    table = np.einsum("echc->ehc", x_v.reshape(h, dim, h, dim)).reshape(h, nu)
+    if loop is not None:
+        t = m_inv.reshape(h, dim, h, dim)[:, 0, :, 0]
+        table += np.einsum("ejd,jm->emd", loop.forced[1:], t).reshape(h, nu)
+    return table
 
 
 def _blocks(offsets: list[int], size: int) -> list[tuple[int, int]]:

@@ -46,6 +46,7 @@ from mpcform.mpc.rows import limit_rows, row_ends, violators
 from mpcform.mpc.separation import Separation, SeparationRows
 from mpcform.mpc.settings import MPCSettings
 from mpcform.mpc.sparse import SparseSolver
+from mpcform.mpc.split import SplitQP
 from mpcform.reference.base import Reference
 from mpcform.solvers.base import QPBackend, QPSolution, SolverOptions
 from mpcform.solvers.registry import DEFAULT_SOLVER, make_backend
@@ -89,6 +90,8 @@ class MPCPlanner(Controller):
         self._solver: StepSolver  # the sparse QP with a backend, or DAQP per drone
         if settings.solves_per_drone:
             self._solver = PerDroneQP(self.dim, dt_s, limits, settings, self._families, loop)
+            if settings.split_iterations:  # the pair rows' split points iterated (mpc.split)
+                self._solver = SplitQP(self._solver, settings.split_iterations, settings.split_budget_s)
         else:
             st = settings
             options = SolverOptions(st.eps_abs, st.eps_rel, st.max_iter, st.time_limit_s)
@@ -165,7 +168,10 @@ class MPCPlanner(Controller):
             turned = conflicted & sep.conflicted(x_nom, plain)
         c = self._tie_break.turn(c, turned, p0, targets[0] - p0, self._plan is not None, blocked)
         bad = off_limits | conflicted
-        drones = qp_drones(bad, rows.pairs[rows.pair_on]) if grouped else np.arange(self.n)
+        linked = rows.pairs[rows.pair_on]
+        if st.split_iterations:  # a pair's split moves both its drones: solved as one group
+            linked = rows.labels[(rows.labels[:, 1] >= 0) & rows.single_on]
+        drones = qp_drones(bad, linked) if grouped else np.arange(self.n)
         sub = rows.subset(drones, self.n, on_only=grouped)  # grouped: the pattern follows the groups
         warm = warm_start(self._plan, p0, u_nom, x_nom)[:, :, drones] if self._solver.warm_starts else None
         qp = StepQP(self.n, drones, p0[drones], c[:, drones], self._u_prev[drones], sub, cand.rebuilt, warm)

@@ -41,6 +41,11 @@ class MPCSettings:
       (:mod:`mpcform.mpc.per_drone`) instead of one sparse block-diagonal QP with the ``solver``
       (naming another solver is then an error). DAQP solves to 1e-9 row feasibility; of the
       solver settings below only ``max_iter`` applies to it.
+    - ``split_iterations`` (decoupled with ``per_drone``): rounds that move each pair row's split
+      point from the midpoint towards the joint optimum (:mod:`mpcform.mpc.split`); every round's
+      plans meet the joint pair rows, and the rounds converge to the joint QP's optimum
+      (0: the midpoint split). ``split_budget_s``: no new round starts after this much wall time
+      of a step's solve [s] (None: no limit).
     - ``grouping``: solve only the groups of drones (connected by pair rows within reach) that
       hold a conflict; the other groups' optimum is their eq. 14 rollout (needs ``fast_path``).
       Equal to the monolithic QP up to solver tolerance.
@@ -62,6 +67,8 @@ class MPCSettings:
     tie_break_rad: float = 0.5
     coupling: str = "joint"
     per_drone: bool = True
+    split_iterations: int = 0
+    split_budget_s: float | None = None
     grouping: bool = True
     fast_path: bool = True
     plant_model: bool = True
@@ -106,6 +113,14 @@ class MPCSettings:
         if isinstance(self.max_iter, bool) or not isinstance(self.max_iter, int) or self.max_iter < 1:
             raise ValidationError("controller.max_iter", f"expected an integer >= 1, got {self.max_iter!r}")
         positive("controller.time_limit", self.time_limit_s, allow_zero=True)
+        split = self.split_iterations
+        if isinstance(split, bool) or not isinstance(split, int) or split < 0:
+            raise ValidationError("controller.split_iterations", f"expected an integer >= 0, got {split!r}")
+        if split and not self.solves_per_drone:
+            raise ValidationError("controller.split_iterations", f"expected 0 unless coupling = "
+                                  f"'decoupled' with per_drone = true, got {split!r}")  # fmt: skip
+        if self.split_budget_s is not None:
+            positive("controller.split_budget", self.split_budget_s)
 
 
 PLANNER_MODES = ("decoupled", "decoupled-sparse", "joint", "monolithic")

@@ -104,7 +104,7 @@ _GOAL = ("constant", "exponential")
 _MISSION = ("mission",)
 # scenario key -> MPCSettings field (the remaining mpc keys share their name with the field)
 MPC_FIELDS = {"gain": "gain_per_s", "margin": "margin_m", "tie_break": "tie_break_rad",
-              "time_limit": "time_limit_s"}  # fmt: skip
+              "time_limit": "time_limit_s", "split_budget": "split_budget_s"}  # fmt: skip
 
 
 def _mpc_key(name: str, type_: str, doc: str, unit: str = "", **kw: Any) -> Key:
@@ -278,6 +278,11 @@ SCHEMA: tuple[Table, ...] = (
         _mpc_key("per_drone", "bool", "With `decoupled`: solve each conflicted drone's QP with DAQP "
                  "(small dense QPs, the fast way; of the solver keys only `max_iter` applies) instead "
                  "of one sparse QP with `solver`."),
+        _mpc_key("split_iterations", "int", "With `decoupled` and `per_drone`: rounds that move each "
+                 "pair row's split point from the midpoint towards the joint optimum (every round's plans "
+                 "meet the joint pair rows; 0: the midpoint split).", bound=">= 0"),
+        _mpc_key("split_budget", "float", "Wall time of a step's split rounds after which no new "
+                 "round starts.", "s", bound="> 0", shown_default="none"),
         _mpc_key("grouping", "bool", "Solve only the groups of drones that hold a conflict; the others "
                  "take their eq. 14 rollout (exact)."),
         _mpc_key("fast_path", "bool", "Skip the solver when the eq. 14 rollout meets every row."),

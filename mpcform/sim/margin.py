@@ -155,6 +155,25 @@ def plant_margin(plant: Plant, dt_s: float, a_max_mps2: float | None = None, *, 
     return Margin(per, float(np.linalg.norm(per)), cmd, wnd, valid)
 
 
+def chord_margin(plant: Plant, dt_s: float, a_max_mps2: float) -> Array:
+    """Per-axis bound (d,) [m] on how far a linear plant's true path strays from the chord between
+    its positions at the ends of an interval, for command changes within ``a_max dt``: what is
+    left of the margin when the planner models the loop (:mod:`mpcform.mpc.loop`), whose rows hold
+    at the interval ends. A step ``Delta`` at ``t_j`` bends the interval ``[t_k, t_k + dt]`` by
+    ``Delta (S(tau + s) - S(tau) - s/dt (S(tau + dt) - S(tau)))``, ``tau = t_k - t_j``; summing the
+    worst of each over the past steps bounds it."""
+    dt = positive("margin.dt", dt_s)
+    out = np.zeros(plant.dim)
+    for a, b, e, c, axes in plant.velocity_loops():
+        past = int(np.ceil(_settle_time(a) / dt))
+        s_series, _ = _loop_series(a, b, e, c, dt / GRID, (past + 1) * GRID)
+        base = np.arange(past + 1) * GRID
+        window = s_series[base[:, None] + np.arange(GRID + 1)[None, :]] - s_series[base][:, None]
+        bend = window - np.linspace(0.0, 1.0, GRID + 1)[None, :] * window[:, -1:]
+        out[[k for k in axes if k < plant.dim]] = a_max_mps2 * dt * np.abs(bend).max(axis=1).sum()
+    return out
+
+
 def valid_speed(plant: QuadrotorPlant, a_max: float, w_max: Array) -> float:
     """Largest speed with ``a_max + c (v + w)`` within the tilt (and, d = 3, thrust) authority."""
     pr = plant.params

@@ -196,7 +196,7 @@ def test_rows_over_v_are_the_rows_over_positions(dim: int) -> None:
 
 def test_only_the_rows_that_can_be_active_are_built() -> None:
     """Rows of items within reach with ``b > -|a| e v_max dt``, by drone (item order kept), are
-    kept; an item's hard first row has no slack."""
+    kept, named by their flat ``item * R + row`` index; an item's hard first row has no slack."""
     h, dim, n = 3, 2, 4
     qp = PerDroneQP(dim, 0.1, LIMITS, MPCSettings(horizon=h, coupling="decoupled"), ())
     rng = np.random.default_rng(5)
@@ -208,11 +208,12 @@ def test_only_the_rows_that_can_be_active_are_built() -> None:
     lower = -reach * rng.uniform(0.5, 1.5, (s, r))
     expect = [(i, item, row) for i in range(n) for item in range(s) for row in range(r)
               if singles[item] == i and on[item] and lower[item, row] > -reach[item, row]]  # fmt: skip
-    c, end, lo, soft, counts = qp._separation(n, singles, coeffs, lower, hard, on)
+    c, end, lo, soft, counts, at = qp._separation(n, singles, coeffs, lower, hard, on)
     assert c.shape[0] == len(expect) and counts.tolist() == [sum(e[0] == i for e in expect) for i in range(n)]
     for got, (_, item, row) in enumerate(expect):
         assert np.array_equal(c[got], coeffs[item, row]) and lo[got] == lower[item, row]
         assert end[got] == ends[row] and soft[got] == (row > 0 or not hard[item])
+        assert at[got] == item * r + row
 
 
 def test_the_row_block_size_does_not_change_the_solution(monkeypatch: pytest.MonkeyPatch) -> None:

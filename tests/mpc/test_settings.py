@@ -29,6 +29,10 @@ def test_defaults_are_valid():
         ("eps_rel", -1.0, "controller.eps_rel"),
         ("max_iter", 0, "controller.max_iter"),
         ("time_limit_s", -1.0, "controller.time_limit"),
+        ("split_iterations", -1, "controller.split_iterations"),
+        ("split_iterations", 2.0, "controller.split_iterations"),
+        ("split_iterations", 3, "controller.split_iterations.*decoupled"),  # joint coupling
+        ("split_budget_s", 0.0, "controller.split_budget"),
     ],
 )
 def test_bad_settings_are_rejected(field, value, match):
@@ -47,3 +51,9 @@ def test_mode_settings():
     assert set(GROUPED_MODES) == set(PLANNER_MODES) - {"monolithic"}
     with pytest.raises(ValidationError, match="mode"):
         mode_settings("nope", 4)
+
+
+def test_split_iterations_need_the_per_drone_decoupled_mode():
+    assert MPCSettings(coupling="decoupled", split_iterations=3, split_budget_s=0.01).split_iterations == 3
+    with pytest.raises(ValidationError, match="controller.split_iterations"):
+        MPCSettings(coupling="decoupled", per_drone=False, split_iterations=3)

@@ -139,3 +139,31 @@ def test_worst_case_sequence_meets_the_margin(kind, options):
         assert measured > 0.6 * margin.per_axis_m[0]
     else:  # linear plants: the bound is attained
         assert measured == pytest.approx(margin.per_axis_m[0], rel=1e-3)  # 1e-3: the speed reflection
+
+
+@pytest.mark.parametrize("kind", ["lag", "second_order"])
+def test_chord_margin_bounds_the_bend_within_an_interval(kind: str) -> None:
+    """Random and bang-bang command changes within ``a_max dt`` per axis: the dense true path stays
+    within the chord margin of the chord between its interval ends (and the bound is not loose by
+    more than 3x on the bang-bang sequence)."""
+    from mpcform.sim.margin import chord_margin
+    from mpcform.sim.plant_spec import PlantSpec
+
+    dt, a_max = 0.1, 1.8
+    spec = PlantSpec(kind, time_constant_s=0.3, samples_per_step=50)
+    bound = chord_margin(spec.build(1, 2), dt, a_max)
+    rng = np.random.default_rng(4)
+    worst = np.zeros(2)
+    for sequence in ("random", "bang"):
+        plant = spec.build(8, 2)
+        plant.reset(np.zeros((8, 2)))
+        u = np.zeros((8, 2))
+        for k in range(60):
+            bang = np.sign(np.sin(k / 3 + np.arange(8)))[:, None]
+            step = rng.uniform(-1, 1, (8, 2)) if sequence == "random" else bang
+            u = u + a_max * dt * np.clip(step, -1, 1)
+            p = plant.advance(u, dt).p_true_m  # (m + 1, 8, 2)
+            chord = p[0] + np.linspace(0, 1, p.shape[0])[:, None, None] * (p[-1] - p[0])
+            worst = np.maximum(worst, np.abs(p - chord).max(axis=(0, 1)))
+    assert np.all(worst <= bound + 1e-12), (worst, bound)
+    assert np.all(worst >= bound / 3), (worst, bound)
