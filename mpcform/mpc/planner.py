@@ -88,10 +88,13 @@ class MPCPlanner(Controller):
         self._candidates = CandidateSelector(self.n, dt_s, limits, settings, self.obstacles, gain)
         self._certifier = Certifier(dt_s, limits.v_max_mps, sep, limits.a_max_mps2)
         self._solver: StepSolver  # the sparse QP with a backend, or DAQP per drone
+        self._stalled_solver: StepSolver | None = None  # the split rounds while a drone is stalled
         if settings.solves_per_drone:
             self._solver = PerDroneQP(self.dim, dt_s, limits, settings, self._families, loop)
             if settings.split_iterations:  # the pair rows' split points iterated (mpc.split)
                 self._solver = SplitQP(self._solver, settings.split_iterations, settings.split_budget_s)
+            elif settings.stalled_split:  # only while a drone is stalled (liveness)
+                self._stalled_solver = SplitQP(self._solver, settings.stalled_split, settings.split_budget_s)
         else:
             st = settings
             options = SolverOptions(st.eps_abs, st.eps_rel, st.max_iter, st.time_limit_s)
@@ -169,13 +172,16 @@ class MPCPlanner(Controller):
         c = self._tie_break.turn(c, turned, p0, targets[0] - p0, self._plan is not None, blocked)
         bad = off_limits | conflicted
         linked = rows.pairs[rows.pair_on]
-        if st.split_iterations:  # a pair's split moves both its drones: solved as one group
+        solver = self._solver
+        if self._stalled_solver is not None and self._tie_break.resolving:
+            solver = self._stalled_solver
+        if solver is not self._solver or st.split_iterations:  # a pair's split moves both its drones
             linked = rows.labels[(rows.labels[:, 1] >= 0) & rows.single_on]
         drones = qp_drones(bad, linked) if grouped else np.arange(self.n)
         sub = rows.subset(drones, self.n, on_only=grouped)  # grouped: the pattern follows the groups
         warm = warm_start(self._plan, p0, u_nom, x_nom)[:, :, drones] if self._solver.warm_starts else None
         qp = StepQP(self.n, drones, p0[drones], c[:, drones], self._u_prev[drones], sub, cand.rebuilt, warm)
-        sol, active = self._solver.solve(qp)
+        sol, active = solver.solve(qp)
         status, solved = sol.status, None
         inside_m, inside = sep.start_shortfall(p0, rows)  # items that start too close
         if sol.success and sol.x is not None:

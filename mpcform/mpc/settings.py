@@ -46,6 +46,10 @@ class MPCSettings:
       plans meet the joint pair rows, and the rounds converge to the joint QP's optimum
       (0: the midpoint split). ``split_budget_s``: no new round starts after this much wall time
       of a step's solve [s] (None: no limit).
+    - ``stalled_split`` (decoupled with ``per_drone``; ignored otherwise): the split rounds of a
+      step in which a drone is stalled in conflict (its tie-break escalated,
+      :mod:`mpcform.mpc.liveness`), when ``split_iterations`` is 0: the midpoint split jams rings
+      of drones that joint-quality splits let pass (0: never).
     - ``grouping``: solve only the groups of drones (connected by pair rows within reach) that
       hold a conflict; the other groups' optimum is their eq. 14 rollout (needs ``fast_path``).
       Equal to the monolithic QP up to solver tolerance.
@@ -69,6 +73,7 @@ class MPCSettings:
     per_drone: bool = True
     split_iterations: int = 0
     split_budget_s: float | None = None
+    stalled_split: int = 10
     grouping: bool = True
     fast_path: bool = True
     plant_model: bool = True
@@ -121,6 +126,9 @@ class MPCSettings:
                                   f"'decoupled' with per_drone = true, got {split!r}")  # fmt: skip
         if self.split_budget_s is not None:
             positive("controller.split_budget", self.split_budget_s)
+        stalled = self.stalled_split
+        if isinstance(stalled, bool) or not isinstance(stalled, int) or stalled < 0:
+            raise ValidationError("controller.stalled_split", f"expected an integer >= 0, got {stalled!r}")
 
 
 PLANNER_MODES = ("decoupled", "decoupled-sparse", "joint", "monolithic")

@@ -283,6 +283,9 @@ SCHEMA: tuple[Table, ...] = (
                  "meet the joint pair rows; 0: the midpoint split).", bound=">= 0"),
         _mpc_key("split_budget", "float", "Wall time of a step's split rounds after which no new "
                  "round starts.", "s", bound="> 0", shown_default="none"),
+        _mpc_key("stalled_split", "int", "With `decoupled` and `per_drone` (and `split_iterations` "
+                 "0): split rounds in the steps where a drone is stalled in conflict (rings the "
+                 "midpoint split jams pass; 0: never).", bound=">= 0"),
         _mpc_key("grouping", "bool", "Solve only the groups of drones that hold a conflict; the others "
                  "take their eq. 14 rollout (exact)."),
         _mpc_key("fast_path", "bool", "Skip the solver when the eq. 14 rollout meets every row."),
