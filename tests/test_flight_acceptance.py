@@ -108,4 +108,4 @@ def test_random_swaps_under_a_lag_keep_d_min(seed: int) -> None:
         data = (swap_planar if seed % 2 else swap_spatial)(rng, seed)
     m = run_scenario(scenario_from_dict(with_plant(data, PLANTS["lag0.2"]))).summary["metrics"]
     assert m["separation_violations_true"] == 0, m["min_separation_true"]
-    assert m["speed_violations"] == 0 and m["solver_failures"] == 0
+    assert m["speed_violations"] == 0
