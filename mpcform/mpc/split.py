@@ -118,7 +118,8 @@ class SplitQP(StepSolver):
         best = step_qp.solve(np.arange(m), step_qp.midpoint(), warm, None)
         history = [(best.value, time.perf_counter() - t0, time.process_time() - c0)]
         seen = [step_qp.positions(best)] if record else []
-        bend, direction, rounds = 1.0, step_qp.direction(best), 0
+        finite = bool(np.isfinite(best.value))  # a drone whose midpoint solve failed: no rounds
+        bend, direction, rounds = 1.0, step_qp.direction(best) if finite else None, 0
         frozen = np.zeros(best.shift.shape, dtype=bool)  # rows kept where they are until a step succeeds
         while rounds < self.iterations and direction is not None and np.isfinite(best.value):
             if self.budget_s is not None and time.perf_counter() - t0 >= self.budget_s:
@@ -160,6 +161,7 @@ class SplitStep:
     def __init__(self, per_drone: PerDroneQP, qp: StepQP) -> None:
         self.pd, self.qp, rows = per_drone, qp, qp.rows
         self.m, self.r = qp.start_m.shape[0], rows.single_lower.shape[1]
+        self.flags = np.full(self.m, DAQP_OK)  # each drone's last DAQP exit flag
         self.first, self.second = first, second = _sides(rows.labels)
         self.splittable = np.repeat(rows.single_on[first][:, None], self.r, axis=1)
         self.splittable[rows.single_hard[first], 0] = False
@@ -207,6 +209,7 @@ class SplitStep:
             it.lams[i], it.mu[i] = got.lams[j], pd.multipliers(got, j)
             it.solves[i] = (got, j) if got.flags[j] == DAQP_OK else None
         it.cost[drones[got.flags != DAQP_OK]] = np.inf
+        self.flags[drones] = got.flags  # the last exit flags, for a failed midpoint's report
         if base is not None:  # a trial may not need more slack than the midpoint (the joint rows hold)
             more = got.s.max(axis=1, initial=0.0) > base.s[drones].max(axis=1, initial=0.0) + SLACK_TOL_M
             it.cost[drones[more]] = np.inf
@@ -309,7 +312,7 @@ class SplitStep:
 
     def solution(self, it: Iterate) -> tuple[QPSolution, int]:
         """The iterate as the planner's solution ``[u | x | s]`` and its number of active rows."""
-        flags = np.where(np.isfinite(it.cost), DAQP_OK, -1)
+        flags = np.where(np.isfinite(it.cost), DAQP_OK, self.flags)
         return self.pd.solution(it.v, it.s, flags, it.lams, self.iterations, self.time_s)
 
 

@@ -48,9 +48,9 @@ def _recorded(n: int, steps: int) -> _Keeping:
 
 def test_stopwatch_cpu_time_follows_work_not_waiting() -> None:
     clock = Stopwatch()
-    time.sleep(0.05)
+    time.sleep(0.2)  # the process's other threads (OpenBLAS spinning after work) may accrue a little
     wall, cpu = clock.ms()
-    assert wall >= 50 and cpu < 25
+    assert wall >= 200 and cpu < 0.5 * wall
     clock = Stopwatch()
     np.linalg.eigvalsh(np.random.default_rng(0).normal(size=(300, 300)) + 0.0)
     while clock.ms()[0] < 30:

@@ -121,7 +121,7 @@ def test_small_encounters_reach_the_joint_optimum(n: int, dim: int, seed: int, s
 def test_the_planner_reports_the_rounds_and_keeps_the_pairs_apart() -> None:
     ref, start = swap(5, 2, 5)
     for rounds in (0, 20):
-        st = MPCSettings(coupling="decoupled", split_iterations=rounds)
+        st = MPCSettings(coupling="decoupled", split_iterations=rounds, stalled_split=0)
         res = simulate(MPCPlanner(ref, DT, LIMITS, st), start, 4.0)
         qp = [i for i in res.infos if i.mode == "qp"]
         assert qp and all(("split" in i.status) == bool(rounds) for i in qp)
