@@ -18,6 +18,7 @@ from typing import Any
 
 import numpy as np
 
+from mpcform.errors import ScenarioError
 from mpcform.mpc.planner import MPCPlanner
 from mpcform.mpc.problem import StepQP
 from mpcform.mpc.sparse import SparseSolver
@@ -39,8 +40,9 @@ def record(path: str, rounds: int, steps: int | None) -> tuple[MPCPlanner, list[
     sc = load_scenario(path)
     mpc = replace(sc.controller.mpc, coupling="decoupled", per_drone=True, split_iterations=max(rounds, 1))
     sc = replace(sc, controller=replace(sc.controller, mpc=mpc))
-    planner = build_controller(sc)
-    assert isinstance(planner, MPCPlanner)
+    planner = build_controller(sc, "mpc")
+    if not isinstance(planner, MPCPlanner):  # build_controller makes the kind asked for
+        raise ScenarioError("controller.kind", f"bench split flies the mpc planner, got {planner.name!r}")
     qps: list[StepQP] = []
     solve = planner._solver.solve
 

@@ -35,6 +35,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from mpcform._validate import Array
+from mpcform.errors import ValidationError
 from mpcform.mpc.per_drone import DAQP_OK, DroneSolves, PerDroneQP, Sensitivity
 from mpcform.mpc.problem import StepQP, StepSolver
 from mpcform.mpc.rows import row_ends
@@ -188,7 +189,8 @@ class SplitStep:
         others keep ``base``'s solves."""
         qp, rows, r, pd = self.qp, self.qp.rows, self.r, self.pd
         if drones is None:
-            assert base is not None
+            if base is None:
+                raise ValidationError("split", "re-solving the moved drones needs their last iterate")
             moved, changed = np.zeros(self.m, dtype=bool), (shift != base.shift).any(axis=1)
             moved[rows.singles[self.first[changed]]] = moved[rows.singles[self.second[changed]]] = True
             drones = np.flatnonzero(moved)
