@@ -107,7 +107,11 @@ class VelocityLoop:
 
     def offsets(self, state: Array, u: Array) -> Array:
         """``p_e - p0 - x_e`` (H + 1, n, d) [m] for the inputs ``u`` (H, n, d) from ``state``."""
-        return self.free(state) + np.einsum("ejd,jnd->end", self.forced, u)
+        return self.free(state) + self.forced_response(u)
+
+    def forced_response(self, u: Array) -> Array:
+        """``sum_{j<e} G_{e,j} u_j`` (H + 1, n, d) [m] of the inputs ``u`` (H, n, d)."""
+        return np.einsum("ejd,jnd->end", self.forced, u)
 
 
 def _step_variation(a: Array, b: Array, c: Array, samples: int = 4000) -> float:

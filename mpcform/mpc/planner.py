@@ -87,6 +87,10 @@ class MPCPlanner(Controller):
         gain = 1.0 if self.loop is None else self.loop.speed_gain
         self._candidates = CandidateSelector(self.n, dt_s, limits, settings, self.obstacles, gain)
         self._certifier = Certifier(dt_s, limits.v_max_mps, sep, limits.a_max_mps2)
+        self._loop_state: Array  # the velocity loop's state (n, d, s), set by reset
+        if self.loop is not None:  # certify where the loop takes the drones in the interval
+            loop = self.loop
+            self._certifier.drift = lambda u0: loop.first(self._loop_state, u0)
         self._solver: StepSolver  # the sparse QP with a backend, or DAQP per drone
         self._stalled_solver: StepSolver | None = None  # the split rounds while a drone is stalled
         if settings.solves_per_drone:
@@ -112,11 +116,8 @@ class MPCPlanner(Controller):
         self._plan: Plan | None = None
         self._u_prev = np.zeros((self.n, self.dim))
         self._tie_break.reset()
-        # the velocity loop's state (n, d, s), drones at rest (no states without a loop)
+        # drones at rest (no states without a loop)
         self._loop_state = np.zeros((self.n, self.dim, 0)) if self.loop is None else self.loop.rest(self.n)
-        if self.loop is not None:  # certify where the loop takes the drones in the interval
-            loop = self.loop
-            self._certifier.drift = lambda u0: loop.first(self._loop_state, u0)
 
     @property
     def plan(self) -> Plan | None:

@@ -82,7 +82,7 @@ class SparseSolver(StepSolver):
         if qp.warm is not None:
             y = []  # with a loop, the warm start's true positions y = x + G u
             if self.loop is not None:
-                y = [(qp.warm[1] + np.einsum("ejd,jnd->end", self.loop.forced[1:], qp.warm[0])).ravel()]
+                y = [(qp.warm[1] + self.loop.forced_response(qp.warm[0])[1:]).ravel()]
             x0 = np.concatenate([qp.warm.ravel(), np.zeros(mpc_qp.layout.n_slack), *y])
         sol = backend.solve(x0)
         sol = self._exact(sol, mpc_qp, qp, lo, hi, a_data, x0)
