@@ -280,9 +280,10 @@ class SplitStep:
             if not used.size:
                 return None
         hess = np.zeros((used.shape[0], used.shape[0]))
-        for flat, sign, k in blocks:
-            at = np.searchsorted(used, flat)
-            hess[np.ix_(at, at)] += np.outer(sign, sign) * k
+        for flat, sign, k in blocks:  # frozen entries stay put: their rows and columns drop out
+            at = np.minimum(np.searchsorted(used, flat), used.shape[0] - 1)
+            keep = used[at] == flat
+            hess[np.ix_(at[keep], at[keep])] += np.outer(sign[keep], sign[keep]) * k[np.ix_(keep, keep)]
         g = grad.ravel()[used]
         newton = np.zeros(shape)
         ridge = RIDGE * max(1.0, float(np.abs(np.diag(hess)).max(initial=0.0)))

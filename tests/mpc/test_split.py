@@ -153,3 +153,26 @@ def test_every_run_of_the_random_families_completes_safely_with_split_rounds() -
         if any(out[k] for k in checks) or out["completion"] < 1.0 or not finite:
             bad.append((sc["name"], {k: v for k, v in out.items() if k != "infos"}))
     assert not bad
+
+
+def test_a_newton_step_keeps_frozen_rows_put() -> None:
+    """After a drone's QP fails, its rows are frozen and the Newton step solves for the others
+    only (the step once indexed the Hessian out of bounds when a frozen row sorted last)."""
+    from mpcform.mpc.split import SplitStep
+
+    planner, qps = step_qps(6, 3, 3, 6)
+    checked = 0
+    for qp in qps:
+        step_qp = SplitStep(planner._solver.per_drone, qp)
+        best = step_qp.solve(np.arange(qp.start_m.shape[0]), step_qp.midpoint(), np.zeros_like(qp.targets_mps), None)
+        free = step_qp.direction(best)
+        if free is None:
+            continue
+        moving = np.flatnonzero(np.abs(free[0]).max(axis=1) > 0)  # pairs whose split moves
+        last = int(qp.rows.singles[step_qp.first[moving[-1]]])  # a drone of the last pair that moves
+        frozen = step_qp.rows_of(np.array([last]))
+        got = step_qp.direction(best, frozen)
+        if got is not None:
+            assert np.all(got[0][frozen] == 0.0) and got[1] < 0.0
+        checked += 1
+    assert checked
