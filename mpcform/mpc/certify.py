@@ -4,7 +4,10 @@ A command is certified when it lies in the ball ``||u_i|| <= v_max`` (it is scal
 eq. 7) and, along the first segment ``p0 -> p0 + dt u``, no pair (or drone-obstacle item) within
 reach gets closer than ``d_min`` (its required distance), or than it already was. With a velocity
 loop (:mod:`mpcform.mpc.loop`) the segment ends where the loop takes the drone,
-``p0 + dt u + F_1 xi_0 + G_{1,0} u`` (the chord of the interval's true motion).
+``p0 + dt u + F_1 xi_0 + G_{1,0} u`` (the chord of the interval's true motion), and an item inside
+its distance may also come as close as the hold's chord ``p0 -> p0 + F_1 xi_0`` takes it: within
+the interval no command undoes the velocity a drone already has (the QP's no-approach rows leave
+out that free response too).
 
 The fallback, when a solve fails or does not certify, is the first of these
 that certifies: the previous plan's next input; the solved command scaled back (1, 1/2, 1/4,
@@ -50,14 +53,18 @@ class Certifier:
         return u0 if self.safe(p0, u0, cand) else None
 
     def safe(self, p0: Array, u0: Array, cand: Candidates) -> bool:
-        """Along ``p0 -> p0 + dt u0`` no item within reach gets closer than required, or than it
-        already was (up to :data:`CERTIFY_TOL_M`)."""
-        p1 = p0 + self.dt_s * u0
+        """Along ``p0 -> p0 + dt u0`` (with a loop, its true chord) no item within reach gets
+        closer than required, or than it already was, or (with a loop) than the hold's chord takes
+        it (up to :data:`CERTIFY_TOL_M`)."""
+        p1, free = p0 + self.dt_s * u0, None
         if self.drift is not None:
             p1 = p1 + self.drift(u0)
-        for a, b, required in self.separation.first_segment(p0, p1, cand):
-            d_seg = vector_norms(closest_on_segments(a, b))
-            if np.any(d_seg < np.minimum(required, vector_norms(a)) - CERTIFY_TOL_M):
+            free = self.separation.first_segment(p0, p0 + self.drift(np.zeros_like(u0)), cand)
+        for j, (a, b, required) in enumerate(self.separation.first_segment(p0, p1, cand)):
+            floor = np.minimum(required, vector_norms(a))
+            if free is not None:  # as close as the free response takes it
+                floor = np.minimum(floor, vector_norms(closest_on_segments(a, free[j][1])))
+            if np.any(vector_norms(closest_on_segments(a, b)) < floor - CERTIFY_TOL_M):
                 return False
         return True
 

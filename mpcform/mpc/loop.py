@@ -16,7 +16,14 @@ active) and writes its separation rows on these true positions: rows linear in `
 the plant without wind, so a braking plan no longer overshoots into a partner.
 
 The loop state ``xi_0`` is not measured: :meth:`VelocityLoop.advance` runs the model on the
-commands sent (a drone at rest at the start), exact for a linear plant without wind.
+commands sent (a drone at rest at the start), exact for a linear plant without wind. Wind (and a
+quadrotor's departure from its hover linearisation) moves the drone by ``r_k`` more than the model
+predicted over the last interval. The state's last component is a velocity offset ``delta``
+[m/s] over the next interval (``F_e`` carries ``dt`` for it, ``e >= 1``), set by
+:meth:`VelocityLoop.observe` to the last interval's mean, ``delta += r_k / dt`` (a deadbeat
+disturbance estimate). It is not extrapolated further: a loop with integral action takes a
+wind's offset out within about a second, and extrapolated gusts would only raise spurious
+conflicts. The margin covers what the estimate misses (:func:`mpcform.sim.margin.modelled_margin`).
 """
 
 from __future__ import annotations
@@ -37,7 +44,8 @@ class VelocityLoop:
     """Per-axis linear velocity loop discretised at ``dt_s`` over ``horizon`` intervals.
 
     ``free_m`` (H + 1, d, s): ``F_e``; ``forced`` (H + 1, H, d): ``G_{e,j}`` (zero for ``j >= e``);
-    ``step_state`` (d, s, s) and ``step_input`` (d, s): one interval of the loop state;
+    ``step_state`` (d, s, s) and ``step_input`` (d, s): one interval of the loop state, whose last
+    component is the velocity offset ``delta`` (module docstring);
     ``speed_gain``: the L1 norm of the velocity's impulse response (the total variation of its step
     response), so ``|v| <= speed_gain v_max`` for commands within ``v_max`` (1 for a lag).
     """
@@ -52,7 +60,7 @@ class VelocityLoop:
     @classmethod
     def from_groups(cls, groups: list[LoopGroup], dim: int, dt_s: float, horizon: int) -> VelocityLoop:
         """The loop of per-axis groups ``(A, B, c, axes)`` (axes beyond ``dim`` ignored)."""
-        s = max(a.shape[0] for a, _, _, _ in groups)
+        s = max(a.shape[0] for a, _, _, _ in groups) + 1  # the loops' states, then delta
         free, forced = np.zeros((horizon + 1, dim, s)), np.zeros((horizon + 1, horizon, dim))
         step_state, step_input = np.zeros((dim, s, s)), np.zeros((dim, s))
         covered, gain = np.zeros(dim, dtype=bool), 1.0
@@ -74,6 +82,8 @@ class VelocityLoop:
                     forced[e, :e, ax] = g_m[e - 1 :: -1][:e]
                 step_state[ax, :k, :k], step_input[ax, :k] = phi[1:, 1:], gam[1:]
             gain = max(gain, _step_variation(a, b, c))
+        free[1:, :, -1] = dt_s  # delta moves the drone dt delta in the first interval
+        step_state[:, -1, -1] = 1.0
         if not covered.all():
             axes_given = np.flatnonzero(covered).tolist()
             raise ValidationError("plant", f"the loop covers axes {axes_given}, expected 0..{dim - 1}")
@@ -96,6 +106,13 @@ class VelocityLoop:
     def advance(self, state: Array, u: Array) -> Array:
         """The loop state (n, d, s) one interval after ``state`` with the commands ``u`` (n, d)."""
         return np.einsum("dst,ndt->nds", self.step_state, state) + u[..., None] * self.step_input
+
+    def observe(self, state: Array, residual_m: Array) -> Array:
+        """The state (n, d, s) with its velocity offset moved by ``residual_m / dt`` (n, d): where
+        the drones are minus where the model took them over the last interval."""
+        out = state.copy()
+        out[..., -1] += residual_m / self.dt_s
+        return out
 
     def free(self, state: Array) -> Array:
         """The free response ``F_e xi_0`` (H + 1, n, d) [m] of drones in loop ``state`` (n, d, s)."""
@@ -125,4 +142,3 @@ def _step_variation(a: Array, b: Array, c: Array, samples: int = 4000) -> float:
         g[i] = c @ z[:-1]
         z = phi @ z
     return float(np.abs(np.diff(g)).sum())
-

@@ -116,8 +116,9 @@ class MPCPlanner(Controller):
         self._plan: Plan | None = None
         self._u_prev = np.zeros((self.n, self.dim))
         self._tie_break.reset()
-        # drones at rest (no states without a loop)
+        # drones at rest (no states without a loop); where the loop takes them by the next step
         self._loop_state = np.zeros((self.n, self.dim, 0)) if self.loop is None else self.loop.rest(self.n)
+        self._predicted: Array | None = None
 
     @property
     def plan(self) -> Plan | None:
@@ -131,9 +132,15 @@ class MPCPlanner(Controller):
         than its limit along the first segment, or than it already was) and the step's information
         (mode ``fast_path`` | ``qp`` | ``fallback``, solver status, slack and the pairs that needed it,
         liveness events). With none of the QP's rows active the command is exactly eq. 14."""
-        out = self._step(t_s, self._check_positions(positions_m))
-        if self.loop is not None:
-            self._loop_state = self.loop.advance(self._loop_state, out.command_mps)
+        p0 = self._check_positions(positions_m)
+        if self.loop is None:
+            return self._step(t_s, p0)
+        if self._predicted is not None:  # the velocity offset of the last interval
+            self._loop_state = self.loop.observe(self._loop_state, p0 - self._predicted)
+        out = self._step(t_s, p0)
+        u0 = out.command_mps
+        self._predicted = p0 + self.dt_s * u0 + self.loop.first(self._loop_state, u0)
+        self._loop_state = self.loop.advance(self._loop_state, u0)
         return out
 
     def _step(self, t_s: float, p0: Array) -> ControlStep:

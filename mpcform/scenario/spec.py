@@ -82,7 +82,7 @@ class Scenario:
     @functools.cached_property
     def robustness(self) -> Robustness:
         """The plant's robust margin and the acceleration bound it assumes (zero for the ideal plant;
-        the wind part only when the MPC models a linear plant's velocity loop)."""
+        only what its model leaves out when the MPC models the velocity loop)."""
         spec = self.controller
         modelled = spec.kind == "mpc" and spec.mpc.plant_model
         return self.plant.robustness(self.dim, self.simulation.dt_s, self.limits.a_max_mps2, modelled)

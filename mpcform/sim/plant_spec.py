@@ -37,8 +37,8 @@ class Robustness:
     a_max_mps2: float | None
     valid_speed_mps: float = float("inf")
     loop: tuple[LoopGroup, ...] = ()
-    """The linear plants' velocity loops ``(A, B, c, axes)`` per axis group, which the planner
-    can model (:mod:`mpcform.mpc.loop`); empty for the ideal plant and the quadrotor."""
+    """The plant's velocity loops ``(A, B, c, axes)`` per axis group, which the planner can model
+    (:mod:`mpcform.mpc.loop`; the quadrotor's hover linearisation); empty for the ideal plant."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -96,22 +96,20 @@ class PlantSpec:
         """The margin and acceleration bound the planner uses for this plant (module
         :mod:`mpcform.sim.margin`): zero for the ideal plant; otherwise ``margin_m`` if given, else
         the plant's margin over one control interval of ``dt_s`` with ``a_max_mps2`` (None: the
-        plant's default); with ``loop_modelled`` (the MPC's rows model a linear plant's velocity
-        loop exactly at the interval ends, :mod:`mpcform.mpc.loop`) only its wind part and how far
-        the path bends within an interval (:func:`mpcform.sim.margin.chord_margin`). Measurement
-        noise is not part of it."""
+        plant's default); with ``loop_modelled`` (the MPC's rows model the plant's velocity loop at
+        the interval ends, :mod:`mpcform.mpc.loop`) only what that model leaves out
+        (:func:`mpcform.sim.margin.modelled_margin`). Measurement noise is not part of it."""
         if self.kind == "ideal":
             return Robustness(self.margin_m or 0.0, a_max_mps2)
-        from mpcform.sim.margin import chord_margin, default_a_max, plant_margin
+        from mpcform.sim.margin import default_a_max, modelled_margin, plant_margin
 
         plant = self.build(1, dim)
         a_max = default_a_max(plant) if a_max_mps2 is None else a_max_mps2
         margin = plant_margin(plant, dt_s, a_max)
-        linear = self.kind != "quadrotor"  # the quadrotor's loops are a linearisation: not modelled
-        loop = tuple((a, b, c, axes) for a, b, _, c, axes in plant.velocity_loops()) if linear else ()
+        loop = tuple((a, b, c, axes) for a, b, _, c, axes in plant.velocity_loops())
         computed = margin.norm_m
-        if loop and loop_modelled:  # the interval ends are exact: the wind and the bend within
-            computed = float(np.linalg.norm(margin.wind_m + chord_margin(plant, dt_s, a_max)))
+        if loop_modelled:  # the interval ends are modelled: the wind, the bend within, the remainder
+            computed = float(np.linalg.norm(modelled_margin(plant, dt_s, a_max, margin)))
         chosen = computed if self.margin_m is None else self.margin_m
         return Robustness(chosen, a_max, margin.valid_speed_mps, loop)
 

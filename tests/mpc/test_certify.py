@@ -52,6 +52,27 @@ def test_a_pair_already_too_close_may_not_get_closer() -> None:
     assert cert.certify(p0, np.array([[0.5, 0.0], [0.0, 0.0]]), items([[0, 1]])) is None  # closer
 
 
+def test_with_a_loop_a_close_pair_may_come_as_close_as_its_free_response() -> None:
+    """A 0.2 s lag: drone 1 still flies at 1 m/s towards drone 0, inside d_min. Within the
+    interval no command undoes that velocity (the hold's chord closes 0.079 m), so the hold and
+    braking certify; a command that closes the pair beyond its free response does not."""
+    from mpcform.mpc.loop import VelocityLoop
+
+    lag = (np.array([[-5.0]]), np.array([5.0]), np.array([1.0]), (0, 1))
+    loop = VelocityLoop.from_groups([lag], 2, DT, 3)
+    state = loop.rest(2)
+    state[1, 0, 0] = -1.0  # drone 1's velocity [m/s]
+    cert = certifier()
+    cert.drift = lambda u0: loop.first(state, u0)
+    p0 = np.array([[0.0, 0.0], [0.4, 0.0]])
+    hold = np.zeros((2, 2))
+    assert cert.certify(p0, hold, items([[0, 1]])) is not None
+    assert cert.certify(p0, np.array([[0.0, 0.0], [1.0, 0.0]]), items([[0, 1]])) is not None  # brake
+    assert cert.certify(p0, np.array([[1.0, 0.0], [0.0, 0.0]]), items([[0, 1]])) is None  # closer
+    cert.drift = None  # the single integrator: the hold keeps the distance, the same push does not
+    assert cert.certify(p0, np.array([[1.0, 0.0], [0.0, 0.0]]), items([[0, 1]])) is None
+
+
 def test_the_closest_point_of_the_segment_counts() -> None:
     """Passing each other sideways: 0.141 m apart at both ends of the step, 0.1 m halfway."""
     p0 = np.array([[0.0, -0.05], [0.1, 0.05]])

@@ -55,6 +55,32 @@ def test_lag_closed_form() -> None:
     assert loop.reach_factor == 1.0
 
 
+def test_the_velocity_offset_is_the_last_intervals_mean_over_the_next_interval() -> None:
+    """``observe`` moves the offset by ``residual / dt``; it moves the drones by ``dt delta`` in
+    the first interval and no further, and ``advance`` keeps it. Under a constant wind the
+    observed lag predicts the next interval end exactly once the wind's transient has settled."""
+    from mpcform.sim.wind import Wind
+
+    loop = loop_of(lag_plant(2, 3, 0.2))
+    residual = np.array([[0.01, -0.02, 0.0], [0.0, 0.0, 0.003]])
+    state = loop.observe(loop.rest(2), residual)
+    np.testing.assert_allclose(state[..., -1], residual / DT)
+    free = loop.free(state)
+    assert not free[0].any()
+    np.testing.assert_allclose(free[1:], np.broadcast_to(residual, free[1:].shape), atol=1e-15)
+    np.testing.assert_array_equal(loop.advance(state, np.zeros((2, 3)))[..., -1], state[..., -1])
+
+    plant = lag_plant(1, 3, 0.2, wind=Wind(np.array([1.0, -0.5, 0.2])))
+    plant.reset(np.zeros((1, 3)))
+    state, u, misses = loop.rest(1), np.array([[0.5, 0.0, 0.0]]), []
+    for _ in range(80):
+        s = plant.advance(u, DT)
+        miss = s.p_true_m[-1] - s.p_true_m[0] - DT * u - loop.first(state, u)
+        misses.append(np.abs(miss).max())
+        state = loop.observe(loop.advance(state, u), miss)
+    assert misses[0] > 1e-3 and misses[-1] < 1e-9  # the drag's steady offset, learnt
+
+
 def test_an_axis_without_a_loop_is_refused() -> None:
     a, b, c = np.array([[-5.0]]), np.array([5.0]), np.array([1.0])
     with pytest.raises(ValidationError, match="axes"):

@@ -164,7 +164,8 @@ def test_a_newton_step_keeps_frozen_rows_put() -> None:
     checked = 0
     for qp in qps:
         step_qp = SplitStep(planner._solver.per_drone, qp)
-        best = step_qp.solve(np.arange(qp.start_m.shape[0]), step_qp.midpoint(), np.zeros_like(qp.targets_mps), None)
+        m = qp.start_m.shape[0]
+        best = step_qp.solve(np.arange(m), step_qp.midpoint(), np.zeros_like(qp.targets_mps), None)
         free = step_qp.direction(best)
         if free is None:
             continue

@@ -96,11 +96,11 @@ duration = 6.0
 """
 
 
-@pytest.mark.parametrize(("plant", "modelled"), [("lag", True), ("second_order", True), ("quadrotor", False),
+@pytest.mark.parametrize(("plant", "modelled"), [("lag", True), ("second_order", True), ("quadrotor", True),
                                                  ("ideal", False)])  # fmt: skip
-def test_the_planner_models_a_linear_plants_velocity_loop(plant: str, modelled: bool, tmp_path: Path) -> None:
-    """A lag or second-order plant gives the planner its velocity loop (``plant_model = false``:
-    none); the ideal plant and the quadrotor give none."""
+def test_the_planner_models_the_plants_velocity_loop(plant: str, modelled: bool, tmp_path: Path) -> None:
+    """A lag, second-order or quadrotor plant (its hover linearisation) gives the planner its
+    velocity loop (``plant_model = false``: none); the ideal plant gives none."""
     from importlib import metadata
 
     try:
