@@ -18,7 +18,8 @@ class Limits:
     [m]; ``a_max_mps2``: componentwise bound on command changes, ``|u_j - u_{j-1}| <= a_max dt``
     [m/s^2]; ``geofence_min_m`` / ``geofence_max_m``: axis-aligned box (d,) the drones stay in
     (a floor is ``geofence_min_m[2]``; use +-inf for open sides); ``downwash_kappa``: separation
-    is measured as ``||diag(1, 1, 1/kappa) (p_i - p_k)||`` (spatial only, kappa >= 1).
+    is measured as ``||diag(1, 1, 1/kappa) (p_i - p_k)||`` (spatial only, kappa >= 1);
+    ``tube_m``: the plant's margin these limits are already tightened by (:func:`tightened`).
     """
 
     v_max_mps: float | None = None
@@ -27,8 +28,10 @@ class Limits:
     geofence_min_m: Array | None = None
     geofence_max_m: Array | None = None
     downwash_kappa: float | None = None
+    tube_m: float = 0.0
 
     def __post_init__(self) -> None:
+        positive("limits.tube", self.tube_m, allow_zero=True)
         for name in ("v_max_mps", "d_min_m", "a_max_mps2", "downwash_kappa"):
             value = getattr(self, name)
             if value is not None:
@@ -122,7 +125,7 @@ def tightened(
         }
     planned = Limits(
         limits.v_max_mps, None if limits.d_min_m is None else limits.d_min_m + 2.0 * tube, a_max,
-        downwash_kappa=limits.downwash_kappa, **fence,
+        downwash_kappa=limits.downwash_kappa, tube_m=tube, **fence,
     )  # fmt: skip
     inflated = tuple(
         SphereObstacle(o.center_m, o.radius_m, o.clearance_for(limits.d_min_m) + 2 * tube)

@@ -26,8 +26,11 @@ Safety is untouched: the turn only changes the cost's targets, every row stays i
 
 Blocked targets: a drone whose target lies within ``d_min`` of another drone's target, with the
 planner's limits (a plant's margin included), can never reach it; turning or backing off would
-only carry it away. Such a drone is not turned and never escalates: it presses towards its
-target and settles as close as the rows allow.
+only carry it away. Nor can a plant that is pushed off its plan by up to its margin (the tube)
+per interval hold two targets less than the tube farther apart: the pair is pushed inside its
+rows and back, in conflict at every step, and turning it would only scatter a tight formation.
+Such a drone is not turned and never escalates: it presses towards its target and settles as
+close as the rows allow.
 
 Limits: the rule is local and greedy. A drone backing out of a pocket can fall back into it once
 it is out of conflict (then it stalls and escalates again; nothing bounds how many times), and a

@@ -216,7 +216,7 @@ class Separation:
         self, dim: int, limits: Limits, settings: MPCSettings, obstacles: tuple[SphereObstacle, ...]
     ) -> None:
         self.dim, self.margin_m = dim, settings.margin_m
-        self.d_min_m = limits.d_min_m
+        self.d_min_m, self.tube_m = limits.d_min_m, limits.tube_m
         self.metric = np.ones(dim)  # W's diagonal
         if limits.downwash_kappa is not None:
             self.metric[2] = 1.0 / limits.downwash_kappa
@@ -324,12 +324,12 @@ class Separation:
         return np.concatenate([pair, single]), np.concatenate([rows.pairs, rows.labels])
 
     def blocked_targets(self, targets: Array) -> Array:
-        """Drones (n,) whose target (n, d) lies within ``d_min`` (in the metric, with the margin)
-        of another drone's target: no plan reaches both. (A target inside an obstacle is not
-        blocked: a moving reference may pass through one, and the drone goes around.)"""
+        """Drones (n,) whose target (n, d) lies within ``d_min`` + margin + 2 tube (in the metric) of
+        another's (:mod:`mpcform.mpc.liveness`; not obstacles: a moving reference may cross one)."""
         blocked = np.zeros(targets.shape[0], dtype=bool)
         if self.pairs is not None and targets.shape[0] > 1:
-            blocked[pairs_within(targets * self.metric, self.pairs.d_min_m + self.margin_m).ravel()] = True
+            near = pairs_within(targets * self.metric, self.pairs.d_min_m + self.margin_m + 2.0 * self.tube_m)
+            blocked[near.ravel()] = True
         return blocked
 
     def push_apart(self, p0: Array, cand: Candidates) -> Array:

@@ -54,9 +54,10 @@ class MPCSettings:
       hold a conflict; the other groups' optimum is their eq. 14 rollout (needs ``fast_path``).
       Equal to the monolithic QP up to solver tolerance.
     - ``fast_path``: return the eq. 14 rollout without a solver call when it meets every row.
-    - ``plant_model``: with a linear plant (``lag``, ``second_order``), write the separation rows
-      on where its velocity loop really takes the drones (:mod:`mpcform.mpc.loop`); the cost and
-      eq. 14 are unchanged. No effect on the ideal plant and the quadrotor.
+    - ``plant_model``: with a ``lag``, ``second_order`` or ``quadrotor`` plant (its hover
+      linearisation), write the separation rows on where its velocity loop really takes the drones,
+      with the last interval's velocity offset estimated (:mod:`mpcform.mpc.loop`); the cost and
+      eq. 14 are unchanged. No effect on the ideal plant.
     - ``eps_abs`` / ``eps_rel`` / ``max_iter`` / ``time_limit_s``: solver tolerances and limits.
     """
 

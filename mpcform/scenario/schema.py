@@ -289,9 +289,10 @@ SCHEMA: tuple[Table, ...] = (
         _mpc_key("grouping", "bool", "Solve only the groups of drones that hold a conflict; the others "
                  "take their eq. 14 rollout (exact)."),
         _mpc_key("fast_path", "bool", "Skip the solver when the eq. 14 rollout meets every row."),
-        _mpc_key("plant_model", "bool", "With a `lag` or `second_order` plant: separation rows on "
-                 "where its velocity loop really takes the drones (a braking drone overshoots its "
-                 "commands); cost and eq. 14 unchanged."),
+        _mpc_key("plant_model", "bool", "With a `lag`, `second_order` or `quadrotor` plant (its hover "
+                 "linearisation): separation rows on where its velocity loop really takes the drones "
+                 "(a braking drone overshoots its commands), with the last interval's velocity offset "
+                 "(wind) estimated; cost and eq. 14 unchanged."),
         _mpc_key("eps_abs", "float", "Solver absolute tolerance.", bound="> 0"),
         _mpc_key("eps_rel", "float", "Solver relative tolerance.", bound=">= 0"),
         _mpc_key("max_iter", "int", "Solver iteration limit.", bound=">= 1"),

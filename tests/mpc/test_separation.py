@@ -220,6 +220,21 @@ def test_blocked_targets_are_the_pairs_within_d_min_in_the_metric() -> None:
                                                        [0, 0, 0], [0, 0, 0]]))[:2].any()  # fmt: skip
 
 
+def test_targets_within_two_tubes_of_the_tightened_distance_are_blocked() -> None:
+    """A plant tube of 0.04 m (limits tightened to d_min 0.58): targets 0.6 m apart are blocked
+    (0.6 < 0.58 + 2 x 0.04: the plant cannot hold both without the pair in conflict), 0.7 m apart
+    are not; without a tube 0.6 m apart are not."""
+    from mpcform.mpc.limits import tightened
+
+    targets = np.array([[0.0, 0.0], [0.6, 0.0], [5.0, 0.0], [5.7, 0.0]])
+    planned, _ = tightened(Limits(v_max_mps=1.0, d_min_m=0.5), (), 0.04, None)
+    assert planned.tube_m == 0.04 and planned.d_min_m == pytest.approx(0.58)
+    sep = Separation(2, planned, MPCSettings(), ())
+    np.testing.assert_array_equal(sep.blocked_targets(targets), [True, True, False, False])
+    plain = Separation(2, Limits(v_max_mps=1.0, d_min_m=0.58), MPCSettings(), ())
+    assert not plain.blocked_targets(targets).any()
+
+
 @pytest.mark.parametrize("kappa", [None, 2.0])
 def test_the_block_size_leaves_the_rows(kappa: float | None, monkeypatch: pytest.MonkeyPatch) -> None:
     """Decoupled rows built a few pairs at a time, or all at once, with close starts (hard rows):
