@@ -60,8 +60,7 @@ def _run(args: argparse.Namespace) -> int:
         cli_runner.check_run_options(args, scenario)  # e.g. --plot without matplotlib: fail before running
         out_dir = Path("results") / scenario.name if args.out is None else Path(args.out)
         check_output_dir("--out", out_dir)
-        warning = scenario.spacing_warning(args.controller)
-        if warning is not None:
+        for warning in scenario.warnings(args.controller):
             print(f"mpcform: warning: {warning}", file=sys.stderr)
         run = run_scenario(scenario, out_dir, controller=args.controller, solver=args.solver,
                            progress=cli_runner.progress_bar(scenario))  # fmt: skip
@@ -91,8 +90,7 @@ def _validate(args: argparse.Namespace) -> int:
     result = check_scenario_file(args.scenario, args.max_memory)
     if result.scenario is not None:
         print(f"OK {describe(result.scenario)}")
-        warning = result.scenario.spacing_warning()
-        if warning is not None:
+        for warning in result.scenario.warnings():
             print(f"mpcform: warning: {args.scenario}: {warning}", file=sys.stderr)
         return 0
     for problem in result.problems:

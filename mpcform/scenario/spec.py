@@ -87,6 +87,23 @@ class Scenario:
         modelled = spec.kind == "mpc" and spec.mpc.plant_model
         return self.plant.robustness(self.dim, self.simulation.dt_s, self.limits.a_max_mps2, modelled)
 
+    def warnings(self, controller: str | None = None) -> list[str]:
+        """The plant's warnings for a run with ``controller`` (None: the file's): the spacing and
+        the speed warnings."""
+        if (controller or self.controller.kind) != "mpc":
+            return []
+        return [w for w in (self.spacing_warning(controller), self.speed_warning()) if w is not None]
+
+    def speed_warning(self) -> str | None:
+        """A line when ``limits.v_max`` exceeds the speed below which the quadrotor's margin holds
+        (:func:`mpcform.sim.margin.valid_speed`); None otherwise."""
+        valid, v_max = self.robustness.valid_speed_mps, self.limits.v_max_mps
+        if v_max is None or not v_max > valid:
+            return None
+        return (f"plant: its margin holds for commands below {valid:.3g} m/s (beyond, drag in the "
+                "strongest wind plus a_max may exceed the tilt or thrust authority) and limits.v_max "
+                f"is {v_max:.3g} m/s (lower limits.v_max, limits.a_max or the wind's bound)")  # fmt: skip
+
     def spacing_warning(self, controller: str | None = None) -> str | None:
         """A line when the MPC cannot reach the final formation under the plant: its closest pair
         is nearer than ``d_min + 2 margin``, the distance the planner keeps between two drones

@@ -32,6 +32,9 @@ quadrotor's bound holds while the commanded speed stays below :attr:`Margin.vali
 (beyond it drag plus ``a_max`` exceed the tilt or thrust authority and the drone falls behind
 without bound); it covers velocity tracking (no planned positions passed to the plant). Position
 noise is not included: the planner's measured start is off by the noise on top of this margin.
+
+When the planner models the velocity loop (:mod:`mpcform.mpc.loop`, the default), its rows hold at
+the interval ends up to what that model misses, and :func:`modelled_margin` is the margin instead.
 """
 
 from __future__ import annotations

@@ -70,3 +70,28 @@ def test_a_modelled_loop_keeps_only_the_winds_margin() -> None:
     bend = float(np.linalg.norm(chord_margin(plant, 0.1, scenario_from_dict(data).robustness.a_max_mps2)))
     assert margins[False, True] == pytest.approx(bend, rel=1e-12) and 0.001 < bend < 0.005
     assert margins[False, False] > 0.04 and bend < margins[True, True] < margins[True, False]
+
+
+def test_speed_warning_when_v_max_exceeds_the_quadrotors_valid_speed() -> None:
+    """The windy swap flies at v_max 1 m/s; its quadrotor margin holds below 0.954 m/s in the
+    strongest wind (drag plus a_max within the 20 degree tilt): one warning, only for the MPC;
+    at v_max 0.9 m/s, or in still air (valid below 3.87 m/s), none."""
+    import tomllib
+    from importlib import metadata
+
+    try:
+        metadata.distribution("drone-models")
+    except metadata.PackageNotFoundError:
+        pytest.skip("needs drone-models: pip install -e '.[flight]'")
+    from mpcform.scenario.load import scenario_from_dict
+
+    data = tomllib.loads((SCENARIOS / "swap_spatial_12_quadrotor_wind.toml").read_text())
+    text = scenario_from_dict(data).speed_warning()
+    assert text is not None and "below 0.954 m/s" in text and "limits.v_max is 1 m/s" in text
+    assert scenario_from_dict(data).warnings() == [text]
+    assert scenario_from_dict(data).warnings("tracking") == []
+    data["limits"]["v_max"] = 0.9
+    assert scenario_from_dict(data).warnings() == []
+    data["limits"]["v_max"] = 1.0
+    del data["plant"]["wind"]
+    assert scenario_from_dict(data).speed_warning() is None
