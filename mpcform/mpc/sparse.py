@@ -8,7 +8,9 @@ QP's multipliers, which grow with speed and shrink with ``dt``. When a solve use
 is solved again with the weight raised :data:`RAISE` fold (up to :data:`MAX_RAISES` times) while
 that lowers the slack: a feasible hard QP then gives its own optimum (slack within the solver's
 tolerance), an infeasible one keeps the least slack. The weight enters the cost linearly, so the
-Hessian's conditioning does not change.
+Hessian's conditioning does not change; an interior-point solver can still need far more
+iterations at a raised weight, so a re-solve gets at most :data:`RESOLVE_ITER_FACTOR` times the
+first solve's iterations (a re-solve that stops there keeps the solution before it).
 """
 
 from __future__ import annotations
@@ -28,6 +30,8 @@ from mpcform.solvers.base import QPBackend, QPContext, QPSolution
 
 RAISE = 30.0  # the slack weight is raised this many fold per re-solve
 MAX_RAISES = 3  # at most this many re-solves (w1 up to 27,000 times the setting)
+RESOLVE_ITER_FACTOR = 4  # a re-solve may take this many times the first solve's iterations, ...
+RESOLVE_MIN_ITER = 50  # ... and at least this many (PIQP took 1,000 at 13 ms each at a raised weight)
 SLACK_TOL_M = 1e-6  # a solve that misses no row by more than this is final [m]
 
 
@@ -97,17 +101,21 @@ class SparseSolver(StepSolver):
         """``sol``, or a re-solve with a raised slack weight that needs less slack (module docstring)."""
         lay, weight = mpc_qp.layout, self.settings.slack_weight
         slack = lay.slack_slice()
-        for _ in range(MAX_RAISES):
-            if not sol.success or sol.x is None or not self._short(sol.x, mpc_qp, qp):
-                return sol
-            weight *= RAISE
-            self.backend.update(mpc_qp.cost_vector(qp.targets_mps, weight), lo, hi, a_data)
-            again = self.backend.solve(x0)
-            if not again.success or again.x is None or again.x[slack].sum() >= sol.x[slack].sum():
-                return sol
-            sol = QPSolution(again.x, again.y, True, again.status, sol.iterations + again.iterations,
-                             sol.solve_time_s + again.solve_time_s)  # fmt: skip
-        return sol
+        self.backend.limit_iterations(max(RESOLVE_MIN_ITER, RESOLVE_ITER_FACTOR * sol.iterations))
+        try:
+            for _ in range(MAX_RAISES):
+                if not sol.success or sol.x is None or not self._short(sol.x, mpc_qp, qp):
+                    return sol
+                weight *= RAISE
+                self.backend.update(mpc_qp.cost_vector(qp.targets_mps, weight), lo, hi, a_data)
+                again = self.backend.solve(x0)
+                if not again.success or again.x is None or again.x[slack].sum() >= sol.x[slack].sum():
+                    return sol
+                sol = QPSolution(again.x, again.y, True, again.status, sol.iterations + again.iterations,
+                                 sol.solve_time_s + again.solve_time_s)  # fmt: skip
+            return sol
+        finally:
+            self.backend.limit_iterations(None)
 
     def _short(self, z: Array, mpc_qp: MPCQP, qp: StepQP) -> bool:
         """Whether the solution ``z`` misses a separation row by more than :data:`SLACK_TOL_M` (an

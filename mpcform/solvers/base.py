@@ -127,3 +127,7 @@ class QPBackend(ABC):
 
     def set_context(self, context: QPContext) -> None:  # noqa: B027 - optional hook
         """The meaning of the current problem (used only by backends with ``needs_context``)."""
+
+    def limit_iterations(self, max_iter: int | None) -> None:  # noqa: B027 - optional hook
+        """Cap the next solves at ``max_iter`` iterations (None: the options' limit again); a
+        backend without the setting ignores it."""

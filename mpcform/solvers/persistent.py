@@ -44,6 +44,7 @@ class OSQPBackend(QPBackend):
         self._osqp = osqp
         self._solver: Any = None
         self._nnz_a = 0
+        self._own_max_iter: int | None = None  # the setup's limit, restored after a cap
 
     def setup(self, P: sp.csc_matrix, q: Array, A: sp.csc_matrix, lo: Array, hi: Array) -> None:
         o = self.options
@@ -52,7 +53,13 @@ class OSQPBackend(QPBackend):
         solver = self._osqp.OSQP()
         solver.setup(P.copy(), q, A.copy(), lo, hi, verbose=False, polishing=True, warm_starting=True,
                      adaptive_rho=True, **extra)  # fmt: skip
-        self._solver, self._nnz_a = solver, A.nnz
+        self._solver, self._nnz_a, self._own_max_iter = solver, A.nnz, None
+
+    def limit_iterations(self, max_iter: int | None) -> None:
+        if self._solver is not None:
+            if self._own_max_iter is None:
+                self._own_max_iter = int(self._solver.settings.max_iter)
+            self._solver.update_settings(max_iter=max_iter or self._own_max_iter)
 
     def update(self, q: Array, lo: Array, hi: Array, A_data: Array) -> None:
         if A_data.shape[0] != self._nnz_a:  # OSQP would only print an error and keep the old A
@@ -92,6 +99,7 @@ class PIQPBackend(QPBackend):
         self._obj: _PIQPObject | None = None  # the current pattern's solver object
         self._objects: OrderedDict[bytes, _PIQPObject] = OrderedDict()  # least recently used first
         self.keep_nnz = keep_nnz  # nonzeros of the patterns kept besides the current one
+        self._cap: int | None = None  # the iteration cap of the next solves (None: the setup's)
         self.reused = 0  # setups served by a kept solver object
 
     def setup(self, P: sp.csc_matrix, q: Array, A: sp.csc_matrix, lo: Array, hi: Array) -> None:
@@ -121,7 +129,7 @@ class PIQPBackend(QPBackend):
         for key, value in given(eps_abs=o.eps_abs, eps_rel=o.eps_rel, max_iter=o.max_iter).items():
             setattr(st, key, value)
         solver.setup(P.copy(), q, a_eq.copy(), lo[eq], g.copy(), lo[~eq], hi[~eq])
-        return _PIQPObject(solver, eq, a_eq, eq_ids, g, g_ids, P.data.copy())
+        return _PIQPObject(solver, eq, a_eq, eq_ids, g, g_ids, P.data.copy(), int(st.max_iter))
 
     def update(self, q: Array, lo: Array, hi: Array, A_data: Array) -> None:
         obj = self._current()
@@ -137,9 +145,13 @@ class PIQPBackend(QPBackend):
             raise SolverError(self.name, "update() or solve() before setup()")
         return self._obj
 
+    def limit_iterations(self, max_iter: int | None) -> None:
+        self._cap = max_iter
+
     def solve(self, x0: Array | None = None) -> QPSolution:
         obj = self._current()
         solver = obj.solver
+        solver.settings.max_iter = self._cap or obj.max_iter
         start = time.perf_counter()
         status = solver.solve()
         elapsed = time.perf_counter() - start
@@ -159,7 +171,8 @@ class PIQPBackend(QPBackend):
 @dataclass(eq=False)
 class _PIQPObject:
     """A ``piqp.SparseSolver`` set up for one pattern: its equality rows ``eq``, the equality and
-    inequality blocks (``a_eq``, ``g``) and which entries of ``A``'s data fill them, ``P``'s values."""
+    inequality blocks (``a_eq``, ``g``) and which entries of ``A``'s data fill them, ``P``'s values
+    and its iteration limit."""
 
     solver: Any
     eq: Array
@@ -168,7 +181,7 @@ class _PIQPObject:
     g: sp.csc_matrix
     g_ids: Array
     p_data: Array
-
+    max_iter: int  # its settings' iteration limit
     @property
     def nnz(self) -> int:
         """Nonzeros of its pattern (``P`` and ``A``)."""

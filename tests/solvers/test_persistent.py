@@ -74,6 +74,25 @@ def test_piqp_reuses_its_object_when_a_pattern_comes_back(
     assert got.y is not None and want.y is not None and np.max(np.abs(got.y - want.y)) < 1e-7
 
 
+@pytest.mark.parametrize("backend", [OSQPBackend, PIQPBackend])
+def test_an_iteration_cap_stops_the_next_solves_and_lifts(
+    backend: type, recorded: dict[str, list[RecordedQP]], require_usable: Callable[[str], None]
+) -> None:
+    """``limit_iterations(k)`` stops the next solves after k iterations (not solved); ``None``
+    restores the backend's own limit and the QP solves (a freshly set-up backend each time: OSQP
+    warm-starts from its last iterate)."""
+    require_usable(backend.name)
+    qp = recorded["swap_spatial_12"][0]
+    capped, lifted = backend(SolverOptions(1e-5, 1e-5)), backend(SolverOptions(1e-5, 1e-5))
+    for solver, cap in ((capped, 2), (lifted, None)):
+        solver.setup(qp.P, qp.q, qp.A, qp.l, qp.u)
+        solver.limit_iterations(2)
+        solver.limit_iterations(cap)
+    short, full = capped.solve(), lifted.solve()
+    assert not short.success and short.iterations == 2
+    assert full.success and full.iterations > 2
+
+
 def test_piqp_keeps_recent_patterns_up_to_its_nonzeros(require_usable: Callable[[str], None]) -> None:
     require_usable("piqp")
     backend = PIQPBackend(SolverOptions(), keep_nnz=30)
