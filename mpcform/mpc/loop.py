@@ -3,7 +3,7 @@ r"""The planner's model of a drone's velocity loop: where a lagging drone really
 The planner's single integrator predicts ``p0 + x_e`` with ``x_e = dt sum_{j<e} u_j``. A drone
 whose velocity loop is linear, per axis ``xi' = A xi + B u``, ``v = c^T xi`` (first-order lag:
 ``xi = v``, ``A = -1/tau``, ``B = 1/tau``; second order: ``xi = (v, v')``), flown with each
-command held over its interval, is instead at
+command held over its interval (the quadrotor: its hover linearisation), is instead at
 
 .. math::
     p_e = p_0 + x_e + F_e \xi_0 + \sum_{j<e} G_{e,j} u_j        \qquad \text{(per axis)},

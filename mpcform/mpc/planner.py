@@ -15,13 +15,14 @@ the rollout itself, which meets them exactly; so the rollout is the decoupled QP
 the fast path (which tests the joint rows) returns the same command as a solve. A rollout that
 breaks a limit row is never a linearisation point (the plan could not follow it).
 
-With a velocity loop (``loop``, :mod:`mpcform.mpc.loop`: a linear plant's) every separation test
+With a velocity loop (``loop``, :mod:`mpcform.mpc.loop`: a linear plant's, or the quadrotor's
+hover linearisation) every separation test
 is on where the loop takes the drones: the rows (the forced response in the QP, the free one in
 their bounds), the rollout's tests, the guess (the true path of the shifted plan) and the
 certification (the interval's true chord). The cost, and so eq. 14, stay on the single
 integrator; the tie-break turns only drones whose single-integrator rollout conflicts (an
 encounter), not a drone whose own overshoot does (the QP brakes it). The loop state is run on
-the commands sent, from rest.
+the commands sent, from rest, plus the last interval's velocity offset.
 """
 
 from __future__ import annotations
