@@ -100,14 +100,14 @@ class SparseSolver(StepSolver):
     ) -> QPSolution:
         """``sol``, or a re-solve with a raised slack weight that needs less slack (module docstring)."""
         lay, weight = mpc_qp.layout, self.settings.slack_weight
-        slack = lay.slack_slice()
-        self.backend.limit_iterations(max(RESOLVE_MIN_ITER, RESOLVE_ITER_FACTOR * sol.iterations))
+        slack, cap = lay.slack_slice(), max(RESOLVE_MIN_ITER, RESOLVE_ITER_FACTOR * sol.iterations)
         try:
             for _ in range(MAX_RAISES):
                 if not sol.success or sol.x is None or not self._short(sol.x, mpc_qp, qp):
                     return sol
                 weight *= RAISE
                 self.backend.update(mpc_qp.cost_vector(qp.targets_mps, weight), lo, hi, a_data)
+                self.backend.limit_iterations(cap)
                 again = self.backend.solve(x0)
                 if not again.success or again.x is None or again.x[slack].sum() >= sol.x[slack].sum():
                     return sol
@@ -115,7 +115,8 @@ class SparseSolver(StepSolver):
                                  sol.solve_time_s + again.solve_time_s)  # fmt: skip
             return sol
         finally:
-            self.backend.limit_iterations(None)
+            if weight != self.settings.slack_weight:  # a re-solve was capped
+                self.backend.limit_iterations(None)
 
     def _short(self, z: Array, mpc_qp: MPCQP, qp: StepQP) -> bool:
         """Whether the solution ``z`` misses a separation row by more than :data:`SLACK_TOL_M` (an

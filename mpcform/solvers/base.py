@@ -129,5 +129,5 @@ class QPBackend(ABC):
         """The meaning of the current problem (used only by backends with ``needs_context``)."""
 
     def limit_iterations(self, max_iter: int | None) -> None:  # noqa: B027 - optional hook
-        """Cap the next solves at ``max_iter`` iterations (None: the options' limit again); a
+        """Cap the next solves at ``max_iter`` iterations (None: the limit set up again); a
         backend without the setting ignores it."""

@@ -44,7 +44,7 @@ class OSQPBackend(QPBackend):
         self._osqp = osqp
         self._solver: Any = None
         self._nnz_a = 0
-        self._own_max_iter: int | None = None  # the setup's limit, restored after a cap
+        self._own_max_iter = 0  # the setup's iteration limit, restored after a cap
 
     def setup(self, P: sp.csc_matrix, q: Array, A: sp.csc_matrix, lo: Array, hi: Array) -> None:
         o = self.options
@@ -53,12 +53,10 @@ class OSQPBackend(QPBackend):
         solver = self._osqp.OSQP()
         solver.setup(P.copy(), q, A.copy(), lo, hi, verbose=False, polishing=True, warm_starting=True,
                      adaptive_rho=True, **extra)  # fmt: skip
-        self._solver, self._nnz_a, self._own_max_iter = solver, A.nnz, None
+        self._solver, self._nnz_a, self._own_max_iter = solver, A.nnz, int(solver.settings.max_iter)
 
     def limit_iterations(self, max_iter: int | None) -> None:
         if self._solver is not None:
-            if self._own_max_iter is None:
-                self._own_max_iter = int(self._solver.settings.max_iter)
             self._solver.update_settings(max_iter=max_iter or self._own_max_iter)
 
     def update(self, q: Array, lo: Array, hi: Array, A_data: Array) -> None:
@@ -182,6 +180,7 @@ class _PIQPObject:
     g_ids: Array
     p_data: Array
     max_iter: int  # its settings' iteration limit
+
     @property
     def nnz(self) -> int:
         """Nonzeros of its pattern (``P`` and ``A``)."""
