@@ -55,13 +55,10 @@ def check(data: dict) -> dict:
     return m
 
 
-OPEN = {  # measured on this commit: the open part of the acceptance (strict: a fix makes the test fail)
-    ("formation_flight_100", "quadrotor_wind"): "completion 0.99: one drone ends 0.103 m from its target "
-    "(tolerance 0.1 m), pressed by its neighbours' rows in the gusts at the final spacing of 0.6 m "
-    "(tightened distance 0.578 m); safe (0.553 m)",
-}
+OPEN: dict[tuple[str, str], str] = {}  # the open part of the acceptance (strict: a fix makes the test fail)
 OPEN_RANDOM = {
-    9: "quadrotor: completion 0.95 (20 planar drones, joint, 29.7 s); safe (0.586 m)",
+    9: "quadrotor in gusts: completion 0.65 at 29.7 s (20 planar drones, joint): the ring's tie-break "
+    "takes until 34 s in the gusts (16 s in calm air); safe (0.583 m)",
 }
 
 
@@ -76,6 +73,20 @@ def test_bundled_scenario_on_a_realistic_plant(name: str, plant: str) -> None:
     if plant.startswith("quadrotor") and not FLIGHT:
         pytest.skip("needs drone-models: pip install -e '.[flight]'")
     check(with_plant(FILES[name], PLANTS[plant]))
+
+
+@pytest.mark.parametrize("seed", range(1, 6))
+def test_a_tight_formation_in_gusts_keeps_d_min_for_every_gust_seed(seed: int) -> None:
+    """formation_flight_100 ends at 0.6 m spacing, 0.022 m above its tightened distance: the gusts
+    keep pressing its rows. Every first row is hard under a loop, so no drone approaches one partner
+    because another forces a slack (seeds 2 and 3 came to 0.425 and 0.449 m with slack there); the
+    completion at the last sample varies with the gusts (0.89 to 1.0 over seeds 0 to 5)."""
+    if not FLIGHT:
+        pytest.skip("needs drone-models: pip install -e '.[flight]'")
+    data = with_plant(FILES["formation_flight_100"], PLANTS["quadrotor_wind"]) | {"seed": seed}
+    m = run_scenario(scenario_from_dict(data)).summary["metrics"]
+    assert m["separation_violations_true"] == 0, m["min_separation_true"]
+    assert m["speed_violations"] == 0
 
 
 @pytest.mark.parametrize(

@@ -22,7 +22,9 @@ their bounds), the rollout's tests, the guess (the true path of the shifted plan
 certification (the interval's true chord). The cost, and so eq. 14, stay on the single
 integrator; the tie-break turns only drones whose single-integrator rollout conflicts (an
 encounter), not a drone whose own overshoot does (the QP brakes it). The loop state is run on
-the commands sent, from rest, plus the last interval's velocity offset.
+the commands sent, from rest, plus the last interval's velocity offset. Every item's first row is
+then hard, lowered at most to what braking reaches: the first interval is mostly the loop's free
+response, and a slack there would let a drone approach one partner while another forces it.
 """
 
 from __future__ import annotations
@@ -187,7 +189,8 @@ class MPCPlanner(Controller):
         if solver is not self._solver or st.split_iterations:  # a pair's split moves both its drones
             linked = rows.labels[(rows.labels[:, 1] >= 0) & rows.single_on]
         drones = qp_drones(bad, linked) if grouped else np.arange(self.n)
-        sub = rows.subset(drones, self.n, on_only=grouped)  # grouped: the pattern follows the groups
+        qp_rows, relaxed = self._hard_first_rows(rows)
+        sub = qp_rows.subset(drones, self.n, on_only=grouped)  # grouped: the pattern follows the groups
         warm = warm_start(self._plan, p0, u_nom, x_nom)[:, :, drones] if self._solver.warm_starts else None
         qp = StepQP(self.n, drones, p0[drones], c[:, drones], self._u_prev[drones], sub, cand.rebuilt, warm)
         sol, active = solver.solve(qp)
@@ -198,7 +201,8 @@ class MPCPlanner(Controller):
             u0 = self._certifier.certify(p0, u[0], cand)
             if u0 is not None:
                 self._accept(p0, u, x)
-                info = self._qp_info(sol, sol.x, active, drones, self._true(u, x), rows, inside_m, inside)
+                x_true = self._true(u, x)
+                info = self._qp_info(sol, sol.x, active, drones, x_true, rows, inside_m, inside, relaxed)
                 return ControlStep(u0, info)
             status, solved = status + "; command failed certification", u[0]
         u, x, note = self._certifier.fallback(self._plan, p0, cand, horizon, solved, self._u_prev)
@@ -240,6 +244,30 @@ class MPCPlanner(Controller):
         shift_s[rows.single_hard, 0] = 0.0
         return replace(rows, pair_lower=rows.pair_lower - shift_p, single_lower=rows.single_lower - shift_s)
 
+    def _hard_first_rows(self, rows: SeparationRows) -> tuple[SeparationRows, bool]:
+        """With a loop, the QP's rows with every item's first row hard (no slack), its bound lowered
+        to what the braking command reaches (the last command moved towards zero by ``a_max dt``, or
+        zero): the first interval is mostly the loop's free response, so a slack there (one per
+        drone and step) would let a drone approach one partner as far as another forces it to, and
+        fail the certification; braking meets every first row, so they stay feasible. Also whether a
+        bound was lowered (the report then checks the rows as built). Without a loop: ``rows``."""
+        if self.loop is None:
+            return rows, False
+        u, step = self._u_prev, self._certifier.a_step_mps
+        brake = np.zeros_like(u) if step is None else u - np.clip(u, -step, step)
+        first = (self.dt_s + self.loop.forced[1, 0]) * brake  # (n, d): x_1 + G_10 u_0 when braking
+        i, k = rows.pairs.T
+        at_p = np.einsum("pd,pd->p", rows.pair_coeffs[:, 0], first[i] - first[k])
+        at_s = np.einsum("sd,sd->s", rows.single_coeffs[:, 0], first[rows.singles])
+        lower_p, lower_s = rows.pair_lower.copy(), rows.single_lower.copy()
+        np.minimum(lower_p[:, 0], at_p, out=lower_p[:, 0])
+        np.minimum(lower_s[:, 0], at_s, out=lower_s[:, 0])
+        relaxed = bool(np.any((lower_p[:, 0] < rows.pair_lower[:, 0]) & rows.pair_on)
+                       or np.any((lower_s[:, 0] < rows.single_lower[:, 0]) & rows.single_on))  # fmt: skip
+        hard = replace(rows, pair_lower=lower_p, single_lower=lower_s, pair_hard=np.ones_like(rows.pair_hard),
+                       single_hard=np.ones_like(rows.single_hard))  # fmt: skip
+        return hard, relaxed
+
     def _liveness(self) -> dict[str, int]:
         """The tie-break's events of this step (StepInfo fields)."""
         tb = self._tie_break
@@ -264,7 +292,7 @@ class MPCPlanner(Controller):
 
     def _qp_info(
         self, sol: QPSolution, z: Array, active: int, drones: Array, x: Array, rows: SeparationRows,
-        inside_m: float, inside: Array,
+        inside_m: float, inside: Array, relaxed: bool = False,
     ) -> StepInfo:
         """What a certified solve ``z`` reports: its solver figures and the slack it needed (the
         items whose rows positions ``x`` (H, n, d) miss, and the items ``inside`` that start
@@ -272,7 +300,7 @@ class MPCPlanner(Controller):
         nud = self.settings.horizon * drones.shape[0] * self.dim
         slack = z[2 * nud : 2 * nud + self.settings.horizon * drones.shape[0]]
         shortfall, missed = inside_m, inside
-        if slack.max(initial=0.0) > SLACK_REPORT_M / 2:
+        if relaxed or slack.max(initial=0.0) > SLACK_REPORT_M / 2:
             planned, missed = self._separation.shortfall(x, rows, SLACK_REPORT_M)
             shortfall, missed = max(shortfall, planned), np.concatenate([inside, missed])
         return StepInfo(

@@ -374,3 +374,35 @@ def test_split_rounds_while_stalled_let_a_decoupled_ring_pass() -> None:
     assert outcome(jammed)["completion"] < 1.0
     out = outcome(ring)
     assert out["completion"] == 1.0 and not out["separation_violations"] and not out["approached"]
+
+
+@pytest.mark.parametrize("coupling", ["joint", "decoupled"])
+def test_with_a_loop_every_first_row_is_hard_and_braking_meets_it(coupling: str) -> None:
+    """With a velocity loop the QP's first rows carry no slack (a drone's slack at the first step
+    would let it approach one partner as far as another forces it to): each is lowered at most to
+    what the braking command reaches, which meets them all, and a lowered bound is reported."""
+    from mpcform.mpc.loop import VelocityLoop
+
+    lag = (np.array([[-5.0]]), np.array([5.0]), np.array([1.0]), (0, 1))
+    tpl = Template(np.array([[-1.0, 0.0], [0.0, 0.0], [1.0, 0.0]]))
+    ref = ConstantReference(tpl, FormationState.from_param([0.0, 0.0]))
+    limits = Limits(v_max_mps=1.0, d_min_m=0.5, a_max_mps2=2.0)
+    planner = MPCPlanner(ref, 0.1, limits, MPCSettings(horizon=6, coupling=coupling),
+                         loop=VelocityLoop.from_groups([lag], 2, 0.1, 6))  # fmt: skip
+    p0 = np.array([[-0.3, 0.0], [0.0, 0.02], [0.3, 0.0]])  # the middle drone squeezed, moving at both
+    planner.reset(0.0, p0)
+    planner._u_prev = np.array([[0.8, 0.0], [0.0, 0.0], [-0.8, 0.0]])
+    planner._loop_state[..., 0] = planner._u_prev  # the lag's velocity
+    cand = planner._candidates.select(p0)
+    rows = planner._rows(p0, planner._guess(p0), cand)
+    hard, relaxed = planner._hard_first_rows(rows)
+    assert hard.pair_hard.all() and hard.single_hard.all() and relaxed
+    assert np.all(hard.pair_lower <= rows.pair_lower) and np.all(hard.single_lower <= rows.single_lower)
+    assert np.array_equal(hard.pair_lower[:, 1:], rows.pair_lower[:, 1:])
+    assert np.array_equal(hard.single_lower[:, 1:], rows.single_lower[:, 1:])
+    brake = planner._u_prev - np.clip(planner._u_prev, -0.2, 0.2)
+    first = (0.1 + planner.loop.forced[1, 0]) * brake
+    at_p = np.einsum("pd,pd->p", hard.pair_coeffs[:, 0], first[hard.pairs[:, 0]] - first[hard.pairs[:, 1]])
+    at_s = np.einsum("sd,sd->s", hard.single_coeffs[:, 0], first[hard.singles])
+    assert np.all(at_p >= hard.pair_lower[:, 0]) and np.all(at_s >= hard.single_lower[:, 0])
+    assert (at_p < rows.pair_lower[:, 0]).any() or (at_s < rows.single_lower[:, 0]).any()
