@@ -257,16 +257,17 @@ class SplitStep:
         step``, and the fraction of it to the first breakpoint (a row's slack or multiplier
         reaching zero, 1 at most); None at convergence."""
         shape, r = self.splittable.shape, self.r
-        grad, blocks, moves, split = np.zeros(shape), [], [], []
-        for i in range(self.m):
-            split.append(self._split_rows(it.rows[i]))
-            pair, row, sign, ok = split[-1]
-            np.add.at(grad, (pair[ok], row[ok]), sign[ok] * it.mu[i][ok])
-        for i in range(self.m):  # the drones of rows with a gradient: the others stay put
-            pair, row, sign, ok = split[i]
-            if not (grad[pair[ok], row[ok]] != 0.0).any():
-                continue
-            sens = self.sensitivity(it, i)
+        grad, blocks, moves = np.zeros(shape), [], []
+        offsets = np.zeros(self.m + 1, dtype=np.intp)
+        np.cumsum([ids.shape[0] for ids in it.rows], out=offsets[1:])
+        all_pair, all_row, all_sign, all_ok = self._split_rows(np.concatenate(it.rows))
+        at = (all_pair[all_ok], all_row[all_ok])  # every drone's rows, in drone order
+        np.add.at(grad, at, all_sign[all_ok] * np.concatenate(it.mu)[all_ok])
+        owner = np.repeat(np.arange(self.m), np.diff(offsets))[all_ok]
+        for i in np.unique(owner[grad[at] != 0.0]):  # the drones of rows with a gradient: the others stay put
+            rows_i = slice(offsets[i], offsets[i + 1])
+            pair, row, sign, ok = all_pair[rows_i], all_row[rows_i], all_sign[rows_i], all_ok[rows_i]
+            sens = self.sensitivity(it, int(i))
             if sens is not None:
                 use = ok[sens.active]
                 act = sens.active[use]
