@@ -245,28 +245,14 @@ class MPCPlanner(Controller):
         return replace(rows, pair_lower=rows.pair_lower - shift_p, single_lower=rows.single_lower - shift_s)
 
     def _hard_first_rows(self, rows: SeparationRows) -> tuple[SeparationRows, bool]:
-        """With a loop, the QP's rows with every item's first row hard (no slack), its bound lowered
-        to what the braking command reaches (the last command moved towards zero by ``a_max dt``, or
-        zero): the first interval is mostly the loop's free response, so a slack there (one per
-        drone and step) would let a drone approach one partner as far as another forces it to, and
-        fail the certification; braking meets every first row, so they stay feasible. Also whether a
-        bound was lowered (the report then checks the rows as built). Without a loop: ``rows``."""
+        """With a loop, the QP's rows with every first row hard, lowered at most to where braking
+        (the last command moved towards zero by ``a_max dt``, or zero) takes the drones
+        (:func:`hard_first_rows`); also whether a bound was lowered. Without a loop: ``rows``."""
         if self.loop is None:
             return rows, False
         u, step = self._u_prev, self._certifier.a_step_mps
         brake = np.zeros_like(u) if step is None else u - np.clip(u, -step, step)
-        first = (self.dt_s + self.loop.forced[1, 0]) * brake  # (n, d): x_1 + G_10 u_0 when braking
-        i, k = rows.pairs.T
-        at_p = np.einsum("pd,pd->p", rows.pair_coeffs[:, 0], first[i] - first[k])
-        at_s = np.einsum("sd,sd->s", rows.single_coeffs[:, 0], first[rows.singles])
-        lower_p, lower_s = rows.pair_lower.copy(), rows.single_lower.copy()
-        np.minimum(lower_p[:, 0], at_p, out=lower_p[:, 0])
-        np.minimum(lower_s[:, 0], at_s, out=lower_s[:, 0])
-        relaxed = bool(np.any((lower_p[:, 0] < rows.pair_lower[:, 0]) & rows.pair_on)
-                       or np.any((lower_s[:, 0] < rows.single_lower[:, 0]) & rows.single_on))  # fmt: skip
-        hard = replace(rows, pair_lower=lower_p, single_lower=lower_s, pair_hard=np.ones_like(rows.pair_hard),
-                       single_hard=np.ones_like(rows.single_hard))  # fmt: skip
-        return hard, relaxed
+        return hard_first_rows(rows, (self.dt_s + self.loop.forced[1, 0]) * brake)
 
     def _liveness(self) -> dict[str, int]:
         """The tie-break's events of this step (StepInfo fields)."""
@@ -356,3 +342,25 @@ def _check_limits(
         raise ValidationError("controller.solver", f"{text} solves the sparse QP, but decoupled mode "
                               "solves each drone's QP with DAQP here; set controller.per_drone = false "
                               "to use it")  # fmt: skip
+
+
+def hard_first_rows(rows: SeparationRows, first_m: Array) -> tuple[SeparationRows, bool]:
+    """``rows`` with every item's first row hard (no slack), its bound lowered to the row's value
+    at ``first_m`` (n, d) where that is lower, and whether a bound was (of an item within reach).
+
+    With a loop the first interval is mostly the free response: a slack there (one per drone and
+    step) would let a drone approach one partner as far as another forces it to, and fail the
+    certification. ``first_m`` is where braking takes the drones (``x_1 + G_10 u_0``), so braking
+    meets every first row and they stay feasible.
+    """
+    i, k = rows.pairs.T
+    at_p = np.einsum("pd,pd->p", rows.pair_coeffs[:, 0], first_m[i] - first_m[k])
+    at_s = np.einsum("sd,sd->s", rows.single_coeffs[:, 0], first_m[rows.singles])
+    lower_p, lower_s = rows.pair_lower.copy(), rows.single_lower.copy()
+    np.minimum(lower_p[:, 0], at_p, out=lower_p[:, 0])
+    np.minimum(lower_s[:, 0], at_s, out=lower_s[:, 0])
+    relaxed = bool(np.any((lower_p[:, 0] < rows.pair_lower[:, 0]) & rows.pair_on)
+                   or np.any((lower_s[:, 0] < rows.single_lower[:, 0]) & rows.single_on))  # fmt: skip
+    hard = replace(rows, pair_lower=lower_p, single_lower=lower_s, pair_hard=np.ones_like(rows.pair_hard),
+                   single_hard=np.ones_like(rows.single_hard))  # fmt: skip
+    return hard, relaxed
