@@ -235,7 +235,7 @@ def run_sweep(
         raise ValidationError("--executor", f"expected one of {EXECUTORS}, got {executor!r}")
     if workers < 1:
         raise ValidationError("--jobs", f"expected an integer >= 1, got {workers}")
-    for overrides in dict.fromkeys(j.overrides for j in jobs):
+    for overrides in {repr(j.overrides): j.overrides for j in jobs}.values():  # list values: unhashable
         scenario = load_job(SweepJob(jobs[0].path, overrides, jobs[0].seed))
         if max_memory_gib is not None:
             check_memory(scenario, max_memory_gib, files=False)

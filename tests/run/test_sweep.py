@@ -137,6 +137,14 @@ def test_cli_sweep(tiny: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str
     assert "--set" in capsys.readouterr().err
 
 
+def test_a_list_valued_set_sweeps(tiny: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A TOML list as a ``--set`` value (e.g. a wind vector) is one value of that key."""
+    argv = ["sweep", str(tiny), "--seeds", "0..1", "--set", "initial.centroid=[0.1, 0.0],[0.0, 0.1]"]
+    assert main(argv) == 0
+    out = capsys.readouterr().out
+    assert "| initial.centroid=[0.1, 0.0] | 2 |" in out and "| initial.centroid=[0.0, 0.1] | 2 |" in out
+
+
 def test_dask_executor_runs_the_same_jobs(tiny: Path) -> None:
     distributed = pytest.importorskip("dask.distributed")
     jobs = build_jobs(tiny, [0, 1], [])
