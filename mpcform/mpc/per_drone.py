@@ -87,9 +87,15 @@ class Sensitivity:
     dv: Array  # (H d, a) dv / db
     dual: Array  # (r,) the active rows' multipliers y >= 0 (constant rows first)
     ddual: Array  # (r, a) dy / db
-    rows: Array  # (q, H d) the inactive rows, one-sided ``rows v >= bound``
-    slack: Array  # (q,) how far they are from their bounds
+    const_rows: Array  # (2 c, H d) every drone's one-sided constant rows (shared, not copied)
+    const_off: Array  # (2 c,) the inactive ones among them
+    sep_rows: Array  # (q - q_c, H d) the inactive separation rows; all one-sided ``rows v >= bound``
+    slack: Array  # (q,) how far the inactive rows are from their bounds (constant ones first)
     sep_index: Array  # (q,) an inactive separation row's index in the drone's rows, else -1
+
+    def rate(self, dv: Array) -> Array:
+        """How fast the inactive rows' values change (q,) along ``dv`` (H d,)."""
+        return np.concatenate([(self.const_rows @ dv)[self.const_off], self.sep_rows @ dv])
 
 
 class PerDroneQP(StepSolver):
@@ -117,6 +123,7 @@ class PerDroneQP(StepSolver):
         self._m_inv = solve_triangular(self._m, np.eye(nu), lower=True)  # u = M^-1 v
         rows = [family.dense() for family in families]  # constant rows over u; bounds per drone from _bounds
         self._const_v = (np.vstack(rows) if rows else np.zeros((0, nu))) @ self._m_inv
+        self._const_pm = np.vstack([self._const_v, -self._const_v])  # one-sided: lower, then upper
         self._ends = row_ends(h)
         self._w_rep = position_table(self._m_inv, h, dim, dt_s, loop)
         self._reach = 1.0 if loop is None else loop.reach_factor
@@ -245,26 +252,27 @@ class PerDroneQP(StepSolver):
         (identity Hessian; a soft drone's slacks ignored) ``v = c + A^T y``, ``y = (A A^T)^-1 (b -
         A c)``: ``d^2 f / db^2 = dy / db = (A A^T)^-1``, ``dv / db = A^T (A A^T)^-1``; regularised
         (:data:`GRAM_EPS`) so that dependent rows (a segment's two ends at one step) get a large
-        curvature, not none."""
+        curvature, not none. The inactive constant rows are not copied (a mask on the shared ones)."""
         n_const, first, last = self._const_v.shape[0], solves.offsets[i], solves.offsets[i + 1]
-        lam, v = self.multipliers(solves, i, everything=True), solves.v[i]
+        lam, v, both = self.multipliers(solves, i, everything=True), solves.v[i], self._const_pm
         lo, hi = (b[min(i, b.shape[0] - 1)] for b in (solves.const_lo, solves.const_hi))
         sep = self._rows_v(solves.sep_c[first:last], solves.sep_end[first:last])
-        rows = np.vstack([self._const_v, -self._const_v, sep])
         bound = np.concatenate([lo, -hi, solves.sep_lo[first:last]])
         y = np.concatenate([np.maximum(-lam[:n_const], 0.0), np.maximum(lam[:n_const], 0.0), -lam[n_const:]])
-        gap = rows @ v - bound
+        gap = np.concatenate([both @ v, sep @ v])
+        gap -= bound
         real = np.abs(bound) < DAQP_INF / 2
         on = real & ((y > ACTIVE_TOL) | (gap <= AT_BOUND_M))
-        active = rows[on]
+        off, c2 = real & ~on, 2 * n_const
+        active = np.concatenate([both[on[:c2]], sep[on[c2:]]])
         gram = active @ active.T
-        gram[np.diag_indices_from(gram)] += GRAM_EPS * max(1.0, float(np.diag(gram).max(initial=0.0)))
-        sep_on = np.flatnonzero(on[2 * n_const :])
-        k = np.linalg.inv(gram)[:, on[: 2 * n_const].sum() :]  # columns: the active separation rows
-        off = real & ~on
-        sep_index = np.concatenate([np.full(2 * n_const, -1), np.arange(last - first)])[off]
+        gram.flat[:: gram.shape[0] + 1] += GRAM_EPS * max(1.0, float(np.diag(gram).max(initial=0.0)))
+        sep_on = np.flatnonzero(on[c2:])
+        k = np.linalg.inv(gram)[:, on[:c2].sum() :]  # columns: the active separation rows
+        idx = np.flatnonzero(off)
+        sep_index = np.where(idx >= c2, idx - c2, -1)
         return Sensitivity(sep_on, k[-sep_on.shape[0] :] if sep_on.size else k[:0], active.T @ k, y[on], k,
-                           rows[off], gap[off], sep_index)  # fmt: skip
+                           both, off[:c2], sep[off[c2:]], gap[off], sep_index)  # fmt: skip
 
     def _rows_v(self, coeffs: Array, end: Array) -> Array:
         """Separation rows (K, H d) over ``v`` of coefficients ``coeffs`` (K, d) at position steps

@@ -297,7 +297,7 @@ class SplitStep:
             db = np.zeros(pair.shape[0])
             db[ok] = sign[ok] * newton[pair[ok], row[ok]]
             dv = sens.dv @ db[sens.active]
-            rate = sens.rows @ dv
+            rate = sens.rate(dv)
             on = sens.sep_index >= 0
             rate[on] -= db[sens.sep_index[on]]
             for have, change in ((sens.slack, rate), (sens.dual, sens.ddual @ db[sens.active])):

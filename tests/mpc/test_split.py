@@ -177,3 +177,42 @@ def test_a_newton_step_keeps_frozen_rows_put() -> None:
             assert np.all(got[0][frozen] == 0.0) and got[1] < 0.0
         checked += 1
     assert checked
+
+
+def test_the_newton_model_matches_finite_differences_of_the_drone_solves() -> None:
+    """A drone's sensitivity (its optimum's and its multipliers' derivatives in its separation
+    rows' bounds, and the inactive rows' rates) against re-solves with one active row's bound moved
+    by +-h: the optimum is piecewise linear in the bounds, exact while the active set holds."""
+    from mpcform.mpc.split import SplitStep
+
+    planner, qps = step_qps(4, 3, 2, 6)
+    qp, h = qps[0], 1e-6
+    step = SplitStep(planner._solver.per_drone, qp)
+    m = qp.start_m.shape[0]
+    it = step.solve(np.arange(m), step.midpoint(), np.zeros_like(qp.targets_mps), None)
+    checked = 0
+    for i in range(m):
+        sens = step.sensitivity(it, i)
+        assert sens is not None
+        for a, row_id in enumerate(sens.active):
+            item, row = divmod(int(it.rows[i][row_id]), step.r)
+            pair = step.pair_of[item]
+            if pair < 0 or not step.splittable[pair, row] or sens.hessian[a, a] >= 1e4:
+                continue  # (a large curvature: a dependent row, GRAM_EPS; its multiplier is not unique)
+            sign, moved = step.sign[item], []
+            for delta in (h, -h):
+                shift = step.midpoint()
+                shift[pair, row] = delta  # this side's bound moves by sign * delta
+                moved.append(step.solve(np.array([i]), shift, np.zeros_like(qp.targets_mps), it))
+            up, down = moved
+            dv = (up.v[i] - down.v[i]) / (2 * h * sign)
+            np.testing.assert_allclose(dv, sens.dv[:, a], atol=1e-6 * max(1.0, np.abs(sens.dv).max()))
+            dmu = (up.mu[i][row_id] - down.mu[i][row_id]) / (2 * h * sign)
+            assert dmu == pytest.approx(sens.hessian[a, a], rel=1e-5, abs=1e-6)
+            dcost = (up.cost[i] - down.cost[i]) / (2 * h * sign)
+            assert dcost == pytest.approx(it.mu[i][row_id], rel=1e-5, abs=1e-7)
+            rows_off = np.concatenate([sens.const_rows[sens.const_off], sens.sep_rows])  # the inactive rows
+            assert rows_off.shape[0] == sens.slack.shape[0]
+            np.testing.assert_allclose(sens.rate(dv), rows_off @ dv, rtol=1e-12, atol=1e-12)
+            checked += 1
+    assert checked >= 2
