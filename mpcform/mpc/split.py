@@ -225,9 +225,10 @@ class SplitStep:
             empty: list[Array] = [np.empty(0)] * m
             return Iterate(shift, np.zeros((m, nu)), np.zeros((m, h)), np.zeros(m), np.zeros(m, dtype=bool),
                            list(empty), [np.empty(0, np.intp)] * m, list(empty), [None] * m)  # fmt: skip
+        redone = set(drones.tolist())
         return Iterate(shift, base.v.copy(), base.s.copy(), base.cost.copy(), base.soft.copy(),
                        list(base.lams), list(base.rows), list(base.mu), list(base.solves),
-                       {i: v for i, v in base.sens.items() if i not in set(drones.tolist())})  # fmt: skip
+                       {i: v for i, v in base.sens.items() if i not in redone})  # fmt: skip
 
     def sensitivity(self, it: Iterate, i: int) -> Sensitivity | None:
         """Drone i's sensitivity in ``it`` (computed once; None for a failed solve)."""
@@ -271,7 +272,7 @@ class SplitStep:
             if sens is not None:
                 use = ok[sens.active]
                 act = sens.active[use]
-                blocks.append((pair[act] * r + row[act], sign[act], sens.hessian[np.ix_(use, use)]))
+                blocks.append((pair[act] * r + row[act], sign[act], sens.hessian[use][:, use]))
                 moves.append((sens, pair, row, sign, ok))
         if np.abs(grad).max(initial=0.0) <= GRAD_TOL or not blocks:
             return None
