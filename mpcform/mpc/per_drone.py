@@ -277,8 +277,9 @@ class PerDroneQP(StepSolver):
     def _rows_v(self, coeffs: Array, end: Array) -> Array:
         """Separation rows (K, H d) over ``v`` of coefficients ``coeffs`` (K, d) at position steps
         ``end`` (K,): ``a^T x_e = (w_e (x) a)^T v``."""
-        k, h = end.shape[0], self.settings.horizon
-        return (self._w_rep[end - 1].reshape(k, h, self.dim) * coeffs[:, None, :]).reshape(k, self._nu)
+        rows = np.take(self._w_rep, end - 1, axis=0)
+        rows.reshape(end.shape[0], self.settings.horizon, self.dim)[...] *= coeffs[:, None, :]
+        return rows
 
     def _buffers(self, max_sep: int) -> tuple[Array, Array, Array]:
         """Row and bound buffers with room for ``max_sep`` separation rows after the constant ones
