@@ -23,6 +23,8 @@ The iteration stops after ``split_iterations`` rounds, when a round would start 
 
 A close start's hard no-approach first row stays at ``t = 0`` (its safety argument needs
 ``+-c0^T W x_1 >= 0`` per drone): the limit is the joint QP's optimum with those rows split so.
+With a velocity loop every first row is hard (:func:`mpcform.mpc.planner.hard_first_rows`), so
+none of them moves.
 The per-drone QP takes the hard optimum whenever it exists (:mod:`mpcform.mpc.per_drone`), so the
 limit is the joint optimum where the joint QP needs no slack.
 """
