@@ -277,8 +277,8 @@ class PerDroneQP(StepSolver):
     def _rows_v(self, coeffs: Array, end: Array) -> Array:
         """Separation rows (K, H d) over ``v`` of coefficients ``coeffs`` (K, d) at position steps
         ``end`` (K,): ``a^T x_e = (w_e (x) a)^T v``."""
-        rows = np.take(self._w_rep, end - 1, axis=0)
-        rows.reshape(end.shape[0], self.settings.horizon, self.dim)[...] *= coeffs[:, None, :]
+        rows = np.repeat(coeffs[:, None, :], self.settings.horizon, axis=1).reshape(end.shape[0], self._nu)
+        rows *= self._w_rep[end - 1]
         return rows
 
     def _buffers(self, max_sep: int) -> tuple[Array, Array, Array]:
