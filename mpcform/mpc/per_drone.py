@@ -252,15 +252,14 @@ class PerDroneQP(StepSolver):
         (identity Hessian; a soft drone's slacks ignored) ``v = c + A^T y``, ``y = (A A^T)^-1 (b -
         A c)``: ``d^2 f / db^2 = dy / db = (A A^T)^-1``, ``dv / db = A^T (A A^T)^-1``; regularised
         (:data:`GRAM_EPS`) so that dependent rows (a segment's two ends at one step) get a large
-        curvature, not none. The inactive constant rows are not copied (a mask on the shared ones)."""
+        curvature, not none. The inactive constant rows stay shared (a mask, not a copy)."""
         n_const, first, last = self._const_v.shape[0], solves.offsets[i], solves.offsets[i + 1]
         lam, v, both = self.multipliers(solves, i, everything=True), solves.v[i], self._const_pm
         lo, hi = (b[min(i, b.shape[0] - 1)] for b in (solves.const_lo, solves.const_hi))
         sep = self._rows_v(solves.sep_c[first:last], solves.sep_end[first:last])
         bound = np.concatenate([lo, -hi, solves.sep_lo[first:last]])
         y = np.concatenate([np.maximum(-lam[:n_const], 0.0), np.maximum(lam[:n_const], 0.0), -lam[n_const:]])
-        gap = np.concatenate([both @ v, sep @ v])
-        gap -= bound
+        gap = np.concatenate([both @ v, sep @ v]) - bound
         real = np.abs(bound) < DAQP_INF / 2
         on = real & ((y > ACTIVE_TOL) | (gap <= AT_BOUND_M))
         off, c2 = real & ~on, 2 * n_const
