@@ -250,8 +250,7 @@ class MPCPlanner(Controller):
         (:func:`hard_first_rows`); also whether a bound was lowered. Without a loop: ``rows``."""
         if self.loop is None:
             return rows, False
-        u, step = self._u_prev, self._certifier.a_step_mps
-        brake = np.zeros_like(u) if step is None else u - np.clip(u, -step, step)
+        brake = self._certifier.within_limits(np.zeros_like(self._u_prev), self._u_prev)  # its "decelerate"
         return hard_first_rows(rows, (self.dt_s + self.loop.forced[1, 0]) * brake)
 
     def _liveness(self) -> dict[str, int]:
