@@ -126,6 +126,7 @@ class PerDroneQP(StepSolver):
         self._const_pm = np.vstack([self._const_v, -self._const_v])  # one-sided: lower, then upper
         self._ends = row_ends(h)
         self._w_rep = position_table(self._m_inv, h, dim, dt_s, loop)
+        self._table = self._w_rep.reshape(h, h, dim)  # x_e = sum_j table[e - 1, j] * v_j per axis
         self._reach = 1.0 if loop is None else loop.reach_factor
         self._eye = np.eye(nu)
         w2 = max(settings.slack_quadratic, MIN_SLACK_QUADRATIC)
@@ -174,7 +175,14 @@ class PerDroneQP(StepSolver):
         bounds = None if self._fixed_bounds else self._bounds(p0, u_prev)  # else in the buffers
         offsets = [0, *np.cumsum(counts).tolist()]
         v_out, s_out, flags, lams = [np.empty(0)] * n, np.zeros((n, h)), [DAQP_OK] * n, [np.empty(0)] * n
-        cost = np.zeros(n)
+        cost = -0.5 * np.einsum("ij,ij->i", f_v, f_v)  # a free drone's, at v = c
+        free = self._free(-f_v, bounds, sep_c, sep_end, sep_lo, counts)
+        for i in np.flatnonzero(free).tolist():  # the unconstrained optimum, no row active
+            v_out[i], lams[i] = -f_v[i], np.zeros(n_const + int(counts[i]))
+        busy = np.flatnonzero(~free)
+        busy_rows = np.repeat(~free, counts)
+        busy_c, busy_end = sep_c[busy_rows], sep_end[busy_rows]
+        busy_off = [0, *np.cumsum(counts[busy]).tolist()]
         iters, in_daqp = 0, 0.0
 
         def put(i: int, rows_v: Array) -> int:
@@ -188,11 +196,11 @@ class PerDroneQP(StepSolver):
             return m
 
         solve, eye, options = self._daqp.solve, self._eye, self._options
-        for start, stop in _blocks(offsets, ROW_BLOCK):  # the hard QPs, rows built a block at a time
-            base = offsets[start]
-            rows_v = self._rows_v(sep_c[base : offsets[stop]], sep_end[base : offsets[stop]])
-            for i in range(start, stop):
-                m = put(i, rows_v[offsets[i] - base : offsets[i + 1] - base])
+        for start, stop in _blocks(busy_off, ROW_BLOCK):  # the hard QPs, rows built a block at a time
+            base = busy_off[start]
+            rows_v = self._rows_v(busy_c[base : busy_off[stop]], busy_end[base : busy_off[stop]])
+            for j, i in enumerate(busy[start:stop].tolist(), start):
+                m = put(i, rows_v[busy_off[j] - base : busy_off[j + 1] - base])
                 t0 = time.perf_counter()
                 v_out[i], cost[i], flags[i], info = solve(
                     eye, f_v[i], a[:m], hi[:m], lo[:m], primal_start=v_warm[i], **options
@@ -279,6 +287,22 @@ class PerDroneQP(StepSolver):
         rows = np.repeat(coeffs[:, None, :], self.settings.horizon, axis=1).reshape(end.shape[0], self._nu)
         rows *= self._w_rep[end - 1]
         return rows
+
+    def _free(
+        self, c_v: Array, bounds: tuple[Array, Array] | None, sep_c: Array, sep_end: Array, sep_lo: Array,
+        counts: Array,
+    ) -> Array:
+        """The drones (n,) whose unconstrained optimum ``v = c`` (``c_v`` (n, H d)) meets every row:
+        it is their solve (no row active; DAQP returns it bitwise), without a DAQP call."""
+        n, n_const = c_v.shape[0], self._const_v.shape[0]
+        const = c_v @ self._const_v.T
+        lo, hi = (self._lo[None, :n_const], self._hi[None, :n_const]) if bounds is None else bounds
+        free = ((const >= lo) & (const <= hi)).all(axis=1)
+        x = np.einsum("ehd,nhd->ned", self._table, c_v.reshape(n, self.settings.horizon, self.dim))
+        owner = np.repeat(np.arange(n), counts)
+        missed = np.einsum("kd,kd->k", sep_c, x[owner, sep_end - 1]) < sep_lo  # the rows at x_e(c)
+        free[owner[missed]] = False
+        return free
 
     def _buffers(self, max_sep: int) -> tuple[Array, Array, Array]:
         """Row and bound buffers with room for ``max_sep`` separation rows after the constant ones

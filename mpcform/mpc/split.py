@@ -199,19 +199,21 @@ class SplitStep:
         local = np.full(self.m, -1)
         local[drones] = np.arange(drones.shape[0])
         keep = np.flatnonzero(local[rows.singles] >= 0)
+        sel = slice(None) if keep.shape[0] == rows.singles.shape[0] else keep  # every item: no copies
         got = pd.solve_each(
-            qp.start_m[drones], qp.targets_mps[:, drones], qp.u_prev_mps[drones], local[rows.singles[keep]],
-            rows.single_coeffs[keep], self.lower(shift)[keep], warm_u[:, drones], rows.single_hard[keep],
-            rows.single_on[keep],
+            qp.start_m[drones], qp.targets_mps[:, drones], qp.u_prev_mps[drones], local[rows.singles[sel]],
+            rows.single_coeffs[sel], self.lower(shift)[sel], warm_u[:, drones], rows.single_hard[sel],
+            rows.single_on[sel],
         )  # fmt: skip
         self.iterations, self.time_s = self.iterations + got.iterations, self.time_s + got.time_s
         it = self._copy(base, shift, drones)
-        for j, i in enumerate(drones):
-            item, row = np.divmod(got.rows[got.offsets[j] : got.offsets[j + 1]], r)
-            it.rows[i] = keep[item] * r + row  # global flat indices
-            it.v[i], it.s[i], it.cost[i], it.soft[i] = got.v[j], got.s[j], got.cost[j], got.soft[j]
-            it.lams[i], it.mu[i] = got.lams[j], pd.multipliers(got, j)
-            it.solves[i] = (got, j) if got.flags[j] == DAQP_OK else None
+        it.v[drones], it.s[drones], it.cost[drones], it.soft[drones] = got.v, got.s, got.cost, got.soft
+        item, row = np.divmod(got.rows, r)
+        rows_at = np.split(keep[item] * r + row, got.offsets[1:-1])  # global flat indices per drone
+        ok = got.flags == DAQP_OK
+        for j, i in enumerate(drones.tolist()):
+            it.rows[i], it.lams[i], it.mu[i] = rows_at[j], got.lams[j], pd.multipliers(got, j)
+            it.solves[i] = (got, j) if ok[j] else None
         it.cost[drones[got.flags != DAQP_OK]] = np.inf
         self.flags[drones] = got.flags  # the last exit flags, for a failed midpoint's report
         if base is not None:  # a trial may not need more slack than the midpoint (the joint rows hold)
@@ -266,6 +268,8 @@ class SplitStep:
         all_pair, all_row, all_sign, all_ok = self._split_rows(np.concatenate(it.rows))
         at = (all_pair[all_ok], all_row[all_ok])  # every drone's rows, in drone order
         np.add.at(grad, at, all_sign[all_ok] * np.concatenate(it.mu)[all_ok])
+        if np.abs(grad).max(initial=0.0) <= GRAD_TOL:  # converged: no sensitivity needed
+            return None
         owner = np.repeat(np.arange(self.m), np.diff(offsets))[all_ok]
         for i in np.unique(owner[grad[at] != 0.0]):  # the drones of rows with a gradient: the others stay put
             rows_i = slice(offsets[i], offsets[i + 1])
@@ -276,7 +280,7 @@ class SplitStep:
                 act = sens.active[use]
                 blocks.append((pair[act] * r + row[act], sign[act], sens.hessian[use][:, use]))
                 moves.append((sens, pair, row, sign, ok))
-        if np.abs(grad).max(initial=0.0) <= GRAD_TOL or not blocks:
+        if not blocks:
             return None
         used = np.unique(np.concatenate([b[0] for b in blocks]))
         if frozen is not None:
@@ -330,6 +334,9 @@ def _sides(labels: Array) -> tuple[Array, Array]:
     key = np.where(labels[:, 1] >= 0, np.minimum(labels[:, 0], labels[:, 1]) * n + labels.max(axis=1), -1)
     first = np.flatnonzero((labels[:, 1] >= 0) & (labels[:, 0] < labels[:, 1]))
     second = np.flatnonzero((labels[:, 1] >= 0) & (labels[:, 0] > labels[:, 1]))
+    if first.shape == second.shape and np.array_equal(key[first], key[second]):  # the rows' own layout
+        order = np.argsort(key[first])
+        return first[order], second[order]
     both = np.intersect1d(key[first], key[second])  # a side whose partner is not solved stays put
     first, second = first[np.isin(key[first], both)], second[np.isin(key[second], both)]
     return first[np.argsort(key[first])], second[np.argsort(key[second])]

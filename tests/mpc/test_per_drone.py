@@ -303,3 +303,31 @@ def test_rows_with_a_velocity_loop_are_on_the_true_positions() -> None:
     coeffs, ends = rng.normal(size=(7, dim)), rng.integers(1, h + 1, 7)
     want = np.einsum("kd,kd->k", coeffs, true[ends - 1])
     np.testing.assert_allclose(per._rows_v(coeffs, ends) @ v, want, atol=1e-12)
+
+
+def test_a_drone_whose_target_meets_its_rows_skips_daqp_and_gets_daqps_solve(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """Where ``v = c`` meets every row of a drone, the drone gets it without a DAQP call: the same
+    solve, multipliers and cost as DAQP's, bit for bit (the cost to rounding)."""
+    ref, start = crowd(0, 5, 2)
+    planner = MPCPlanner(ref, 0.1, LIMITS, MPCSettings(coupling="decoupled", grouping=False, fast_path=False))
+    qp = planner._solver
+    assert isinstance(qp, PerDroneQP)
+    calls: list[tuple[Any, ...]] = []
+    solve_each = qp.solve_each
+    monkeypatch.setattr(qp, "solve_each", lambda *args: calls.append(args) or solve_each(*args))
+    simulate(planner, start, 4.0)
+    skipped = 0
+    for args in calls:
+        fast = solve_each(*args)
+        with monkeypatch.context() as m:
+            m.setattr(qp, "_free", lambda c_v, *_: np.zeros(c_v.shape[0], dtype=bool))
+            every = solve_each(*args)
+        free = qp._free(-args[1].transpose(1, 0, 2).reshape(fast.v.shape), None, fast.sep_c, fast.sep_end,
+                        fast.sep_lo, np.diff(fast.offsets))  # fmt: skip
+        skipped += int(free.sum()) * int((~free).any())
+        assert np.array_equal(fast.v, every.v) and np.array_equal(fast.flags, every.flags)
+        assert all(np.array_equal(a, b) for a, b in zip(fast.lams, every.lams, strict=True))
+        np.testing.assert_allclose(fast.cost, every.cost, rtol=1e-14, atol=1e-14)
+    assert skipped >= 10  # drones skipped in steps that solve others
