@@ -126,7 +126,8 @@ class PerDroneQP(StepSolver):
         self._const_pm = np.vstack([self._const_v, -self._const_v])  # one-sided: lower, then upper
         self._ends = row_ends(h)
         self._w_rep = position_table(self._m_inv, h, dim, dt_s, loop)
-        self._table = self._w_rep.reshape(h, h, dim)  # x_e = sum_j table[e - 1, j] * v_j per axis
+        table = self._w_rep.reshape(h, 1, h, dim)  # x_e = sum_j table[e - 1, j] * v_j per axis
+        self._x_of_v = (table * np.eye(dim)[None, :, None, :]).reshape(nu, nu)  # x_1..x_H from v
         self._reach = 1.0 if loop is None else loop.reach_factor
         self._eye = np.eye(nu)
         w2 = max(settings.slack_quadratic, MIN_SLACK_QUADRATIC)
@@ -168,7 +169,8 @@ class PerDroneQP(StepSolver):
         """Every drone's solve as DAQP returns it (arguments as :meth:`solve_drones`)."""
         st = self.settings
         h, n, nu, n_const = st.horizon, p0.shape[0], self._nu, self._const_v.shape[0]
-        f_v = -c.transpose(1, 0, 2).reshape(n, nu)  # 0.5 ||v - c||^2
+        c_v = c.transpose(1, 0, 2).reshape(n, nu)
+        f_v = -c_v  # 0.5 ||v - c||^2
         v_warm = warm_u.transpose(1, 0, 2).reshape(n, nu) @ self._m.T
         sep_c, sep_end, sep_lo, sep_soft, counts, at = self._separation(n, singles, coeffs, lower, hard, on)
         a, lo, hi = self._buffers(int(counts.max(initial=0)))
@@ -176,18 +178,16 @@ class PerDroneQP(StepSolver):
         offsets = [0, *np.cumsum(counts).tolist()]
         v_out, s_out, flags, lams = [np.empty(0)] * n, np.zeros((n, h)), [DAQP_OK] * n, [np.empty(0)] * n
         cost = -0.5 * np.einsum("ij,ij->i", f_v, f_v)  # a free drone's, at v = c
-        free = self._free(-f_v, bounds, sep_c, sep_end, sep_lo, counts)
+        free = self._free(c_v, bounds, sep_c, sep_end, sep_lo, counts)
+        zero = np.broadcast_to(0.0, n_const + int(counts.max(initial=0)))  # read-only: views of it are shared
         for i in np.flatnonzero(free).tolist():  # the unconstrained optimum, no row active
-            v_out[i], lams[i] = -f_v[i], np.zeros(n_const + int(counts[i]))
-        busy = np.flatnonzero(~free)
-        busy_rows = np.repeat(~free, counts)
-        busy_c, busy_end = sep_c[busy_rows], sep_end[busy_rows]
-        busy_off = [0, *np.cumsum(counts[busy]).tolist()]
+            v_out[i], lams[i] = c_v[i], zero[: n_const + counts[i]]
+        busy, on_busy = np.flatnonzero(~free), np.repeat(~free, counts) if free.any() else slice(None)
+        busy_c, busy_end, busy_off = sep_c[on_busy], sep_end[on_busy], [0, *counts[busy].cumsum().tolist()]
         iters, in_daqp = 0, 0.0
 
         def put(i: int, rows_v: Array) -> int:
-            """Put drone i's rows ``rows_v`` over v and its bounds into the buffers; return its
-            number of rows."""
+            """Put drone i's rows ``rows_v`` over v and its bounds into the buffers; return their number."""
             m = n_const + rows_v.shape[0]
             a[n_const:m] = rows_v
             lo[n_const:m] = sep_lo[offsets[i] : offsets[i + 1]]
@@ -221,8 +221,7 @@ class PerDroneQP(StepSolver):
             lams[i] = info["lam"]
         v_all = np.array(v_out).reshape(n, nu)
         const_bounds = (lo[None, :n_const].copy(), hi[None, :n_const].copy()) if bounds is None else bounds
-        is_soft = np.zeros(n, dtype=bool)
-        is_soft[soft] = True
+        is_soft = np.isin(np.arange(n), soft)
         return DroneSolves(v_all, s_out, cost, np.array(flags), is_soft, lams, at, np.array(offsets), sep_c,
                            sep_end, sep_lo, *const_bounds, int(iters), in_daqp)  # fmt: skip
 
@@ -294,13 +293,14 @@ class PerDroneQP(StepSolver):
     ) -> Array:
         """The drones (n,) whose unconstrained optimum ``v = c`` (``c_v`` (n, H d)) meets every row:
         it is their solve (no row active; DAQP returns it bitwise), without a DAQP call."""
-        n, n_const = c_v.shape[0], self._const_v.shape[0]
-        const = c_v @ self._const_v.T
+        n, n_const, const = c_v.shape[0], self._const_v.shape[0], c_v @ self._const_v.T
         lo, hi = (self._lo[None, :n_const], self._hi[None, :n_const]) if bounds is None else bounds
         free = ((const >= lo) & (const <= hi)).all(axis=1)
-        x = np.einsum("ehd,nhd->ned", self._table, c_v.reshape(n, self.settings.horizon, self.dim))
+        if not free.any():
+            return free
+        x = (c_v @ self._x_of_v.T).reshape(-1, self.dim)  # x_e at v = c, rows (drone, step e)
         owner = np.repeat(np.arange(n), counts)
-        missed = np.einsum("kd,kd->k", sep_c, x[owner, sep_end - 1]) < sep_lo  # the rows at x_e(c)
+        missed = np.einsum("kd,kd->k", sep_c, x[owner * self.settings.horizon + sep_end - 1]) < sep_lo
         free[owner[missed]] = False
         return free
 

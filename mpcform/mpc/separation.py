@@ -64,12 +64,12 @@ class SeparationRows:
     def subset(self, drones: Array, n: int, on_only: bool) -> SeparationRows:
         """The rows of the items within ``drones`` (only those within reach with ``on_only``), with
         drone indices renumbered 0..len(drones)-1 (``labels`` keep the global ones)."""
-        if drones.shape[0] == n and not on_only:
-            return self
         local = np.full(n, -1)
         local[drones] = np.arange(drones.shape[0])
         keep_p = (local[self.pairs] >= 0).all(axis=1) & (self.pair_on | (not on_only))
         keep_s = (local[self.singles] >= 0) & (self.single_on | (not on_only))
+        if drones.shape[0] == n and keep_p.all() and keep_s.all():  # everything: no copies
+            return self
         return SeparationRows(
             local[self.pairs[keep_p]], self.pair_coeffs[keep_p], self.pair_lower[keep_p],
             self.pair_on[keep_p], local[self.singles[keep_s]], self.labels[keep_s],

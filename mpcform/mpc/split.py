@@ -209,7 +209,8 @@ class SplitStep:
         it = self._copy(base, shift, drones)
         it.v[drones], it.s[drones], it.cost[drones], it.soft[drones] = got.v, got.s, got.cost, got.soft
         item, row = np.divmod(got.rows, r)
-        rows_at = np.split(keep[item] * r + row, got.offsets[1:-1])  # global flat indices per drone
+        flat, cuts = keep[item] * r + row, got.offsets.tolist()  # global flat indices, per drone:
+        rows_at = [flat[a:b] for a, b in zip(cuts[:-1], cuts[1:], strict=True)]
         ok = got.flags == DAQP_OK
         for j, i in enumerate(drones.tolist()):
             it.rows[i], it.lams[i], it.mu[i] = rows_at[j], got.lams[j], pd.multipliers(got, j)
@@ -262,12 +263,13 @@ class SplitStep:
         step``, and the fraction of it to the first breakpoint (a row's slack or multiplier
         reaching zero, 1 at most); None at convergence."""
         shape, r = self.splittable.shape, self.r
-        grad, blocks, moves = np.zeros(shape), [], []
+        blocks, moves = [], []
         offsets = np.zeros(self.m + 1, dtype=np.intp)
         np.cumsum([ids.shape[0] for ids in it.rows], out=offsets[1:])
         all_pair, all_row, all_sign, all_ok = self._split_rows(np.concatenate(it.rows))
         at = (all_pair[all_ok], all_row[all_ok])  # every drone's rows, in drone order
-        np.add.at(grad, at, all_sign[all_ok] * np.concatenate(it.mu)[all_ok])
+        weights = all_sign[all_ok] * np.concatenate(it.mu)[all_ok]  # summed in order, as np.add.at
+        grad = np.bincount(all_pair[all_ok] * r + all_row[all_ok], weights, shape[0] * r).reshape(shape)
         if np.abs(grad).max(initial=0.0) <= GRAD_TOL:  # converged: no sensitivity needed
             return None
         owner = np.repeat(np.arange(self.m), np.diff(offsets))[all_ok]
