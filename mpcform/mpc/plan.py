@@ -6,6 +6,7 @@ Positions ``x`` are relative to the step's start ``p0``; a :class:`Plan` keeps a
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 
@@ -40,15 +41,22 @@ class Plan:
 
 
 def rollout(c: Array, k: float, dt: float) -> tuple[Array, Array]:
-    """Eq. 14 over the horizon in relative coordinates: ``u_j = c_j - k x_j``, ``x_{j+1} = x_j + dt u_j``."""
-    u = np.empty_like(c)
-    x = np.empty_like(c)
-    xj = np.zeros(c.shape[1:])
-    for j in range(c.shape[0]):
-        u[j] = c[j] - k * xj
-        xj = xj + dt * u[j]
-        x[j] = xj
+    """Eq. 14 over the horizon in relative coordinates: ``u_j = c_j - k x_j``, ``x_{j+1} = x_j + dt u_j``,
+    in closed form ``x_{j+1} = sum_{i <= j} dt (1 - k dt)^(j - i) c_i`` (one product; ``u_0 = c_0``)."""
+    h = c.shape[0]
+    x = (_decay(h, k, dt) @ c.reshape(h, -1)).reshape(c.shape)
+    u = c.copy()
+    u[1:] -= k * x[:-1]
     return u, x
+
+
+@lru_cache(maxsize=16)
+def _decay(h: int, k: float, dt: float) -> Array:
+    """The rollout's matrix (H, H): ``dt (1 - k dt)^(j - i)`` for ``i <= j``, else 0 (read-only)."""
+    j = np.arange(h)
+    out = np.tril(dt * (1.0 - k * dt) ** np.maximum(j[:, None] - j[None, :], 0))
+    out.flags.writeable = False
+    return out
 
 
 def guess(plan: Plan | None, p0: Array, horizon: int) -> Array:
