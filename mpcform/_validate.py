@@ -22,7 +22,7 @@ def finite_array(field: str, value: Any, shape: tuple[int | None, ...]) -> Array
         s is not None and s != a for s, a in zip(shape, arr.shape, strict=False)
     ):
         raise ValidationError(field, f"expected shape {_shape(shape)}, got shape {arr.shape}")
-    if not np.all(np.isfinite(arr)):
+    if not np.isfinite(arr).all():
         raise ValidationError(field, f"expected finite numbers, got {arr.tolist()}")
     return arr
 

@@ -50,7 +50,6 @@ PRIMAL_TOL = 1e-9  # DAQP row feasibility tolerance (its default 1e-6 shows in t
 MIN_SLACK_QUADRATIC = 1e-6  # keeps the soft QP's Hessian positive definite when w2 = 0
 AT_BOUND_M = 1e-7  # a separation row this close to its bound counts as active (sensitivity)
 GRAM_EPS = 1e-9  # relative regularisation of the active rows' Gram matrix (sensitivity)
-ROW_BLOCK = 2048  # separation rows built at once (whole drones; a block stays in cache)
 Solved = tuple[QPSolution, int]  # a solution and its number of active rows
 
 
@@ -125,9 +124,8 @@ class PerDroneQP(StepSolver):
         self._const_v = (np.vstack(rows) if rows else np.zeros((0, nu))) @ self._m_inv
         self._const_pm = np.vstack([self._const_v, -self._const_v])  # one-sided: lower, then upper
         self._ends = row_ends(h)
-        self._w_rep = position_table(self._m_inv, h, dim, dt_s, loop)
-        table = self._w_rep.reshape(h, 1, h, dim)  # x_e = sum_j table[e - 1, j] * v_j per axis
-        self._x_of_v = (table * np.eye(dim)[None, :, None, :]).reshape(nu, nu)  # x_1..x_H from v
+        self._table = position_table(self._m_inv, h, dim, dt_s, loop).reshape(h, h, dim)  # x_e per axis
+        self._x_of_v = (self._table[:, None] * np.eye(dim)[:, None, :]).reshape(nu, nu)  # x_1..x_H from v
         self._reach = 1.0 if loop is None else loop.reach_factor
         self._eye = np.eye(nu)
         w2 = max(settings.slack_quadratic, MIN_SLACK_QUADRATIC)
@@ -182,36 +180,31 @@ class PerDroneQP(StepSolver):
         zero = np.broadcast_to(0.0, n_const + int(counts.max(initial=0)))  # read-only: views of it are shared
         for i in np.flatnonzero(free).tolist():  # the unconstrained optimum, no row active
             v_out[i], lams[i] = c_v[i], zero[: n_const + counts[i]]
-        busy, on_busy = np.flatnonzero(~free), np.repeat(~free, counts) if free.any() else slice(None)
-        busy_c, busy_end, busy_off = sep_c[on_busy], sep_end[on_busy], [0, *counts[busy].cumsum().tolist()]
         iters, in_daqp = 0, 0.0
 
-        def put(i: int, rows_v: Array) -> int:
-            """Put drone i's rows ``rows_v`` over v and its bounds into the buffers; return their number."""
-            m = n_const + rows_v.shape[0]
-            a[n_const:m] = rows_v
-            lo[n_const:m] = sep_lo[offsets[i] : offsets[i + 1]]
+        def put(i: int) -> int:
+            """Put drone i's rows over v and their bounds into the buffers; return their number."""
+            first, last = offsets[i], offsets[i + 1]
+            m = n_const + last - first
+            self._rows_v(sep_c[first:last], sep_end[first:last], out=a[n_const:m])
+            lo[n_const:m] = sep_lo[first:last]
             if bounds is not None:
                 lo[:n_const], hi[:n_const] = bounds[0][i], bounds[1][i]
             return m
 
         solve, eye, options = self._daqp.solve, self._eye, self._options
-        for start, stop in _blocks(busy_off, ROW_BLOCK):  # the hard QPs, rows built a block at a time
-            base = busy_off[start]
-            rows_v = self._rows_v(busy_c[base : busy_off[stop]], busy_end[base : busy_off[stop]])
-            for j, i in enumerate(busy[start:stop].tolist(), start):
-                m = put(i, rows_v[busy_off[j] - base : busy_off[j + 1] - base])
-                t0 = time.perf_counter()
-                v_out[i], cost[i], flags[i], info = solve(
-                    eye, f_v[i], a[:m], hi[:m], lo[:m], primal_start=v_warm[i], **options
-                )  # fmt: skip
-                in_daqp += time.perf_counter() - t0
-                iters += info["iterations"]
-                lams[i] = info["lam"]
+        for i in np.flatnonzero(~free).tolist():  # the hard QPs
+            m = put(i)
+            t0 = time.perf_counter()
+            v_out[i], cost[i], flags[i], info = solve(
+                eye, f_v[i], a[:m], hi[:m], lo[:m], primal_start=v_warm[i], **options
+            )  # fmt: skip
+            in_daqp += time.perf_counter() - t0
+            iters += info["iterations"]
+            lams[i] = info["lam"]
         soft = [i for i in range(n) if flags[i] != DAQP_OK]  # else the hard optimum (s = 0)
         for i in soft:
-            first, last = offsets[i], offsets[i + 1]
-            m = put(i, self._rows_v(sep_c[first:last], sep_end[first:last]))
+            m, first, last = put(i), offsets[i], offsets[i + 1]
             t0 = time.perf_counter()
             v_out[i], s_out[i], flags[i], cost[i], info = self._solve_soft(
                 f_v[i], a[:m], hi[:m], lo[:m], sep_end[first:last], sep_soft[first:last], n_const
@@ -280,11 +273,11 @@ class PerDroneQP(StepSolver):
         return Sensitivity(sep_on, k[-sep_on.shape[0] :] if sep_on.size else k[:0], active.T @ k, y[on], k,
                            both, off[:c2], sep[off[c2:]], gap[off], sep_index)  # fmt: skip
 
-    def _rows_v(self, coeffs: Array, end: Array) -> Array:
-        """Separation rows (K, H d) over ``v`` of coefficients ``coeffs`` (K, d) at position steps
-        ``end`` (K,): ``a^T x_e = (w_e (x) a)^T v``."""
-        rows = np.repeat(coeffs[:, None, :], self.settings.horizon, axis=1).reshape(end.shape[0], self._nu)
-        rows *= self._w_rep[end - 1]
+    def _rows_v(self, coeffs: Array, end: Array, out: Array | None = None) -> Array:
+        """Separation rows (K, H d) over ``v`` (into ``out``) of coefficients ``coeffs`` (K, d) at
+        position steps ``end`` (K,): ``a^T x_e = (w_e (x) a)^T v``."""
+        rows = np.empty((end.shape[0], self._nu)) if out is None else out
+        np.multiply(self._table[end - 1], coeffs[:, None, :], out=rows.reshape(-1, *self._table.shape[1:]))
         return rows
 
     def _free(
@@ -345,7 +338,7 @@ class PerDroneQP(StepSolver):
 
         A row ``a^T x_e + s_e >= b`` that every reachable ``x_e`` meets (``b <= -|a| e v_max dt``,
         since the velocity set lies in the ball) is left out, the optimum unchanged. The rows over
-        ``v`` are built later, a block of drones at a time (:meth:`_rows_v`).
+        ``v`` are built later, drone by drone into DAQP's buffer (:meth:`_rows_v`).
         """
         keep = np.ones(lower.shape, dtype=bool)
         if on is not None:
@@ -387,14 +380,3 @@ def position_table(m_inv: Array, h: int, dim: int, dt_s: float, loop: VelocityLo
         t = m_inv.reshape(h, dim, h, dim)[:, 0, :, 0]
         table += np.einsum("ejd,jm->emd", loop.forced[1:], t).reshape(h, nu)
     return table
-
-
-def _blocks(offsets: list[int], size: int) -> list[tuple[int, int]]:
-    """Runs ``[start, stop)`` of consecutive drones (drone i's rows ``offsets[i]:offsets[i + 1]``)
-    with at most ``size`` rows each (a drone with more runs alone)."""
-    runs, start = [], 0
-    for i in range(1, len(offsets) - 1):
-        if offsets[i + 1] - offsets[start] > size:
-            runs.append((start, i))
-            start = i
-    return [*runs, (start, len(offsets) - 1)] if len(offsets) > 1 else []

@@ -152,7 +152,7 @@ class PairSeparation:
     def doubtful(self, p0: Array, spread: Array) -> tuple[Array, Array, Array]:
         """The pairs ``(i, k)`` (of the neighbour list) the spread bound of :meth:`Separation.clear`
         leaves in doubt, and by how much their start distance clears it (negative)."""
-        scaled = p0 * self.metric  # the metric only shrinks lengths: world spreads bound it
+        scaled = self.scaled(p0)  # the metric only shrinks lengths: world spreads bound it
         need = self.d_min_m + self.margin_m
         i, k = self.near.within(scaled, need + 2.0 * spread.max()).T
         clearance = vector_norms(scaled[i] - scaled[k]) - spread[i] - spread[k]

@@ -216,19 +216,6 @@ def test_only_the_rows_that_can_be_active_are_built() -> None:
         assert at[got] == item * r + row
 
 
-def test_the_row_block_size_does_not_change_the_solution(monkeypatch: pytest.MonkeyPatch) -> None:
-    """Rows built one drone at a time or all at once: the same plans, bit for bit."""
-    ref, start = crowd(11, 6, 3)
-    plans = []
-    for block in (1, 100_000):
-        monkeypatch.setattr("mpcform.mpc.per_drone.ROW_BLOCK", block)
-        planner = MPCPlanner(ref, 0.1, LIMITS, MPCSettings(coupling="decoupled"))
-        res = simulate(planner, start, 1.0)
-        assert any(i.mode == "qp" for i in res.infos)
-        plans.append(res.commands_mps)
-    assert np.array_equal(*plans)
-
-
 class HardFeasibility:
     """DAQP, and at each drone's slack-free solve whether that QP is feasible (Clarabel): the
     decoupled QP is block-diagonal, so its hard version is feasible iff every drone's is."""
