@@ -126,7 +126,8 @@ class PerDroneQP(StepSolver):
         self._ends = row_ends(h)
         self._table = position_table(self._m_inv, h, dim, dt_s, loop).reshape(h, h, dim)  # x_e per axis
         self._x_of_v = (self._table[:, None] * np.eye(dim)[:, None, :]).reshape(nu, nu)  # x_1..x_H from v
-        self._reach = 1.0 if loop is None else loop.reach_factor
+        reach = 1.0 if loop is None else loop.reach_factor  # the longest step, with a loop's response
+        self._step_m = None if limits.v_max_mps is None else limits.v_max_mps * dt_s * reach
         self._eye = np.eye(nu)
         w2 = max(settings.slack_quadratic, MIN_SLACK_QUADRATIC)
         self._hess_soft = np.diag(np.concatenate([np.full(h, w2), np.ones(nu)]))
@@ -170,7 +171,8 @@ class PerDroneQP(StepSolver):
         c_v = c.transpose(1, 0, 2).reshape(n, nu)
         f_v = -c_v  # 0.5 ||v - c||^2
         v_warm = warm_u.transpose(1, 0, 2).reshape(n, nu) @ self._m.T
-        sep_c, sep_end, sep_lo, sep_soft, counts, at = self._separation(n, singles, coeffs, lower, hard, on)
+        sep_c, sep_end, sep_lo, sep_soft, counts, at = reachable_rows(n, singles, coeffs, lower, hard, on,
+                                                                      self._ends, self._step_m)  # fmt: skip
         a, lo, hi = self._buffers(int(counts.max(initial=0)))
         bounds = None if self._fixed_bounds else self._bounds(p0, u_prev)  # else in the buffers
         offsets = [0, *np.cumsum(counts).tolist()]
@@ -328,36 +330,6 @@ class PerDroneQP(StepSolver):
         )  # fmt: skip
         return z[h:], z[:h], flag, cost, info
 
-    def _separation(
-        self, n: int, singles: Array, coeffs: Array, lower: Array, hard: Array | None, on: Array | None
-    ) -> tuple[Array, Array, Array, Array, Array, Array]:
-        """The separation rows that can be active, sorted by drone (item order kept within a drone):
-        their coefficients ``a`` (K, d), position steps, lower bounds and whether they have a slack
-        (not an item's hard first row); the number of rows per drone; and which they are (K,), as
-        flat ``item * R + row`` indices.
-
-        A row ``a^T x_e + s_e >= b`` that every reachable ``x_e`` meets (``b <= -|a| e v_max dt``,
-        since the velocity set lies in the ball) is left out, the optimum unchanged. The rows over
-        ``v`` are built later, drone by drone into DAQP's buffer (:meth:`_rows_v`).
-        """
-        keep = np.ones(lower.shape, dtype=bool)
-        if on is not None:
-            keep &= on[:, None]
-        ends = self._ends
-        if self.limits.v_max_mps is not None:
-            reach = vector_norms(coeffs) * (ends * (self.limits.v_max_mps * self.dt_s * self._reach))
-            keep &= lower > -reach
-        order = np.argsort(singles, kind="stable")
-        rows = ends.shape[0]
-        at = (order[:, None] * rows + np.arange(rows))[keep[order]]  # flat (item, row) indices
-        item, r = np.divmod(at, rows)
-        soft = r > 0
-        if hard is not None:
-            soft |= ~hard[item]
-        counts = np.bincount(singles[item], minlength=n).astype(np.intp)
-        sep_c = np.take(coeffs.reshape(-1, coeffs.shape[2]), at, axis=0)
-        return sep_c, ends[r], np.take(lower.reshape(-1), at), soft, counts, at
-
     def _bounds(self, p0: Array, u_prev: Array) -> tuple[Array, Array]:
         """Lower and upper bounds (n, rows) of the constant rows for each drone."""
         n = p0.shape[0]
@@ -380,3 +352,35 @@ def position_table(m_inv: Array, h: int, dim: int, dt_s: float, loop: VelocityLo
         t = m_inv.reshape(h, dim, h, dim)[:, 0, :, 0]
         table += np.einsum("ejd,jm->emd", loop.forced[1:], t).reshape(h, nu)
     return table
+
+
+def reachable_rows(
+    n: int, singles: Array, coeffs: Array, lower: Array, hard: Array | None, on: Array | None, ends: Array,
+    step_m: float | None,
+) -> tuple[Array, Array, Array, Array, Array, Array]:
+    """The separation rows that can be active, sorted by drone (item order kept within a drone):
+    their coefficients ``a`` (K, d), position steps, lower bounds and whether they have a slack
+    (not an item's hard first row); the number of rows per drone; and which they are (K,), as
+    flat ``item * R + row`` indices (items ``singles`` (S,), ``coeffs`` (S, R, d), ``lower`` (S, R),
+    rows at position steps ``ends`` (R,)).
+
+    A row ``a^T x_e + s_e >= b`` that every reachable ``x_e`` meets (``b <= -|a| e step_m``, the
+    longest step ``step_m`` = v_max dt, since the velocity set lies in the ball; None: no limit) is
+    left out, the optimum unchanged. The rows over ``v`` are built later, drone by drone into
+    DAQP's buffer (:meth:`PerDroneQP._rows_v`).
+    """
+    keep = np.ones(lower.shape, dtype=bool)
+    if on is not None:
+        keep &= on[:, None]
+    if step_m is not None:
+        keep &= lower > -(vector_norms(coeffs) * (ends * step_m))
+    order = np.argsort(singles, kind="stable")
+    rows = ends.shape[0]
+    at = (order[:, None] * rows + np.arange(rows))[keep[order]]  # flat (item, row) indices
+    item, r = np.divmod(at, rows)
+    soft = r > 0
+    if hard is not None:
+        soft |= ~hard[item]
+    counts = np.bincount(singles[item], minlength=n).astype(np.intp)
+    sep_c = np.take(coeffs.reshape(-1, coeffs.shape[2]), at, axis=0)
+    return sep_c, ends[r], np.take(lower.reshape(-1), at), soft, counts, at

@@ -14,7 +14,7 @@ from hypothesis import strategies as st
 from mpcform.formation.state import FormationState
 from mpcform.formation.template import Template
 from mpcform.mpc.limits import Limits, SphereObstacle
-from mpcform.mpc.per_drone import PER_DRONE_SOLVER, PerDroneQP
+from mpcform.mpc.per_drone import PER_DRONE_SOLVER, PerDroneQP, reachable_rows
 from mpcform.mpc.planner import MPCPlanner
 from mpcform.mpc.settings import MPCSettings
 from mpcform.reference.base import ConstantReference
@@ -208,7 +208,8 @@ def test_only_the_rows_that_can_be_active_are_built() -> None:
     lower = -reach * rng.uniform(0.5, 1.5, (s, r))
     expect = [(i, item, row) for i in range(n) for item in range(s) for row in range(r)
               if singles[item] == i and on[item] and lower[item, row] > -reach[item, row]]  # fmt: skip
-    c, end, lo, soft, counts, at = qp._separation(n, singles, coeffs, lower, hard, on)
+    assert np.array_equal(qp._ends, ends) and qp._step_m == pytest.approx(0.1)
+    c, end, lo, soft, counts, at = reachable_rows(n, singles, coeffs, lower, hard, on, qp._ends, qp._step_m)
     assert c.shape[0] == len(expect) and counts.tolist() == [sum(e[0] == i for e in expect) for i in range(n)]
     for got, (_, item, row) in enumerate(expect):
         assert np.array_equal(c[got], coeffs[item, row]) and lo[got] == lower[item, row]
