@@ -182,13 +182,15 @@ class PerDroneQP(StepSolver):
         zero = np.broadcast_to(0.0, n_const + int(counts.max(initial=0)))  # read-only: views of it are shared
         for i in np.flatnonzero(free).tolist():  # the unconstrained optimum, no row active
             v_out[i], lams[i] = c_v[i], zero[: n_const + counts[i]]
-        iters, in_daqp = 0, 0.0
+        iters, in_daqp, table, step = 0, 0.0, self._table, sep_end - 1
+        rows3 = a.reshape(a.shape[0], *table.shape[1:])  # the rows over v as (H, d) tables
 
         def put(i: int) -> int:
-            """Put drone i's rows over v and their bounds into the buffers; return their number."""
+            """Put drone i's rows over v (:meth:`_rows_v`) and their bounds into the buffers; return
+            their number."""
             first, last = offsets[i], offsets[i + 1]
             m = n_const + last - first
-            self._rows_v(sep_c[first:last], sep_end[first:last], out=a[n_const:m])
+            np.multiply(table.take(step[first:last], axis=0), sep_c[first:last, None], out=rows3[n_const:m])
             lo[n_const:m] = sep_lo[first:last]
             if bounds is not None:
                 lo[:n_const], hi[:n_const] = bounds[0][i], bounds[1][i]
