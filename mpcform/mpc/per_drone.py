@@ -177,11 +177,13 @@ class PerDroneQP(StepSolver):
         bounds = None if self._fixed_bounds else self._bounds(p0, u_prev)  # else in the buffers
         offsets = [0, *np.cumsum(counts).tolist()]
         v_out, s_out, flags, lams = [np.empty(0)] * n, np.zeros((n, h)), [DAQP_OK] * n, [np.empty(0)] * n
-        cost = -0.5 * np.einsum("ij,ij->i", f_v, f_v)  # a free drone's, at v = c
-        free = self._free(c_v, bounds, sep_c, sep_end, sep_lo, counts)
-        zero = np.broadcast_to(0.0, n_const + int(counts.max(initial=0)))  # read-only: views of it are shared
-        for i in np.flatnonzero(free).tolist():  # the unconstrained optimum, no row active
-            v_out[i], lams[i] = c_v[i], zero[: n_const + counts[i]]
+        cost, free = np.zeros(n), self._free(c_v, bounds, sep_c, sep_end, sep_lo, counts)
+        if free.any():  # the unconstrained optimum, no row active
+            cost[free] = -0.5 * np.einsum("ij,ij->i", c_v[free], c_v[free])
+            zero = np.zeros(n_const + int(counts.max(initial=0)))
+            zero.flags.writeable = False  # views of it are the free drones' multipliers
+            for i in np.flatnonzero(free).tolist():
+                v_out[i], lams[i] = c_v[i], zero[: n_const + counts[i]]
         iters, in_daqp, table, step = 0, 0.0, self._table, sep_end - 1
         rows3 = a.reshape(a.shape[0], *table.shape[1:])  # the rows over v as (H, d) tables
 
@@ -218,7 +220,8 @@ class PerDroneQP(StepSolver):
             lams[i] = info["lam"]
         v_all = np.array(v_out).reshape(n, nu)
         const_bounds = (lo[None, :n_const].copy(), hi[None, :n_const].copy()) if bounds is None else bounds
-        is_soft = np.isin(np.arange(n), soft)
+        is_soft = np.zeros(n, dtype=bool)
+        is_soft[soft] = True
         return DroneSolves(v_all, s_out, cost, np.array(flags), is_soft, lams, at, np.array(offsets), sep_c,
                            sep_end, sep_lo, *const_bounds, int(iters), in_daqp)  # fmt: skip
 
