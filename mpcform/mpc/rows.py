@@ -231,9 +231,7 @@ class VelocityRows(LimitRows):
     def violators(self, p0: Array, u_prev: Array, u: Array, x: Array) -> Array:
         """Tested on the drones with an input outside the inscribed ball ``||u|| <= h`` (inside it,
         every ``D_i^T u <= ||u|| <= h``, rounding included with the factor's margin)."""
-        sq = u[..., 0] * u[..., 0]
-        for a in range(1, u.shape[-1]):
-            sq += u[..., a] * u[..., a]
+        sq = np.einsum("hnd,hnd->hn", u, u)
         out = sq.max(axis=0, initial=0.0) > INSCRIBED * self.h_mps**2
         if out.any():
             out[out] = (u[:, out] @ self.normals.T > self.h_mps).any(axis=(0, 2))
