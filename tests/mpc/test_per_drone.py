@@ -312,7 +312,7 @@ def test_a_drone_whose_target_meets_its_rows_skips_daqp_and_gets_daqps_solve(
         with monkeypatch.context() as m:
             m.setattr(qp, "_free", lambda c_v, *_: np.zeros(c_v.shape[0], dtype=bool))
             every = solve_each(*args)
-        free = qp._free(-args[1].transpose(1, 0, 2).reshape(fast.v.shape), None, fast.sep_c, fast.sep_end,
+        free = qp._free(args[1].transpose(1, 0, 2).reshape(fast.v.shape), None, fast.sep_c, fast.sep_end,
                         fast.sep_lo, np.diff(fast.offsets))  # fmt: skip
         skipped += int(free.sum()) * int((~free).any())
         assert np.array_equal(fast.v, every.v) and np.array_equal(fast.flags, every.flags)
