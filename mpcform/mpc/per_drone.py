@@ -179,7 +179,10 @@ class PerDroneQP(StepSolver):
         v_out, s_out, flags, lams = [np.empty(0)] * n, np.zeros((n, h)), [DAQP_OK] * n, [np.empty(0)] * n
         cost, free = np.zeros(n), self._free(c_v, bounds, sep_c, sep_end, sep_lo, counts)
         if free.any():  # the unconstrained optimum, no row active
-            cost[free] = -0.5 * np.einsum("ij,ij->i", c_v[free], c_v[free])
+            sq = np.zeros(int(free.sum()))
+            for col in c_v[free].T:  # summed in order, as DAQP sums its cost (bit for bit)
+                sq += col * col
+            cost[free] = -0.5 * sq
             zero = np.zeros(n_const + int(counts.max(initial=0)))
             zero.flags.writeable = False  # views of it are the free drones' multipliers
             for i in np.flatnonzero(free).tolist():

@@ -293,13 +293,25 @@ def test_rows_with_a_velocity_loop_are_on_the_true_positions() -> None:
     np.testing.assert_allclose(per._rows_v(coeffs, ends) @ v, want, atol=1e-12)
 
 
+def _lag_loop(dim: int, horizon: int) -> Any:
+    """A first-order velocity lag of 0.2 s on every axis, at dt 0.1 s."""
+    from mpcform.mpc.loop import VelocityLoop
+
+    lag = (np.array([[-5.0]]), np.array([5.0]), np.array([1.0]), tuple(range(dim)))
+    return VelocityLoop.from_groups([lag], dim, 0.1, horizon)
+
+
+@pytest.mark.parametrize("case", ["planar", "fence, acceleration, obstacle", "spatial, lag loop"])
 def test_a_drone_whose_target_meets_its_rows_skips_daqp_and_gets_daqps_solve(
-    monkeypatch: pytest.MonkeyPatch,
+    case: str, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     """Where ``v = c`` meets every row of a drone, the drone gets it without a DAQP call: the same
-    solve, multipliers and cost as DAQP's, bit for bit (the cost to rounding)."""
-    ref, start = crowd(0, 5, 2)
-    planner = MPCPlanner(ref, 0.1, LIMITS, MPCSettings(coupling="decoupled", grouping=False, fast_path=False))
+    solve, multipliers and cost as DAQP's, bit for bit (per-drone bounds and a velocity loop too)."""
+    dim, lim, obstacles, _ = VARIANTS["spatial" if "spatial" in case else case]
+    ref, start = crowd(0, 5, dim)
+    loop = _lag_loop(dim, 10) if "loop" in case else None
+    settings = MPCSettings(coupling="decoupled", grouping=False, fast_path=False)
+    planner = MPCPlanner(ref, 0.1, lim, settings, obstacles, loop=loop)
     qp = planner._solver
     assert isinstance(qp, PerDroneQP)
     calls: list[tuple[Any, ...]] = []
@@ -312,10 +324,11 @@ def test_a_drone_whose_target_meets_its_rows_skips_daqp_and_gets_daqps_solve(
         with monkeypatch.context() as m:
             m.setattr(qp, "_free", lambda c_v, *_: np.zeros(c_v.shape[0], dtype=bool))
             every = solve_each(*args)
-        free = qp._free(args[1].transpose(1, 0, 2).reshape(fast.v.shape), None, fast.sep_c, fast.sep_end,
+        bounds = None if qp._fixed_bounds else qp._bounds(args[0], args[2])
+        free = qp._free(args[1].transpose(1, 0, 2).reshape(fast.v.shape), bounds, fast.sep_c, fast.sep_end,
                         fast.sep_lo, np.diff(fast.offsets))  # fmt: skip
         skipped += int(free.sum()) * int((~free).any())
         assert np.array_equal(fast.v, every.v) and np.array_equal(fast.flags, every.flags)
         assert all(np.array_equal(a, b) for a, b in zip(fast.lams, every.lams, strict=True))
-        np.testing.assert_allclose(fast.cost, every.cost, rtol=1e-14, atol=1e-14)
+        assert np.array_equal(fast.cost, every.cost)
     assert skipped >= 10  # drones skipped in steps that solve others
