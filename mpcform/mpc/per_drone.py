@@ -187,15 +187,13 @@ class PerDroneQP(StepSolver):
             zero.flags.writeable = False  # views of it are the free drones' multipliers
             for i in np.flatnonzero(free).tolist():
                 v_out[i], lams[i] = c_v[i], zero[: n_const + counts[i]]
-        iters, in_daqp, table, step = 0, 0.0, self._table, sep_end - 1
-        rows3 = a.reshape(a.shape[0], *table.shape[1:])  # the rows over v as (H, d) tables
+        iters, in_daqp = 0, 0.0
 
         def put(i: int) -> int:
-            """Put drone i's rows over v (:meth:`_rows_v`) and their bounds into the buffers; return
-            their number."""
+            """Put drone i's rows over v and their bounds into the buffers; return their number."""
             first, last = offsets[i], offsets[i + 1]
             m = n_const + last - first
-            np.multiply(table.take(step[first:last], axis=0), sep_c[first:last, None], out=rows3[n_const:m])
+            self._rows_v(sep_c[first:last], sep_end[first:last], out=a[n_const:m])
             lo[n_const:m] = sep_lo[first:last]
             if bounds is not None:
                 lo[:n_const], hi[:n_const] = bounds[0][i], bounds[1][i]
@@ -287,7 +285,8 @@ class PerDroneQP(StepSolver):
         """Separation rows (K, H d) over ``v`` (into ``out``) of coefficients ``coeffs`` (K, d) at
         position steps ``end`` (K,): ``a^T x_e = (w_e (x) a)^T v``."""
         rows = np.empty((end.shape[0], self._nu)) if out is None else out
-        np.multiply(self._table[end - 1], coeffs[:, None, :], out=rows.reshape(-1, *self._table.shape[1:]))
+        table = self._table.take(end - 1, axis=0)  # (K, H, d)
+        np.multiply(table, coeffs[:, None], out=rows.reshape(table.shape))
         return rows
 
     def _free(
