@@ -38,7 +38,8 @@ from mpcform.formation.geometry import vector_norms
 from mpcform.mpc.limits import Limits
 from mpcform.mpc.loop import VelocityLoop
 from mpcform.mpc.problem import ACTIVE_TOL, StepQP, StepSolver
-from mpcform.mpc.rows import LimitRows, positions_of_inputs, row_ends
+from mpcform.mpc.rows import LimitRows, position_table, positions_of_inputs, row_ends
+from mpcform.mpc.sensitivity import Sensitivity, drone_sensitivity
 from mpcform.mpc.settings import MPCSettings
 from mpcform.solvers.base import QPSolution, failed
 
@@ -48,8 +49,9 @@ DAQP_INF = 1e30  # DAQP's "no bound"
 DAQP_OK = 1
 PRIMAL_TOL = 1e-9  # DAQP row feasibility tolerance (its default 1e-6 shows in the plans)
 MIN_SLACK_QUADRATIC = 1e-6  # keeps the soft QP's Hessian positive definite when w2 = 0
-AT_BOUND_M = 1e-7  # a separation row this close to its bound counts as active (sensitivity)
-GRAM_EPS = 1e-9  # relative regularisation of the active rows' Gram matrix (sensitivity)
+WORKING_MARGIN = 0.1  # constant rows this close to a bound [m/s or m] go to DAQP first
+WORKING_SHARE = 0.1  # ... when they are at most this share of the constant rows
+WORKING_MIN_DRONES = 32  # ... in a call with at least this many drones to solve (the choice costs ~50 us)
 Solved = tuple[QPSolution, int]  # a solution and its number of active rows
 
 
@@ -73,28 +75,6 @@ class DroneSolves:
     const_hi: Array
     iterations: int
     time_s: float  # inside DAQP
-
-
-@dataclass(frozen=True)
-class Sensitivity:
-    """How one drone's optimum moves with its separation rows' lower bounds ``b`` on its active
-    set (:meth:`PerDroneQP.sensitivity`): a separation rows active, r rows active in all (one-sided),
-    q rows inactive."""
-
-    active: Array  # (a,) the active separation rows (indices into the drone's rows)
-    hessian: Array  # (a, a) d^2 f / db^2
-    dv: Array  # (H d, a) dv / db
-    dual: Array  # (r,) the active rows' multipliers y >= 0 (constant rows first)
-    ddual: Array  # (r, a) dy / db
-    const_rows: Array  # (2 c, H d) every drone's one-sided constant rows (shared, not copied)
-    const_off: Array  # (2 c,) the inactive ones among them
-    sep_rows: Array  # (q - q_c, H d) the inactive separation rows; all one-sided ``rows v >= bound``
-    slack: Array  # (q,) how far the inactive rows are from their bounds (constant ones first)
-    sep_index: Array  # (q,) an inactive separation row's index in the drone's rows, else -1
-
-    def rate(self, dv: Array) -> Array:
-        """How fast the inactive rows' values change (q,) along ``dv`` (H d,)."""
-        return np.concatenate([(self.const_rows @ dv)[self.const_off], self.sep_rows @ dv])
 
 
 class PerDroneQP(StepSolver):
@@ -132,8 +112,9 @@ class PerDroneQP(StepSolver):
         w2 = max(settings.slack_quadratic, MIN_SLACK_QUADRATIC)
         self._hess_soft = np.diag(np.concatenate([np.full(h, w2), np.ones(nu)]))
         self._options: dict[str, Any] = {"iter_limit": settings.max_iter, "primal_tol": PRIMAL_TOL}
-        self._a, self._lo, self._hi = np.zeros((0, nu)), np.zeros(0), np.zeros(0)
-        self._fixed_bounds = all(family.fixed_bounds for family in families)
+        self._w = (self._a, self._lo, self._hi) = (np.zeros((0, nu)), np.zeros(0), np.zeros(0))  # _buffers
+        fixed = all(family.fixed_bounds for family in families)  # the same for every drone at every step
+        self._fixed = dense_bounds(families, np.zeros((1, dim)), np.zeros((1, dim))) if fixed else None
 
     def solve(self, qp: StepQP) -> tuple[QPSolution, int]:
         """Solve every drone's QP (the one-drone separation rows within reach of ``qp.rows``)."""
@@ -165,7 +146,11 @@ class PerDroneQP(StepSolver):
         self, p0: Array, c: Array, u_prev: Array, singles: Array, coeffs: Array, lower: Array, warm_u: Array,
         hard: Array | None = None, on: Array | None = None,
     ) -> DroneSolves:
-        """Every drone's solve as DAQP returns it (arguments as :meth:`solve_drones`)."""
+        """Every drone's solve as DAQP returns it (arguments as :meth:`solve_drones`).
+
+        DAQP first gets a drone's constant rows within :data:`WORKING_MARGIN` of a bound at ``v = c``
+        or at the warm start (its starting active set among them); a solve that misses any other
+        constant row, or fails, is solved again with all of them."""
         st = self.settings
         h, n, nu, n_const = st.horizon, p0.shape[0], self._nu, self._const_v.shape[0]
         c_v = c.transpose(1, 0, 2).reshape(n, nu)
@@ -173,11 +158,12 @@ class PerDroneQP(StepSolver):
         v_warm = warm_u.transpose(1, 0, 2).reshape(n, nu) @ self._m.T
         sep_c, sep_end, sep_lo, sep_soft, counts, at = reachable_rows(n, singles, coeffs, lower, hard, on,
                                                                       self._ends, self._step_m)  # fmt: skip
-        a, lo, hi = self._buffers(int(counts.max(initial=0)))
-        bounds = None if self._fixed_bounds else self._bounds(p0, u_prev)  # else in the buffers
+        (a, lo, hi), (wa, wlo, whi) = self._buffers(n_const + int(counts.max(initial=0)))
+        b_lo, b_hi = self._fixed if self._fixed is not None else dense_bounds(self.families, p0, u_prev)
         offsets = [0, *np.cumsum(counts).tolist()]
         v_out, s_out, flags, lams = [np.empty(0)] * n, np.zeros((n, h)), [DAQP_OK] * n, [np.empty(0)] * n
-        cost, free = np.zeros(n), self._free(c_v, bounds, sep_c, sep_end, sep_lo, counts)
+        const_c = c_v @ self._const_v.T
+        cost, free = np.zeros(n), self._free(c_v, const_c, b_lo, b_hi, sep_c, sep_end, sep_lo, counts)
         if free.any():  # the unconstrained optimum, no row active
             sq = np.zeros(int(free.sum()))
             for col in c_v[free].T:  # summed in order, as DAQP sums its cost (bit for bit)
@@ -188,43 +174,69 @@ class PerDroneQP(StepSolver):
             for i in np.flatnonzero(free).tolist():
                 v_out[i], lams[i] = c_v[i], zero[: n_const + counts[i]]
         iters, in_daqp = 0, 0.0
+        if self._fixed is not None:  # the constant rows' bounds stay in the full buffer
+            lo[:n_const], hi[:n_const] = b_lo[0], b_hi[0]
 
-        def put(i: int) -> int:
-            """Put drone i's rows over v and their bounds into the buffers; return their number."""
+        def put(i: int, rows: Array | None) -> tuple[Array, Array, Array, int]:
+            """Drone i's constant ``rows`` (None: all, in the full buffer) and separation rows
+            over v with their bounds, in a buffer; the buffer and the number of rows."""
             first, last = offsets[i], offsets[i + 1]
-            m = n_const + last - first
-            self._rows_v(sep_c[first:last], sep_end[first:last], out=a[n_const:m])
-            lo[n_const:m] = sep_lo[first:last]
-            if bounds is not None:
-                lo[:n_const], hi[:n_const] = bounds[0][i], bounds[1][i]
-            return m
+            if rows is None:
+                aa, ll, hh, k = a, lo, hi, n_const
+                if self._fixed is None:
+                    lo[:n_const], hi[:n_const] = b_lo[i], b_hi[i]
+            else:
+                aa, ll, hh, k = wa, wlo, whi, rows.shape[0]
+                b = min(i, b_lo.shape[0] - 1)
+                np.take(self._const_v, rows, axis=0, out=wa[:k])
+                wlo[:k], whi[:k] = b_lo[b, rows], b_hi[b, rows]
+                whi[k : k + last - first] = DAQP_INF
+            m = k + last - first
+            self._rows_v(sep_c[first:last], sep_end[first:last], out=aa[k:m])
+            ll[k:m] = sep_lo[first:last]
+            return aa, ll, hh, m
 
-        solve, eye, options = self._daqp.solve, self._eye, self._options
-        for i in np.flatnonzero(~free).tolist():  # the hard QPs
-            m = put(i)
+        def solve(i: int, rows: Array | None, soft: bool = False) -> None:
+            """Drone i's hard (or ``soft``) QP with the constant ``rows`` (None: all); its
+            multipliers over all its rows."""
+            nonlocal iters, in_daqp
+            (aa, ll, hh, m), first, last = put(i, rows), offsets[i], offsets[i + 1]
             t0 = time.perf_counter()
-            v_out[i], cost[i], flags[i], info = solve(
-                eye, f_v[i], a[:m], hi[:m], lo[:m], primal_start=v_warm[i], **options
-            )  # fmt: skip
+            if soft:
+                v_out[i], s_out[i], flags[i], cost[i], info = self._solve_soft(
+                    f_v[i], aa[:m], hh[:m], ll[:m], sep_end[first:last], sep_soft[first:last], n_const
+                )  # fmt: skip
+            else:
+                v_out[i], cost[i], flags[i], info = self._daqp.solve(
+                    self._eye, f_v[i], aa[:m], hh[:m], ll[:m], primal_start=v_warm[i], **self._options
+                )  # fmt: skip
             in_daqp += time.perf_counter() - t0
             iters += info["iterations"]
-            lams[i] = info["lam"]
+            lams[i] = lam = info["lam"]
+            if rows is not None:
+                k = rows.shape[0]
+                lams[i] = np.zeros(n_const + m - k)
+                lams[i][rows], lams[i][n_const:] = lam[:k], lam[k:]
+
+        busy = np.flatnonzero(~free)
+        near, few = working_sets(self._const_v, const_c[busy], v_warm[busy], b_lo, b_hi, busy)
+        for i in busy[~few].tolist():
+            solve(i, None)
+        if few.any():  # the drones with a working set; any that missed a row left out or failed: all rows
+            some = busy[few]
+            for i, rows in zip(some.tolist(), near, strict=True):
+                solve(i, np.flatnonzero(rows))
+            again = misses(self._const_v, np.array([v_out[i] for i in some.tolist()]), near, b_lo, b_hi, some)
+            for i in some[again | (np.array(flags)[some] != DAQP_OK)].tolist():
+                solve(i, None)
         soft = [i for i in range(n) if flags[i] != DAQP_OK]  # else the hard optimum (s = 0)
         for i in soft:
-            m, first, last = put(i), offsets[i], offsets[i + 1]
-            t0 = time.perf_counter()
-            v_out[i], s_out[i], flags[i], cost[i], info = self._solve_soft(
-                f_v[i], a[:m], hi[:m], lo[:m], sep_end[first:last], sep_soft[first:last], n_const
-            )  # fmt: skip
-            in_daqp += time.perf_counter() - t0
-            iters += info["iterations"]
-            lams[i] = info["lam"]
+            solve(i, None, soft=True)
         v_all = np.array(v_out).reshape(n, nu)
-        const_bounds = (lo[None, :n_const].copy(), hi[None, :n_const].copy()) if bounds is None else bounds
         is_soft = np.zeros(n, dtype=bool)
         is_soft[soft] = True
         return DroneSolves(v_all, s_out, cost, np.array(flags), is_soft, lams, at, np.array(offsets), sep_c,
-                           sep_end, sep_lo, *const_bounds, int(iters), in_daqp)  # fmt: skip
+                           sep_end, sep_lo, b_lo, b_hi, int(iters), in_daqp)  # fmt: skip
 
     def solution(self, v: Array, s: Array, flags: Array, lams: list[Array], iters: int, t_s: float) -> Solved:
         """The drones' solves (``v`` (n, H d), slacks ``s`` (n, H), DAQP's exit flags and
@@ -254,32 +266,13 @@ class PerDroneQP(StepSolver):
         return lam if everything else -lam[self._const_v.shape[0] :]
 
     def sensitivity(self, solves: DroneSolves, i: int) -> Sensitivity:
-        """How drone i's optimum moves with its separation rows' lower bounds on its active set:
-        every row one-sided, ``a^T v >= b`` (a constant row's bounds as two rows), multiplier
-        ``y >= 0``; active: a multiplier, or within :data:`AT_BOUND_M` of the bound. There
-        (identity Hessian; a soft drone's slacks ignored) ``v = c + A^T y``, ``y = (A A^T)^-1 (b -
-        A c)``: ``d^2 f / db^2 = dy / db = (A A^T)^-1``, ``dv / db = A^T (A A^T)^-1``; regularised
-        (:data:`GRAM_EPS`) so that dependent rows (a segment's two ends at one step) get a large
-        curvature, not none. The inactive constant rows stay shared (a mask, not a copy)."""
-        n_const, first, last = self._const_v.shape[0], solves.offsets[i], solves.offsets[i + 1]
-        lam, v, both = self.multipliers(solves, i, everything=True), solves.v[i], self._const_pm
-        lo, hi = (b[min(i, b.shape[0] - 1)] for b in (solves.const_lo, solves.const_hi))
+        """How drone i's optimum moves with its separation rows' lower bounds on its active set
+        (:func:`mpcform.mpc.sensitivity.drone_sensitivity`)."""
+        first, last, b = solves.offsets[i], solves.offsets[i + 1], min(i, solves.const_lo.shape[0] - 1)
         sep = self._rows_v(solves.sep_c[first:last], solves.sep_end[first:last])
-        bound = np.concatenate([lo, -hi, solves.sep_lo[first:last]])
-        y = np.concatenate([np.maximum(-lam[:n_const], 0.0), np.maximum(lam[:n_const], 0.0), -lam[n_const:]])
-        gap = np.concatenate([both @ v, sep @ v]) - bound
-        real = np.abs(bound) < DAQP_INF / 2
-        on = real & ((y > ACTIVE_TOL) | (gap <= AT_BOUND_M))
-        off, c2 = real & ~on, 2 * n_const
-        active = np.concatenate([both[on[:c2]], sep[on[c2:]]])
-        gram = active @ active.T
-        gram.flat[:: gram.shape[0] + 1] += GRAM_EPS * max(1.0, float(np.diag(gram).max(initial=0.0)))
-        sep_on = np.flatnonzero(on[c2:])
-        k = np.linalg.inv(gram)[:, on[:c2].sum() :]  # columns: the active separation rows
-        idx = np.flatnonzero(off)
-        sep_index = np.where(idx >= c2, idx - c2, -1)
-        return Sensitivity(sep_on, k[-sep_on.shape[0] :] if sep_on.size else k[:0], active.T @ k, y[on], k,
-                           both, off[:c2], sep[off[c2:]], gap[off], sep_index)  # fmt: skip
+        lam = self.multipliers(solves, i, everything=True)
+        lo, hi = solves.const_lo[b], solves.const_hi[b]
+        return drone_sensitivity(lam, solves.v[i], self._const_pm, sep, lo, hi, solves.sep_lo[first:last])
 
     def _rows_v(self, coeffs: Array, end: Array, out: Array | None = None) -> Array:
         """Separation rows (K, H d) over ``v`` (into ``out``) of coefficients ``coeffs`` (K, d) at
@@ -290,35 +283,32 @@ class PerDroneQP(StepSolver):
         return rows
 
     def _free(
-        self, c_v: Array, bounds: tuple[Array, Array] | None, sep_c: Array, sep_end: Array, sep_lo: Array,
-        counts: Array,
+        self, c_v: Array, const_c: Array, b_lo: Array, b_hi: Array, sep_c: Array, sep_end: Array,
+        sep_lo: Array, counts: Array,
     ) -> Array:
-        """The drones (n,) whose unconstrained optimum ``v = c`` (``c_v`` (n, H d)) meets every row:
-        it is their solve (no row active; DAQP returns it bitwise), without a DAQP call."""
-        n, n_const, const = c_v.shape[0], self._const_v.shape[0], c_v @ self._const_v.T
-        lo, hi = (self._lo[None, :n_const], self._hi[None, :n_const]) if bounds is None else bounds
-        free = ((const >= lo) & (const <= hi)).all(axis=1)
+        """The drones (n,) whose unconstrained optimum ``v = c`` (``c_v`` (n, H d); ``const_c`` the
+        constant rows there) meets every row: it is their solve (no row active; DAQP returns it
+        bitwise), without a DAQP call."""
+        free = np.asarray(((const_c >= b_lo) & (const_c <= b_hi)).all(axis=1))
         if not free.any():
             return free
+        n = c_v.shape[0]
         x = (c_v @ self._x_of_v.T).reshape(-1, self.dim)  # x_e at v = c, rows (drone, step e)
         owner = np.repeat(np.arange(n), counts)
         missed = np.einsum("kd,kd->k", sep_c, x[owner * self.settings.horizon + sep_end - 1]) < sep_lo
         free[owner[missed]] = False
         return free
 
-    def _buffers(self, max_sep: int) -> tuple[Array, Array, Array]:
-        """Row and bound buffers with room for ``max_sep`` separation rows after the constant ones
-        (kept between calls; only the separation part and per-drone bounds are rewritten)."""
-        n_const = self._const_v.shape[0]
-        if self._a.shape[0] < n_const + max_sep:
-            size = n_const + max(max_sep, 2 * (self._a.shape[0] - n_const))
-            self._a = np.empty((size, self._nu))
-            self._a[:n_const] = self._const_v
-            self._lo, self._hi = np.empty(size), np.full(size, DAQP_INF)
-            if self._fixed_bounds:  # the same for every drone at every step
-                lo, hi = self._bounds(np.zeros((1, self.dim)), np.zeros((1, self.dim)))
-                self._lo[:n_const], self._hi[:n_const] = lo[0], hi[0]
-        return self._a, self._lo, self._hi
+    def _buffers(self, size: int) -> tuple[tuple[Array, Array, Array], tuple[Array, Array, Array]]:
+        """Row and bound buffers with room for ``size`` rows (kept between calls): the full one (the
+        constant rows first; only the separation part and per-drone bounds are rewritten) and the
+        working-set one."""
+        if self._a.shape[0] < size:
+            size = max(size, 2 * self._a.shape[0])
+            self._a, self._lo, self._hi = np.empty((size, self._nu)), np.empty(size), np.full(size, DAQP_INF)
+            self._a[: self._const_v.shape[0]] = self._const_v
+            self._w = np.empty_like(self._a), np.empty(size), np.empty(size)
+        return (self._a, self._lo, self._hi), self._w
 
     def _solve_soft(
         self, f_v: Array, a: Array, hi: Array, lo: Array, end: Array, soft: Array, n_const: int
@@ -336,29 +326,6 @@ class PerDroneQP(StepSolver):
             np.concatenate([np.zeros(h), lo]), **self._options,
         )  # fmt: skip
         return z[h:], z[:h], flag, cost, info
-
-    def _bounds(self, p0: Array, u_prev: Array) -> tuple[Array, Array]:
-        """Lower and upper bounds (n, rows) of the constant rows for each drone."""
-        n = p0.shape[0]
-        if not self.families:
-            return np.zeros((n, 0)), np.zeros((n, 0))
-        lo, hi = zip(*(family.dense_bounds(p0, u_prev, DAQP_INF) for family in self.families), strict=True)
-        return np.hstack(lo), np.hstack(hi)
-
-
-def position_table(m_inv: Array, h: int, dim: int, dt_s: float, loop: VelocityLoop | None) -> Array:
-    """The table (H, H d) of ``w_e (x) 1_d`` per position step e, rows over ``v``.
-
-    ``x_e = dt sum_{j<e} u_j = (sum_{j<e} dt M^-1[(j, .), :]) v`` and ``M^-1 = T (x) I_d``, so
-    ``x_e = (w_e (x) I_d) v`` and ``a^T x_e = (w_e (x) a)^T v``. With a velocity ``loop`` the rows
-    are on its positions, ``+ sum_j G_{e,j} u_j`` with ``u_j = sum_m T[j, m] v_m`` (per axis)."""
-    nu = h * dim
-    x_v = dt_s * np.cumsum(m_inv.reshape(h, dim, nu), axis=0)
-    table = np.einsum("echc->ehc", x_v.reshape(h, dim, h, dim)).reshape(h, nu)
-    if loop is not None:
-        t = m_inv.reshape(h, dim, h, dim)[:, 0, :, 0]
-        table += np.einsum("ejd,jm->emd", loop.forced[1:], t).reshape(h, nu)
-    return table
 
 
 def reachable_rows(
@@ -391,3 +358,43 @@ def reachable_rows(
     counts = np.bincount(singles[item], minlength=n).astype(np.intp)
     sep_c = np.take(coeffs.reshape(-1, coeffs.shape[2]), at, axis=0)
     return sep_c, ends[r], np.take(lower.reshape(-1), at), soft, counts, at
+
+
+def working_sets(
+    const_v: Array, at_c: Array, warm: Array, b_lo: Array, b_hi: Array, busy: Array
+) -> tuple[Array, Array]:
+    """DAQP's first rows among the constant rows ``const_v`` (c, H d), for the drones ``busy``: those
+    within :data:`WORKING_MARGIN` of a bound (or beyond) at ``v = c`` (values ``at_c``) or at the warm
+    start ``warm`` (over v), where they are at most :data:`WORKING_SHARE` of the rows and at least
+    :data:`WORKING_MIN_DRONES` drones are solved (the choice costs about 50 us a call): the sets
+    (drones with one, c) and which drones have one (busy,). Bounds ``b_lo``, ``b_hi`` (n or 1, c)."""
+    share, none = WORKING_SHARE * const_v.shape[0], np.zeros(busy.shape[0], dtype=bool)
+    if busy.shape[0] < WORKING_MIN_DRONES:
+        return np.zeros((0, const_v.shape[0]), dtype=bool), none
+    lo, hi = (b[busy] if b.shape[0] > 1 else b for b in (b_lo, b_hi))
+    near = np.minimum(at_c - lo, hi - at_c) < WORKING_MARGIN
+    few = near.sum(axis=1) <= share
+    near, lo, hi = near[few], *(b[few] if b.shape[0] > 1 else b for b in (lo, hi))
+    at_warm = warm[few] @ const_v.T
+    near |= np.minimum(at_warm - lo, hi - at_warm) < WORKING_MARGIN
+    keep = near.sum(axis=1) <= share
+    few[few] = keep
+    return near[keep], few
+
+
+def misses(const_v: Array, v: Array, given: Array, b_lo: Array, b_hi: Array, some: Array) -> Array:
+    """Which solves ``v`` (drones ``some``, H d) miss a constant row (``const_v``, bounds ``b_lo``,
+    ``b_hi`` (n or 1, c)) that DAQP was not ``given`` (drones, c)."""
+    vals = v @ const_v.T
+    lo, hi = (b[some] if b.shape[0] > 1 else b for b in (b_lo, b_hi))
+    return np.asarray((((vals < lo) | (vals > hi)) & ~given).any(axis=1))
+
+
+def dense_bounds(families: tuple[LimitRows, ...], p0: Array, u_prev: Array) -> tuple[Array, Array]:
+    """Lower and upper bounds (n, rows) of the constant rows of ``families`` for each drone (starts
+    ``p0``, last commands ``u_prev`` (n, d)); :data:`DAQP_INF` where a row has none."""
+    n = p0.shape[0]
+    if not families:
+        return np.zeros((n, 0)), np.zeros((n, 0))
+    lo, hi = zip(*(family.dense_bounds(p0, u_prev, DAQP_INF) for family in families), strict=True)
+    return np.hstack(lo), np.hstack(hi)

@@ -25,6 +25,7 @@ from scipy.spatial import HalfspaceIntersection
 
 from mpcform._validate import Array
 from mpcform.mpc.limits import Limits
+from mpcform.mpc.loop import VelocityLoop
 from mpcform.mpc.settings import MPCSettings
 
 INF = np.inf
@@ -362,3 +363,18 @@ def velocity_set(dim: int, settings: MPCSettings, v_max_mps: float) -> tuple[Arr
         return np.vstack([np.eye(dim), -np.eye(dim)]), v_max_mps / np.sqrt(dim)
     normals, h_rel = velocity_polytope(dim, settings.facets)
     return normals, h_rel * v_max_mps
+
+
+def position_table(m_inv: Array, h: int, dim: int, dt_s: float, loop: VelocityLoop | None) -> Array:
+    """The table (H, H d) of ``w_e (x) 1_d`` per position step e, rows over ``v``.
+
+    ``x_e = dt sum_{j<e} u_j = (sum_{j<e} dt M^-1[(j, .), :]) v`` and ``M^-1 = T (x) I_d``, so
+    ``x_e = (w_e (x) I_d) v`` and ``a^T x_e = (w_e (x) a)^T v``. With a velocity ``loop`` the rows
+    are on its positions, ``+ sum_j G_{e,j} u_j`` with ``u_j = sum_m T[j, m] v_m`` (per axis)."""
+    nu = h * dim
+    x_v = dt_s * np.cumsum(m_inv.reshape(h, dim, nu), axis=0)
+    table = np.einsum("echc->ehc", x_v.reshape(h, dim, h, dim)).reshape(h, nu)
+    if loop is not None:
+        t = m_inv.reshape(h, dim, h, dim)[:, 0, :, 0]
+        table += np.einsum("ejd,jm->emd", loop.forced[1:], t).reshape(h, nu)
+    return table

@@ -11,7 +11,7 @@ drones' optimal costs: convex and piecewise quadratic in ``t`` (primal decomposi
     dV/dt_r = mu_{i,r} - mu_{k,r}        d^2V/dt^2 = sum_i S_i^T (A_i A_i^T)^-1 S_i
 
 (``mu`` the sides' multipliers, ``A_i`` drone i's active rows over ``v``, identity Hessian, ``S_i``
-its split rows' signs; :meth:`~mpcform.mpc.per_drone.PerDroneQP.sensitivity`). Each round takes a
+its split rows' signs; :func:`~mpcform.mpc.sensitivity.drone_sensitivity`). Each round takes a
 step along the Newton direction in ``t`` from the best iterate and re-solves the drones whose rows
 moved, warm-started; the trial becomes the best iterate if it lowers ``V`` enough (Armijo) and
 needs no more slack than the midpoint split. The step length is the model's minimiser with its
@@ -38,9 +38,10 @@ import numpy as np
 
 from mpcform._validate import Array
 from mpcform.errors import ValidationError
-from mpcform.mpc.per_drone import DAQP_OK, DroneSolves, PerDroneQP, Sensitivity
+from mpcform.mpc.per_drone import DAQP_OK, DroneSolves, PerDroneQP
 from mpcform.mpc.problem import StepQP, StepSolver
 from mpcform.mpc.rows import row_ends
+from mpcform.mpc.sensitivity import Sensitivity
 from mpcform.mpc.separation import SeparationRows
 from mpcform.solvers.base import QPSolution
 

@@ -324,11 +324,51 @@ def test_a_drone_whose_target_meets_its_rows_skips_daqp_and_gets_daqps_solve(
         with monkeypatch.context() as m:
             m.setattr(qp, "_free", lambda c_v, *_: np.zeros(c_v.shape[0], dtype=bool))
             every = solve_each(*args)
-        bounds = None if qp._fixed_bounds else qp._bounds(args[0], args[2])
-        free = qp._free(args[1].transpose(1, 0, 2).reshape(fast.v.shape), bounds, fast.sep_c, fast.sep_end,
+        c_v = args[1].transpose(1, 0, 2).reshape(fast.v.shape)
+        free = qp._free(c_v, c_v @ qp._const_v.T, fast.const_lo, fast.const_hi, fast.sep_c, fast.sep_end,
                         fast.sep_lo, np.diff(fast.offsets))  # fmt: skip
         skipped += int(free.sum()) * int((~free).any())
         assert np.array_equal(fast.v, every.v) and np.array_equal(fast.flags, every.flags)
         assert all(np.array_equal(a, b) for a, b in zip(fast.lams, every.lams, strict=True))
         assert np.array_equal(fast.cost, every.cost)
     assert skipped >= 10  # drones skipped in steps that solve others
+
+
+@pytest.mark.parametrize("case", ["planar", "fence, acceleration, obstacle", "spatial, lag loop"])
+def test_a_working_set_of_constant_rows_gives_the_solve_with_every_row(
+    case: str, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """DAQP first sees only a drone's constant rows near a bound; a solve that misses one it did not
+    see is solved again with all of them. Forced on every drone (no margin, any share, any number
+    of drones), the solves, flags and multipliers are those with every row, and some drones did
+    miss a row and were solved again. The optimum is unique; multipliers of duplicate rows are not."""
+    from mpcform.mpc import per_drone
+
+    dim, lim, obstacles, _ = VARIANTS["spatial" if "spatial" in case else case]
+    ref, start = crowd(1, 6, dim)
+    loop = _lag_loop(dim, 10) if "loop" in case else None
+    settings = MPCSettings(coupling="decoupled", grouping=False, fast_path=False)
+    planner = MPCPlanner(ref, 0.1, lim, settings, obstacles, loop=loop)
+    qp = planner._solver
+    assert isinstance(qp, PerDroneQP)
+    calls: list[tuple[Any, ...]] = []
+    solve_each = qp.solve_each
+    monkeypatch.setattr(qp, "solve_each", lambda *args: calls.append(args) or solve_each(*args))
+    simulate(planner, start, 3.0)
+    missed: list[int] = []
+    misses = per_drone.misses
+    for args in calls:
+        every = solve_each(*args)
+        with monkeypatch.context() as m:
+            m.setattr(per_drone, "WORKING_MARGIN", 0.0)
+            m.setattr(per_drone, "WORKING_SHARE", 1.0)
+            m.setattr(per_drone, "WORKING_MIN_DRONES", 1)
+            m.setattr(per_drone, "misses", lambda *a: (out := misses(*a)) is not None and missed.append(
+                int(out.sum())) or out)  # fmt: skip
+            some = solve_each(*args)
+        np.testing.assert_allclose(some.v, every.v, rtol=0.0, atol=1e-9)
+        assert np.array_equal(some.flags, every.flags) and np.array_equal(some.soft, every.soft)
+        np.testing.assert_allclose(some.cost, every.cost, rtol=1e-12, atol=1e-12)
+        for a, b in zip(some.lams, every.lams, strict=True):  # (a duplicate row's share is not unique)
+            assert a.shape == b.shape and a.sum() == pytest.approx(b.sum(), rel=1e-9, abs=1e-9)
+    assert sum(missed) >= 3 and len(missed) >= 10  # solved again, and many calls used working sets
