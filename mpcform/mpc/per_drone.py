@@ -368,9 +368,9 @@ def working_sets(
     start ``warm`` (over v), where they are at most :data:`WORKING_SHARE` of the rows and at least
     :data:`WORKING_MIN_DRONES` drones are solved (the choice costs about 50 us a call): the sets
     (drones with one, c) and which drones have one (busy,). Bounds ``b_lo``, ``b_hi`` (n or 1, c)."""
-    share, none = WORKING_SHARE * const_v.shape[0], np.zeros(busy.shape[0], dtype=bool)
+    share = WORKING_SHARE * const_v.shape[0]
     if busy.shape[0] < WORKING_MIN_DRONES:
-        return np.zeros((0, const_v.shape[0]), dtype=bool), none
+        return np.zeros((0, const_v.shape[0]), dtype=bool), np.zeros(busy.shape[0], dtype=bool)
     lo, hi = (b[busy] if b.shape[0] > 1 else b for b in (b_lo, b_hi))
     near = np.minimum(at_c - lo, hi - at_c) < WORKING_MARGIN
     few = near.sum(axis=1) <= share
