@@ -59,7 +59,7 @@ def drone_sensitivity(
     off, c2 = real & ~on, 2 * n_const
     active = np.concatenate([const_pm[on[:c2]], sep[on[c2:]]])
     gram = active @ active.T
-    gram.flat[:: gram.shape[0] + 1] += GRAM_EPS * max(1.0, float(np.diag(gram).max(initial=0.0)))
+    gram.flat[:: gram.shape[0] + 1] += GRAM_EPS * max(1.0, float(gram.diagonal().max(initial=0.0)))
     sep_on = np.flatnonzero(on[c2:])
     k = np.linalg.inv(gram)[:, on[:c2].sum() :]  # columns: the active separation rows
     idx = np.flatnonzero(off)

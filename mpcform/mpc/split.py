@@ -290,11 +290,15 @@ class SplitStep:
             used = used[~frozen.ravel()[used]]
             if not used.size:
                 return None
-        hess = np.zeros((used.shape[0], used.shape[0]))
+        n_used, entries, values = used.shape[0], [], []
         for flat, sign, k in blocks:  # frozen entries stay put: their rows and columns drop out
-            at = np.minimum(np.searchsorted(used, flat), used.shape[0] - 1)
+            at = np.minimum(np.searchsorted(used, flat), n_used - 1)
             keep = used[at] == flat
-            hess[np.ix_(at[keep], at[keep])] += np.outer(sign[keep], sign[keep]) * k[np.ix_(keep, keep)]
+            at, sign = at[keep], sign[keep]
+            entries.append((at[:, None] * n_used + at).ravel())
+            values.append((np.outer(sign, sign) * k[np.ix_(keep, keep)]).ravel())
+        hess = np.bincount(np.concatenate(entries), np.concatenate(values), n_used**2)  # in order, as +=
+        hess = hess.reshape(n_used, n_used)
         g = grad.ravel()[used]
         newton = np.zeros(shape)
         ridge = RIDGE * max(1.0, float(np.abs(np.diag(hess)).max(initial=0.0)))
