@@ -301,14 +301,13 @@ def _lag_loop(dim: int, horizon: int) -> Any:
     return VelocityLoop.from_groups([lag], dim, 0.1, horizon)
 
 
-@pytest.mark.parametrize("case", ["planar", "fence, acceleration, obstacle", "spatial, lag loop"])
-def test_a_drone_whose_target_meets_its_rows_skips_daqp_and_gets_daqps_solve(
-    case: str, monkeypatch: pytest.MonkeyPatch
-) -> None:
-    """Where ``v = c`` meets every row of a drone, the drone gets it without a DAQP call: the same
-    solve, multipliers and cost as DAQP's, bit for bit (per-drone bounds and a velocity loop too)."""
+def _recorded_calls(
+    case: str, seed: int, n: int, duration_s: float, monkeypatch: pytest.MonkeyPatch
+) -> tuple[PerDroneQP, list[tuple[Any, ...]]]:
+    """The per-drone QP of a crowd of ``n`` drones (a variant of ``case``, with a 0.2 s lag loop
+    if ``case`` says so) and every ``solve_each`` call of its closed loop."""
     dim, lim, obstacles, _ = VARIANTS["spatial" if "spatial" in case else case]
-    ref, start = crowd(0, 5, dim)
+    ref, start = crowd(seed, n, dim)
     loop = _lag_loop(dim, 10) if "loop" in case else None
     settings = MPCSettings(coupling="decoupled", grouping=False, fast_path=False)
     planner = MPCPlanner(ref, 0.1, lim, settings, obstacles, loop=loop)
@@ -317,8 +316,19 @@ def test_a_drone_whose_target_meets_its_rows_skips_daqp_and_gets_daqps_solve(
     calls: list[tuple[Any, ...]] = []
     solve_each = qp.solve_each
     monkeypatch.setattr(qp, "solve_each", lambda *args: calls.append(args) or solve_each(*args))
-    simulate(planner, start, 4.0)
-    skipped = 0
+    simulate(planner, start, duration_s)
+    monkeypatch.undo()
+    return qp, calls
+
+
+@pytest.mark.parametrize("case", ["planar", "fence, acceleration, obstacle", "spatial, lag loop"])
+def test_a_drone_whose_target_meets_its_rows_skips_daqp_and_gets_daqps_solve(
+    case: str, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Where ``v = c`` meets every row of a drone, the drone gets it without a DAQP call: the same
+    solve, multipliers and cost as DAQP's, bit for bit (per-drone bounds and a velocity loop too)."""
+    qp, calls = _recorded_calls(case, 0, 5, 4.0, monkeypatch)
+    solve_each, skipped = qp.solve_each, 0
     for args in calls:
         fast = solve_each(*args)
         with monkeypatch.context() as m:
@@ -344,28 +354,23 @@ def test_a_working_set_of_constant_rows_gives_the_solve_with_every_row(
     miss a row and were solved again. The optimum is unique; multipliers of duplicate rows are not."""
     from mpcform.mpc import per_drone
 
-    dim, lim, obstacles, _ = VARIANTS["spatial" if "spatial" in case else case]
-    ref, start = crowd(1, 6, dim)
-    loop = _lag_loop(dim, 10) if "loop" in case else None
-    settings = MPCSettings(coupling="decoupled", grouping=False, fast_path=False)
-    planner = MPCPlanner(ref, 0.1, lim, settings, obstacles, loop=loop)
-    qp = planner._solver
-    assert isinstance(qp, PerDroneQP)
-    calls: list[tuple[Any, ...]] = []
-    solve_each = qp.solve_each
-    monkeypatch.setattr(qp, "solve_each", lambda *args: calls.append(args) or solve_each(*args))
-    simulate(planner, start, 3.0)
+    qp, calls = _recorded_calls(case, 1, 6, 3.0, monkeypatch)
     missed: list[int] = []
     misses = per_drone.misses
+
+    def counted(*args: Any) -> np.ndarray:
+        out = misses(*args)
+        missed.append(int(out.sum()))
+        return out
+
     for args in calls:
-        every = solve_each(*args)
+        every = qp.solve_each(*args)  # 6 drones: fewer than WORKING_MIN_DRONES, every row
         with monkeypatch.context() as m:
             m.setattr(per_drone, "WORKING_MARGIN", 0.0)
             m.setattr(per_drone, "WORKING_SHARE", 1.0)
             m.setattr(per_drone, "WORKING_MIN_DRONES", 1)
-            m.setattr(per_drone, "misses", lambda *a: (out := misses(*a)) is not None and missed.append(
-                int(out.sum())) or out)  # fmt: skip
-            some = solve_each(*args)
+            m.setattr(per_drone, "misses", counted)
+            some = qp.solve_each(*args)
         np.testing.assert_allclose(some.v, every.v, rtol=0.0, atol=1e-9)
         assert np.array_equal(some.flags, every.flags) and np.array_equal(some.soft, every.soft)
         np.testing.assert_allclose(some.cost, every.cost, rtol=1e-12, atol=1e-12)
