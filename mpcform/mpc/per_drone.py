@@ -148,9 +148,8 @@ class PerDroneQP(StepSolver):
     ) -> DroneSolves:
         """Every drone's solve as DAQP returns it (arguments as :meth:`solve_drones`).
 
-        DAQP first gets a drone's constant rows within :data:`WORKING_MARGIN` of a bound at ``v = c``
-        or at the warm start (its starting active set among them); a solve that misses any other
-        constant row, or fails, is solved again with all of them."""
+        A drone with a working set (:func:`working_sets`) first gives DAQP only those constant rows;
+        a solve that misses any other constant row, or fails, is solved again with all of them."""
         st = self.settings
         h, n, nu, n_const = st.horizon, p0.shape[0], self._nu, self._const_v.shape[0]
         c_v = c.transpose(1, 0, 2).reshape(n, nu)
@@ -174,8 +173,6 @@ class PerDroneQP(StepSolver):
             for i in np.flatnonzero(free).tolist():
                 v_out[i], lams[i] = c_v[i], zero[: n_const + counts[i]]
         iters, in_daqp = 0, 0.0
-        if self._fixed is not None:  # the constant rows' bounds stay in the full buffer
-            lo[:n_const], hi[:n_const] = b_lo[0], b_hi[0]
 
         def put(i: int, rows: Array | None) -> tuple[Array, Array, Array, int]:
             """Drone i's constant ``rows`` (None: all, in the full buffer) and separation rows
@@ -306,7 +303,10 @@ class PerDroneQP(StepSolver):
         if self._a.shape[0] < size:
             size = max(size, 2 * self._a.shape[0])
             self._a, self._lo, self._hi = np.empty((size, self._nu)), np.empty(size), np.full(size, DAQP_INF)
-            self._a[: self._const_v.shape[0]] = self._const_v
+            n_const = self._const_v.shape[0]
+            self._a[:n_const] = self._const_v
+            if self._fixed is not None:  # the same bounds for every drone at every step: kept here
+                self._lo[:n_const], self._hi[:n_const] = self._fixed[0][0], self._fixed[1][0]
             self._w = np.empty_like(self._a), np.empty(size), np.empty(size)
         return (self._a, self._lo, self._hi), self._w
 
