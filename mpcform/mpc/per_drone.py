@@ -34,13 +34,21 @@ import numpy as np
 from scipy.linalg import solve_triangular
 
 from mpcform._validate import Array
-from mpcform.formation.geometry import vector_norms
 from mpcform.mpc.limits import Limits
 from mpcform.mpc.loop import VelocityLoop
 from mpcform.mpc.problem import ACTIVE_TOL, StepQP, StepSolver
 from mpcform.mpc.rows import LimitRows, position_table, positions_of_inputs, row_ends
 from mpcform.mpc.sensitivity import Sensitivity, drone_sensitivity
 from mpcform.mpc.settings import MPCSettings
+from mpcform.mpc.working_set import (
+    free_drones,
+    misses,
+    reachable_rows,
+    row_values,
+    separation_misses,
+    separation_sets,
+    working_sets,
+)
 from mpcform.solvers.base import QPSolution, failed
 
 PER_DRONE_SOLVER = "daqp (per drone)"  # the planner's solver_name in decoupled mode with per_drone
@@ -49,9 +57,6 @@ DAQP_INF = 1e30  # DAQP's "no bound"
 DAQP_OK = 1
 PRIMAL_TOL = 1e-9  # DAQP row feasibility tolerance (its default 1e-6 shows in the plans)
 MIN_SLACK_QUADRATIC = 1e-6  # keeps the soft QP's Hessian positive definite when w2 = 0
-WORKING_MARGIN = 0.1  # constant rows this close to a bound [m/s or m] go to DAQP first
-WORKING_SHARE = 0.1  # ... when they are at most this share of the constant rows
-WORKING_MIN_DRONES = 32  # ... in a call with at least this many drones to solve (the choice costs ~50 us)
 Solved = tuple[QPSolution, int]  # a solution and its number of active rows
 
 
@@ -161,8 +166,9 @@ class PerDroneQP(StepSolver):
         b_lo, b_hi = self._fixed if self._fixed is not None else dense_bounds(self.families, p0, u_prev)
         offsets = [0, *np.cumsum(counts).tolist()]
         v_out, s_out, flags, lams = [np.empty(0)] * n, np.zeros((n, h)), [DAQP_OK] * n, [np.empty(0)] * n
-        const_c = c_v @ self._const_v.T
-        cost, free = np.zeros(n), self._free(c_v, const_c, b_lo, b_hi, sep_c, sep_end, sep_lo, counts)
+        const_c, owner = c_v @ self._const_v.T, np.repeat(np.arange(n), counts)
+        sep_c_at = row_values(self._x_of_v, c_v, sep_c, sep_end, owner, h)  # at the unconstrained optimum
+        cost, free = np.zeros(n), free_drones(const_c, b_lo, b_hi, sep_c_at < sep_lo, owner)
         if free.any():  # the unconstrained optimum, no row active
             sq = np.zeros(int(free.sum()))
             for col in c_v[free].T:  # summed in order, as DAQP sums its cost (bit for bit)
@@ -174,30 +180,31 @@ class PerDroneQP(StepSolver):
                 v_out[i], lams[i] = c_v[i], zero[: n_const + counts[i]]
         iters, in_daqp = 0, 0.0
 
-        def put(i: int, rows: Array | None) -> tuple[Array, Array, Array, int]:
-            """Drone i's constant ``rows`` (None: all, in the full buffer) and separation rows
-            over v with their bounds, in a buffer; the buffer and the number of rows."""
+        def put(i: int, rows: Array | None, sep: Array | None) -> tuple[Array, Array, Array, int]:
+            """Drone i's constant ``rows`` and separation rows ``sep`` (None: all; else both given,
+            in the working-set buffer) over v with their bounds; the buffer and the number of rows."""
             first, last = offsets[i], offsets[i + 1]
             if rows is None:
-                aa, ll, hh, k = a, lo, hi, n_const
+                aa, ll, hh, k, at = a, lo, hi, n_const, slice(first, last)
                 if self._fixed is None:
                     lo[:n_const], hi[:n_const] = b_lo[i], b_hi[i]
             else:
-                aa, ll, hh, k = wa, wlo, whi, rows.shape[0]
+                aa, ll, hh, k, at = wa, wlo, whi, rows.shape[0], first + sep
                 b = min(i, b_lo.shape[0] - 1)
                 np.take(self._const_v, rows, axis=0, out=wa[:k])
                 wlo[:k], whi[:k] = b_lo[b, rows], b_hi[b, rows]
-                whi[k : k + last - first] = DAQP_INF
-            m = k + last - first
-            self._rows_v(sep_c[first:last], sep_end[first:last], out=aa[k:m])
-            ll[k:m] = sep_lo[first:last]
+            m = k + (last - first if sep is None else sep.shape[0])
+            self._rows_v(sep_c[at], sep_end[at], out=aa[k:m])
+            ll[k:m] = sep_lo[at]
+            if rows is not None:
+                whi[k:m] = DAQP_INF
             return aa, ll, hh, m
 
-        def solve(i: int, rows: Array | None, soft: bool = False) -> None:
-            """Drone i's hard (or ``soft``) QP with the constant ``rows`` (None: all); its
-            multipliers over all its rows."""
+        def solve(i: int, rows: Array | None, sep: Array | None = None, soft: bool = False) -> None:
+            """Drone i's hard (or ``soft``) QP with the constant ``rows`` and separation rows ``sep``
+            (None: all); its multipliers over all its rows."""
             nonlocal iters, in_daqp
-            (aa, ll, hh, m), first, last = put(i, rows), offsets[i], offsets[i + 1]
+            (aa, ll, hh, m), first, last = put(i, rows, sep), offsets[i], offsets[i + 1]
             t0 = time.perf_counter()
             if soft:
                 v_out[i], s_out[i], flags[i], cost[i], info = self._solve_soft(
@@ -210,10 +217,9 @@ class PerDroneQP(StepSolver):
             in_daqp += time.perf_counter() - t0
             iters += info["iterations"]
             lams[i] = lam = info["lam"]
-            if rows is not None:
-                k = rows.shape[0]
-                lams[i] = np.zeros(n_const + m - k)
-                lams[i][rows], lams[i][n_const:] = lam[:k], lam[k:]
+            if rows is not None and sep is not None:
+                lams[i] = every = np.zeros(n_const + last - first)
+                every[rows], every[n_const + sep] = lam[: rows.shape[0]], lam[rows.shape[0] :]
 
         busy = np.flatnonzero(~free)
         near, few = working_sets(self._const_v, const_c[busy], v_warm[busy], b_lo, b_hi, busy)
@@ -221,9 +227,14 @@ class PerDroneQP(StepSolver):
             solve(i, None)
         if few.any():  # the drones with a working set; any that missed a row left out or failed: all rows
             some = busy[few]
+            sep_warm_at = row_values(self._x_of_v, v_warm, sep_c, sep_end, owner, h)
+            given = separation_sets(sep_c_at, sep_warm_at, sep_lo)
             for i, rows in zip(some.tolist(), near, strict=True):
-                solve(i, np.flatnonzero(rows))
-            again = misses(self._const_v, np.array([v_out[i] for i in some.tolist()]), near, b_lo, b_hi, some)
+                solve(i, np.flatnonzero(rows), np.flatnonzero(given[offsets[i] : offsets[i + 1]]))
+            v_all = np.array(v_out)
+            again = misses(self._const_v, v_all[some], near, b_lo, b_hi, some)
+            again |= separation_misses(row_values(self._x_of_v, v_all, sep_c, sep_end, owner, h), sep_lo,
+                                       given, owner, n)[some]  # fmt: skip
             for i in some[again | (np.array(flags)[some] != DAQP_OK)].tolist():
                 solve(i, None)
         soft = [i for i in range(n) if flags[i] != DAQP_OK]  # else the hard optimum (s = 0)
@@ -279,23 +290,6 @@ class PerDroneQP(StepSolver):
         np.multiply(table, coeffs[:, None], out=rows.reshape(table.shape))
         return rows
 
-    def _free(
-        self, c_v: Array, const_c: Array, b_lo: Array, b_hi: Array, sep_c: Array, sep_end: Array,
-        sep_lo: Array, counts: Array,
-    ) -> Array:
-        """The drones (n,) whose unconstrained optimum ``v = c`` (``c_v`` (n, H d); ``const_c`` the
-        constant rows there) meets every row: it is their solve (no row active; DAQP returns it
-        bitwise), without a DAQP call."""
-        free = np.asarray(((const_c >= b_lo) & (const_c <= b_hi)).all(axis=1))
-        if not free.any():
-            return free
-        n = c_v.shape[0]
-        x = (c_v @ self._x_of_v.T).reshape(-1, self.dim)  # x_e at v = c, rows (drone, step e)
-        owner = np.repeat(np.arange(n), counts)
-        missed = np.einsum("kd,kd->k", sep_c, x[owner * self.settings.horizon + sep_end - 1]) < sep_lo
-        free[owner[missed]] = False
-        return free
-
     def _buffers(self, size: int) -> tuple[tuple[Array, Array, Array], tuple[Array, Array, Array]]:
         """Row and bound buffers with room for ``size`` rows (kept between calls): the full one (the
         constant rows first; only the separation part and per-drone bounds are rewritten) and the
@@ -326,68 +320,6 @@ class PerDroneQP(StepSolver):
             np.concatenate([np.zeros(h), lo]), **self._options,
         )  # fmt: skip
         return z[h:], z[:h], flag, cost, info
-
-
-def reachable_rows(
-    n: int, singles: Array, coeffs: Array, lower: Array, hard: Array | None, on: Array | None, ends: Array,
-    step_m: float | None,
-) -> tuple[Array, Array, Array, Array, Array, Array]:
-    """The separation rows that can be active, sorted by drone (item order kept within a drone):
-    their coefficients ``a`` (K, d), position steps, lower bounds and whether they have a slack
-    (not an item's hard first row); the number of rows per drone; and which they are (K,), as
-    flat ``item * R + row`` indices (items ``singles`` (S,), ``coeffs`` (S, R, d), ``lower`` (S, R),
-    rows at position steps ``ends`` (R,)).
-
-    A row ``a^T x_e + s_e >= b`` that every reachable ``x_e`` meets (``b <= -|a| e step_m``, the
-    longest step ``step_m`` = v_max dt, since the velocity set lies in the ball; None: no limit) is
-    left out, the optimum unchanged. The rows over ``v`` are built later, drone by drone into
-    DAQP's buffer (:meth:`PerDroneQP._rows_v`).
-    """
-    keep = np.ones(lower.shape, dtype=bool)
-    if on is not None:
-        keep &= on[:, None]
-    if step_m is not None:
-        keep &= lower > -(vector_norms(coeffs) * (ends * step_m))
-    order = np.argsort(singles, kind="stable")
-    rows = ends.shape[0]
-    at = (order[:, None] * rows + np.arange(rows))[keep[order]]  # flat (item, row) indices
-    item, r = np.divmod(at, rows)
-    soft = r > 0
-    if hard is not None:
-        soft |= ~hard[item]
-    counts = np.bincount(singles[item], minlength=n).astype(np.intp)
-    sep_c = np.take(coeffs.reshape(-1, coeffs.shape[2]), at, axis=0)
-    return sep_c, ends[r], np.take(lower.reshape(-1), at), soft, counts, at
-
-
-def working_sets(
-    const_v: Array, at_c: Array, warm: Array, b_lo: Array, b_hi: Array, busy: Array
-) -> tuple[Array, Array]:
-    """DAQP's first rows among the constant rows ``const_v`` (c, H d), for the drones ``busy``: those
-    within :data:`WORKING_MARGIN` of a bound (or beyond) at ``v = c`` (values ``at_c``) or at the warm
-    start ``warm`` (over v), where they are at most :data:`WORKING_SHARE` of the rows and at least
-    :data:`WORKING_MIN_DRONES` drones are solved (the choice costs about 50 us a call): the sets
-    (drones with one, c) and which drones have one (busy,). Bounds ``b_lo``, ``b_hi`` (n or 1, c)."""
-    share = WORKING_SHARE * const_v.shape[0]
-    if busy.shape[0] < WORKING_MIN_DRONES:
-        return np.zeros((0, const_v.shape[0]), dtype=bool), np.zeros(busy.shape[0], dtype=bool)
-    lo, hi = (b[busy] if b.shape[0] > 1 else b for b in (b_lo, b_hi))
-    near = np.minimum(at_c - lo, hi - at_c) < WORKING_MARGIN
-    few = near.sum(axis=1) <= share
-    near, lo, hi = near[few], *(b[few] if b.shape[0] > 1 else b for b in (lo, hi))
-    at_warm = warm[few] @ const_v.T
-    near |= np.minimum(at_warm - lo, hi - at_warm) < WORKING_MARGIN
-    keep = near.sum(axis=1) <= share
-    few[few] = keep
-    return near[keep], few
-
-
-def misses(const_v: Array, v: Array, given: Array, b_lo: Array, b_hi: Array, some: Array) -> Array:
-    """Which solves ``v`` (drones ``some``, H d) miss a constant row (``const_v``, bounds ``b_lo``,
-    ``b_hi`` (n or 1, c)) that DAQP was not ``given`` (drones, c)."""
-    vals = v @ const_v.T
-    lo, hi = (b[some] if b.shape[0] > 1 else b for b in (b_lo, b_hi))
-    return np.asarray((((vals < lo) | (vals > hi)) & ~given).any(axis=1))
 
 
 def dense_bounds(families: tuple[LimitRows, ...], p0: Array, u_prev: Array) -> tuple[Array, Array]:

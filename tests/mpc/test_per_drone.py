@@ -14,7 +14,7 @@ from hypothesis import strategies as st
 from mpcform.formation.state import FormationState
 from mpcform.formation.template import Template
 from mpcform.mpc.limits import Limits, SphereObstacle
-from mpcform.mpc.per_drone import PER_DRONE_SOLVER, PerDroneQP, reachable_rows
+from mpcform.mpc.per_drone import PER_DRONE_SOLVER, PerDroneQP
 from mpcform.mpc.planner import MPCPlanner
 from mpcform.mpc.settings import MPCSettings
 from mpcform.reference.base import ConstantReference
@@ -194,29 +194,6 @@ def test_rows_over_v_are_the_rows_over_positions(dim: int) -> None:
     np.testing.assert_allclose(qp._rows_v(a, end) @ v, np.einsum("kd,kd->k", a, x[end - 1]), atol=1e-13)
 
 
-def test_only_the_rows_that_can_be_active_are_built() -> None:
-    """Rows of items within reach with ``b > -|a| e v_max dt``, by drone (item order kept), are
-    kept, named by their flat ``item * R + row`` index; an item's hard first row has no slack."""
-    h, dim, n = 3, 2, 4
-    qp = PerDroneQP(dim, 0.1, LIMITS, MPCSettings(horizon=h, coupling="decoupled"), ())
-    rng = np.random.default_rng(5)
-    s, r = 12, 5  # items, rows per item (horizon 3)
-    singles, on, hard = rng.integers(0, n, s), rng.random(s) < 0.8, rng.random(s) < 0.3
-    coeffs = rng.normal(size=(s, r, dim)) * rng.uniform(0.5, 1.0, (s, r, 1))
-    ends = np.array([1, 2, 1, 3, 2])  # row_ends(3)
-    reach = np.linalg.norm(coeffs, axis=2) * ends * 0.1  # v_max 1, dt 0.1
-    lower = -reach * rng.uniform(0.5, 1.5, (s, r))
-    expect = [(i, item, row) for i in range(n) for item in range(s) for row in range(r)
-              if singles[item] == i and on[item] and lower[item, row] > -reach[item, row]]  # fmt: skip
-    assert np.array_equal(qp._ends, ends) and qp._step_m == pytest.approx(0.1)
-    c, end, lo, soft, counts, at = reachable_rows(n, singles, coeffs, lower, hard, on, qp._ends, qp._step_m)
-    assert c.shape[0] == len(expect) and counts.tolist() == [sum(e[0] == i for e in expect) for i in range(n)]
-    for got, (_, item, row) in enumerate(expect):
-        assert np.array_equal(c[got], coeffs[item, row]) and lo[got] == lower[item, row]
-        assert end[got] == ends[row] and soft[got] == (row > 0 or not hard[item])
-        assert at[got] == item * r + row
-
-
 class HardFeasibility:
     """DAQP, and at each drone's slack-free solve whether that QP is feasible (Clarabel): the
     decoupled QP is block-diagonal, so its hard version is feasible iff every drone's is."""
@@ -327,53 +304,58 @@ def test_a_drone_whose_target_meets_its_rows_skips_daqp_and_gets_daqps_solve(
 ) -> None:
     """Where ``v = c`` meets every row of a drone, the drone gets it without a DAQP call: the same
     solve, multipliers and cost as DAQP's, bit for bit (per-drone bounds and a velocity loop too)."""
+    from mpcform.mpc import per_drone
+
     qp, calls = _recorded_calls(case, 0, 5, 4.0, monkeypatch)
-    solve_each, skipped = qp.solve_each, 0
+    frees: list[np.ndarray] = []
+    free_drones = per_drone.free_drones
     for args in calls:
-        fast = solve_each(*args)
         with monkeypatch.context() as m:
-            m.setattr(qp, "_free", lambda c_v, *_: np.zeros(c_v.shape[0], dtype=bool))
-            every = solve_each(*args)
-        c_v = args[1].transpose(1, 0, 2).reshape(fast.v.shape)
-        free = qp._free(c_v, c_v @ qp._const_v.T, fast.const_lo, fast.const_hi, fast.sep_c, fast.sep_end,
-                        fast.sep_lo, np.diff(fast.offsets))  # fmt: skip
-        skipped += int(free.sum()) * int((~free).any())
+            m.setattr(per_drone, "free_drones", lambda *a: frees.append(free_drones(*a)) or frees[-1])
+            fast = qp.solve_each(*args)
+            m.setattr(per_drone, "free_drones", lambda c, *_: np.zeros(c.shape[0], dtype=bool))
+            every = qp.solve_each(*args)
         assert np.array_equal(fast.v, every.v) and np.array_equal(fast.flags, every.flags)
         assert all(np.array_equal(a, b) for a, b in zip(fast.lams, every.lams, strict=True))
         assert np.array_equal(fast.cost, every.cost)
-    assert skipped >= 10  # drones skipped in steps that solve others
+    assert sum(int(f.sum()) * int((~f).any()) for f in frees) >= 10  # skipped in steps that solve others
 
 
 @pytest.mark.parametrize("case", ["planar", "fence, acceleration, obstacle", "spatial, lag loop"])
-def test_a_working_set_of_constant_rows_gives_the_solve_with_every_row(
-    case: str, monkeypatch: pytest.MonkeyPatch
-) -> None:
-    """DAQP first sees only a drone's constant rows near a bound; a solve that misses one it did not
-    see is solved again with all of them. Forced on every drone (no margin, any share, any number
-    of drones), the solves, flags and multipliers are those with every row, and some drones did
-    miss a row and were solved again. The optimum is unique; multipliers of duplicate rows are not."""
-    from mpcform.mpc import per_drone
+def test_a_working_set_gives_the_solve_with_every_row(case: str, monkeypatch: pytest.MonkeyPatch) -> None:
+    """DAQP first sees only a drone's constant rows near a bound and its separation rows near their
+    bound; a solve that misses a row it did not see is solved again with all of them. Forced on
+    every drone (no margin, any share, any number of drones), the solves, flags and multipliers are
+    those with every row, and some drones did miss a row of each kind and were solved again. The
+    optimum is unique; multipliers of duplicate rows are not."""
+    from mpcform.mpc import per_drone, working_set
 
     qp, calls = _recorded_calls(case, 1, 6, 3.0, monkeypatch)
-    missed: list[int] = []
-    misses = per_drone.misses
+    missed: dict[str, list[int]] = {"misses": [], "separation_misses": []}
 
-    def counted(*args: Any) -> np.ndarray:
-        out = misses(*args)
-        missed.append(int(out.sum()))
-        return out
+    def counted(name: str) -> Any:
+        original = getattr(per_drone, name)
+
+        def call(*args: Any) -> np.ndarray:
+            out = original(*args)
+            missed[name].append(int(out.sum()))
+            return out
+
+        return call
 
     for args in calls:
         every = qp.solve_each(*args)  # 6 drones: fewer than WORKING_MIN_DRONES, every row
         with monkeypatch.context() as m:
-            m.setattr(per_drone, "WORKING_MARGIN", 0.0)
-            m.setattr(per_drone, "WORKING_SHARE", 1.0)
-            m.setattr(per_drone, "WORKING_MIN_DRONES", 1)
-            m.setattr(per_drone, "misses", counted)
+            m.setattr(working_set, "WORKING_MARGIN", 0.0)
+            m.setattr(working_set, "WORKING_SHARE", 1.0)
+            m.setattr(working_set, "WORKING_MIN_DRONES", 1)
+            for name in missed:
+                m.setattr(per_drone, name, counted(name))
             some = qp.solve_each(*args)
         np.testing.assert_allclose(some.v, every.v, rtol=0.0, atol=1e-9)
         assert np.array_equal(some.flags, every.flags) and np.array_equal(some.soft, every.soft)
         np.testing.assert_allclose(some.cost, every.cost, rtol=1e-12, atol=1e-12)
         for a, b in zip(some.lams, every.lams, strict=True):  # (a duplicate row's share is not unique)
             assert a.shape == b.shape and a.sum() == pytest.approx(b.sum(), rel=1e-9, abs=1e-9)
-    assert sum(missed) >= 3 and len(missed) >= 10  # solved again, and many calls used working sets
+    for name, counts in missed.items():  # solved again, and many calls used working sets
+        assert sum(counts) >= 3 and len(counts) >= 10, name

@@ -1,0 +1,117 @@
+"""Which rows each drone's DAQP call is given (:mod:`mpcform.mpc.per_drone`).
+
+A drone's QP is strictly convex, so its optimum is unique: the optimum of a relaxation (some rows
+left out) that meets every left-out row is the optimum, and DAQP's multipliers of the left-out
+rows are zero, as for inactive rows. Four selections use this:
+
+- :func:`reachable_rows`: a separation row that every reachable position meets is never given;
+- :func:`free_drones`: a drone whose unconstrained optimum ``v = c`` meets every row needs no call;
+- :func:`working_sets` and :func:`separation_sets`: in a call with many drones, a drone with few
+  constant rows near a bound (at ``v = c`` or at its warm start) is first given only those and
+  its separation rows near their bound;
+- :func:`misses` and :func:`separation_misses` find the solves that miss a row left out: those
+  drones are solved again with every row.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from mpcform._validate import Array
+from mpcform.formation.geometry import vector_norms
+
+WORKING_MARGIN = 0.1  # rows this close to a bound [m/s or m] go to DAQP first
+WORKING_SHARE = 0.1  # ... when the constant ones are at most this share of the constant rows
+WORKING_MIN_DRONES = 32  # ... in a call with at least this many drones to solve (the choice costs ~50 us)
+
+
+def reachable_rows(
+    n: int, singles: Array, coeffs: Array, lower: Array, hard: Array | None, on: Array | None, ends: Array,
+    step_m: float | None,
+) -> tuple[Array, Array, Array, Array, Array, Array]:
+    """The separation rows that can be active, sorted by drone (item order kept within a drone):
+    their coefficients ``a`` (K, d), position steps, lower bounds and whether they have a slack
+    (not an item's hard first row); the number of rows per drone; and which they are (K,), as
+    flat ``item * R + row`` indices (items ``singles`` (S,), ``coeffs`` (S, R, d), ``lower`` (S, R),
+    rows at position steps ``ends`` (R,)).
+
+    A row ``a^T x_e + s_e >= b`` that every reachable ``x_e`` meets (``b <= -|a| e step_m``, the
+    longest step ``step_m`` = v_max dt, since the velocity set lies in the ball; None: no limit) is
+    left out, the optimum unchanged. The rows over ``v`` are built later, drone by drone into
+    DAQP's buffer (:meth:`PerDroneQP._rows_v`).
+    """
+    keep = np.ones(lower.shape, dtype=bool)
+    if on is not None:
+        keep &= on[:, None]
+    if step_m is not None:
+        keep &= lower > -(vector_norms(coeffs) * (ends * step_m))
+    order = np.argsort(singles, kind="stable")
+    rows = ends.shape[0]
+    at = (order[:, None] * rows + np.arange(rows))[keep[order]]  # flat (item, row) indices
+    item, r = np.divmod(at, rows)
+    soft = r > 0
+    if hard is not None:
+        soft |= ~hard[item]
+    counts = np.bincount(singles[item], minlength=n).astype(np.intp)
+    sep_c = np.take(coeffs.reshape(-1, coeffs.shape[2]), at, axis=0)
+    return sep_c, ends[r], np.take(lower.reshape(-1), at), soft, counts, at
+
+
+def row_values(x_of_v: Array, v: Array, sep_c: Array, sep_end: Array, owner: Array, horizon: int) -> Array:
+    """The separation rows' values ``a^T x_e`` (K,) at the drones' ``v`` (n, H d) (positions
+    ``x = x_of_v v``; row k of drone ``owner[k]`` at position step ``sep_end[k]``)."""
+    x = (v @ x_of_v.T).reshape(-1, sep_c.shape[1])  # x_e, rows (drone, step e)
+    return np.einsum("kd,kd->k", sep_c, x[owner * horizon + sep_end - 1])
+
+
+def free_drones(const_c: Array, b_lo: Array, b_hi: Array, sep_missed: Array, owner: Array) -> Array:
+    """The drones (n,) whose unconstrained optimum ``v = c`` meets every row: their constant rows'
+    values there ``const_c`` (n, c) within bounds ``b_lo``, ``b_hi`` (n or 1, c), and none of their
+    separation rows ``sep_missed`` (K,) there. It is their solve (DAQP returns it bitwise)."""
+    free = np.asarray(((const_c >= b_lo) & (const_c <= b_hi)).all(axis=1))
+    free[owner[sep_missed]] = False
+    return free
+
+
+def working_sets(
+    const_v: Array, at_c: Array, warm: Array, b_lo: Array, b_hi: Array, busy: Array
+) -> tuple[Array, Array]:
+    """DAQP's first rows among the constant rows ``const_v`` (c, H d), for the drones ``busy``: those
+    within :data:`WORKING_MARGIN` of a bound (or beyond) at ``v = c`` (values ``at_c``) or at the warm
+    start ``warm`` (over v), where they are at most :data:`WORKING_SHARE` of the rows and at least
+    :data:`WORKING_MIN_DRONES` drones are solved (the choice costs about 50 us a call): the sets
+    (drones with one, c) and which drones have one (busy,). Bounds ``b_lo``, ``b_hi`` (n or 1, c)."""
+    share = WORKING_SHARE * const_v.shape[0]
+    if busy.shape[0] < WORKING_MIN_DRONES:
+        return np.zeros((0, const_v.shape[0]), dtype=bool), np.zeros(busy.shape[0], dtype=bool)
+    lo, hi = (b[busy] if b.shape[0] > 1 else b for b in (b_lo, b_hi))
+    near = np.minimum(at_c - lo, hi - at_c) < WORKING_MARGIN
+    few = near.sum(axis=1) <= share
+    near, lo, hi = near[few], *(b[few] if b.shape[0] > 1 else b for b in (lo, hi))
+    at_warm = warm[few] @ const_v.T
+    near |= np.minimum(at_warm - lo, hi - at_warm) < WORKING_MARGIN
+    keep = near.sum(axis=1) <= share
+    few[few] = keep
+    return near[keep], few
+
+
+def separation_sets(at_c: Array, at_warm: Array, lower: Array) -> Array:
+    """DAQP's first separation rows (K,): those within :data:`WORKING_MARGIN` of their lower bound
+    ``lower`` (or below it) at ``v = c`` (values ``at_c``) or at the warm start (``at_warm``)."""
+    return np.asarray((at_c - lower < WORKING_MARGIN) | (at_warm - lower < WORKING_MARGIN))
+
+
+def misses(const_v: Array, v: Array, given: Array, b_lo: Array, b_hi: Array, some: Array) -> Array:
+    """Which solves ``v`` (drones ``some``, H d) miss a constant row (``const_v``, bounds ``b_lo``,
+    ``b_hi`` (n or 1, c)) that DAQP was not ``given`` (drones, c)."""
+    vals = v @ const_v.T
+    lo, hi = (b[some] if b.shape[0] > 1 else b for b in (b_lo, b_hi))
+    return np.asarray((((vals < lo) | (vals > hi)) & ~given).any(axis=1))
+
+
+def separation_misses(values: Array, lower: Array, given: Array, owner: Array, n: int) -> Array:
+    """Which of ``n`` drones (n,) miss a separation row (values ``values`` (K,) at their solves,
+    lower bounds ``lower``, rows of drones ``owner``) that DAQP was not ``given`` (K,)."""
+    missed = np.zeros(n, dtype=bool)
+    missed[owner[(values < lower) & ~given]] = True
+    return missed

@@ -1,0 +1,82 @@
+"""The rows each drone's DAQP call is given: reachable rows, free drones, working sets and misses."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from mpcform.mpc.rows import positions_of_inputs, row_ends
+from mpcform.mpc.working_set import (
+    WORKING_MARGIN,
+    free_drones,
+    misses,
+    reachable_rows,
+    row_values,
+    separation_misses,
+    separation_sets,
+)
+
+
+def test_only_the_rows_that_can_be_active_are_built() -> None:
+    """Rows of items within reach with ``b > -|a| e v_max dt``, by drone (item order kept), are
+    kept, named by their flat ``item * R + row`` index; an item's hard first row has no slack."""
+    dim, n, step_m = 2, 4, 0.1  # v_max 1, dt 0.1
+    rng = np.random.default_rng(5)
+    s, r = 12, 5  # items, rows per item (horizon 3)
+    singles, on, hard = rng.integers(0, n, s), rng.random(s) < 0.8, rng.random(s) < 0.3
+    coeffs = rng.normal(size=(s, r, dim)) * rng.uniform(0.5, 1.0, (s, r, 1))
+    ends = row_ends(3)
+    assert ends.tolist() == [1, 2, 1, 3, 2]
+    reach = np.linalg.norm(coeffs, axis=2) * ends * step_m
+    lower = -reach * rng.uniform(0.5, 1.5, (s, r))
+    expect = [(i, item, row) for i in range(n) for item in range(s) for row in range(r)
+              if singles[item] == i and on[item] and lower[item, row] > -reach[item, row]]  # fmt: skip
+    c, end, lo, soft, counts, at = reachable_rows(n, singles, coeffs, lower, hard, on, ends, step_m)
+    assert c.shape[0] == len(expect) and counts.tolist() == [sum(e[0] == i for e in expect) for i in range(n)]
+    for got, (_, item, row) in enumerate(expect):
+        assert np.array_equal(c[got], coeffs[item, row]) and lo[got] == lower[item, row]
+        assert end[got] == ends[row] and soft[got] == (row > 0 or not hard[item])
+        assert at[got] == item * r + row
+
+
+def _rows(seed: int, n: int = 5, h: int = 4, dim: int = 3) -> tuple[np.ndarray, ...]:
+    """Random separation rows of ``n`` drones over positions ``x = x_of_v v`` (v = u here)."""
+    rng = np.random.default_rng(seed)
+    counts = rng.integers(0, 6, n)
+    owner = np.repeat(np.arange(n), counts)
+    sep_c, sep_end = rng.normal(size=(owner.shape[0], dim)), rng.integers(1, h + 1, owner.shape[0])
+    return positions_of_inputs(h, dim, 0.1), rng.normal(size=(n, h * dim)), sep_c, sep_end, owner
+
+
+def test_row_values_are_each_rows_normal_times_its_drones_position() -> None:
+    """``a^T x_e`` of each row, against the positions computed drone by drone, step by step."""
+    x_of_v, v, sep_c, sep_end, owner = _rows(1)
+    h, dim = 4, 3
+    got = row_values(x_of_v, v, sep_c, sep_end, owner, h)
+    for k, (i, e) in enumerate(zip(owner, sep_end, strict=True)):
+        x_e = 0.1 * v[i].reshape(h, dim)[:e].sum(axis=0)  # x_e = dt sum_{j<e} u_j
+        assert abs(got[k] - sep_c[k] @ x_e) < 1e-12
+
+
+def test_a_drone_is_free_when_its_wish_meets_every_row() -> None:
+    """A drone is free iff all its constant rows are within bounds and none of its rows is missed."""
+    const_c = np.array([[0.0, 1.0], [0.5, 2.5], [0.0, 0.0], [1.0, 1.0]])
+    b_lo, b_hi = np.array([[-1.0, -1.0]]), np.array([[1.0, 2.0]])
+    owner, missed = np.array([0, 0, 2, 3]), np.array([False, False, True, False])
+    assert free_drones(const_c, b_lo, b_hi, missed, owner).tolist() == [True, False, False, True]
+
+
+def test_working_sets_and_misses() -> None:
+    """The rows near their bound at the wish or the warm start are given; a drone misses when a
+    row not given is violated at its solve, never for a given one."""
+    lower = np.zeros(5)
+    at_c = np.array([-1.0, 0.5 * WORKING_MARGIN, 1.0, 1.0, 2.0])
+    at_warm = np.array([1.0, 1.0, 0.5 * WORKING_MARGIN, 1.0, 2.0])
+    given = separation_sets(at_c, at_warm, lower)
+    assert given.tolist() == [True, True, True, False, False]
+    owner = np.array([0, 0, 1, 1, 2])
+    at_v = np.array([-5.0, 1.0, -5.0, -1e-12, 0.0])  # drone 0 violates a given row only
+    assert separation_misses(at_v, lower, given, owner, 4).tolist() == [False, True, False, False]
+    const_v, v = np.eye(2), np.array([[0.5, 3.0], [0.5, 3.0]])
+    b_lo, b_hi = np.zeros((1, 2)), np.ones((1, 2))
+    given_c = np.array([[False, True], [False, False]])
+    assert misses(const_v, v, given_c, b_lo, b_hi, np.array([0, 1])).tolist() == [False, True]
