@@ -47,6 +47,7 @@ from mpcform.mpc.working_set import (
     row_values,
     separation_misses,
     separation_sets,
+    stack,
     working_sets,
 )
 from mpcform.solvers.base import QPSolution, failed
@@ -117,7 +118,7 @@ class PerDroneQP(StepSolver):
         w2 = max(settings.slack_quadratic, MIN_SLACK_QUADRATIC)
         self._hess_soft = np.diag(np.concatenate([np.full(h, w2), np.ones(nu)]))
         self._options: dict[str, Any] = {"iter_limit": settings.max_iter, "primal_tol": PRIMAL_TOL}
-        self._w = (self._a, self._lo, self._hi) = (np.zeros((0, nu)), np.zeros(0), np.zeros(0))  # _buffers
+        self._a, self._lo, self._hi = np.zeros((0, nu)), np.zeros(0), np.zeros(0)  # _buffers
         fixed = all(family.fixed_bounds for family in families)  # the same for every drone at every step
         self._fixed = dense_bounds(families, np.zeros((1, dim)), np.zeros((1, dim))) if fixed else None
 
@@ -162,12 +163,13 @@ class PerDroneQP(StepSolver):
         v_warm = warm_u.transpose(1, 0, 2).reshape(n, nu) @ self._m.T
         sep_c, sep_end, sep_lo, sep_soft, counts, at = reachable_rows(n, singles, coeffs, lower, hard, on,
                                                                       self._ends, self._step_m)  # fmt: skip
-        (a, lo, hi), (wa, wlo, whi) = self._buffers(n_const + int(counts.max(initial=0)))
+        a, lo, hi = self._buffers(n_const + int(counts.max(initial=0)))
         b_lo, b_hi = self._fixed if self._fixed is not None else dense_bounds(self.families, p0, u_prev)
         offsets = [0, *np.cumsum(counts).tolist()]
         v_out, s_out, flags, lams = [np.empty(0)] * n, np.zeros((n, h)), [DAQP_OK] * n, [np.empty(0)] * n
         const_c, owner = c_v @ self._const_v.T, np.repeat(np.arange(n), counts)
-        sep_c_at = row_values(self._x_of_v, c_v, sep_c, sep_end, owner, h)  # at the unconstrained optimum
+        at_x = owner * h + sep_end - 1  # each row's position x_e among the drones'
+        sep_c_at = row_values(self._x_of_v, c_v, sep_c, at_x)  # at the unconstrained optimum
         cost, free = np.zeros(n), free_drones(const_c, b_lo, b_hi, sep_c_at < sep_lo, owner)
         if free.any():  # the unconstrained optimum, no row active
             sq = np.zeros(int(free.sum()))
@@ -180,66 +182,67 @@ class PerDroneQP(StepSolver):
                 v_out[i], lams[i] = c_v[i], zero[: n_const + counts[i]]
         iters, in_daqp = 0, 0.0
 
-        def put(i: int, rows: Array | None, sep: Array | None) -> tuple[Array, Array, Array, int]:
-            """Drone i's constant ``rows`` and separation rows ``sep`` (None: all; else both given,
-            in the working-set buffer) over v with their bounds; the buffer and the number of rows."""
-            first, last = offsets[i], offsets[i + 1]
-            if rows is None:
-                aa, ll, hh, k, at = a, lo, hi, n_const, slice(first, last)
-                if self._fixed is None:
-                    lo[:n_const], hi[:n_const] = b_lo[i], b_hi[i]
-            else:
-                aa, ll, hh, k, at = wa, wlo, whi, rows.shape[0], first + sep
-                b = min(i, b_lo.shape[0] - 1)
-                np.take(self._const_v, rows, axis=0, out=wa[:k])
-                wlo[:k], whi[:k] = b_lo[b, rows], b_hi[b, rows]
-            m = k + (last - first if sep is None else sep.shape[0])
-            self._rows_v(sep_c[at], sep_end[at], out=aa[k:m])
-            ll[k:m] = sep_lo[at]
-            if rows is not None:
-                whi[k:m] = DAQP_INF
-            return aa, ll, hh, m
-
-        def solve(i: int, rows: Array | None, sep: Array | None = None, soft: bool = False) -> None:
-            """Drone i's hard (or ``soft``) QP with the constant ``rows`` and separation rows ``sep``
-            (None: all); its multipliers over all its rows."""
+        def hard_qp(i: int, aa: Array, hh: Array, ll: Array) -> Array:
+            """Drone i's hard QP with the rows ``aa`` and bounds; DAQP's multipliers."""
             nonlocal iters, in_daqp
-            (aa, ll, hh, m), first, last = put(i, rows, sep), offsets[i], offsets[i + 1]
             t0 = time.perf_counter()
-            if soft:
-                v_out[i], s_out[i], flags[i], cost[i], info = self._solve_soft(
-                    f_v[i], aa[:m], hh[:m], ll[:m], sep_end[first:last], sep_soft[first:last], n_const
-                )  # fmt: skip
-            else:
-                v_out[i], cost[i], flags[i], info = self._daqp.solve(
-                    self._eye, f_v[i], aa[:m], hh[:m], ll[:m], primal_start=v_warm[i], **self._options
-                )  # fmt: skip
+            v_out[i], cost[i], flags[i], info = self._daqp.solve(
+                self._eye, f_v[i], aa, hh, ll, primal_start=v_warm[i], **self._options
+            )  # fmt: skip
             in_daqp += time.perf_counter() - t0
             iters += info["iterations"]
-            lams[i] = lam = info["lam"]
-            if rows is not None and sep is not None:
-                lams[i] = every = np.zeros(n_const + last - first)
-                every[rows], every[n_const + sep] = lam[: rows.shape[0]], lam[rows.shape[0] :]
+            return info["lam"]
+
+        def solve(i: int, soft: bool = False) -> None:
+            """Drone i's hard (or ``soft``) QP with all its rows, in the buffer; its multipliers."""
+            nonlocal iters, in_daqp
+            first, last = offsets[i], offsets[i + 1]
+            m = n_const + last - first
+            if self._fixed is None:
+                lo[:n_const], hi[:n_const] = b_lo[i], b_hi[i]
+            self._rows_v(sep_c[first:last], sep_end[first:last], out=a[n_const:m])
+            lo[n_const:m] = sep_lo[first:last]
+            if not soft:
+                lams[i] = hard_qp(i, a[:m], hi[:m], lo[:m])
+                return
+            t0 = time.perf_counter()
+            v_out[i], s_out[i], flags[i], cost[i], info = self._solve_soft(
+                f_v[i], a[:m], hi[:m], lo[:m], sep_end[first:last], sep_soft[first:last], n_const
+            )  # fmt: skip
+            in_daqp += time.perf_counter() - t0
+            iters += info["iterations"]
+            lams[i] = info["lam"]
 
         busy = np.flatnonzero(~free)
         near, few = working_sets(self._const_v, const_c[busy], v_warm[busy], b_lo, b_hi, busy)
         for i in busy[~few].tolist():
-            solve(i, None)
-        if few.any():  # the drones with a working set; any that missed a row left out or failed: all rows
-            some = busy[few]
-            sep_warm_at = row_values(self._x_of_v, v_warm, sep_c, sep_end, owner, h)
+            solve(i)
+        if few.any():  # the drones with a working set, all in one stack; any that missed a row or failed: all
+            some, mine = busy[few], np.zeros(n, dtype=bool)
+            mine[some] = True
+            sep_warm_at = row_values(self._x_of_v, v_warm, sep_c, at_x)
             given = separation_sets(sep_c_at, sep_warm_at, sep_lo)
-            for i, rows in zip(some.tolist(), near, strict=True):
-                solve(i, np.flatnonzero(rows), np.flatnonzero(given[offsets[i] : offsets[i + 1]]))
+            g = np.flatnonzero(given & mine[owner])
+            of_g, sep_g = owner[g], self._rows_v(sep_c[g], sep_end[g])
+            stk = stack(self._const_v, near, b_lo, b_hi, some, sep_g, sep_lo[g], (np.cumsum(mine) - 1)[of_g],
+                        g - np.asarray(offsets)[of_g], counts[some], DAQP_INF)  # fmt: skip
+            cuts, fs, parts = stk.starts, stk.full_starts, []
+            for j, i in enumerate(some.tolist()):
+                rows = slice(cuts[j], cuts[j + 1])
+                parts.append(hard_qp(i, stk.a[rows], stk.hi[rows], stk.lo[rows]))
+            every = np.zeros(fs[-1])
+            every[stk.full] = np.concatenate(parts)
+            for j, i in enumerate(some.tolist()):
+                lams[i] = every[fs[j] : fs[j + 1]]
             v_all = np.array(v_out)
             again = misses(self._const_v, v_all[some], near, b_lo, b_hi, some)
-            again |= separation_misses(row_values(self._x_of_v, v_all, sep_c, sep_end, owner, h), sep_lo,
+            again |= separation_misses(row_values(self._x_of_v, v_all, sep_c, at_x), sep_lo,
                                        given, owner, n)[some]  # fmt: skip
             for i in some[again | (np.array(flags)[some] != DAQP_OK)].tolist():
-                solve(i, None)
+                solve(i)
         soft = [i for i in range(n) if flags[i] != DAQP_OK]  # else the hard optimum (s = 0)
         for i in soft:
-            solve(i, None, soft=True)
+            solve(i, soft=True)
         v_all = np.array(v_out).reshape(n, nu)
         is_soft = np.zeros(n, dtype=bool)
         is_soft[soft] = True
@@ -290,10 +293,9 @@ class PerDroneQP(StepSolver):
         np.multiply(table, coeffs[:, None], out=rows.reshape(table.shape))
         return rows
 
-    def _buffers(self, size: int) -> tuple[tuple[Array, Array, Array], tuple[Array, Array, Array]]:
-        """Row and bound buffers with room for ``size`` rows (kept between calls): the full one (the
-        constant rows first; only the separation part and per-drone bounds are rewritten) and the
-        working-set one."""
+    def _buffers(self, size: int) -> tuple[Array, Array, Array]:
+        """Row and bound buffers with room for ``size`` rows (kept between calls; the constant rows
+        first: only the separation part and per-drone bounds are rewritten)."""
         if self._a.shape[0] < size:
             size = max(size, 2 * self._a.shape[0])
             self._a, self._lo, self._hi = np.empty((size, self._nu)), np.empty(size), np.full(size, DAQP_INF)
@@ -301,8 +303,7 @@ class PerDroneQP(StepSolver):
             self._a[:n_const] = self._const_v
             if self._fixed is not None:  # the same bounds for every drone at every step: kept here
                 self._lo[:n_const], self._hi[:n_const] = self._fixed[0][0], self._fixed[1][0]
-            self._w = np.empty_like(self._a), np.empty(size), np.empty(size)
-        return (self._a, self._lo, self._hi), self._w
+        return self._a, self._lo, self._hi
 
     def _solve_soft(
         self, f_v: Array, a: Array, hi: Array, lo: Array, end: Array, soft: Array, n_const: int

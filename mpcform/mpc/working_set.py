@@ -15,6 +15,8 @@ rows are zero, as for inactive rows. Four selections use this:
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from mpcform._validate import Array
@@ -57,11 +59,11 @@ def reachable_rows(
     return sep_c, ends[r], np.take(lower.reshape(-1), at), soft, counts, at
 
 
-def row_values(x_of_v: Array, v: Array, sep_c: Array, sep_end: Array, owner: Array, horizon: int) -> Array:
+def row_values(x_of_v: Array, v: Array, sep_c: Array, at_x: Array) -> Array:
     """The separation rows' values ``a^T x_e`` (K,) at the drones' ``v`` (n, H d) (positions
-    ``x = x_of_v v``; row k of drone ``owner[k]`` at position step ``sep_end[k]``)."""
-    x = (v @ x_of_v.T).reshape(-1, sep_c.shape[1])  # x_e, rows (drone, step e)
-    return np.einsum("kd,kd->k", sep_c, x[owner * horizon + sep_end - 1])
+    ``x = x_of_v v``, (n H, d) drone by drone; row k on ``x[at_x[k]]``, i.e. ``drone H + e - 1``)."""
+    x = (v @ x_of_v.T).reshape(-1, sep_c.shape[1])
+    return np.einsum("kd,kd->k", sep_c, np.take(x, at_x, axis=0))
 
 
 def free_drones(const_c: Array, b_lo: Array, b_hi: Array, sep_missed: Array, owner: Array) -> Array:
@@ -115,3 +117,42 @@ def separation_misses(values: Array, lower: Array, given: Array, owner: Array, n
     missed = np.zeros(n, dtype=bool)
     missed[owner[(values < lower) & ~given]] = True
     return missed
+
+
+@dataclass(frozen=True)
+class Stack:
+    """The working-set drones' rows for DAQP, one drone after the other: drone j's rows are
+    ``a[starts[j]:starts[j + 1]]`` (its constant rows, then its separation rows)."""
+
+    a: Array  # (rows, H d)
+    lo: Array  # (rows,)
+    hi: Array
+    starts: list[int]  # (drones + 1,)
+    full: Array  # (rows,) each row's place in the drones' multipliers over all their rows, concatenated
+    full_starts: list[int]  # (drones + 1,) drone j's multipliers over all its rows
+
+
+def stack(
+    const_v: Array, near: Array, b_lo: Array, b_hi: Array, some: Array, sep_a: Array, sep_lo: Array,
+    sep_drone: Array, sep_local: Array, n_sep: Array, inf: float,
+) -> Stack:
+    """The rows of drones ``some`` (m,): their constant rows ``near`` (m, c) of ``const_v`` (c, H d),
+    bounds ``b_lo``, ``b_hi`` (n or 1, c), and separation rows ``sep_a`` (G, H d) with lower bounds
+    ``sep_lo`` (upper ``inf``), of drone ``sep_drone`` (G,) (into ``some``, ascending), number
+    ``sep_local`` among that drone's ``n_sep`` (m,) separation rows."""
+    m, c = near.shape
+    jc, rc = np.nonzero(near)  # drone by drone, rows in order
+    kc, ks = np.bincount(jc, minlength=m), np.bincount(sep_drone, minlength=m)
+    starts = np.zeros(m + 1, dtype=np.intp)
+    np.cumsum(kc + ks, out=starts[1:])
+    at_c = starts[jc] + np.arange(jc.shape[0]) - (np.cumsum(kc) - kc)[jc]
+    at_s = starts[sep_drone] + kc[sep_drone] + np.arange(sep_drone.shape[0]) - (np.cumsum(ks) - ks)[sep_drone]
+    a, lo, hi = np.empty((starts[-1], const_v.shape[1])), np.empty(starts[-1]), np.full(starts[-1], inf)
+    a[at_c], a[at_s], lo[at_s] = const_v[rc], sep_a, sep_lo
+    b = some[jc] if b_lo.shape[0] > 1 else np.zeros_like(jc)
+    lo[at_c], hi[at_c] = b_lo[b, rc], b_hi[b, rc]
+    full_starts = np.zeros(m + 1, dtype=np.intp)
+    np.cumsum(c + n_sep, out=full_starts[1:])
+    full = np.empty(starts[-1], dtype=np.intp)
+    full[at_c], full[at_s] = full_starts[jc] + rc, full_starts[sep_drone] + c + sep_local
+    return Stack(a, lo, hi, starts.tolist(), full, full_starts.tolist())

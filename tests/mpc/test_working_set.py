@@ -51,7 +51,7 @@ def test_row_values_are_each_rows_normal_times_its_drones_position() -> None:
     """``a^T x_e`` of each row, against the positions computed drone by drone, step by step."""
     x_of_v, v, sep_c, sep_end, owner = _rows(1)
     h, dim = 4, 3
-    got = row_values(x_of_v, v, sep_c, sep_end, owner, h)
+    got = row_values(x_of_v, v, sep_c, owner * h + sep_end - 1)
     for k, (i, e) in enumerate(zip(owner, sep_end, strict=True)):
         x_e = 0.1 * v[i].reshape(h, dim)[:e].sum(axis=0)  # x_e = dt sum_{j<e} u_j
         assert abs(got[k] - sep_c[k] @ x_e) < 1e-12
