@@ -1,4 +1,4 @@
-"""The rows each drone's DAQP call is given: reachable rows, free drones, working sets and misses."""
+"""The rows each drone's DAQP call is given: reachable rows, free drones, working sets, misses, the stack."""
 
 from __future__ import annotations
 
@@ -13,6 +13,7 @@ from mpcform.mpc.working_set import (
     row_values,
     separation_misses,
     separation_sets,
+    stack,
 )
 
 
@@ -80,3 +81,29 @@ def test_working_sets_and_misses() -> None:
     b_lo, b_hi = np.zeros((1, 2)), np.ones((1, 2))
     given_c = np.array([[False, True], [False, False]])
     assert misses(const_v, v, given_c, b_lo, b_hi, np.array([0, 1])).tolist() == [False, True]
+
+
+def test_the_stack_holds_each_drones_rows_and_places_their_multipliers() -> None:
+    """Drone j's block is its given constant rows (with its own or the shared bounds), then its
+    given separation rows; ``full`` sends each row to its place among all the drone's rows."""
+    rng = np.random.default_rng(3)
+    n, c, nu = 6, 7, 4
+    const_v, some = rng.normal(size=(c, nu)), np.array([1, 2, 4, 5])
+    near = rng.random((some.shape[0], c)) < 0.4
+    n_sep = np.array([3, 0, 5, 2])  # every separation row of each drone of some
+    chosen = [np.flatnonzero(rng.random(k) < 0.6) for k in n_sep.tolist()]
+    sep_drone = np.concatenate([np.full(len(t), j) for j, t in enumerate(chosen)]).astype(np.intp)
+    sep_local = np.concatenate(chosen).astype(np.intp)
+    sep_a, sep_lo = rng.normal(size=(sep_drone.shape[0], nu)), rng.normal(size=sep_drone.shape[0])
+    for b_lo in (rng.normal(size=(1, c)), rng.normal(size=(n, c))):
+        b_hi = b_lo + 1.0
+        stk = stack(const_v, near, b_lo, b_hi, some, sep_a, sep_lo, sep_drone, sep_local, n_sep, 1e30)
+        for j, i in enumerate(some.tolist()):
+            rows, mine = slice(stk.starts[j], stk.starts[j + 1]), sep_drone == j
+            b = i if b_lo.shape[0] > 1 else 0
+            assert np.array_equal(stk.a[rows], np.vstack([const_v[near[j]], sep_a[mine]]))
+            assert np.array_equal(stk.lo[rows], np.concatenate([b_lo[b, near[j]], sep_lo[mine]]))
+            assert np.array_equal(stk.hi[rows], np.concatenate([b_hi[b, near[j]], np.full(mine.sum(), 1e30)]))
+            place = stk.full[rows] - stk.full_starts[j]
+            assert stk.full_starts[j + 1] - stk.full_starts[j] == c + n_sep[j]
+            assert np.array_equal(place, np.concatenate([np.flatnonzero(near[j]), c + sep_local[mine]]))
