@@ -41,13 +41,13 @@ from mpcform.mpc.rows import LimitRows, position_table, positions_of_inputs, row
 from mpcform.mpc.sensitivity import Sensitivity, drone_sensitivity
 from mpcform.mpc.settings import MPCSettings
 from mpcform.mpc.working_set import (
-    free_drones,
     misses,
     reachable_rows,
     row_values,
     separation_misses,
     separation_sets,
     stack,
+    within_bounds,
     working_sets,
 )
 from mpcform.solvers.base import QPSolution, failed
@@ -154,8 +154,9 @@ class PerDroneQP(StepSolver):
     ) -> DroneSolves:
         """Every drone's solve as DAQP returns it (arguments as :meth:`solve_drones`).
 
-        A drone with a working set (:func:`working_sets`) first gives DAQP only those constant rows;
-        a solve that misses any other constant row, or fails, is solved again with all of them."""
+        With working sets (:func:`mpcform.mpc.working_set.working_sets`), each drone first gives DAQP
+        only its rows near their bound; a solve that misses any other row, or fails, is solved again
+        with all of them."""
         st = self.settings
         h, n, nu, n_const = st.horizon, p0.shape[0], self._nu, self._const_v.shape[0]
         c_v = c.transpose(1, 0, 2).reshape(n, nu)
@@ -169,8 +170,10 @@ class PerDroneQP(StepSolver):
         v_out, s_out, flags, lams = [np.empty(0)] * n, np.zeros((n, h)), [DAQP_OK] * n, [np.empty(0)] * n
         const_c, owner = c_v @ self._const_v.T, np.repeat(np.arange(n), counts)
         at_x = owner * h + sep_end - 1  # each row's position x_e among the drones'
-        sep_c_at = row_values(self._x_of_v, c_v, sep_c, at_x)  # at the unconstrained optimum
-        cost, free = np.zeros(n), free_drones(const_c, b_lo, b_hi, sep_c_at < sep_lo, owner)
+        cost, free, sep_c_at = np.zeros(n), within_bounds(const_c, b_lo, b_hi), None
+        if free.any():  # the wish v = c meets the constant rows: and the separation rows?
+            sep_c_at = row_values(self._x_of_v, c_v, sep_c, at_x)
+            free[owner[sep_c_at < sep_lo]] = False
         if free.any():  # the unconstrained optimum, no row active
             sq = np.zeros(int(free.sum()))
             for col in c_v[free].T:  # summed in order, as DAQP sums its cost (bit for bit)
@@ -214,31 +217,30 @@ class PerDroneQP(StepSolver):
             lams[i] = info["lam"]
 
         busy = np.flatnonzero(~free)
-        near, few = working_sets(self._const_v, const_c[busy], v_warm[busy], b_lo, b_hi, busy)
-        for i in busy[~few].tolist():
-            solve(i)
-        if few.any():  # the drones with a working set, all in one stack; any that missed a row or failed: all
-            some, mine = busy[few], np.zeros(n, dtype=bool)
-            mine[some] = True
-            sep_warm_at = row_values(self._x_of_v, v_warm, sep_c, at_x)
-            given = separation_sets(sep_c_at, sep_warm_at, sep_lo)
-            g = np.flatnonzero(given & mine[owner])
-            of_g, sep_g = owner[g], self._rows_v(sep_c[g], sep_end[g])
-            stk = stack(self._const_v, near, b_lo, b_hi, some, sep_g, sep_lo[g], (np.cumsum(mine) - 1)[of_g],
-                        g - np.asarray(offsets)[of_g], counts[some], DAQP_INF)  # fmt: skip
-            cuts, fs, parts = stk.starts, stk.full_starts, []
-            for j, i in enumerate(some.tolist()):
-                rows = slice(cuts[j], cuts[j + 1])
-                parts.append(hard_qp(i, stk.a[rows], stk.hi[rows], stk.lo[rows]))
+        near = working_sets(self._const_v, const_c, v_warm, b_lo, b_hi, busy)
+        if near is None:
+            for i in busy.tolist():
+                solve(i)
+        else:  # working sets, all in one stack; any drone that missed a row left out or failed: all rows
+            if sep_c_at is None:
+                sep_c_at = row_values(self._x_of_v, c_v, sep_c, at_x)
+            given = separation_sets(sep_c_at, row_values(self._x_of_v, v_warm, sep_c, at_x), sep_lo)
+            g = np.flatnonzero(given & ~free[owner])
+            of_g, place = owner[g], np.cumsum(~free) - 1  # a busy drone's place among them
+            stk = stack(self._const_v, near, b_lo, b_hi, busy, self._rows_v(sep_c[g], sep_end[g]), sep_lo[g],
+                        place[of_g], g - np.asarray(offsets)[of_g], counts[busy], DAQP_INF)  # fmt: skip
+            cuts, fs = stk.starts, stk.full_starts
+            parts = [hard_qp(i, stk.a[cuts[j] : cuts[j + 1]], stk.hi[cuts[j] : cuts[j + 1]],
+                             stk.lo[cuts[j] : cuts[j + 1]]) for j, i in enumerate(busy.tolist())]  # fmt: skip
             every = np.zeros(fs[-1])
             every[stk.full] = np.concatenate(parts)
-            for j, i in enumerate(some.tolist()):
+            for j, i in enumerate(busy.tolist()):
                 lams[i] = every[fs[j] : fs[j + 1]]
             v_all = np.array(v_out)
-            again = misses(self._const_v, v_all[some], near, b_lo, b_hi, some)
-            again |= separation_misses(row_values(self._x_of_v, v_all, sep_c, at_x), sep_lo,
-                                       given, owner, n)[some]  # fmt: skip
-            for i in some[again | (np.array(flags)[some] != DAQP_OK)].tolist():
+            again = misses(self._const_v, v_all[busy], near, b_lo, b_hi, busy)
+            at_v = row_values(self._x_of_v, v_all, sep_c, at_x)
+            again |= separation_misses(at_v, sep_lo, given, owner, n)[busy]
+            for i in busy[again | (np.array(flags)[busy] != DAQP_OK)].tolist():
                 solve(i)
         soft = [i for i in range(n) if flags[i] != DAQP_OK]  # else the hard optimum (s = 0)
         for i in soft:

@@ -1,4 +1,4 @@
-"""The rows each drone's DAQP call is given: reachable rows, free drones, working sets, misses, the stack."""
+"""The rows each drone's DAQP call is given: reachable rows, bounds, working sets, misses, the stack."""
 
 from __future__ import annotations
 
@@ -7,13 +7,13 @@ import numpy as np
 from mpcform.mpc.rows import positions_of_inputs, row_ends
 from mpcform.mpc.working_set import (
     WORKING_MARGIN,
-    free_drones,
     misses,
     reachable_rows,
     row_values,
     separation_misses,
     separation_sets,
     stack,
+    within_bounds,
 )
 
 
@@ -58,12 +58,14 @@ def test_row_values_are_each_rows_normal_times_its_drones_position() -> None:
         assert abs(got[k] - sep_c[k] @ x_e) < 1e-12
 
 
-def test_a_drone_is_free_when_its_wish_meets_every_row() -> None:
-    """A drone is free iff all its constant rows are within bounds and none of its rows is missed."""
-    const_c = np.array([[0.0, 1.0], [0.5, 2.5], [0.0, 0.0], [1.0, 1.0]])
+def test_a_drone_is_within_bounds_when_all_its_constant_rows_hold() -> None:
+    """Bounds shared by every drone (one row) or per drone; a bound itself holds."""
+    values = np.array([[0.0, 1.0], [0.5, 2.5], [1.0, 2.0], [-1.0, -1.5]])
     b_lo, b_hi = np.array([[-1.0, -1.0]]), np.array([[1.0, 2.0]])
-    owner, missed = np.array([0, 0, 2, 3]), np.array([False, False, True, False])
-    assert free_drones(const_c, b_lo, b_hi, missed, owner).tolist() == [True, False, False, True]
+    assert within_bounds(values, b_lo, b_hi).tolist() == [True, False, True, False]
+    b_lo_n = np.repeat(b_lo, 4, axis=0)
+    b_lo_n[3] = -2.0
+    assert within_bounds(values, b_lo_n, b_hi).tolist() == [True, False, True, True]
 
 
 def test_working_sets_and_misses() -> None:
