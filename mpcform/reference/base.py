@@ -46,7 +46,7 @@ class Reference(ABC):
     def targets(self, times_s: ArrayLike) -> tuple[Array, Array]:
         """Drone targets ``p*`` [m] and ``p_dot*`` [m/s], each (T, n, d), at ``times_s`` (T,)."""
         pr = self.profile(np.atleast_1d(np.asarray(times_s, dtype=float)))
-        q = np.einsum("tij,nj->tni", pr.rotation_body_to_world, self.template.offsets)
+        q = self.template.offsets @ pr.rotation_body_to_world.transpose(0, 2, 1)  # R_t r_i (T, n, d)
         s = pr.scale[:, None, None]
         if q.shape[-1] == 2:
             spin = pr.omega_world_radps[:, :, None] * (q @ S_PLANAR.T)
