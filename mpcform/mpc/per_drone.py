@@ -278,6 +278,14 @@ class PerDroneQP(StepSolver):
         lam = solves.lams[i][self.settings.horizon if solves.soft[i] else 0 :]
         return lam if everything else -lam[self._const_v.shape[0] :]
 
+    def separation_multipliers(self, solves: DroneSolves) -> list[Array]:
+        """Every drone's :meth:`multipliers` of its separation rows, negated in one pass (views of
+        one array)."""
+        hard, soft = self._const_v.shape[0], self._const_v.shape[0] + self.settings.horizon  # rows to skip
+        parts = [lam[soft if s else hard :] for lam, s in zip(solves.lams, solves.soft.tolist(), strict=True)]
+        mu, cuts = -np.concatenate(parts), solves.offsets.tolist()
+        return [mu[a:b] for a, b in zip(cuts[:-1], cuts[1:], strict=True)]
+
     def sensitivity(self, solves: DroneSolves, i: int) -> Sensitivity:
         """How drone i's optimum moves with its separation rows' lower bounds on its active set
         (:func:`mpcform.mpc.sensitivity.drone_sensitivity`)."""

@@ -182,6 +182,8 @@ class SplitStep:
 
     def lower(self, shift: Array) -> Array:
         """The one-drone rows' lower bounds (S, R) at split ``shift`` (P, R)."""
+        if not shift.any():  # the midpoint
+            return self.qp.rows.single_lower
         low = self.qp.rows.single_lower.copy()
         low[self.first] += shift
         low[self.second] -= shift
@@ -212,9 +214,9 @@ class SplitStep:
         item, row = np.divmod(got.rows, r)
         flat, cuts = keep[item] * r + row, got.offsets.tolist()  # global flat indices, per drone:
         rows_at = [flat[a:b] for a, b in zip(cuts[:-1], cuts[1:], strict=True)]
-        ok = got.flags == DAQP_OK
+        ok, mu = got.flags == DAQP_OK, pd.separation_multipliers(got)
         for j, i in enumerate(drones.tolist()):
-            it.rows[i], it.lams[i], it.mu[i] = rows_at[j], got.lams[j], pd.multipliers(got, j)
+            it.rows[i], it.lams[i], it.mu[i] = rows_at[j], got.lams[j], mu[j]
             it.solves[i] = (got, j) if ok[j] else None
         it.cost[drones[got.flags != DAQP_OK]] = np.inf
         self.flags[drones] = got.flags  # the last exit flags, for a failed midpoint's report
@@ -267,9 +269,12 @@ class SplitStep:
         blocks, moves = [], []
         offsets = np.zeros(self.m + 1, dtype=np.intp)
         np.cumsum([ids.shape[0] for ids in it.rows], out=offsets[1:])
+        mu = np.concatenate(it.mu)
+        if np.abs(mu).max(initial=0.0) <= 0.5 * GRAD_TOL:  # each dV/dt_r = mu_i - mu_k: converged
+            return None
         all_pair, all_row, all_sign, all_ok = self._split_rows(np.concatenate(it.rows))
         at = (all_pair[all_ok], all_row[all_ok])  # every drone's rows, in drone order
-        weights = all_sign[all_ok] * np.concatenate(it.mu)[all_ok]  # summed in order, as np.add.at
+        weights = all_sign[all_ok] * mu[all_ok]  # summed in order, as np.add.at
         grad = np.bincount(all_pair[all_ok] * r + all_row[all_ok], weights, shape[0] * r).reshape(shape)
         if np.abs(grad).max(initial=0.0) <= GRAD_TOL:  # converged: no sensitivity needed
             return None

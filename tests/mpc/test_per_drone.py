@@ -369,3 +369,28 @@ def test_a_working_set_gives_the_solve_with_every_row(case: str, monkeypatch: py
             assert a.shape == b.shape and a.sum() == pytest.approx(b.sum(), rel=1e-9, abs=1e-9)
     for name, counts in missed.items():  # solved again, and many calls used working sets
         assert sum(counts) >= 3 and len(counts) >= 10, name
+
+
+def test_separation_multipliers_are_each_drones_multipliers(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The one-pass ``separation_multipliers`` gives every drone's :meth:`multipliers`, bit for bit,
+    for hard and soft (slack) solves."""
+    spatial, calls = _recorded_calls("spatial, lag loop", 1, 6, 3.0, monkeypatch)
+    tpl = Template.line(2, 2.0)  # a start inside d_min: soft solves
+    ref = ConstantReference(tpl, FormationState.from_param([0.0, 0.0]))
+    planner = MPCPlanner(ref, 0.1, Limits(v_max_mps=0.5, d_min_m=0.5), MPCSettings(coupling="decoupled"))
+    qp = planner._solver
+    assert isinstance(qp, PerDroneQP)
+    solve_each, close = qp.solve_each, []
+    monkeypatch.setattr(qp, "solve_each", lambda *args: close.append(args) or solve_each(*args))
+    simulate(planner, np.array([[0.0, 0.0], [0.1, 0.0]]), 1.0)
+    monkeypatch.undo()
+    soft = 0
+    for solver, args in [(spatial, a) for a in calls] + [(qp, a) for a in close]:
+        got = solver.solve_each(*args)
+        soft += int(got.soft.sum())
+        every = solver.separation_multipliers(got)
+        assert len(every) == got.v.shape[0]
+        for j, mu in enumerate(every):
+            assert np.array_equal(mu, solver.multipliers(got, j))
+            assert mu.shape[0] == got.offsets[j + 1] - got.offsets[j]
+    assert soft >= 1 and len(calls) >= 10
