@@ -302,8 +302,8 @@ class MissionReference(Reference):
         ``s R alpha_dot (r'_pi(i) - r_i)`` besides ``J xi_dot_d``.
         """
         pr = self.profile(np.atleast_1d(np.asarray(times_s, dtype=float)))
-        rot_t = pr.rotation_body_to_world.transpose(0, 2, 1)  # R_t rho_i as rho_i^T R_t^T: a matmul,
-        q, q_rate = pr.offsets_m @ rot_t, pr.offsets_rate_mps @ rot_t  # ~20x faster than einsum
+        rot_t = pr.rotation_body_to_world.transpose(0, 2, 1)  # R_t rho_i as one stacked matmul
+        q, q_rate = pr.offsets_m @ rot_t, pr.offsets_rate_mps @ rot_t
         s = pr.scale[:, None, None]
         if q.shape[-1] == 2:
             spin = pr.omega_world_radps[:, :, None] * np.stack([-q[..., 1], q[..., 0]], -1)
