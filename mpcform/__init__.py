@@ -27,6 +27,7 @@ from mpcform.mpc.settings import MPCSettings
 from mpcform.reference.base import ConstantReference, ExponentialReference
 from mpcform.reference.keyframes import Keyframe, MissionLimits, SpeedBudget
 from mpcform.reference.mission import MissionReference
+from mpcform.run.heap import keep_heap
 from mpcform.run.runner import run_scenario
 from mpcform.scenario.load import load_scenario
 from mpcform.sim.metrics import run_metrics
@@ -66,6 +67,7 @@ __all__ = [
     "formation_jacobian",
     "forward_kinematics",
     "jacobian_pinv",
+    "keep_heap",
     "load_scenario",
     "nullspace_projector",
     "run_metrics",

@@ -25,6 +25,7 @@ from mpcform.cli import handlers as cli_runner
 from mpcform.cli.paths import check_output_dir, check_output_paths
 from mpcform.errors import MPCFormError, ScenarioError, ValidationError
 from mpcform.outputs.files import OUTPUT_FILES, format_summary
+from mpcform.run.heap import keep_heap
 from mpcform.run.runner import describe, run_scenario
 from mpcform.scenario.build import check_solver_key
 from mpcform.scenario.check import check_scenario_file, located_problem
@@ -166,6 +167,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the console script; returns the exit status."""
+    keep_heap()  # large runs: freed arrays stay in the heap (see mpcform.run.heap)
     parser = build_parser()
     try:
         args = parser.parse_args(argv)
