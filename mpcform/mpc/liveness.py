@@ -75,6 +75,9 @@ class TieBreak:
 
     def clear(self) -> None:
         """No drone is in conflict (a step without conflict, or a new run)."""
+        if self.last_m is None:  # cleared, and no turn since: nothing is stalled
+            self.resolved = self.new_stalls = 0
+            return
         self.resolved = int(np.count_nonzero(self.stalled))
         self.new_stalls = 0
         self.stalled[:] = 0

@@ -55,6 +55,7 @@ from mpcform.solvers.base import QPBackend, QPSolution, SolverOptions
 from mpcform.solvers.registry import DEFAULT_SOLVER, make_backend
 
 SLACK_REPORT_M = 1e-6  # slack above this is reported
+FAST_PATH = StepInfo("fast_path")  # a fast-path step that ends no escalation (frozen: shared)
 
 
 class MPCPlanner(Controller):
@@ -262,7 +263,8 @@ class MPCPlanner(Controller):
         """Accept the rollout's plan: its first input is the command."""
         self._tie_break.clear()
         self._plan, self._u_prev = nominal, nominal.inputs_mps[0].copy()
-        info = StepInfo("fast_path", resolved=self._tie_break.resolved)
+        resolved = self._tie_break.resolved
+        info = StepInfo("fast_path", resolved=resolved) if resolved else FAST_PATH
         return ControlStep(nominal.inputs_mps[0].copy(), info)
 
     def _merge(self, drones: Array, z: Array, u_nom: Array, x_nom: Array) -> tuple[Array, Array]:

@@ -330,6 +330,8 @@ def limit_rows(dim: int, dt_s: float, limits: Limits, settings: MPCSettings) -> 
 
 def violators(families: tuple[LimitRows, ...], p0: Array, u_prev: Array, u: Array, x: Array) -> Array:
     """Drones (n,) whose ``(u, x)`` miss a velocity, acceleration or geofence row."""
+    if len(families) == 1:
+        return families[0].violators(p0, u_prev, u, x)
     bad = np.zeros(p0.shape[0], dtype=bool)
     for family in families:
         bad |= family.violators(p0, u_prev, u, x)

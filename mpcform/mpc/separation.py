@@ -155,8 +155,11 @@ class PairSeparation:
         scaled = self.scaled(p0)  # the metric only shrinks lengths: world spreads bound it
         need = self.d_min_m + self.margin_m
         i, k = self.near.within(scaled, need + 2.0 * spread.max()).T
-        clearance = vector_norms(scaled[i] - scaled[k]) - spread[i] - spread[k]
+        gap = vector_norms(np.take(scaled, i, axis=0) - np.take(scaled, k, axis=0))
+        clearance = gap - np.take(spread, i) - np.take(spread, k)
         near = clearance < need
+        if not near.any():  # the common case: every pair clear
+            return i[:0], k[:0], clearance[:0]
         return i[near], k[near], clearance[near] - need
 
     def clear_test(self, guess: Array, pos: Array, i: Array, k: Array) -> Test:
