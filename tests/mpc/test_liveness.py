@@ -71,7 +71,9 @@ def test_angle_grows_while_stalled_and_is_kept_while_in_conflict() -> None:
     assert tb.stalled[0] == 0 and tb.resolved == 1
     tb.stalled[:] = 4
     tb.clear()
-    assert not tb.stalled.any() and tb.resolved == 2
+    assert not tb.stalled.any() and tb.resolved == 2 and tb.last_m is None
+    tb.clear()  # cleared again without a turn between: nothing more has resolved
+    assert tb.resolved == tb.new_stalls == 0 and not tb.stalled.any() and np.isinf(tb.stall_distance_m).all()
 
 
 def test_a_stuck_drone_sweeps_the_full_circle_and_backing_off_starts_afresh() -> None:
