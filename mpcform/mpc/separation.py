@@ -256,7 +256,7 @@ class Separation:
         of its start and its positions within ``spread_i`` of the guess, so an item whose start
         distance clears the requirement by the spreads of its drones is clear. No row is built.
         """
-        p0, spread = positions[0], _spread(guess, positions)  # spread (n,) [m]
+        p0, spread = positions[0], drone_spreads(guess, positions)  # spread (n,) [m]
         units = [u for u in (self.pairs if p0.shape[0] > 1 else None, self.obstacles) if u is not None]
         for unit in units:
             i, k, slack = unit.doubtful(p0, spread)
@@ -394,10 +394,13 @@ def inside(rel0: Array, required: Array | float) -> tuple[Array, Array]:
     return hard, c0
 
 
-def _spread(guess: Array, positions: Array) -> Array:
+def drone_spreads(guess: Array, positions: Array) -> Array:
     """Per drone (n,): its guess's largest distance from its start plus its positions' from the guess."""
     dev = np.empty((2,) + guess.shape)
     np.subtract(guess, positions[0], out=dev[0])
     np.subtract(positions, guess, out=dev[1])
-    far = np.sqrt(np.einsum("stnd,stnd->stn", dev, dev).max(axis=1))  # (2, n)
+    sq = np.square(dev, out=dev)[..., 0]  # squared lengths summed in place, in order (as vector_norms)
+    for a in range(1, dev.shape[-1]):
+        sq += dev[..., a]
+    far = np.sqrt(sq.max(axis=1))  # (2, n)
     return far[0] + far[1]

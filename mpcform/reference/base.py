@@ -21,6 +21,8 @@ from mpcform.formation.rotation import S_PLANAR, geodesic
 from mpcform.formation.state import FormationState
 from mpcform.formation.template import Template
 
+ROW_ADD_MIN_N = 100  # drones from which add_per_time repeats its rows (below, the broadcast is faster)
+
 
 @dataclass(frozen=True)
 class Profile:
@@ -54,9 +56,9 @@ class Reference(ABC):
             spin = spin_world(pr.omega_world_radps, q)
         # c + s q and c_dot + s_dot q + s (omega x q), summed in place (no (T, n, d) temporaries)
         pos = s * q
-        pos += pr.centroid_m[:, None, :]
+        add_per_time(pos, pr.centroid_m)
         vel = pr.scale_rate_per_s[:, None, None] * q
-        vel += pr.centroid_velocity_mps[:, None, :]
+        add_per_time(vel, pr.centroid_velocity_mps)
         spin *= s
         vel += spin
         return pos, vel
@@ -80,6 +82,18 @@ class Reference(ABC):
         """The desired formation velocity ``xi_dot_d`` (4 or 7) at ``t_s``."""
         pr = self.profile(np.array([t_s], dtype=float))
         return np.concatenate([pr.centroid_velocity_mps[0], pr.omega_world_radps[0], pr.scale_rate_per_s[:1]])
+
+
+def add_per_time(a: Array, b: Array) -> None:
+    """``a += b[:, None, :]`` in place for ``a`` (T, n, d) and ``b`` (T, d), bit for bit. From
+    :data:`ROW_ADD_MIN_N` drones (``a`` contiguous) ``b`` is first repeated into a block laid out as
+    ``a``: the broadcast's inner loop runs over only d values (1000 drones: 90 -> 52 us)."""
+    t, n, d = a.shape
+    if n < ROW_ADD_MIN_N or not a.flags.c_contiguous:
+        a += b[:, None, :]
+        return
+    flat = a.reshape(t, n * d)  # a view of a
+    flat += np.repeat(b, n, axis=0).reshape(t, n * d)
 
 
 def spin_world(omega_world_radps: Array, q: Array) -> Array:

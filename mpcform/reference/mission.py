@@ -28,7 +28,7 @@ from mpcform.errors import ValidationError
 from mpcform.formation.rotation import omega_size
 from mpcform.formation.state import FormationState
 from mpcform.formation.template import Template
-from mpcform.reference.base import Profile, Reference, spin_world
+from mpcform.reference.base import Profile, Reference, add_per_time, spin_world
 from mpcform.reference.keyframes import (
     Keyframe,
     MissionLimits,
@@ -309,12 +309,12 @@ class MissionReference(Reference):
             spin = pr.omega_world_radps[:, :, None] * np.stack([-q[..., 1], q[..., 0]], -1)
         else:
             spin = spin_world(pr.omega_world_radps, q)
-        vel = (
-            pr.centroid_velocity_mps[:, None, :]
-            + pr.scale_rate_per_s[:, None, None] * q
-            + s * (spin + q_rate)
-        )
-        return pr.centroid_m[:, None, :] + s * q, vel
+        vel = pr.scale_rate_per_s[:, None, None] * q
+        add_per_time(vel, pr.centroid_velocity_mps)
+        vel += s * (spin + q_rate)
+        pos = s * q
+        add_per_time(pos, pr.centroid_m)
+        return pos, vel
 
     def acceleration(self, t_s: float) -> Array:
         """The desired formation acceleration ``(c_ddot, omega_dot_world, s_ddot)`` (4 or 7) at ``t_s``."""

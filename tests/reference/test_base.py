@@ -12,7 +12,13 @@ from mpcform.errors import ValidationError
 from mpcform.formation.kinematics import drone_velocities, forward_kinematics
 from mpcform.formation.state import FormationState
 from mpcform.formation.template import Template
-from mpcform.reference.base import ConstantReference, ExponentialReference, spin_world
+from mpcform.reference.base import (
+    ROW_ADD_MIN_N,
+    ConstantReference,
+    ExponentialReference,
+    add_per_time,
+    spin_world,
+)
 
 H = 1e-5
 TIMES = np.array([0.05, 0.3, 1.0, 2.5, 6.0])
@@ -140,3 +146,17 @@ def test_spin_is_numpys_cross_product_bitwise(seed):
     omega[0], q[1, :, 2] = 0.0, -0.0  # zero rates and zero components
     spin = spin_world(omega, q)
     assert spin.tobytes() == np.cross(omega[:, None, :], q).tobytes()
+
+
+@pytest.mark.parametrize("n", [3, ROW_ADD_MIN_N, 1000])
+@pytest.mark.parametrize("dim", [2, 3])
+def test_add_per_time_is_the_broadcast_add_bitwise(n: int, dim: int) -> None:
+    """Below and from ``ROW_ADD_MIN_N`` drones (repeated rows), and on a non-contiguous array."""
+    rng = np.random.default_rng(n)
+    a, b = rng.normal(size=(11, n, dim)) * 1e3, rng.normal(size=(11, dim))
+    got = a.copy()
+    add_per_time(got, b)
+    assert got.tobytes() == (a + b[:, None, :]).tobytes()
+    strided = a.transpose(1, 0, 2).copy().transpose(1, 0, 2)  # the same values, not C-contiguous
+    add_per_time(strided, b)
+    assert np.array_equal(strided, a + b[:, None, :])
