@@ -24,6 +24,7 @@ import numpy as np
 from scipy.spatial import HalfspaceIntersection
 
 from mpcform._validate import Array
+from mpcform.formation.geometry import squared_norms
 from mpcform.mpc.limits import Limits
 from mpcform.mpc.loop import VelocityLoop
 from mpcform.mpc.settings import MPCSettings
@@ -232,8 +233,7 @@ class VelocityRows(LimitRows):
     def violators(self, p0: Array, u_prev: Array, u: Array, x: Array) -> Array:
         """Tested on the drones with an input outside the inscribed ball ``||u|| <= h`` (inside it,
         every ``D_i^T u <= ||u|| <= h``, rounding included with the factor's margin)."""
-        sq = np.einsum("hnd,hnd->hn", u, u)
-        out = sq.max(axis=0, initial=0.0) > INSCRIBED * self.h_mps**2
+        out = squared_norms(u).max(axis=0, initial=0.0) > INSCRIBED * self.h_mps**2
         if out.any():
             out[out] = (u[:, out] @ self.normals.T > self.h_mps).any(axis=(0, 2))
         return out

@@ -27,7 +27,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from mpcform._validate import Array
-from mpcform.formation.geometry import NearPairs, closest_on_segments, pairs_within, vector_norms
+from mpcform.formation.geometry import (
+    NearPairs,
+    closest_on_segments,
+    drone_spreads,
+    pairs_within,
+    vector_norms,
+)
 from mpcform.mpc.candidates import Candidates
 from mpcform.mpc.limits import Limits, SphereObstacle, obstacle_arrays
 from mpcform.mpc.rows import row_ends, row_segments
@@ -392,15 +398,3 @@ def inside(rel0: Array, required: Array | float) -> tuple[Array, Array]:
     ok = dist[hard] > 1e-12
     c0[ok] = rel0[hard][ok] / dist[hard][ok, None]
     return hard, c0
-
-
-def drone_spreads(guess: Array, positions: Array) -> Array:
-    """Per drone (n,): its guess's largest distance from its start plus its positions' from the guess."""
-    dev = np.empty((2,) + guess.shape)
-    np.subtract(guess, positions[0], out=dev[0])
-    np.subtract(positions, guess, out=dev[1])
-    sq = np.square(dev, out=dev)[..., 0]  # squared lengths summed in place, in order (as vector_norms)
-    for a in range(1, dev.shape[-1]):
-        sq += dev[..., a]
-    far = np.sqrt(sq.max(axis=1))  # (2, n)
-    return far[0] + far[1]

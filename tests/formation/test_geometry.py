@@ -9,9 +9,11 @@ from scipy.spatial.distance import pdist
 from mpcform.formation.geometry import (
     NearPairs,
     closest_on_segments,
+    drone_spreads,
     min_pair_distance,
     min_segment_distance,
     pairs_within,
+    squared_norms,
     vector_norms,
 )
 
@@ -145,3 +147,20 @@ def test_near_pairs_keep_their_list_while_the_swarm_drifts_as_one():
     moved = points + 7.0 + rng.uniform(-0.05, 0.05, points.shape)  # a drift, small relative moves
     assert near.within(moved, 1.0) is pairs
     assert near.within(moved + rng.uniform(-0.3, 0.3, points.shape), 1.0) is not pairs  # rebuilt
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_spread_is_the_largest_distances_bitwise(dim: int) -> None:
+    """Each drone's guess's farthest point from its start plus its positions' from the guess."""
+    rng = np.random.default_rng(dim)
+    guess = rng.normal(size=(11, 40, dim)) * 3.0
+    positions = guess + rng.normal(size=guess.shape) * 1e-2
+    expected = vector_norms(guess - positions[0]).max(axis=0) + vector_norms(positions - guess).max(axis=0)
+    assert drone_spreads(guess, positions).tobytes() == expected.tobytes()
+
+
+def test_squared_norms_are_the_norms_squared_in_order() -> None:
+    v = np.random.default_rng(5).normal(size=(7, 9, 3)) * 1e2
+    expected = (v[..., 0] * v[..., 0] + v[..., 1] * v[..., 1]) + v[..., 2] * v[..., 2]
+    assert squared_norms(v).tobytes() == expected.tobytes()
+    assert vector_norms(v).tobytes() == np.linalg.norm(v, axis=-1).tobytes()

@@ -7,10 +7,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from mpcform.formation.geometry import vector_norms
 from mpcform.mpc.candidates import Candidates
 from mpcform.mpc.limits import Limits, SphereObstacle
-from mpcform.mpc.separation import PairSeparation, Separation, drone_spreads, segment_normals
+from mpcform.mpc.separation import PairSeparation, Separation, segment_normals
 from mpcform.mpc.settings import MPCSettings
 
 MARGIN = 2e-3  # the default margin
@@ -300,13 +299,3 @@ def test_the_clear_test_answers_the_same_with_its_neighbour_list_kept_between_st
         fresh = Separation(2, limits, st_h, ())
         assert kept.clear(guess, planned(p0, x)) == fresh.clear(guess, planned(p0, x))
         p0 = p0 + 0.1 + rng.uniform(-0.03, 0.03, (n, 2))
-
-
-@pytest.mark.parametrize("dim", [2, 3])
-def test_spread_is_the_largest_distances_bitwise(dim: int) -> None:
-    """Each drone's guess's farthest point from its start plus its positions' from the guess."""
-    rng = np.random.default_rng(dim)
-    guess = rng.normal(size=(11, 40, dim)) * 3.0
-    positions = guess + rng.normal(size=guess.shape) * 1e-2
-    expected = vector_norms(guess - positions[0]).max(axis=0) + vector_norms(positions - guess).max(axis=0)
-    assert drone_spreads(guess, positions).tobytes() == expected.tobytes()
