@@ -3,10 +3,10 @@
 A step of hundreds of drones allocates and frees arrays of hundreds of kB (the targets of 1000
 drones over a horizon of 10 are 264 kB each). With glibc's defaults, freed memory at the top of
 the heap beyond twice the largest block freed so far is returned to the system, and the next
-step's arrays fault their pages in again. Measured on the 1000-drone formation flight of
-``mpcform bench scale``: 1.8-2.1 ms per step with the defaults, 1.2-1.5 ms with this setting
-(CPU time, medians of 95 steps, three runs each). Results are bitwise the same: only where memory
-comes from changes.
+step's arrays fault their pages in again. Measured on the formation flight of 1000 drones of
+``mpcform bench scale`` (100 planner steps in one process, CPU medians, three runs each): 1.8-2.1
+ms per step with the defaults, 1.2-1.5 ms with this setting. Results are bitwise the same: only
+where memory comes from changes.
 
 :func:`keep_heap` raises the trim threshold to :data:`TRIM_THRESHOLD_B` and fixes the mmap
 threshold at :data:`MMAP_THRESHOLD_B` (glibc's largest), through ``mallopt`` in this process and
