@@ -28,12 +28,13 @@ def closest_on_segments(start: Array, end: Array) -> Array:
     return delta
 
 
-def squared_norms(v: Array) -> Array:
-    """Squared Euclidean norms over the last axis of ``v`` (..., d), summed in order (a product
-    per component: faster than ``np.einsum("...d,...d")`` over a short axis)."""
-    sq = v[..., 0] * v[..., 0]
+def squared_norms(v: Array, overwrite: bool = False) -> Array:
+    """Squared Euclidean norms over the last axis of ``v`` (..., d), summed in order (faster than
+    ``np.einsum("...d,...d")`` over a short axis); ``overwrite``: ``v`` holds the squares after."""
+    squares = np.square(v, out=v if overwrite else None)
+    sq = squares[..., 0]
     for a in range(1, v.shape[-1]):
-        sq += v[..., a] * v[..., a]
+        sq += squares[..., a]
     return sq
 
 
@@ -50,10 +51,7 @@ def drone_spreads(guess: Array, positions: Array) -> Array:
     dev = np.empty((2,) + guess.shape)
     np.subtract(guess, positions[0], out=dev[0])
     np.subtract(positions, guess, out=dev[1])
-    sq = np.square(dev, out=dev)[..., 0]  # squared lengths summed in place, in order (as vector_norms)
-    for a in range(1, dev.shape[-1]):
-        sq += dev[..., a]
-    far = np.sqrt(sq.max(axis=1))  # (2, n)
+    far = np.sqrt(squared_norms(dev, overwrite=True).max(axis=1))  # (2, n)
     return far[0] + far[1]
 
 
