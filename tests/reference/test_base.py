@@ -16,6 +16,7 @@ from mpcform.reference.base import (
     ROW_ADD_MIN_N,
     ConstantReference,
     ExponentialReference,
+    Reference,
     add_per_time,
     spin_world,
 )
@@ -101,6 +102,19 @@ def test_constant_reference_holds_the_goal(dim):
     pos, vel = ConstantReference(tpl, goal).targets([0.0, 1.0, 7.5])
     np.testing.assert_allclose(pos, np.broadcast_to(forward_kinematics(tpl, goal), pos.shape))
     np.testing.assert_array_equal(vel, 0.0)
+
+
+@pytest.mark.parametrize(("dim", "n"), [(2, 4), (3, 20), (3, 300)])
+def test_constant_reference_targets_are_the_general_sum_bit_for_bit(dim, n):
+    """Its targets, computed once, are the eq. 13 sum of :meth:`Reference.targets` at every time
+    (signed zeros included) and fresh arrays each call."""
+    rng = np.random.default_rng(n)
+    held = ConstantReference(random_template(rng, n, dim), random_state(rng, dim))
+    for times in ([0.0], 2.5 + 0.1 * np.arange(11), np.linspace(0.0, 9.0, 101)):
+        mine, general = held.targets(times), Reference.targets(held, times)
+        assert [a.tobytes() for a in mine] == [a.tobytes() for a in general]
+    first, again = held.targets([0.0, 1.0]), held.targets([0.0, 1.0])
+    assert not np.shares_memory(first[0], again[0])
 
 
 @pytest.mark.parametrize(
