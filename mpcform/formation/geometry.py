@@ -14,6 +14,7 @@ from scipy.spatial.distance import pdist, squareform
 from mpcform._validate import Array
 
 BRUTE_FORCE_MAX_N = 48
+PATH_BLOCK = 4096  # drone samples per block of :func:`min_path_distance` (bounds its temporaries)
 
 
 def closest_on_segments(start: Array, end: Array) -> Array:
@@ -126,20 +127,35 @@ class NearPairs:
 
 
 def min_segment_distance(start: Array, end: Array) -> float:
-    """Smallest distance between two drones moving on straight lines from ``start`` to ``end`` (n, d).
+    """Smallest distance between two drones moving on straight lines from ``start`` to ``end`` (n, d)."""
+    return min_path_distance(np.stack((start, end)))
 
-    Exact: only pairs that can beat the closest sampled pair are examined (k-d tree).
+
+def min_path_distance(path: Array) -> float:
+    """Smallest distance between two drones moving straight between the samples of ``path``
+    (T, n, d); inf for fewer than two drones.
+
+    Exact, a block of segments at a time: a pair can come closer within the block than the
+    closest pair at its first sample only if it starts within that distance plus twice the
+    largest displacement in the block, and only those pairs (a k-d tree) are measured along
+    every segment of the block (:data:`PATH_BLOCK` drone samples per block).
     """
-    if start.shape[0] < 2:
+    t, n = path.shape[:2]
+    if n < 2:
         return float("inf")
-    best = min(min_pair_distance(start), min_pair_distance(end))
-    move = float(np.linalg.norm(end - start, axis=1).max())
-    pairs = pairs_within(start, best + 2.0 * move + 1e-12)
-    if pairs.shape[0] == 0:
-        return best
-    i, j = pairs[:, 0], pairs[:, 1]
-    closest = closest_on_segments(start[i] - start[j], end[i] - end[j])
-    return min(best, float(np.linalg.norm(closest, axis=1).min()))
+    if t == 1:
+        return min_pair_distance(path[0])
+    best, segments = float("inf"), max(1, PATH_BLOCK // n)
+    for a in range(0, t - 1, segments):
+        block = path[a : a + segments + 1]
+        start = block[0]
+        best = min(best, min_pair_distance(start))
+        move = float(np.sqrt(squared_norms(block - start, overwrite=True).max()))
+        i, k = pairs_within(start, best + 2.0 * move + 1e-12, sort=False).T
+        rel = np.take(block, i, axis=1) - np.take(block, k, axis=1)
+        closest = closest_on_segments(rel[:-1], rel[1:])
+        best = min(best, float(np.sqrt(squared_norms(closest, overwrite=True).min(initial=np.inf))))
+    return best
 
 
 def formation_edges(offsets_m: Array) -> list[tuple[int, int]]:

@@ -21,7 +21,7 @@ from typing import Any
 import numpy as np
 
 from mpcform._validate import Array
-from mpcform.formation.geometry import min_pair_distance, min_segment_distance, pairs_within
+from mpcform.formation.geometry import min_pair_distance, min_path_distance, pairs_within
 from mpcform.formation.kinematics import fit_formation
 from mpcform.formation.template import Template
 from mpcform.mpc.limits import Limits, SphereObstacle
@@ -86,7 +86,7 @@ def run_metrics(
     speed = command_speeds_mps(result)
     pos = result.positions_m
     sample_min = float(min_separations_m(result).min())
-    seg_min = min(min_segment_distance(a, b) for a, b in zip(pos[:-1], pos[1:], strict=True))
+    seg_min = min_path_distance(pos)
     sep_viol = 0
     if d_min_m is not None:
         limit = d_min_m * (1.0 - REL_TOL)

@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from mpcform._validate import Array
-from mpcform.formation.geometry import closest_on_segments, min_segment_distance, pairs_within
+from mpcform.formation.geometry import closest_on_segments, min_path_distance, pairs_within
 from mpcform.mpc.limits import Limits, SphereObstacle
 
 TOL_M = 1e-9
@@ -21,7 +21,7 @@ def min_separation_along(path_m: Array, metric: Array | None = None) -> float:
     """Smallest distance between two drones along the straight segments of ``path_m`` (T, n, d) [m]
     (in the scaled coordinates ``metric * p`` when given, e.g. the downwash ellipsoid's)."""
     p = path_m if metric is None else path_m * metric
-    return min(min_segment_distance(a, b) for a, b in zip(p[:-1], p[1:], strict=True))
+    return min_path_distance(p)
 
 
 def separation_violations(path_m: Array, d_min_m: float, metric: Array | None = None) -> int:

@@ -11,6 +11,7 @@ from mpcform.formation.geometry import (
     closest_on_segments,
     drone_spreads,
     min_pair_distance,
+    min_path_distance,
     min_segment_distance,
     pairs_within,
     squared_norms,
@@ -59,6 +60,36 @@ def test_min_segment_distance_special_cases():
     start = np.array([[0.0, 0.0, 0.0], [2.0, 0.0, 0.0]])
     assert min_segment_distance(start, start + [1.0, 2.0, 3.0]) == pytest.approx(2.0)  # parallel
     assert min_segment_distance(start, start[::-1]) == 0.0  # head-on swap
+
+
+def all_pairs_min_path_distance(path):
+    """The closest point of every pair's relative segment, over every segment: no pruning."""
+    i, k = np.triu_indices(path.shape[1], 1)
+    rel = path[:, i] - path[:, k]
+    return np.linalg.norm(closest_on_segments(rel[:-1], rel[1:]), axis=-1).min()
+
+
+@pytest.mark.parametrize(("n", "t"), [(2, 3), (9, 1200), (60, 150), (200, 30)])
+@pytest.mark.parametrize("dim", [2, 3])
+def test_min_path_distance_matches_every_pair_on_every_segment(n, t, dim):
+    """Over several blocks (n t > PATH_BLOCK) and with the k-d tree (n > 48), a random walk."""
+    rng = np.random.default_rng(n * t + dim)
+    start = rng.uniform(-2.0, 2.0, (n, dim)) * np.sqrt(n)
+    path = start + np.cumsum(rng.normal(0.0, 0.2, (t, n, dim)), axis=0)
+    assert min_path_distance(path) == pytest.approx(all_pairs_min_path_distance(path), rel=1e-12)
+
+
+def test_min_path_distance_sees_a_far_pair_cross_within_a_block():
+    """Two drones 20 m apart at the block's first sample meet mid-block; a close static pair elsewhere."""
+    t = 500
+    path = np.zeros((t, 4, 2))
+    path[:, 1] = [1.0, 0.0]  # the static pair: 1 m
+    path[:, 2] = np.column_stack([np.linspace(20.0, 40.0, t), np.full(t, 5.0)])
+    path[:, 3] = np.column_stack([np.linspace(40.0, 20.0, t), np.full(t, 5.1)])
+    assert min_path_distance(path) == pytest.approx(0.1)
+    assert min_path_distance(path[:, :3]) == pytest.approx(1.0)
+    assert min_path_distance(path[:1]) == min_pair_distance(path[0])
+    assert min_path_distance(path[:, :1]) == np.inf
 
 
 @given(seeds, st.sampled_from([2, 3]))
