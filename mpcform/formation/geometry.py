@@ -64,6 +64,21 @@ def min_pair_distance(points: Array) -> float:
     return float(dist[:, 1].min())
 
 
+def min_pair_distances(path: Array) -> Array:
+    """Smallest distance between two drones at every sample of ``path`` (T, n, d), (T,): every pair
+    of :data:`PATH_BLOCK` drone samples at once for few drones, else :func:`min_pair_distance`."""
+    t, n = path.shape[:2]
+    if n < 2 or n > BRUTE_FORCE_MAX_N:
+        return np.array([min_pair_distance(p) for p in path]).reshape(t)
+    i, k = _upper_pairs(n).T
+    out, samples = np.empty(t), max(1, PATH_BLOCK // n)
+    for a in range(0, t, samples):
+        block = path[a : a + samples]
+        diff = np.take(block, i, axis=1) - np.take(block, k, axis=1)
+        out[a : a + samples] = np.sqrt(squared_norms(diff, overwrite=True).min(axis=1))
+    return out
+
+
 def pairs_within(points: Array, radius: float, sort: bool = True) -> Array:
     """Index pairs (m, 2), i < j, of rows of ``points`` closer than ``radius`` (sorted unless
     ``sort`` is false: in the tree's order for more than :data:`BRUTE_FORCE_MAX_N` points)."""
@@ -77,6 +92,21 @@ def pairs_within(points: Array, radius: float, sort: bool = True) -> Array:
     tree = cKDTree(points, balanced_tree=False, compact_nodes=False)  # built faster; the same pairs
     pairs = tree.query_pairs(radius, output_type="ndarray").astype(np.intp)
     return pairs[np.lexsort((pairs[:, 1], pairs[:, 0]))] if sort else pairs
+
+
+def count_pairs_within(path: Array, radius: float) -> int:
+    """Number of (sample, pair) of ``path`` (T, n, d) closer than ``radius``: :func:`pairs_within`
+    at every sample, every pair of :data:`PATH_BLOCK` drone samples at once for few drones."""
+    t, n, d = path.shape
+    if n > BRUTE_FORCE_MAX_N:
+        return sum(pairs_within(p, radius).shape[0] for p in path)
+    i, k = _upper_pairs(n).T
+    count, samples = 0, max(1, PATH_BLOCK // max(n, 1))
+    for a in range(0, t, samples):
+        block = path[a : a + samples]
+        diff = (np.take(block, i, axis=1) - np.take(block, k, axis=1)).reshape(-1, d)
+        count += int(np.count_nonzero(np.einsum("ij,ij->i", diff, diff) < radius * radius))
+    return count
 
 
 @lru_cache(maxsize=32)

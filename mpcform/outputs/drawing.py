@@ -19,7 +19,7 @@ from matplotlib.ticker import MaxNLocator
 from scipy.spatial.distance import pdist, squareform
 
 from mpcform._validate import Array
-from mpcform.formation.geometry import formation_edges, min_pair_distance
+from mpcform.formation.geometry import formation_edges, min_pair_distances
 from mpcform.outputs.rundata import RunData
 
 # ---- the one style of every figure ---------------------------------------------------------
@@ -127,7 +127,7 @@ def envelope(ax: Axes, t_s: Array, values: Array, colour: Any, label: str, *, st
 
 def closest_pair(positions_m: Array) -> tuple[int, int, int, float]:
     """``(sample, i, j, distance [m])`` of the closest two drones over the samples."""
-    sep = np.array([min_pair_distance(p) for p in positions_m])
+    sep = min_pair_distances(positions_m)
     k = int(np.argmin(sep))
     dist = squareform(pdist(positions_m[k])) + np.diag(np.full(positions_m.shape[1], np.inf))
     i, j = np.unravel_index(int(np.argmin(dist)), dist.shape)

@@ -28,7 +28,7 @@ import numpy as np
 
 from mpcform._validate import Array, finite_array, positive
 from mpcform.errors import ValidationError
-from mpcform.formation.geometry import min_pair_distance, pairs_within
+from mpcform.formation.geometry import min_pair_distances, pairs_within
 from mpcform.sim.metrics import REL_TOL
 
 SEPARATION_KEY = "min_separation_m"
@@ -82,7 +82,7 @@ def viewer_curves(
     p = _positions("positions_m", positions_m, t.shape[0])
     curves: dict[str, Array] = {}
     if p.shape[1] >= 2:
-        curves[SEPARATION_KEY] = np.array([min_pair_distance(pk) for pk in p])
+        curves[SEPARATION_KEY] = min_pair_distances(p)
     if commands_mps is not None:
         u = finite_array("commands_mps", commands_mps, (t.shape[0] - 1, p.shape[1], p.shape[2]))
         speed = np.linalg.norm(u, axis=-1).max(axis=1) if u.shape[0] else np.empty(0)

@@ -21,7 +21,7 @@ from typing import Any
 import numpy as np
 
 from mpcform._validate import Array
-from mpcform.formation.geometry import min_pair_distance, min_path_distance, pairs_within
+from mpcform.formation.geometry import count_pairs_within, min_pair_distances, min_path_distance
 from mpcform.formation.kinematics import fit_formation
 from mpcform.formation.template import Template
 from mpcform.mpc.limits import Limits, SphereObstacle
@@ -47,7 +47,7 @@ def tracking_errors_m(trajectory: Trajectory) -> Array:
 
 def min_separations_m(trajectory: Trajectory) -> Array:
     """Smallest distance between two drones at every sample [m], (T,); inf for one drone."""
-    return np.array([min_pair_distance(p) for p in trajectory.positions_m])
+    return min_pair_distances(trajectory.positions_m)
 
 
 def command_speeds_mps(trajectory: Trajectory) -> Array:
@@ -90,7 +90,7 @@ def run_metrics(
     sep_viol = 0
     if d_min_m is not None:
         limit = d_min_m * (1.0 - REL_TOL)
-        sep_viol = sum(pairs_within(p, limit).shape[0] for p in pos)
+        sep_viol = count_pairs_within(pos, limit)
     modes = np.array([i.mode for i in result.infos])
     return {
         "final_tracking_error": float(err[-1]),

@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from mpcform._validate import Array
-from mpcform.formation.geometry import closest_on_segments, min_path_distance, pairs_within
+from mpcform.formation.geometry import closest_on_segments, count_pairs_within, min_path_distance
 from mpcform.mpc.limits import Limits, SphereObstacle
 
 TOL_M = 1e-9
@@ -27,7 +27,7 @@ def min_separation_along(path_m: Array, metric: Array | None = None) -> float:
 def separation_violations(path_m: Array, d_min_m: float, metric: Array | None = None) -> int:
     """Number of (sample, pair) closer than ``d_min_m - TOL_M``."""
     p = path_m if metric is None else path_m * metric
-    return int(sum(pairs_within(x, d_min_m - TOL_M).shape[0] for x in p))
+    return count_pairs_within(p, d_min_m - TOL_M)
 
 
 def required_clearance_m(obstacle: SphereObstacle, d_min_m: float | None) -> float:

@@ -9,8 +9,10 @@ from scipy.spatial.distance import pdist
 from mpcform.formation.geometry import (
     NearPairs,
     closest_on_segments,
+    count_pairs_within,
     drone_spreads,
     min_pair_distance,
+    min_pair_distances,
     min_path_distance,
     min_segment_distance,
     pairs_within,
@@ -60,6 +62,29 @@ def test_min_segment_distance_special_cases():
     start = np.array([[0.0, 0.0, 0.0], [2.0, 0.0, 0.0]])
     assert min_segment_distance(start, start + [1.0, 2.0, 3.0]) == pytest.approx(2.0)  # parallel
     assert min_segment_distance(start, start[::-1]) == 0.0  # head-on swap
+
+
+@pytest.mark.parametrize(("n", "t"), [(1, 5), (7, 1000), (48, 200), (49, 20)])
+def test_min_pair_distances_are_min_pair_distance_at_every_sample_bit_for_bit(n, t):
+    rng = np.random.default_rng(n * t)
+    path = rng.uniform(-1.0, 1.0, (t, n, 2)) * np.sqrt(n)
+    expected = np.array([min_pair_distance(p) for p in path])
+    assert min_pair_distances(path).tobytes() == expected.tobytes()
+
+
+@pytest.mark.parametrize(("n", "t"), [(1, 5), (7, 1000), (48, 200), (49, 20)])
+def test_count_pairs_within_counts_pairs_within_at_every_sample(n, t):
+    """Blocks of every pair (n <= 48, over several blocks) and the k-d tree (n > 48) alike."""
+    rng = np.random.default_rng(n + t)
+    path = rng.uniform(-1.0, 1.0, (t, n, 3)) * np.sqrt(n)
+    expected = sum(pairs_within(p, 0.4).shape[0] for p in path)
+    assert count_pairs_within(path, 0.4) == expected
+    assert n < 7 or expected > 0
+
+
+def test_count_pairs_within_leaves_out_a_pair_exactly_at_the_radius():
+    path = np.array([[[0.0, 0.0], [0.5, 0.0], [5.0, 0.0]], [[0.0, 0.0], [0.25, 0.0], [5.0, 0.0]]])
+    assert count_pairs_within(path, 0.5) == 1
 
 
 def all_pairs_min_path_distance(path):
