@@ -4,6 +4,7 @@ draw a template's shape."""
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from functools import lru_cache
 
 import numpy as np
@@ -14,7 +15,7 @@ from scipy.spatial.distance import pdist, squareform
 from mpcform._validate import Array
 
 BRUTE_FORCE_MAX_N = 48
-PATH_BLOCK = 4096  # drone samples per block of :func:`min_path_distance` (bounds its temporaries)
+PATH_BLOCK = 4096  # drone samples per block of the whole-path measures (bounds their temporaries)
 
 
 def closest_on_segments(start: Array, end: Array) -> Array:
@@ -66,17 +67,12 @@ def min_pair_distance(points: Array) -> float:
 
 def min_pair_distances(path: Array) -> Array:
     """Smallest distance between two drones at every sample of ``path`` (T, n, d), (T,): every pair
-    of :data:`PATH_BLOCK` drone samples at once for few drones, else :func:`min_pair_distance`."""
+    at once for few drones (:func:`_pair_differences`), else :func:`min_pair_distance`."""
     t, n = path.shape[:2]
     if n < 2 or n > BRUTE_FORCE_MAX_N:
         return np.array([min_pair_distance(p) for p in path]).reshape(t)
-    i, k = _upper_pairs(n).T
-    out, samples = np.empty(t), max(1, PATH_BLOCK // n)
-    for a in range(0, t, samples):
-        block = path[a : a + samples]
-        diff = np.take(block, i, axis=1) - np.take(block, k, axis=1)
-        out[a : a + samples] = np.sqrt(squared_norms(diff, overwrite=True).min(axis=1))
-    return out
+    mins = [np.sqrt(squared_norms(diff, overwrite=True).min(axis=1)) for diff in _pair_differences(path)]
+    return np.concatenate(mins) if mins else np.empty(0)
 
 
 def pairs_within(points: Array, radius: float, sort: bool = True) -> Array:
@@ -96,17 +92,24 @@ def pairs_within(points: Array, radius: float, sort: bool = True) -> Array:
 
 def count_pairs_within(path: Array, radius: float) -> int:
     """Number of (sample, pair) of ``path`` (T, n, d) closer than ``radius``: :func:`pairs_within`
-    at every sample, every pair of :data:`PATH_BLOCK` drone samples at once for few drones."""
-    t, n, d = path.shape
-    if n > BRUTE_FORCE_MAX_N:
+    at every sample, every pair at once for few drones (:func:`_pair_differences`)."""
+    if path.shape[1] > BRUTE_FORCE_MAX_N:
         return sum(pairs_within(p, radius).shape[0] for p in path)
-    i, k = _upper_pairs(n).T
-    count, samples = 0, max(1, PATH_BLOCK // max(n, 1))
-    for a in range(0, t, samples):
-        block = path[a : a + samples]
-        diff = (np.take(block, i, axis=1) - np.take(block, k, axis=1)).reshape(-1, d)
-        count += int(np.count_nonzero(np.einsum("ij,ij->i", diff, diff) < radius * radius))
+    count = 0
+    for diff in _pair_differences(path):
+        flat = diff.reshape(-1, diff.shape[2])  # the rows of pairs_within's own test
+        count += int(np.count_nonzero(np.einsum("ij,ij->i", flat, flat) < radius * radius))
     return count
+
+
+def _pair_differences(path: Array) -> Iterator[Array]:
+    """``p_i - p_k`` of every pair i < k at the samples of ``path`` (T, n, d), (S, P, d) for blocks
+    of S samples (:data:`PATH_BLOCK` drone samples each)."""
+    i, k = _upper_pairs(path.shape[1]).T
+    samples = max(1, PATH_BLOCK // max(path.shape[1], 1))
+    for a in range(0, path.shape[0], samples):
+        block = path[a : a + samples]
+        yield np.take(block, i, axis=1) - np.take(block, k, axis=1)
 
 
 @lru_cache(maxsize=32)

@@ -120,7 +120,7 @@ class ConstantReference(Reference):
 
     def targets(self, times_s: ArrayLike) -> tuple[Array, Array]:
         """The goal's positions at every time and zero velocity, each (T, n, d): bit for bit the
-        general eq. 13 sum, without repeating it (a swap's targets: 88 -> 10 us at 20 drones)."""
+        general eq. 13 sum, without repeating it (a swap's targets: 75 -> 7 us at 20 drones)."""
         t = np.atleast_1d(np.asarray(times_s, dtype=float)).shape[0]
         pos = np.repeat(self._held_m[None], t, axis=0)
         return pos, np.zeros_like(pos)
