@@ -116,11 +116,16 @@ class ConstantReference(Reference):
     def __init__(self, template: Template, state: FormationState) -> None:
         _same_dim(template, state, "reference")
         self.template, self.goal = template, state
-        self._held_m = super().targets(0.0)[0][0]  # the goal's positions (n, d), computed once
+        self._held_m: Array | None = None  # the goal's positions (n, d), once computed
 
     def targets(self, times_s: ArrayLike) -> tuple[Array, Array]:
         """The goal's positions at every time and zero velocity, each (T, n, d): bit for bit the
-        general eq. 13 sum, without repeating it (a swap's targets: 75 -> 7 us at 20 drones)."""
+        general eq. 13 sum, computed once (a swap's targets: 75 -> 7 us at 20 drones). A subclass
+        with a profile of its own gets the general sum of that profile."""
+        if type(self).profile is not ConstantReference.profile:
+            return super().targets(times_s)
+        if self._held_m is None:
+            self._held_m = super().targets(0.0)[0][0]
         t = np.atleast_1d(np.asarray(times_s, dtype=float)).shape[0]
         pos = np.repeat(self._held_m[None], t, axis=0)
         return pos, np.zeros_like(pos)

@@ -1,5 +1,6 @@
 """References: drone targets and their velocities (finite differences), limits, clamping."""
 
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -115,6 +116,20 @@ def test_constant_reference_targets_are_the_general_sum_bit_for_bit(dim, n):
         assert [a.tobytes() for a in mine] == [a.tobytes() for a in general]
     first, again = held.targets([0.0, 1.0]), held.targets([0.0, 1.0])
     assert not np.shares_memory(first[0], again[0])
+
+
+def test_a_constant_reference_with_its_own_profile_gets_that_profiles_targets():
+    """A subclass that moves the centroid (as a test of the planner does) is not held at the goal."""
+
+    class Drifting(ConstantReference):
+        def profile(self, times_s):
+            v = np.ones((len(times_s), 2))
+            return replace(super().profile(times_s), centroid_m=times_s[:, None] * v, centroid_velocity_mps=v)
+
+    drifting = Drifting(Template.polygon(4, dim=2), FormationState.from_param(np.zeros(2)))
+    pos, vel = drifting.targets([0.0, 2.0])
+    np.testing.assert_allclose(pos[1] - pos[0], 2.0)
+    np.testing.assert_allclose(vel, 1.0)
 
 
 @pytest.mark.parametrize(
