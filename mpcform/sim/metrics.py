@@ -21,7 +21,7 @@ from typing import Any
 import numpy as np
 
 from mpcform._validate import Array
-from mpcform.formation.geometry import count_pairs_within, min_pair_distances, min_path_distance
+from mpcform.formation.geometry import count_pairs_within, min_pair_distances
 from mpcform.formation.kinematics import fit_formation
 from mpcform.formation.template import Template
 from mpcform.mpc.limits import Limits, SphereObstacle
@@ -86,7 +86,7 @@ def run_metrics(
     speed = command_speeds_mps(result)
     pos = result.positions_m
     sample_min = float(min_separations_m(result).min())
-    seg_min = min_path_distance(pos)
+    seg_min = min_separation_along(pos)
     sep_viol = 0
     if d_min_m is not None:
         limit = d_min_m * (1.0 - REL_TOL)
