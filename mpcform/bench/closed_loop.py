@@ -174,7 +174,9 @@ def closed_loop_markdown(rows: Sequence[dict[str, Any]]) -> str:
         "along the straight segments [m]; QP-step times exclude fast-path steps.",
         "",
     ]
-    table = [r if r["ok"] else {**r, "final_tracking_error_m": f"failed: {shorten(r['status'], 100)}"}
-             for r in rows]  # fmt: skip
+    table = [
+        r if r["ok"] else {**r, "final_tracking_error_m": f"failed: {shorten(r['status'], 100)}"}
+        for r in rows
+    ]
     out.append(markdown_table(table, CLOSED_LOOP_COLUMNS, {"final_tracking_error_m": _error_cell}))
     return "\n".join(out) + "\n"

@@ -42,8 +42,13 @@ def growth_rows(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
     for scenario, mode in dict.fromkeys((r["scenario"], r["mode"]) for r in rows):
         case = [r for r in rows if (r["scenario"], r["mode"]) == (scenario, mode) and r.get("steps_run")]
         ns = [r["n"] for r in case]
-        rec: dict[str, Any] = {"table": "growth", "scenario": scenario, "mode": mode, "sizes": ns,
-                               "partial": [r["n"] for r in case if r["steps_run"] < r["steps"]]}  # fmt: skip
+        rec: dict[str, Any] = {
+            "table": "growth",
+            "scenario": scenario,
+            "mode": mode,
+            "sizes": ns,
+            "partial": [r["n"] for r in case if r["steps_run"] < r["steps"]],
+        }
         for key, name in (("step_ms_median", "step"), ("qp_ms_median", "qp")):
             t = [r.get(key, float("nan")) for r in case]
             rec[f"{name}_exponent_fit"] = growth_exponent(ns, t)

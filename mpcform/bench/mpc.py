@@ -103,8 +103,9 @@ class MPCCase:
     obstacles: tuple[SphereObstacle, ...] = ()
 
     def planner(self, settings: MPCSettings, solver: str | QPBackend) -> MPCPlanner:
-        return MPCPlanner(self.reference, self.dt_s, self.limits, settings, obstacles=self.obstacles,
-                          solver=solver)  # fmt: skip
+        return MPCPlanner(
+            self.reference, self.dt_s, self.limits, settings, obstacles=self.obstacles, solver=solver
+        )
 
 
 def swap_case(n: int, dim: int) -> tuple[ConstantReference, Array]:
@@ -128,9 +129,12 @@ def scenario_case(path: str | Path, coupling: str) -> MPCCase:
     mode ``coupling``; it must fly the ideal plant without process noise."""
     sc = load_scenario(path)
     if sc.plant.kind != "ideal" or sc.simulation.noise_std_m > 0:
-        raise ValidationError("scenario", f"{path}: bench mpc runs scenarios on the ideal plant "
-                              f"without noise, got plant {sc.plant.kind!r}, noise "
-                              f"{sc.simulation.noise_std_m:g} m")  # fmt: skip
+        raise ValidationError(
+            "scenario",
+            f"{path}: bench mpc runs scenarios on the ideal plant "
+            f"without noise, got plant {sc.plant.kind!r}, noise "
+            f"{sc.simulation.noise_std_m:g} m",
+        )
     mode = mode_settings(coupling, sc.controller.mpc.horizon)
     settings = replace(
         sc.controller.mpc, coupling=mode.coupling, grouping=mode.grouping, per_drone=mode.per_drone
@@ -190,11 +194,18 @@ def bench_case(
                 ratio.add((took[0] / floor[0], took[1] / floor[1]))
             p = p + case.dt_s * out.command_mps
     row: dict[str, Any] = {
-        "case": case.name, "n": case.start_m.shape[0], "dim": case.start_m.shape[1], "steps": case.steps,
-        "solver": planner.solver_name, "coupling": st.coupling, "qp_steps": len(ours["qp"].wall),
-        "fast_path_steps": len(ours["fast_path"].wall), "fallback_steps": len(ours["fallback"].wall),
-        "setups": sum(1 for pb in rec.problems if pb["setup"]), "reused": getattr(rec.inner, "reused", 0),
-    }  # fmt: skip
+        "case": case.name,
+        "n": case.start_m.shape[0],
+        "dim": case.start_m.shape[1],
+        "steps": case.steps,
+        "solver": planner.solver_name,
+        "coupling": st.coupling,
+        "qp_steps": len(ours["qp"].wall),
+        "fast_path_steps": len(ours["fast_path"].wall),
+        "fallback_steps": len(ours["fallback"].wall),
+        "setups": sum(1 for pb in rec.problems if pb["setup"]),
+        "reused": getattr(rec.inner, "reused", 0),
+    }
     ours["qp"].stats(row, "qp")
     raw.stats(row, "raw")
     ours["fast_path"].stats(row, "fast")
@@ -272,8 +283,11 @@ def markdown_table(rows: list[dict[str, Any]]) -> str:
     a line saying so, then one line per case whose cvxpy run was skipped, with the reason."""
     pairs = {key: _paired(fmt) for key, _, fmt in COLUMNS if fmt != "{}"}
     shown = [{**r, **{key: (r.get(key), r.get(cpu_key(key))) for key in pairs}} for r in rows]
-    notes = [f"cvxpy skipped for {r['case']} (n = {r['n']}): {r['cvxpy_skipped']}" for r in rows
-             if r.get("cvxpy_skipped")]  # fmt: skip
+    notes = [
+        f"cvxpy skipped for {r['case']} (n = {r['n']}): {r['cvxpy_skipped']}"
+        for r in rows
+        if r.get("cvxpy_skipped")
+    ]
     table = tables.markdown_table(shown, COLUMNS, pairs)
     return "\n".join([table, "", "Times and ratios: wall / CPU (process time).", *notes])
 
@@ -290,8 +304,11 @@ def run(
 ) -> list[dict[str, Any]]:
     """The generated swaps, then the scenario files; cvxpy in every case that fits
     ``cvxpy_budget_s`` (0: none)."""
-    cases = [generated_case(n, dim, steps, coupling) for dim, sizes in ((2, planar_n), (3, spatial_n))
-             for n in sizes]  # fmt: skip
+    cases = [
+        generated_case(n, dim, steps, coupling)
+        for dim, sizes in ((2, planar_n), (3, spatial_n))
+        for n in sizes
+    ]
     cases += [scenario_case(path, coupling) for path in scenarios]
     cvxpy_solver = solver if cvxpy_budget_s > 0 and _have_cvxpy() else None
     rows = []

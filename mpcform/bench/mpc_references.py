@@ -85,8 +85,18 @@ class RawReplay:
             import osqp
 
             raw = osqp.OSQP()
-            raw.setup(pb["P"], pb["q"], pb["A"], pb["l"], pb["u"], verbose=False, eps_abs=o.eps_abs,
-                      eps_rel=o.eps_rel, max_iter=o.max_iter, polishing=True)  # fmt: skip
+            raw.setup(
+                pb["P"],
+                pb["q"],
+                pb["A"],
+                pb["l"],
+                pb["u"],
+                verbose=False,
+                eps_abs=o.eps_abs,
+                eps_rel=o.eps_rel,
+                max_iter=o.max_iter,
+                polishing=True,
+            )
             self._current = {"raw": raw, "res": raw.solve(raise_error=False)}
             return self._current
         import piqp
@@ -175,8 +185,10 @@ def cvxpy_replay(problems: list[dict[str, Any]], solver: str, budget_s: float) -
             estimate_s = (out.whole[0] + (len(problems) - i - 1) * took[0]) / 1e3
             last = i == min(1, len(problems) - 1)
             if estimate_s > budget_s and (last or out.whole[0] / 1e3 > budget_s):
-                out.skipped = (f"estimated {estimate_s:.3g} s > budget {budget_s:g} s ({len(problems)} QPs "
-                               f"at {took[0] / 1e3:.2f} s)")  # fmt: skip
+                out.skipped = (
+                    f"estimated {estimate_s:.3g} s > budget {budget_s:g} s ({len(problems)} QPs "
+                    f"at {took[0] / 1e3:.2f} s)"
+                )
                 return out
     return out
 

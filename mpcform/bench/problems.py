@@ -122,10 +122,14 @@ def save_problem(path: str | Path, qp: RecordedQP) -> Path:
     }
     for key, M in (("P", qp.P), ("A", qp.A)):
         M = sp.csc_matrix(M)
-        arrays.update({
-            f"{key}_data": M.data, f"{key}_indices": M.indices.astype(np.int32),
-            f"{key}_indptr": M.indptr.astype(np.int32), f"{key}_shape": np.array(M.shape, dtype=np.int64),
-        })  # fmt: skip
+        arrays.update(
+            {
+                f"{key}_data": M.data,
+                f"{key}_indices": M.indices.astype(np.int32),
+                f"{key}_indptr": M.indptr.astype(np.int32),
+                f"{key}_shape": np.array(M.shape, dtype=np.int64),
+            }
+        )
     if qp.x0 is not None:
         arrays["x0"] = qp.x0
     ctx = qp.context
@@ -153,11 +157,13 @@ def load_problem(path: str | Path) -> RecordedQP:
     ctx = None
     if "ctx_start_m" in arrays:
         ctx = QPContext(
-            int(meta["n"]), int(meta["dim"]), int(meta["horizon"]),
+            int(meta["n"]),
+            int(meta["dim"]),
+            int(meta["horizon"]),
             (int(arrays["ctx_separation_rows"][0]), int(arrays["ctx_separation_rows"][1])),
             pair_distance_m=float(arrays["ctx_pair_distance_m"]),
             **{name: arrays[f"ctx_{name}"] for name in _CTX_ARRAYS},
-        )  # fmt: skip
+        )
     return RecordedQP(
         _csc(arrays, "P"),
         arrays["q"],
@@ -228,13 +234,27 @@ class RecordingBackend(QPBackend):
         ctx = self._context
         n, dim, horizon = (ctx.n, ctx.dim, ctx.horizon) if ctx is not None else (0, 0, 0)
         meta = {
-            "format": FORMAT, "version": VERSION, "scenario": self.scenario, "step": self.step,
-            "t_s": self.step * self.dt_s, "event": self._event, "n": n, "dim": dim, "horizon": horizon,
-            "n_var": int(self._q.shape[0]), "n_rows": int(self._lo.shape[0]), "nnz_P": int(self._P.nnz),
-            "nnz_A": int(self._A.nnz), "recorded_with": self.inner.name, "mpcform_version": _version(),
-        }  # fmt: skip
-        self.problems.append(RecordedQP(self._P, self._q, self._A, self._lo, self._hi, meta,
-                                        None if x0 is None else x0.copy(), ctx))  # fmt: skip
+            "format": FORMAT,
+            "version": VERSION,
+            "scenario": self.scenario,
+            "step": self.step,
+            "t_s": self.step * self.dt_s,
+            "event": self._event,
+            "n": n,
+            "dim": dim,
+            "horizon": horizon,
+            "n_var": int(self._q.shape[0]),
+            "n_rows": int(self._lo.shape[0]),
+            "nnz_P": int(self._P.nnz),
+            "nnz_A": int(self._A.nnz),
+            "recorded_with": self.inner.name,
+            "mpcform_version": _version(),
+        }
+        self.problems.append(
+            RecordedQP(
+                self._P, self._q, self._A, self._lo, self._hi, meta, None if x0 is None else x0.copy(), ctx
+            )
+        )
         return self.inner.solve(x0 if self.inner.warm_starts else None)
 
 

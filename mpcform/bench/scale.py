@@ -85,8 +85,16 @@ def _closed_loop(planner: MPCPlanner, p: Array, steps: int, budget_s: float) -> 
         if spent > budget_s:
             break
     error = float(np.linalg.norm(p - planner.reference.targets(DT_S * done)[0][0], axis=1).max())
-    return {"times": times, "cpu": cpu, "qp_drones": qp_drones, "min_seg": min_seg, "max_slack": max_slack,
-            "steps_run": done, "spent": spent, "final_error": error}  # fmt: skip
+    return {
+        "times": times,
+        "cpu": cpu,
+        "qp_drones": qp_drones,
+        "min_seg": min_seg,
+        "max_slack": max_slack,
+        "steps_run": done,
+        "spent": spent,
+        "final_error": error,
+    }
 
 
 def bench_case(
@@ -110,14 +118,20 @@ def bench_case(
     qp_ms = times["qp"] + times["fallback"]
     all_ms = qp_ms + times["fast_path"]
     row: dict[str, Any] = {
-        "table": "cases", "scenario": scenario, "n": n, "mode": mode, "solver": planner.solver_name,
+        "table": "cases",
+        "scenario": scenario,
+        "n": n,
+        "mode": mode,
+        "solver": planner.solver_name,
         "horizon": horizon,
         "steps": steps,
-        "steps_run": run["steps_run"], "qp_steps": len(qp_ms), "fast_path_steps": len(times["fast_path"]),
+        "steps_run": run["steps_run"],
+        "qp_steps": len(qp_ms),
+        "fast_path_steps": len(times["fast_path"]),
         "fallback_steps": len(times["fallback"]),
         "qp_drones_mean": float(np.mean(run["qp_drones"])) if run["qp_drones"] else 0.0,
         "qp_drones_max": max(run["qp_drones"], default=0),
-    }  # fmt: skip
+    }
     row["step_ms_median"], row["step_ms_p90"] = median_p90(all_ms)
     row["step_ms_max"] = max(all_ms, default=float("nan"))
     row["qp_ms_median"], row["qp_ms_p90"] = median_p90(qp_ms)
@@ -131,8 +145,12 @@ def bench_case(
     if trace_memory:  # a second run: tracing slows allocations, so it is never timed
         tracemalloc.start()
         tracemalloc.reset_peak()
-        _closed_loop(MPCPlanner(ref, DT_S, LIMITS, settings, solver=_solver(settings, solver)), p0,
-                     run["steps_run"], math.inf)  # fmt: skip
+        _closed_loop(
+            MPCPlanner(ref, DT_S, LIMITS, settings, solver=_solver(settings, solver)),
+            p0,
+            run["steps_run"],
+            math.inf,
+        )
         row["tracemalloc_peak_mib"] = tracemalloc.get_traced_memory()[1] / 2**20
         tracemalloc.stop()
     row["min_separation_segments"] = run["min_seg"]
@@ -184,12 +202,16 @@ def run(
     for mode in modes:  # bad input fails here, before any case process starts
         settings = mode_settings(mode, horizon)
         if solver != _solver(settings, solver):
-            raise ValidationError("--solver", f"mode {mode!r} solves each drone's QP with DAQP, not "
-                                  f"{solver!r}; time it with --coupling decoupled-sparse")  # fmt: skip
+            raise ValidationError(
+                "--solver",
+                f"mode {mode!r} solves each drone's QP with DAQP, not "
+                f"{solver!r}; time it with --coupling decoupled-sparse",
+            )
     smallest = 2 if "crossing" in scenarios else 1
     if steps < 1 or min(sizes, default=smallest) < smallest:
-        raise ValidationError("--n/--steps", f"expected n >= {smallest} and steps >= 1, got n = "
-                              f"{list(sizes)}, steps = {steps}")  # fmt: skip
+        raise ValidationError(
+            "--n/--steps", f"expected n >= {smallest} and steps >= 1, got n = {list(sizes)}, steps = {steps}"
+        )
     rows: list[dict[str, Any]] = []
     over_budget: dict[tuple[str, str], int] = {}
     with ExitStack() as stack:
@@ -206,35 +228,50 @@ def run(
                     row = pool.submit(bench_case, *args).result() if pool is not None else bench_case(*args)
                     rows.append(row)
                     if progress is not None:
-                        progress(f"bench scale: {scenario} n={n} {mode}: median step "
-                                 f"{row['step_ms_median']:.1f} ms over {row['steps_run']} steps")  # fmt: skip
+                        progress(
+                            f"bench scale: {scenario} n={n} {mode}: median step "
+                            f"{row['step_ms_median']:.1f} ms over {row['steps_run']} steps"
+                        )
                     if mode == "monolithic" and row["steps_run"] < steps:
                         over_budget[scenario, mode] = n
     return rows
 
 
 COLUMNS = [
-    ("scenario", "scenario", "{}"), ("n", "n", "{}"), ("mode", "mode", "{}"), ("steps_run", "steps", "{}"),
-    ("qp_steps", "QP", "{}"), ("fast_path_steps", "fast", "{}"), ("fallback_steps", "fallback", "{}"),
-    ("qp_drones_mean", "QP drones", "{:.0f}"), ("step_ms_median", "step med [ms]", "{:.2f}"),
-    ("step_ms_p90", "step p90", "{:.2f}"), ("qp_ms_median", "QP med [ms]", "{:.2f}"),
-    ("qp_ms_p90", "QP p90", "{:.2f}"), ("qp_cpu_ms_median", "QP CPU med", "{:.2f}"),
-    ("qp_cpu_ms_p90", "QP CPU p90", "{:.2f}"), ("fast_ms_median", "fast med [ms]", "{:.2f}"),
-    ("fast_ms_p90", "fast p90", "{:.2f}"), ("fast_cpu_ms_median", "fast CPU med", "{:.2f}"),
+    ("scenario", "scenario", "{}"),
+    ("n", "n", "{}"),
+    ("mode", "mode", "{}"),
+    ("steps_run", "steps", "{}"),
+    ("qp_steps", "QP", "{}"),
+    ("fast_path_steps", "fast", "{}"),
+    ("fallback_steps", "fallback", "{}"),
+    ("qp_drones_mean", "QP drones", "{:.0f}"),
+    ("step_ms_median", "step med [ms]", "{:.2f}"),
+    ("step_ms_p90", "step p90", "{:.2f}"),
+    ("qp_ms_median", "QP med [ms]", "{:.2f}"),
+    ("qp_ms_p90", "QP p90", "{:.2f}"),
+    ("qp_cpu_ms_median", "QP CPU med", "{:.2f}"),
+    ("qp_cpu_ms_p90", "QP CPU p90", "{:.2f}"),
+    ("fast_ms_median", "fast med [ms]", "{:.2f}"),
+    ("fast_ms_p90", "fast p90", "{:.2f}"),
+    ("fast_cpu_ms_median", "fast CPU med", "{:.2f}"),
     ("rss_peak_mib", "peak RSS [MiB]", "{:.0f}"),
-    ("rss_delta_mib", "RSS growth", "{:.0f}"), ("tracemalloc_peak_mib", "traced peak", "{:.0f}"),
-    ("min_separation_segments", "min sep [m]", "{:.3f}"), ("note", "note", "{}"),
-]  # fmt: skip
+    ("rss_delta_mib", "RSS growth", "{:.0f}"),
+    ("tracemalloc_peak_mib", "traced peak", "{:.0f}"),
+    ("min_separation_segments", "min sep [m]", "{:.3f}"),
+    ("note", "note", "{}"),
+]
 
 GROWTH_COLUMNS = [
-    ("scenario", "scenario", "{}"), ("mode", "mode", "{}"),
+    ("scenario", "scenario", "{}"),
+    ("mode", "mode", "{}"),
     ("step_exponent_fit", "step: fit n>=100", "{:.2f}"),
     ("step_exponent_100_1000", "step: 100->1000", "{:.2f}"),
     ("qp_exponent_fit", "QP step: fit n>=100", "{:.2f}"),
     ("qp_exponent_100_1000", "QP step: 100->1000", "{:.2f}"),
     ("qp_cpu_exponent_fit", "QP CPU: fit n>=100", "{:.2f}"),
     ("partial", "stopped early (n)", "{}"),
-]  # fmt: skip
+]
 
 
 def markdown_table(rows: list[dict[str, Any]], columns: list[tuple[str, str, str]] | None = None) -> str:
@@ -261,8 +298,10 @@ def target_lines(rows: list[dict[str, Any]], growth: list[dict[str, Any]], coupl
 
     form = case("formation", 1000)
     med, p90 = form.get("step_ms_median", math.nan), form.get("step_ms_p90", math.nan)
-    lines = [f"formation n=1000 median step {num(med, '{:.1f}')} ms (p90 {num(p90, '{:.1f}')}) <= 100 ms: "
-             f"{verdict(med, 100.0, form)}"]  # fmt: skip
+    lines = [
+        f"formation n=1000 median step {num(med, '{:.1f}')} ms (p90 {num(p90, '{:.1f}')}) <= 100 ms: "
+        f"{verdict(med, 100.0, form)}"
+    ]
     cross = case("crossing", 100)
     qp = cross.get("qp_ms_median", math.nan)
     lines.append(f"crossing n=100 median QP step {num(qp, '{:.1f}')} ms <= 50 ms: {verdict(qp, 50.0, cross)}")
@@ -274,13 +313,17 @@ def target_lines(rows: list[dict[str, Any]], growth: list[dict[str, Any]], coupl
             lines.append(f"{text}: {verdict(e, 1.2)}{partial}")
     big = case("crossing", 1000)  # the performance targets (decoupled step at the solver floor)
     qp, qp_cpu = big.get("qp_ms_median", math.nan), big.get("qp_cpu_ms_median", math.nan)
-    lines.append(f"crossing n=1000 median QP step {num(qp, '{:.1f}')} ms (CPU {num(qp_cpu, '{:.1f}')} ms) "
-                 f"<= 40 ms: {verdict(qp, 40.0, big)}")  # fmt: skip
+    lines.append(
+        f"crossing n=1000 median QP step {num(qp, '{:.1f}')} ms (CPU {num(qp_cpu, '{:.1f}')} ms) "
+        f"<= 40 ms: {verdict(qp, 40.0, big)}"
+    )
     for g in growth:
         if g["mode"] == coupling and g["scenario"] == "crossing":
             e = g.get("qp_cpu_exponent_fit", math.nan)
-            lines.append(f"crossing growth exponent (median CPU per QP step, fit n>=100) {num(e, '{:.2f}')} "
-                         f"<= 1.1: {verdict(e, 1.1)}")  # fmt: skip
+            lines.append(
+                f"crossing growth exponent (median CPU per QP step, fit n>=100) {num(e, '{:.2f}')} "
+                f"<= 1.1: {verdict(e, 1.1)}"
+            )
     lines.append(f"formation n=1000 median step {num(med, '{:.2f}')} ms <= 2 ms: {verdict(med, 2.0, form)}")
     peaks = [case(s, 1000).get("rss_peak_mib", math.nan) for s in SCENARIOS]
     peak = max((x for x in peaks if np.isfinite(x)), default=math.nan)
@@ -296,9 +339,11 @@ def report(rows: list[dict[str, Any]], coupling: str) -> tuple[str, list[dict[st
         case = [r for r in ran if (r["scenario"], r["mode"]) == (g["scenario"], g["mode"])]
         cpu_ms = [r.get("qp_cpu_ms_median", math.nan) for r in case]
         g["qp_cpu_exponent_fit"] = growth_exponent([r["n"] for r in case], cpu_ms)
-    text = "\n\n".join([
-        markdown_table(rows),
-        markdown_table(growth, GROWTH_COLUMNS),
-        "\n".join(f"- {line}" for line in target_lines(rows, growth, coupling)),
-    ])  # fmt: skip
+    text = "\n\n".join(
+        [
+            markdown_table(rows),
+            markdown_table(growth, GROWTH_COLUMNS),
+            "\n".join(f"- {line}" for line in target_lines(rows, growth, coupling)),
+        ]
+    )
     return text, growth

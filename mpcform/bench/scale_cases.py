@@ -57,8 +57,14 @@ class CrossingReference(Reference):
     def profile(self, times_s: Array) -> Profile:
         t, d = times_s.shape[0], self.template.dim
         zeros = np.zeros((t, d))
-        return Profile(zeros, np.broadcast_to(np.eye(d), (t, d, d)), np.ones(t), zeros,
-                       np.zeros((t, velocity_size(d) - d - 1)), np.zeros(t))  # fmt: skip
+        return Profile(
+            zeros,
+            np.broadcast_to(np.eye(d), (t, d, d)),
+            np.ones(t),
+            zeros,
+            np.zeros((t, velocity_size(d) - d - 1)),
+            np.zeros(t),
+        )
 
     def targets(self, times_s: ArrayLike) -> tuple[Array, Array]:
         t = np.atleast_1d(np.asarray(times_s, dtype=float))

@@ -28,8 +28,11 @@ from mpcform.scenario.load import load_scenario
 from mpcform.solvers.base import SolverOptions
 from mpcform.solvers.registry import DEFAULT_SOLVER, make_backend
 
-DEFAULT_SCENARIOS = ("scenarios/swap_planar_8.toml", "scenarios/swap_spatial_12.toml",
-                     "scenarios/swap_spatial_20.toml")  # fmt: skip
+DEFAULT_SCENARIOS = (
+    "scenarios/swap_planar_8.toml",
+    "scenarios/swap_spatial_12.toml",
+    "scenarios/swap_spatial_20.toml",
+)
 DEFAULT_ROUNDS = (0, 1, 2, 5, 10, 20, 50)
 ACCURATE = SolverOptions(1e-9, 1e-9, 10_000, 0.0)
 FLOOR_PCT = 1e-4  # the figure's lowest gap [%]
@@ -116,12 +119,18 @@ def run(
         name = Path(path).stem
         drawn.append((name, gap.mean(axis=0), 1e3 * got["cpu"].mean(axis=0)))
         for k in rounds:
-            rows.append({"scenario": name, "rounds": k, "qp_steps": len(qps),
-                         "wall_ms": 1e3 * float(got["wall"][:, k].mean()),
-                         "cpu_ms": 1e3 * float(got["cpu"][:, k].mean()),
-                         "gap_mean_pct": 100 * float(gap[:, k].mean()),
-                         "gap_max_pct": 100 * float(gap[:, k].max()),
-                         "joint_wall_ms": 1e3 * float(got["joint_wall"].mean())})  # fmt: skip
+            rows.append(
+                {
+                    "scenario": name,
+                    "rounds": k,
+                    "qp_steps": len(qps),
+                    "wall_ms": 1e3 * float(got["wall"][:, k].mean()),
+                    "cpu_ms": 1e3 * float(got["cpu"][:, k].mean()),
+                    "gap_mean_pct": 100 * float(gap[:, k].mean()),
+                    "gap_max_pct": 100 * float(gap[:, k].max()),
+                    "joint_wall_ms": 1e3 * float(got["joint_wall"].mean()),
+                }
+            )
     if figure:
         draw(drawn, figure)
     return rows
@@ -153,11 +162,16 @@ def draw(drawn: list[tuple[str, Array, Array]], path: str) -> None:
 
 def markdown_table(rows: list[dict[str, Any]]) -> str:
     """The rows as a markdown table."""
-    head = ("| scenario | rounds | QP steps | wall ms/step | CPU ms/step | gap mean % | gap max % | "
-            "joint (PIQP) ms/step |\n|---|---:|---:|---:|---:|---:|---:|---:|")  # fmt: skip
-    body = [f"| {r['scenario']} | {r['rounds']} | {r['qp_steps']} | {r['wall_ms']:.2f} | "
-            f"{r['cpu_ms']:.2f} | {r['gap_mean_pct']:.4f} | {r['gap_max_pct']:.4f} | "
-            f"{r['joint_wall_ms']:.2f} |" for r in rows]  # fmt: skip
+    head = (
+        "| scenario | rounds | QP steps | wall ms/step | CPU ms/step | gap mean % | gap max % | "
+        "joint (PIQP) ms/step |\n|---|---:|---:|---:|---:|---:|---:|---:|"
+    )
+    body = [
+        f"| {r['scenario']} | {r['rounds']} | {r['qp_steps']} | {r['wall_ms']:.2f} | "
+        f"{r['cpu_ms']:.2f} | {r['gap_mean_pct']:.4f} | {r['gap_max_pct']:.4f} | "
+        f"{r['joint_wall_ms']:.2f} |"
+        for r in rows
+    ]
     return "\n".join([head, *body])
 
 

@@ -20,8 +20,10 @@ def solver_help(what: str = "QP backend") -> str:
     from mpcform.solvers.casadi_conic import CASADI_CONIC_PLUGINS
 
     named = ", ".join(f"{b} (default)" if b == DEFAULT_SOLVER else b for b in PERSISTENT_SOLVERS)
-    return (f"{what}: {named}, qpsolvers:<name>, casadi:<plugin> ({', '.join(CASADI_CONIC_PLUGINS)}) "
-            "or casadi:ipopt; `mpcform solvers` shows which are installed")  # fmt: skip
+    return (
+        f"{what}: {named}, qpsolvers:<name>, casadi:<plugin> ({', '.join(CASADI_CONIC_PLUGINS)}) "
+        "or casadi:ipopt; `mpcform solvers` shows which are installed"
+    )
 
 
 def max_memory_gib(text: str) -> float:
@@ -48,9 +50,14 @@ def seconds(text: str) -> float:
 
 def add_max_memory(cmd: argparse.ArgumentParser, per: str = "run") -> None:
     """The ``--max-memory GIB`` option (see :mod:`mpcform.scenario.size`)."""
-    cmd.add_argument("--max-memory", type=max_memory_gib, default=DEFAULT_MAX_MEMORY_GIB, metavar="GIB",
-                     help=f"refuse a {per} estimated to need more memory than this [GiB] "
-                     f"(default {DEFAULT_MAX_MEMORY_GIB:g})")  # fmt: skip
+    cmd.add_argument(
+        "--max-memory",
+        type=max_memory_gib,
+        default=DEFAULT_MAX_MEMORY_GIB,
+        metavar="GIB",
+        help=f"refuse a {per} estimated to need more memory than this [GiB] "
+        f"(default {DEFAULT_MAX_MEMORY_GIB:g})",
+    )
 
 
 def print_bench(table: str, rows: list[dict[str, Any]], json_path: str | None) -> None:
@@ -71,8 +78,16 @@ def _bench_mpc(args: argparse.Namespace) -> int:
     from mpcform.bench import mpc as bench_mpc  # benchmarks are imported only when asked for
 
     scenarios = bench_mpc.DEFAULT_SCENARIOS if args.scenarios is None else args.scenarios
-    rows = bench_mpc.run(args.n, args.spatial_n, args.steps, args.solver, args.coupling, args.cvxpy_budget,
-                         scenarios, progress=progress)  # fmt: skip
+    rows = bench_mpc.run(
+        args.n,
+        args.spatial_n,
+        args.steps,
+        args.solver,
+        args.coupling,
+        args.cvxpy_budget,
+        scenarios,
+        progress=progress,
+    )
     print_bench(bench_mpc.markdown_table(rows), rows, args.json)
     return 0
 
@@ -87,25 +102,51 @@ def add_bench(sub: argparse._SubParsersAction) -> None:
     mpc.add_argument("--n", type=int, nargs="*", default=[8, 16, 32, 64], help="planar swap sizes")
     mpc.add_argument("--spatial-n", type=int, nargs="*", default=[20], help="spatial swap sizes")
     mpc.add_argument("--steps", type=int, default=60, help="closed-loop steps per generated swap (dt 0.1 s)")
-    mpc.add_argument("--scenarios", nargs="*", metavar="SCENARIO",
-                     help="scenario files run as they are (ideal plant; default: the bundled swaps "
-                     "swap_planar_8, swap_spatial_12, swap_spatial_20; none when given empty)")  # fmt: skip
-    mpc.add_argument("--solver", default=DEFAULT_SOLVER, choices=PERSISTENT_SOLVERS,
-                     help="QP backend (decoupled, solved per drone: of the cvxpy reference only)")
-    mpc.add_argument("--coupling", default="joint", choices=("joint", "decoupled", "decoupled-sparse"),
-                     help="planner mode (decoupled-sparse: one sparse QP, not per-drone DAQP QPs)")
-    mpc.add_argument("--cvxpy-budget", type=seconds, default=60.0, metavar="S",
-                     help="cvxpy's time per case [s]: a case whose cvxpy time, extrapolated from its first "
-                     "QPs, exceeds it is skipped with the reason (default 60; 0: no cvxpy)")  # fmt: skip
+    mpc.add_argument(
+        "--scenarios",
+        nargs="*",
+        metavar="SCENARIO",
+        help="scenario files run as they are (ideal plant; default: the bundled swaps "
+        "swap_planar_8, swap_spatial_12, swap_spatial_20; none when given empty)",
+    )
+    mpc.add_argument(
+        "--solver",
+        default=DEFAULT_SOLVER,
+        choices=PERSISTENT_SOLVERS,
+        help="QP backend (decoupled, solved per drone: of the cvxpy reference only)",
+    )
+    mpc.add_argument(
+        "--coupling",
+        default="joint",
+        choices=("joint", "decoupled", "decoupled-sparse"),
+        help="planner mode (decoupled-sparse: one sparse QP, not per-drone DAQP QPs)",
+    )
+    mpc.add_argument(
+        "--cvxpy-budget",
+        type=seconds,
+        default=60.0,
+        metavar="S",
+        help="cvxpy's time per case [s]: a case whose cvxpy time, extrapolated from its first "
+        "QPs, exceeds it is skipped with the reason (default 60; 0: no cvxpy)",
+    )
     mpc.add_argument("--json", metavar="PATH", help="also write the rows as a JSON list of records")
     _add_bench_solvers(kinds)
     _add_bench_scale(kinds)
     split = kinds.add_parser("split", help="iterated split points: QP cost gap to the joint vs rounds, time")
     split.set_defaults(func=_bench_split)
-    split.add_argument("--scenarios", nargs="+", metavar="SCENARIO", help="scenario files, flown decoupled "
-                       "(default: swap_planar_8, swap_spatial_12, swap_spatial_20)")  # fmt: skip
-    split.add_argument("--rounds", type=int, nargs="+", default=[0, 1, 2, 5, 10, 20, 50],
-                       help="split rounds per step (the table's rows; the planner flies with the most)")
+    split.add_argument(
+        "--scenarios",
+        nargs="+",
+        metavar="SCENARIO",
+        help="scenario files, flown decoupled (default: swap_planar_8, swap_spatial_12, swap_spatial_20)",
+    )
+    split.add_argument(
+        "--rounds",
+        type=int,
+        nargs="+",
+        default=[0, 1, 2, 5, 10, 20, 50],
+        help="split rounds per step (the table's rows; the planner flies with the most)",
+    )
     split.add_argument("--steps", type=int, help="closed-loop steps per scenario (default: its duration)")
     split.add_argument("--figure", metavar="PNG", help="write the convergence curves to this PNG")
     split.add_argument("--json", metavar="PATH", help="also write the rows as a JSON list of records")
@@ -144,8 +185,15 @@ def _bench_solvers(args: argparse.Namespace) -> int:
     from mpcform.bench import solvers as bs
 
     problems = args.problems or bs.DEFAULT_PROBLEMS_DIR
-    bench = bs.run_solver_benchmark(problems, args.solvers, args.settings, args.modes, args.time_limit,
-                                    exact=not args.no_exact, progress=progress)  # fmt: skip
+    bench = bs.run_solver_benchmark(
+        problems,
+        args.solvers,
+        args.settings,
+        args.modes,
+        args.time_limit,
+        exact=not args.no_exact,
+        progress=progress,
+    )
     report = bench_report.markdown_report(bench)
     print_bench(report, bench_report.records(bench), args.json)
     if args.report:
@@ -157,8 +205,9 @@ def _bench_closed_loop(args: argparse.Namespace) -> int:
     from mpcform.bench import closed_loop
     from mpcform.bench.problems import DEFAULT_SCENARIOS
 
-    rows = closed_loop.run_closed_loop(args.scenarios or DEFAULT_SCENARIOS[:2], args.solvers, args.timeout,
-                                       args.duration, progress=progress)  # fmt: skip
+    rows = closed_loop.run_closed_loop(
+        args.scenarios or DEFAULT_SCENARIOS[:2], args.solvers, args.timeout, args.duration, progress=progress
+    )
     report = closed_loop.closed_loop_markdown(rows)
     print_bench(report, rows, args.json)
     if args.report:
@@ -174,18 +223,21 @@ def _add_bench_solvers(kinds: argparse._SubParsersAction) -> None:
     solvers = kinds.add_parser("solvers", help="QP solvers on the recorded problems (problems/)")
     solvers.set_defaults(func=_bench_solvers)
     solvers.add_argument("--problems", metavar="DIR", help="problem directory (default: bundled problems/)")
-    solvers.add_argument("--solvers", nargs="+", metavar="NAME",
-                         help=solver_help("backends (default: all known)"))  # fmt: skip
+    solvers.add_argument(
+        "--solvers", nargs="+", metavar="NAME", help=solver_help("backends (default: all known)")
+    )
     solvers.add_argument("--settings", nargs="+", choices=list(SETTINGS), default=list(SETTINGS))
     solvers.add_argument("--modes", nargs="+", choices=MODES, default=list(MODES))
-    solvers.add_argument("--time-limit", type=float, default=DEFAULT_TIME_LIMIT_S, metavar="S",
-                         help="per-solve time limit [s]")  # fmt: skip
+    solvers.add_argument(
+        "--time-limit", type=float, default=DEFAULT_TIME_LIMIT_S, metavar="S", help="per-solve time limit [s]"
+    )
     solvers.add_argument("--no-exact", action="store_true", help="skip the casadi:ipopt exact reference")
     loop = kinds.add_parser("closed-loop", help="each solver drives the same scenarios through the planner")
     loop.set_defaults(func=_bench_closed_loop)
     loop.add_argument("scenarios", nargs="*", metavar="SCENARIO", help="scenario files (default: the swaps)")
-    loop.add_argument("--solvers", nargs="+", metavar="NAME",
-                      help=solver_help("backends (default: all usable)"))  # fmt: skip
+    loop.add_argument(
+        "--solvers", nargs="+", metavar="NAME", help=solver_help("backends (default: all usable)")
+    )
     loop.add_argument("--timeout", type=float, default=600.0, metavar="S", help="time limit per run [s]")
     loop.add_argument("--duration", type=float, metavar="S", help="override the scenarios' duration [s]")
     for cmd in (solvers, loop):
@@ -196,9 +248,19 @@ def _add_bench_solvers(kinds: argparse._SubParsersAction) -> None:
 def _bench_scale(args: argparse.Namespace) -> int:
     from mpcform.bench import scale as bench_scale
 
-    rows = bench_scale.run(args.n, args.scenario, args.coupling, args.steps, args.solver, args.horizon,
-                           args.budget, args.monolithic_budget, isolate=not args.in_process,
-                           trace_memory=args.tracemalloc, progress=progress)  # fmt: skip
+    rows = bench_scale.run(
+        args.n,
+        args.scenario,
+        args.coupling,
+        args.steps,
+        args.solver,
+        args.horizon,
+        args.budget,
+        args.monolithic_budget,
+        isolate=not args.in_process,
+        trace_memory=args.tracemalloc,
+        progress=progress,
+    )
     text, growth = bench_scale.report(rows, args.coupling)
     print_bench(text, rows + growth, args.json)
     return 0
@@ -214,14 +276,28 @@ def _add_bench_scale(kinds: argparse._SubParsersAction) -> None:
     scale.add_argument("--n", type=int, nargs="+", default=list(DEFAULT_N), help="swarm sizes")
     scale.add_argument("--steps", type=int, default=30, help="closed-loop steps per case (dt 0.1 s)")
     scale.add_argument("--scenario", nargs="+", choices=SCENARIOS, default=list(SCENARIOS))
-    scale.add_argument("--coupling", default="decoupled", choices=GROUPED_MODES,
-                       help="planner mode, grouped (decoupled-sparse: one sparse QP, not per-drone DAQP)")
+    scale.add_argument(
+        "--coupling",
+        default="decoupled",
+        choices=GROUPED_MODES,
+        help="planner mode, grouped (decoupled-sparse: one sparse QP, not per-drone DAQP)",
+    )
     scale.add_argument("--solver", default=DEFAULT_SOLVER, choices=PERSISTENT_SOLVERS, help="QP backend")
     scale.add_argument("--horizon", type=int, default=10, help="planner horizon [steps]")
-    scale.add_argument("--budget", type=float, default=60.0, metavar="S",
-                       help="planning time per case [s]; a case over it stops early")  # fmt: skip
-    scale.add_argument("--monolithic-budget", type=float, default=60.0, metavar="S",
-                       help="the same for the monolithic joint QP (0: skip it)")  # fmt: skip
+    scale.add_argument(
+        "--budget",
+        type=float,
+        default=60.0,
+        metavar="S",
+        help="planning time per case [s]; a case over it stops early",
+    )
+    scale.add_argument(
+        "--monolithic-budget",
+        type=float,
+        default=60.0,
+        metavar="S",
+        help="the same for the monolithic joint QP (0: skip it)",
+    )
     scale.add_argument("--tracemalloc", action="store_true", help="also trace Python/numpy allocations")
     scale.add_argument("--in-process", action="store_true", help="run the cases here, not in fresh processes")
     scale.add_argument("--json", metavar="PATH", help="also write the rows as a JSON list of records")
@@ -248,10 +324,16 @@ def add_problems(sub: argparse._SubParsersAction) -> None:
     export.set_defaults(func=_problems_export)
     export.add_argument("scenarios", nargs="*", metavar="SCENARIO", help="scenarios (default: the swaps)")
     export.add_argument("--out", metavar="DIR", help="output directory (default: the bundled problems/)")
-    export.add_argument("--per-scenario", type=int, default=DEFAULT_PER_SCENARIO, metavar="K",
-                        help="QPs kept per scenario (a contiguous sequence)")  # fmt: skip
-    export.add_argument("--solver", metavar="NAME",
-                        help=solver_help("solver driving the runs (default: the scenario's)"))  # fmt: skip
+    export.add_argument(
+        "--per-scenario",
+        type=int,
+        default=DEFAULT_PER_SCENARIO,
+        metavar="K",
+        help="QPs kept per scenario (a contiguous sequence)",
+    )
+    export.add_argument(
+        "--solver", metavar="NAME", help=solver_help("solver driving the runs (default: the scenario's)")
+    )
 
 
 # ---- sweep ----------------------------------------------------------------------------------
@@ -276,12 +358,16 @@ def _sweep(args: argparse.Namespace) -> int:
     def report(done: int, total: int) -> None:
         progress(f"sweep: {done}/{total} runs")
 
-    records = sweep.run_sweep(jobs, args.jobs, args.executor, args.scheduler, progress=report,
-                              max_memory_gib=args.max_memory)  # fmt: skip
+    records = sweep.run_sweep(
+        jobs, args.jobs, args.executor, args.scheduler, progress=report, max_memory_gib=args.max_memory
+    )
     groups = sweep.aggregate(records)
     failed = sweep.failures_text(records)
-    print_bench(sweep.markdown_table(groups) + (f"\n\nfailed runs:\n{failed}" if failed else ""),
-                groups + records, args.json)  # fmt: skip
+    print_bench(
+        sweep.markdown_table(groups) + (f"\n\nfailed runs:\n{failed}" if failed else ""),
+        groups + records,
+        args.json,
+    )
     return 0
 
 
@@ -293,12 +379,22 @@ def add_sweep(sub: argparse._SubParsersAction) -> None:
     cmd.set_defaults(func=_sweep)
     cmd.add_argument("scenario", metavar="SCENARIO", help="scenario TOML file")
     cmd.add_argument("--seeds", metavar="SPEC", help="seeds, e.g. 0..19 or 0,3,7 (default: the file's)")
-    cmd.add_argument("--set", action="append", default=[], metavar="KEY=V1,V2",
-                     help="a dotted scenario key and its values, e.g. controller.horizon=5,10")  # fmt: skip
+    cmd.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="KEY=V1,V2",
+        help="a dotted scenario key and its values, e.g. controller.horizon=5,10",
+    )
     cmd.add_argument("--jobs", type=int, default=1, metavar="N", help="worker processes")
     cmd.add_argument("--solver", metavar="NAME", help=solver_help("override controller.solver (mpc)"))
-    cmd.add_argument("--tol", type=float, default=DEFAULT_TOLERANCE_M, metavar="M",
-                     help="final tracking error of a successful run [m] (>= 0)")  # fmt: skip
+    cmd.add_argument(
+        "--tol",
+        type=float,
+        default=DEFAULT_TOLERANCE_M,
+        metavar="M",
+        help="final tracking error of a successful run [m] (>= 0)",
+    )
     cmd.add_argument("--executor", default="process", choices=EXECUTORS, help="process pool or dask cluster")
     cmd.add_argument("--scheduler", metavar="ADDRESS", help="dask scheduler (default: a local cluster)")
     cmd.add_argument("--json", metavar="PATH", help="also write groups and runs as a JSON list of records")

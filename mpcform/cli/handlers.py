@@ -48,9 +48,10 @@ def add_run_options(cmd: argparse.ArgumentParser) -> None:
     """``--plot``, ``--animate``, ``--export`` (with ``--altitude``, ``--tolerance``) of ``run``."""
     cmd.add_argument("--plot", action="store_true", help="also write PNG figures into DIR/plots/")
     cmd.add_argument(
-        "--animate", action="store_true",
+        "--animate",
+        action="store_true",
         help="also write the flight as a video: DIR/plots/flight.mp4 with ffmpeg, else flight.gif",
-    )  # fmt: skip
+    )
     _add_speed_option(cmd)
     cmd.add_argument("--html", action="store_true", help="also write the interactive viewer, DIR/viewer.html")
     cmd.add_argument(
@@ -118,12 +119,20 @@ def write_view(data: RunData, path: Path, geofence: tuple[Any, Any] | None = Non
 
     traj = data.trajectory
     return write_viewer_html(
-        path, t_s=traj.t_s, positions_m=traj.positions_m, d_min_m=data.d_min_m, v_max_mps=data.v_max_mps,
-        edges=formation_edges(data.formation.offsets_m), obstacles=data.formation.obstacles,
-        geofence=geofence, reference_m=traj.reference_m, title=data.label,
-        curves=viewer_curves(traj.t_s, traj.positions_m, reference_m=traj.reference_m,
-                             commands_mps=traj.commands_mps),
-    )  # fmt: skip
+        path,
+        t_s=traj.t_s,
+        positions_m=traj.positions_m,
+        d_min_m=data.d_min_m,
+        v_max_mps=data.v_max_mps,
+        edges=formation_edges(data.formation.offsets_m),
+        obstacles=data.formation.obstacles,
+        geofence=geofence,
+        reference_m=traj.reference_m,
+        title=data.label,
+        curves=viewer_curves(
+            traj.t_s, traj.positions_m, reference_m=traj.reference_m, commands_mps=traj.commands_mps
+        ),
+    )
 
 
 def _compare(args: argparse.Namespace) -> int:
@@ -153,24 +162,33 @@ def _export(args: argparse.Namespace) -> int:
 
 def add_commands(sub: Any) -> None:
     """Add ``plot``, ``compare`` and ``export`` to the ``mpcform`` subcommands."""
-    plot = sub.add_parser("plot", help="draw the figures of a saved run (DIR from `mpcform run --out DIR`)",
-                          description="Draw the figures of a saved run into DIR/plots/.")  # fmt: skip
+    plot = sub.add_parser(
+        "plot",
+        help="draw the figures of a saved run (DIR from `mpcform run --out DIR`)",
+        description="Draw the figures of a saved run into DIR/plots/.",
+    )
     plot.set_defaults(func=_plot)
     plot.add_argument("dir", metavar="DIR", help="output directory of `mpcform run`")
     plot.add_argument("--out", metavar="OUT", help="figure directory (default: DIR/plots/)")
     plot.add_argument("--animate", action="store_true", help="also write the flight as a video")
     _add_speed_option(plot)
-    view = sub.add_parser("view", help="the interactive viewer of a saved run: one self-contained HTML file",
-                          description="Write DIR/viewer.html: drones over time in 2-D or 3-D, a time slider, "
-                          "play/pause at real time, formation edges, obstacles, the geofence, pairs below "
-                          "d_min, and the metric curves with a cursor linked to the time.")  # fmt: skip
+    view = sub.add_parser(
+        "view",
+        help="the interactive viewer of a saved run: one self-contained HTML file",
+        description="Write DIR/viewer.html: drones over time in 2-D or 3-D, a time slider, "
+        "play/pause at real time, formation edges, obstacles, the geofence, pairs below "
+        "d_min, and the metric curves with a cursor linked to the time.",
+    )
     view.set_defaults(func=_view)
     view.add_argument("dir", metavar="DIR", help="output directory of `mpcform run`")
     view.add_argument("--out", metavar="HTML", help="file to write (default: DIR/viewer.html)")
 
-    compare = sub.add_parser("compare", help="several saved runs on one figure and one markdown table",
-                             description="Compare saved runs (e.g. controllers or solvers on one "
-                             "scenario): a markdown table of their metrics and one figure.")  # fmt: skip
+    compare = sub.add_parser(
+        "compare",
+        help="several saved runs on one figure and one markdown table",
+        description="Compare saved runs (e.g. controllers or solvers on one "
+        "scenario): a markdown table of their metrics and one figure.",
+    )
     compare.set_defaults(func=_compare)
     compare.add_argument("dirs", nargs="+", metavar="DIR", help="output directories of `mpcform run`")
     compare.add_argument(
@@ -179,10 +197,13 @@ def add_commands(sub: Any) -> None:
     compare.add_argument("--no-figure", action="store_true", help="print the table only")
     compare.add_argument("--json", metavar="PATH", help="also write the rows as a JSON list of records")
 
-    export = sub.add_parser("export", help="per-drone setpoint CSVs and Crazyswarm polynomial trajectories",
-                            description="Export a saved run for a flight stack: per drone, a setpoint "
-                            "CSV (t, position, velocity, acceleration, yaw) and 7th-order polynomial "
-                            "pieces in the Crazyswarm uav_trajectories CSV format.")  # fmt: skip
+    export = sub.add_parser(
+        "export",
+        help="per-drone setpoint CSVs and Crazyswarm polynomial trajectories",
+        description="Export a saved run for a flight stack: per drone, a setpoint "
+        "CSV (t, position, velocity, acceleration, yaw) and 7th-order polynomial "
+        "pieces in the Crazyswarm uav_trajectories CSV format.",
+    )
     export.set_defaults(func=_export)
     export.add_argument("dir", metavar="DIR", help="output directory of `mpcform run`")
     export.add_argument("--out", metavar="OUT", help="export directory (default: DIR/export/)")
@@ -202,17 +223,41 @@ def _add_export_options(cmd: argparse.ArgumentParser) -> None:
     cmd.add_argument(
         "--altitude", type=float, metavar="M", help="flight altitude of a planar run [m] (default 1)"
     )
-    cmd.add_argument("--tolerance", type=float, default=DEFAULT_TOLERANCE_M, metavar="M",
-                     help=f"largest distance between the polynomials and the planned positions [m] "
-                     f"(default {DEFAULT_TOLERANCE_M:g}); raise it for fewer pieces")  # fmt: skip
-    cmd.add_argument("--offset", type=_offset, default=(0.0, 0.0, 0.0), metavar="X,Y,Z",
-                     help="shift the exported positions [m] (e.g. 0,0,2.5 lifts a spatial run)")  # fmt: skip
-    cmd.add_argument("--floor", type=float, default=0.0, metavar="M",
-                     help="refuse an export whose lowest point is below this height [m]")  # fmt: skip
-    cmd.add_argument("--rate", type=float, default=DEFAULT_RATE_HZ, metavar="HZ",
-                     help=f"rate of the setpoint CSVs [Hz] (default {DEFAULT_RATE_HZ:g})")  # fmt: skip
-    cmd.add_argument("--yaw", choices=YAW_MODES, default="zero",
-                     help="yaw of the drones: zero, or the formation's rotation about z")  # fmt: skip
+    cmd.add_argument(
+        "--tolerance",
+        type=float,
+        default=DEFAULT_TOLERANCE_M,
+        metavar="M",
+        help=f"largest distance between the polynomials and the planned positions [m] "
+        f"(default {DEFAULT_TOLERANCE_M:g}); raise it for fewer pieces",
+    )
+    cmd.add_argument(
+        "--offset",
+        type=_offset,
+        default=(0.0, 0.0, 0.0),
+        metavar="X,Y,Z",
+        help="shift the exported positions [m] (e.g. 0,0,2.5 lifts a spatial run)",
+    )
+    cmd.add_argument(
+        "--floor",
+        type=float,
+        default=0.0,
+        metavar="M",
+        help="refuse an export whose lowest point is below this height [m]",
+    )
+    cmd.add_argument(
+        "--rate",
+        type=float,
+        default=DEFAULT_RATE_HZ,
+        metavar="HZ",
+        help=f"rate of the setpoint CSVs [Hz] (default {DEFAULT_RATE_HZ:g})",
+    )
+    cmd.add_argument(
+        "--yaw",
+        choices=YAW_MODES,
+        default="zero",
+        help="yaw of the drones: zero, or the formation's rotation about z",
+    )
     d = FlightLimits()
     flags = (
         ("--max-speed", "max_speed_mps", d.max_speed_mps, "m/s"),
@@ -221,23 +266,46 @@ def _add_export_options(cmd: argparse.ArgumentParser) -> None:
         ("--max-body-rate", "max_body_rate_rad_s", d.max_body_rate_rad_s, "rad/s"),
     )
     for flag, dest, value, unit in flags:
-        cmd.add_argument(flag, dest=dest, type=float, default=value, metavar="X",
-                         help=f"flight limit [{unit}] (default {value:.3g}, Crazyflie 2.x)")  # fmt: skip
-    cmd.add_argument("--allow-limits", action="store_true",
-                     help="export even when a flight limit is exceeded (then a warning)")  # fmt: skip
-    cmd.add_argument("--no-flight-check", action="store_true",
-                     help="do not fly the export on the quadrotor plant (needs drone-models)")  # fmt: skip
+        cmd.add_argument(
+            flag,
+            dest=dest,
+            type=float,
+            default=value,
+            metavar="X",
+            help=f"flight limit [{unit}] (default {value:.3g}, Crazyflie 2.x)",
+        )
+    cmd.add_argument(
+        "--allow-limits",
+        action="store_true",
+        help="export even when a flight limit is exceeded (then a warning)",
+    )
+    cmd.add_argument(
+        "--no-flight-check",
+        action="store_true",
+        help="do not fly the export on the quadrotor plant (needs drone-models)",
+    )
 
 
 def export_options(args: argparse.Namespace) -> ExportOptions:
     """The :class:`ExportOptions` of the command line."""
     limits = FlightLimits(
-        args.max_speed_mps, args.max_acc_mps2, args.max_jerk_mps3, args.max_body_rate_rad_s,
+        args.max_speed_mps,
+        args.max_acc_mps2,
+        args.max_jerk_mps3,
+        args.max_body_rate_rad_s,
         platform_thrust_acc_mps2(),
-    )  # fmt: skip
-    return ExportOptions(altitude_m=args.altitude, offset_m=args.offset, floor_m=args.floor,
-                         tolerance_m=args.tolerance, rate_hz=args.rate, yaw=args.yaw, limits=limits,
-                         allow_limits=args.allow_limits, fly=not args.no_flight_check)  # fmt: skip
+    )
+    return ExportOptions(
+        altitude_m=args.altitude,
+        offset_m=args.offset,
+        floor_m=args.floor,
+        tolerance_m=args.tolerance,
+        rate_hz=args.rate,
+        yaw=args.yaw,
+        limits=limits,
+        allow_limits=args.allow_limits,
+        fly=not args.no_flight_check,
+    )
 
 
 def _offset(text: str) -> tuple[float, float, float]:
@@ -252,8 +320,13 @@ def _offset(text: str) -> tuple[float, float, float]:
 
 
 def _add_speed_option(cmd: argparse.ArgumentParser) -> None:
-    cmd.add_argument("--speed", type=float, default=1.0, metavar="X",
-                     help="real-time factor of the video (default 1: as long as the flight)")  # fmt: skip
+    cmd.add_argument(
+        "--speed",
+        type=float,
+        default=1.0,
+        metavar="X",
+        help="real-time factor of the video (default 1: as long as the flight)",
+    )
 
 
 def check_speed(args: argparse.Namespace) -> None:
@@ -286,20 +359,26 @@ def _figures(data: RunData, out: Path, plot: bool, animate: bool, speed: float =
 def _report_export(result: ExportResult) -> None:
     fit, rec, env = result.fit, result.record, result.envelope
     n = sum(p.name.endswith("_setpoints.csv") for p in result.files)
-    print(f"exported {n} drone{'s' * (n != 1)} to {result.directory}: rest to rest in "
-          f"{result.retiming.duration_s:.2f} s (planned {rec['planned_duration_s']:.2f} s), "
-          f"{fit.polynomial.pieces} polynomial pieces of {fit.polynomial.durations_s[0]:.3g} s each "
-          f"({result.files_per_drone} file{'s' * (result.files_per_drone != 1)} per drone, at most "
-          f"{CRAZYFLIE_MAX_PIECES} pieces each), max fit error {fit.max_error_m:.2g} m "
-          f"(tolerance {fit.tolerance_m:g} m)")  # fmt: skip
-    print(f"  peaks: speed {env.speed.value:.3g} m/s, acceleration {env.acc.value:.3g} m/s^2, jerk "
-          f"{env.jerk.value:.3g} m/s^3, body rate {env.body_rate.value:.3g} rad/s; min separation "
-          f"{result.min_separation_m:.3g} m; setpoints at {rec['setpoint_rate_hz']:g} Hz; Crazyswarm2: "
-          "crazyflies.yaml, fly.py")  # fmt: skip
+    print(
+        f"exported {n} drone{'s' * (n != 1)} to {result.directory}: rest to rest in "
+        f"{result.retiming.duration_s:.2f} s (planned {rec['planned_duration_s']:.2f} s), "
+        f"{fit.polynomial.pieces} polynomial pieces of {fit.polynomial.durations_s[0]:.3g} s each "
+        f"({result.files_per_drone} file{'s' * (result.files_per_drone != 1)} per drone, at most "
+        f"{CRAZYFLIE_MAX_PIECES} pieces each), max fit error {fit.max_error_m:.2g} m "
+        f"(tolerance {fit.tolerance_m:g} m)"
+    )
+    print(
+        f"  peaks: speed {env.speed.value:.3g} m/s, acceleration {env.acc.value:.3g} m/s^2, jerk "
+        f"{env.jerk.value:.3g} m/s^3, body rate {env.body_rate.value:.3g} rad/s; min separation "
+        f"{result.min_separation_m:.3g} m; setpoints at {rec['setpoint_rate_hz']:g} Hz; Crazyswarm2: "
+        "crazyflies.yaml, fly.py"
+    )
     if result.flight is not None:
         f = result.flight
-        print(f"  flown on the quadrotor plant: true tracking error {f.max_error_m:.3g} m (declared "
-              f"{f.declared_tolerance_m:.3g} m = margin {f.plant_margin_m:.3g} + fit {f.fit_tolerance_m:g}), "
-              f"true min separation {f.min_separation_m:.3g} m")  # fmt: skip
+        print(
+            f"  flown on the quadrotor plant: true tracking error {f.max_error_m:.3g} m (declared "
+            f"{f.declared_tolerance_m:.3g} m = margin {f.plant_margin_m:.3g} + fit {f.fit_tolerance_m:g}), "
+            f"true min separation {f.min_separation_m:.3g} m"
+        )
     for warning in result.warnings:
         print(f"mpcform: warning: {warning}", file=sys.stderr)

@@ -63,8 +63,13 @@ def _run(args: argparse.Namespace) -> int:
         check_output_dir("--out", out_dir)
         for warning in scenario.warnings(args.controller):
             print(f"mpcform: warning: {warning}", file=sys.stderr)
-        run = run_scenario(scenario, out_dir, controller=args.controller, solver=args.solver,
-                           progress=cli_runner.progress_bar(scenario))  # fmt: skip
+        run = run_scenario(
+            scenario,
+            out_dir,
+            controller=args.controller,
+            solver=args.solver,
+            progress=cli_runner.progress_bar(scenario),
+        )
     except ScenarioError as exc:
         raise MPCFormError(located_problem(exc, args.scenario).text(args.scenario)) from None
     print(format_summary(run.summary))
@@ -148,16 +153,29 @@ def build_parser() -> argparse.ArgumentParser:
             bench_commands.add_max_memory(cmd)
         if name == "run":
             cmd.add_argument("--out", metavar="DIR", help="output dir (default: results/<name>/)")
-            cmd.add_argument("--controller", metavar="NAME",
-                             help=f"override controller.kind: {', '.join(CONTROLLER_KINDS)}")  # fmt: skip
-            cmd.add_argument("--solver", metavar="NAME", help=bench_commands.solver_help(
-                "override controller.solver (mpc)"))  # fmt: skip
-            cmd.add_argument("--plant", metavar="KIND", choices=PLANT_KINDS,
-                             help=f"override plant.kind: {', '.join(PLANT_KINDS)}")  # fmt: skip
+            cmd.add_argument(
+                "--controller",
+                metavar="NAME",
+                help=f"override controller.kind: {', '.join(CONTROLLER_KINDS)}",
+            )
+            cmd.add_argument(
+                "--solver",
+                metavar="NAME",
+                help=bench_commands.solver_help("override controller.solver (mpc)"),
+            )
+            cmd.add_argument(
+                "--plant",
+                metavar="KIND",
+                choices=PLANT_KINDS,
+                help=f"override plant.kind: {', '.join(PLANT_KINDS)}",
+            )
             cli_runner.add_run_options(cmd)
         if name == "keys":
-            cmd.add_argument("--json-schema", action="store_true",
-                             help="print the scenario format as a JSON Schema (draft 2020-12)")  # fmt: skip
+            cmd.add_argument(
+                "--json-schema",
+                action="store_true",
+                help="print the scenario format as a JSON Schema (draft 2020-12)",
+            )
     bench_commands.add_bench(sub)
     bench_commands.add_problems(sub)
     bench_commands.add_sweep(sub)

@@ -36,8 +36,9 @@ def check_output_dir(flag: str, path: str | Path) -> None:
     writable directory."""
     path = Path(path)
     if path.exists() and not path.is_dir():
-        raise ValidationError(flag, f"{str(path)!r} is an existing file; expected a directory "
-                              "(created when missing)")  # fmt: skip
+        raise ValidationError(
+            flag, f"{str(path)!r} is an existing file; expected a directory (created when missing)"
+        )
     _writable_ancestor(flag, path)
 
 

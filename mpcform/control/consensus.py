@@ -76,8 +76,11 @@ class ConsensusSettings:
     initial_scale: float | None = None
 
     def __post_init__(self) -> None:
-        for name, field in (("gain_per_s", "gain"), ("gamma_per_s", "gamma"),
-                            ("leader_gain_per_s", "leader_gain")):  # fmt: skip
+        for name, field in (
+            ("gain_per_s", "gain"),
+            ("gamma_per_s", "gamma"),
+            ("leader_gain_per_s", "leader_gain"),
+        ):
             object.__setattr__(self, name, positive(f"controller.{field}", getattr(self, name)))
         if self.law not in CONSENSUS_LAWS:
             raise ValidationError("controller.law", f"expected one of {CONSENSUS_LAWS}, got {self.law!r}")
@@ -189,8 +192,10 @@ class ConsensusController(Controller):
         if orphans:
             warnings.warn(
                 f"components {describe_components(tuple(orphans))} contain no leader: their scale "
-                "estimates never see the commanded scale", DisconnectedGraphWarning, stacklevel=3,
-            )  # fmt: skip
+                "estimates never see the commanded scale",
+                DisconnectedGraphWarning,
+                stacklevel=3,
+            )
 
     def _check_stability(self) -> tuple[float, float]:
         st, dt, g = self.settings, self.dt_s, self.graph

@@ -187,8 +187,11 @@ class Graph:
             f"relative positions between components are not controlled)"
         )
         if allow_disconnected:
-            warnings.warn(f"{message}; running anyway (graph.allow_disconnected)", DisconnectedGraphWarning,
-                          stacklevel=3)  # fmt: skip
+            warnings.warn(
+                f"{message}; running anyway (graph.allow_disconnected)",
+                DisconnectedGraphWarning,
+                stacklevel=3,
+            )
             return
         hint = {"graph.k": "raise k", "graph.radius": "raise the radius", "graph.edges": "add edges"}
         field = _CONNECTIVITY_FIELD.get(self.kind, "graph")

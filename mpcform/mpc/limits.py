@@ -124,11 +124,14 @@ def tightened(
             "geofence_max_m": limits.geofence_max_m - 2.0 * tube,
         }
     planned = Limits(
-        limits.v_max_mps, None if limits.d_min_m is None else limits.d_min_m + 2.0 * tube, a_max,
-        downwash_kappa=limits.downwash_kappa, tube_m=tube, **fence,
-    )  # fmt: skip
+        limits.v_max_mps,
+        None if limits.d_min_m is None else limits.d_min_m + 2.0 * tube,
+        a_max,
+        downwash_kappa=limits.downwash_kappa,
+        tube_m=tube,
+        **fence,
+    )
     inflated = tuple(
-        SphereObstacle(o.center_m, o.radius_m, o.clearance_for(limits.d_min_m) + 2 * tube)
-        for o in obstacles
+        SphereObstacle(o.center_m, o.radius_m, o.clearance_for(limits.d_min_m) + 2 * tube) for o in obstacles
     )
     return planned, inflated

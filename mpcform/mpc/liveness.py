@@ -90,7 +90,12 @@ class TieBreak:
         return int(np.count_nonzero(self.stalled))
 
     def turn(
-        self, c: Array, conflicted: Array, p0: Array, to_target: Array, started: bool,
+        self,
+        c: Array,
+        conflicted: Array,
+        p0: Array,
+        to_target: Array,
+        started: bool,
         blocked: Array | None = None,
     ) -> Array:
         """Targets ``c`` (H, n, d) with the ``conflicted`` (n,) drones' turned to the right;

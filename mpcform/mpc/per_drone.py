@@ -93,7 +93,12 @@ class PerDroneQP(StepSolver):
     warm_starts = True  # nearly active rows of the warm start start DAQP's active set
 
     def __init__(
-        self, dim: int, dt_s: float, limits: Limits, settings: MPCSettings, families: tuple[LimitRows, ...],
+        self,
+        dim: int,
+        dt_s: float,
+        limits: Limits,
+        settings: MPCSettings,
+        families: tuple[LimitRows, ...],
         loop: VelocityLoop | None = None,
     ) -> None:
         import daqp
@@ -127,13 +132,28 @@ class PerDroneQP(StepSolver):
         rows = qp.rows
         warm_u = np.zeros_like(qp.targets_mps) if qp.warm is None else qp.warm[0]  # inputs only
         return self.solve_drones(
-            qp.start_m, qp.targets_mps, qp.u_prev_mps, rows.singles, rows.single_coeffs, rows.single_lower,
-            warm_u, rows.single_hard, rows.single_on,
-        )  # fmt: skip
+            qp.start_m,
+            qp.targets_mps,
+            qp.u_prev_mps,
+            rows.singles,
+            rows.single_coeffs,
+            rows.single_lower,
+            warm_u,
+            rows.single_hard,
+            rows.single_on,
+        )
 
     def solve_drones(
-        self, p0: Array, c: Array, u_prev: Array, singles: Array, coeffs: Array, lower: Array, warm_u: Array,
-        hard: Array | None = None, on: Array | None = None,
+        self,
+        p0: Array,
+        c: Array,
+        u_prev: Array,
+        singles: Array,
+        coeffs: Array,
+        lower: Array,
+        warm_u: Array,
+        hard: Array | None = None,
+        on: Array | None = None,
     ) -> tuple[QPSolution, int]:
         """Solve every drone's QP.
 
@@ -149,8 +169,16 @@ class PerDroneQP(StepSolver):
         return self.solution(got.v, got.s, got.flags, got.lams, got.iterations, got.time_s)
 
     def solve_each(
-        self, p0: Array, c: Array, u_prev: Array, singles: Array, coeffs: Array, lower: Array, warm_u: Array,
-        hard: Array | None = None, on: Array | None = None,
+        self,
+        p0: Array,
+        c: Array,
+        u_prev: Array,
+        singles: Array,
+        coeffs: Array,
+        lower: Array,
+        warm_u: Array,
+        hard: Array | None = None,
+        on: Array | None = None,
     ) -> DroneSolves:
         """Every drone's solve as DAQP returns it (arguments as :meth:`solve_drones`).
 
@@ -162,8 +190,9 @@ class PerDroneQP(StepSolver):
         c_v = c.transpose(1, 0, 2).reshape(n, nu)
         f_v = -c_v  # 0.5 ||v - c||^2
         v_warm = warm_u.transpose(1, 0, 2).reshape(n, nu) @ self._m.T
-        sep_c, sep_end, sep_lo, sep_soft, counts, at = reachable_rows(n, singles, coeffs, lower, hard, on,
-                                                                      self._ends, self._step_m)  # fmt: skip
+        sep_c, sep_end, sep_lo, sep_soft, counts, at = reachable_rows(
+            n, singles, coeffs, lower, hard, on, self._ends, self._step_m
+        )
         a, lo, hi = self._buffers(n_const + int(counts.max(initial=0)))
         b_lo, b_hi = self._fixed if self._fixed is not None else dense_bounds(self.families, p0, u_prev)
         offsets = [0, *np.cumsum(counts).tolist()]
@@ -191,7 +220,7 @@ class PerDroneQP(StepSolver):
             t0 = time.perf_counter()
             v_out[i], cost[i], flags[i], info = self._daqp.solve(
                 self._eye, f_v[i], aa, hh, ll, primal_start=v_warm[i], **self._options
-            )  # fmt: skip
+            )
             in_daqp += time.perf_counter() - t0
             iters += info["iterations"]
             return info["lam"]
@@ -211,7 +240,7 @@ class PerDroneQP(StepSolver):
             t0 = time.perf_counter()
             v_out[i], s_out[i], flags[i], cost[i], info = self._solve_soft(
                 f_v[i], a[:m], hi[:m], lo[:m], sep_end[first:last], sep_soft[first:last], n_const
-            )  # fmt: skip
+            )
             in_daqp += time.perf_counter() - t0
             iters += info["iterations"]
             lams[i] = info["lam"]
@@ -227,11 +256,29 @@ class PerDroneQP(StepSolver):
             given = separation_sets(sep_c_at, row_values(self._x_of_v, v_warm, sep_c, at_x), sep_lo)
             g = np.flatnonzero(given & ~free[owner])
             of_g, place = owner[g], np.cumsum(~free) - 1  # a busy drone's place among them
-            stk = stack(self._const_v, near, b_lo, b_hi, busy, self._rows_v(sep_c[g], sep_end[g]), sep_lo[g],
-                        place[of_g], g - np.asarray(offsets)[of_g], counts[busy], DAQP_INF)  # fmt: skip
+            stk = stack(
+                self._const_v,
+                near,
+                b_lo,
+                b_hi,
+                busy,
+                self._rows_v(sep_c[g], sep_end[g]),
+                sep_lo[g],
+                place[of_g],
+                g - np.asarray(offsets)[of_g],
+                counts[busy],
+                DAQP_INF,
+            )
             cuts, fs = stk.starts, stk.full_starts
-            parts = [hard_qp(i, stk.a[cuts[j] : cuts[j + 1]], stk.hi[cuts[j] : cuts[j + 1]],
-                             stk.lo[cuts[j] : cuts[j + 1]]) for j, i in enumerate(busy.tolist())]  # fmt: skip
+            parts = [
+                hard_qp(
+                    i,
+                    stk.a[cuts[j] : cuts[j + 1]],
+                    stk.hi[cuts[j] : cuts[j + 1]],
+                    stk.lo[cuts[j] : cuts[j + 1]],
+                )
+                for j, i in enumerate(busy.tolist())
+            ]
             every = np.zeros(fs[-1])
             every[stk.full] = np.concatenate(parts)
             for j, i in enumerate(busy.tolist()):
@@ -248,8 +295,23 @@ class PerDroneQP(StepSolver):
         v_all = np.array(v_out).reshape(n, nu)
         is_soft = np.zeros(n, dtype=bool)
         is_soft[soft] = True
-        return DroneSolves(v_all, s_out, cost, np.array(flags), is_soft, lams, at, np.array(offsets), sep_c,
-                           sep_end, sep_lo, b_lo, b_hi, int(iters), in_daqp)  # fmt: skip
+        return DroneSolves(
+            v_all,
+            s_out,
+            cost,
+            np.array(flags),
+            is_soft,
+            lams,
+            at,
+            np.array(offsets),
+            sep_c,
+            sep_end,
+            sep_lo,
+            b_lo,
+            b_hi,
+            int(iters),
+            in_daqp,
+        )
 
     def solution(self, v: Array, s: Array, flags: Array, lams: list[Array], iters: int, t_s: float) -> Solved:
         """The drones' solves (``v`` (n, H d), slacks ``s`` (n, H), DAQP's exit flags and
@@ -327,9 +389,13 @@ class PerDroneQP(StepSolver):
         a_s[n_const + np.arange(end.shape[0]), end - 1] = soft
         f = np.concatenate([np.full(h, st.slack_weight), f_v])
         z, cost, flag, info = self._daqp.solve(
-            self._hess_soft, f, np.hstack([a_s, a]), np.concatenate([np.full(h, DAQP_INF), hi]),
-            np.concatenate([np.zeros(h), lo]), **self._options,
-        )  # fmt: skip
+            self._hess_soft,
+            f,
+            np.hstack([a_s, a]),
+            np.concatenate([np.full(h, DAQP_INF), hi]),
+            np.concatenate([np.zeros(h), lo]),
+            **self._options,
+        )
         return z[h:], z[:h], flag, cost, info
 
 

@@ -208,9 +208,15 @@ class MPCPlanner(Controller):
             status, solved = status + "; command failed certification", u[0]
         u, x, note = self._certifier.fallback(self._plan, p0, cand, horizon, solved, self._u_prev)
         self._accept(p0, u, x)
-        info = StepInfo("fallback", status=f"{status}; {note}", iterations=sol.iterations,
-                        solve_time_s=sol.solve_time_s, max_slack_m=inside_m,
-                        slack_pairs=_pairs_of(inside), **self._liveness())  # fmt: skip
+        info = StepInfo(
+            "fallback",
+            status=f"{status}; {note}",
+            iterations=sol.iterations,
+            solve_time_s=sol.solve_time_s,
+            max_slack_m=inside_m,
+            slack_pairs=_pairs_of(inside),
+            **self._liveness(),
+        )
         return ControlStep(u[0].copy(), info)
 
     def _true(self, u: Array, x: Array) -> Array:
@@ -278,8 +284,16 @@ class MPCPlanner(Controller):
         return u, x
 
     def _qp_info(
-        self, sol: QPSolution, z: Array, active: int, drones: Array, x: Array, rows: SeparationRows,
-        inside_m: float, inside: Array, relaxed: bool = False,
+        self,
+        sol: QPSolution,
+        z: Array,
+        active: int,
+        drones: Array,
+        x: Array,
+        rows: SeparationRows,
+        inside_m: float,
+        inside: Array,
+        relaxed: bool = False,
     ) -> StepInfo:
         """What a certified solve ``z`` reports: its solver figures and the slack it needed (the
         items whose rows positions ``x`` (H, n, d) miss, and the items ``inside`` that start
@@ -291,10 +305,16 @@ class MPCPlanner(Controller):
             planned, missed = self._separation.shortfall(x, rows, SLACK_REPORT_M)
             shortfall, missed = max(shortfall, planned), np.concatenate([inside, missed])
         return StepInfo(
-            "qp", status=sol.status, iterations=sol.iterations, solve_time_s=sol.solve_time_s,
-            active_rows=active, max_slack_m=max(shortfall, 0.0), slack_pairs=_pairs_of(missed),
-            qp_drones=int(drones.shape[0]), **self._liveness(),
-        )  # fmt: skip
+            "qp",
+            status=sol.status,
+            iterations=sol.iterations,
+            solve_time_s=sol.solve_time_s,
+            active_rows=active,
+            max_slack_m=max(shortfall, 0.0),
+            slack_pairs=_pairs_of(missed),
+            qp_drones=int(drones.shape[0]),
+            **self._liveness(),
+        )
 
     def _accept(self, p0: Array, u: Array, x: Array) -> None:
         self._plan = Plan.from_relative(p0, u, x)
@@ -304,9 +324,12 @@ class MPCPlanner(Controller):
 def _check_loop(loop: VelocityLoop | None, dim: int, settings: MPCSettings) -> VelocityLoop | None:
     """The planner's velocity loop fits its dimension and horizon."""
     if loop is not None and loop.forced.shape[1:] != (settings.horizon, dim):
-        raise ValidationError("plant", f"the velocity loop is for {loop.forced.shape[2]} dimensions and "
-                              f"a horizon of {loop.forced.shape[1]}, the planner has {dim} and "
-                              f"{settings.horizon}")  # fmt: skip
+        raise ValidationError(
+            "plant",
+            f"the velocity loop is for {loop.forced.shape[2]} dimensions and "
+            f"a horizon of {loop.forced.shape[1]}, the planner has {dim} and "
+            f"{settings.horizon}",
+        )
     return loop
 
 
@@ -340,9 +363,12 @@ def _check_limits(
         )
     if settings.solves_per_drone and solver != DEFAULT_SOLVER:  # it would be ignored
         text = repr(solver) if isinstance(solver, str) else f"the backend {solver.name!r}"
-        raise ValidationError("controller.solver", f"{text} solves the sparse QP, but decoupled mode "
-                              "solves each drone's QP with DAQP here; set controller.per_drone = false "
-                              "to use it")  # fmt: skip
+        raise ValidationError(
+            "controller.solver",
+            f"{text} solves the sparse QP, but decoupled mode "
+            "solves each drone's QP with DAQP here; set controller.per_drone = false "
+            "to use it",
+        )
 
 
 def hard_first_rows(rows: SeparationRows, first_m: Array) -> tuple[SeparationRows, bool]:
@@ -360,8 +386,15 @@ def hard_first_rows(rows: SeparationRows, first_m: Array) -> tuple[SeparationRow
     lower_p, lower_s = rows.pair_lower.copy(), rows.single_lower.copy()
     np.minimum(lower_p[:, 0], at_p, out=lower_p[:, 0])
     np.minimum(lower_s[:, 0], at_s, out=lower_s[:, 0])
-    relaxed = bool(np.any((lower_p[:, 0] < rows.pair_lower[:, 0]) & rows.pair_on)
-                   or np.any((lower_s[:, 0] < rows.single_lower[:, 0]) & rows.single_on))  # fmt: skip
-    hard = replace(rows, pair_lower=lower_p, single_lower=lower_s, pair_hard=np.ones_like(rows.pair_hard),
-                   single_hard=np.ones_like(rows.single_hard))  # fmt: skip
+    relaxed = bool(
+        np.any((lower_p[:, 0] < rows.pair_lower[:, 0]) & rows.pair_on)
+        or np.any((lower_s[:, 0] < rows.single_lower[:, 0]) & rows.single_on)
+    )
+    hard = replace(
+        rows,
+        pair_lower=lower_p,
+        single_lower=lower_s,
+        pair_hard=np.ones_like(rows.pair_hard),
+        single_hard=np.ones_like(rows.single_hard),
+    )
     return hard, relaxed

@@ -113,7 +113,10 @@ class MPCQP:
         return lo, hi
 
     def separation_values(
-        self, coeffs_pairs: Array, coeffs_singles: Array, hard_pairs: Array | None = None,
+        self,
+        coeffs_pairs: Array,
+        coeffs_singles: Array,
+        hard_pairs: Array | None = None,
         hard_singles: Array | None = None,
     ) -> Array:
         """CSC data of A for row coefficients (P, R, d) of the pairs and (S, R, d) of the singles;

@@ -64,5 +64,15 @@ def drone_sensitivity(
     k = np.linalg.inv(gram)[:, on[:c2].sum() :]  # columns: the active separation rows
     idx = np.flatnonzero(off)
     sep_index = np.where(idx >= c2, idx - c2, -1)
-    return Sensitivity(sep_on, k[-sep_on.shape[0] :] if sep_on.size else k[:0], active.T @ k, y[on], k,
-                       const_pm, off[:c2], sep[off[c2:]], gap[off], sep_index)  # fmt: skip
+    return Sensitivity(
+        sep_on,
+        k[-sep_on.shape[0] :] if sep_on.size else k[:0],
+        active.T @ k,
+        y[on],
+        k,
+        const_pm,
+        off[:c2],
+        sep[off[c2:]],
+        gap[off],
+        sep_index,
+    )

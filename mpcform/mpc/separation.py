@@ -77,11 +77,18 @@ class SeparationRows:
         if drones.shape[0] == n and keep_p.all() and keep_s.all():  # everything: no copies
             return self
         return SeparationRows(
-            local[self.pairs[keep_p]], self.pair_coeffs[keep_p], self.pair_lower[keep_p],
-            self.pair_on[keep_p], local[self.singles[keep_s]], self.labels[keep_s],
-            self.single_coeffs[keep_s], self.single_lower[keep_s], self.single_on[keep_s],
-            self.pair_hard[keep_p], self.single_hard[keep_s],
-        )  # fmt: skip
+            local[self.pairs[keep_p]],
+            self.pair_coeffs[keep_p],
+            self.pair_lower[keep_p],
+            self.pair_on[keep_p],
+            local[self.singles[keep_s]],
+            self.labels[keep_s],
+            self.single_coeffs[keep_s],
+            self.single_lower[keep_s],
+            self.single_on[keep_s],
+            self.pair_hard[keep_p],
+            self.single_hard[keep_s],
+        )
 
 
 def segment_normals(rel: Array, segs: Array | None = None) -> Array:
@@ -360,8 +367,9 @@ class Separation:
     def start_shortfall(self, p0: Array, rows: SeparationRows) -> tuple[float, Array]:
         """How far [m] the items that start inside their required distance (the hard ones) are
         inside it at ``p0``, at most, and their labels (m, 2)."""
-        labels = np.concatenate([rows.pairs[rows.pair_hard & rows.pair_on],
-                                 rows.labels[rows.single_hard & rows.single_on]])  # fmt: skip
+        labels = np.concatenate(
+            [rows.pairs[rows.pair_hard & rows.pair_on], rows.labels[rows.single_hard & rows.single_on]]
+        )
         if labels.shape[0] == 0:
             return 0.0, labels
         pair = labels[:, 1] >= 0

@@ -123,8 +123,10 @@ class MPCSettings:
         if isinstance(split, bool) or not isinstance(split, int) or split < 0:
             raise ValidationError("controller.split_iterations", f"expected an integer >= 0, got {split!r}")
         if split and not self.solves_per_drone:
-            raise ValidationError("controller.split_iterations", f"expected 0 unless coupling = "
-                                  f"'decoupled' with per_drone = true, got {split!r}")  # fmt: skip
+            raise ValidationError(
+                "controller.split_iterations",
+                f"expected 0 unless coupling = 'decoupled' with per_drone = true, got {split!r}",
+            )
         if self.split_budget_s is not None:
             positive("controller.split_budget", self.split_budget_s)
         stalled = self.stalled_split

@@ -53,9 +53,12 @@ class SparseSolver(StepSolver):
         self.dim, self.dt_s, self.limits, self.settings = dim, dt_s, limits, settings
         self.families, self.separation, self.loop = families, separation, loop
         if loop is not None and backend.needs_context:
-            raise ValidationError("controller.solver", f"{backend.name!r} models the separation itself "
-                                  "and cannot take the plant's velocity loop; set controller.plant_model "
-                                  "= false")  # fmt: skip
+            raise ValidationError(
+                "controller.solver",
+                f"{backend.name!r} models the separation itself "
+                "and cannot take the plant's velocity loop; set controller.plant_model "
+                "= false",
+            )
         self.reset()
 
     def reset(self) -> None:
@@ -95,7 +98,13 @@ class SparseSolver(StepSolver):
         return sol, active
 
     def _exact(
-        self, sol: QPSolution, mpc_qp: MPCQP, qp: StepQP, lo: Array, hi: Array, a_data: Array,
+        self,
+        sol: QPSolution,
+        mpc_qp: MPCQP,
+        qp: StepQP,
+        lo: Array,
+        hi: Array,
+        a_data: Array,
         x0: Array | None,
     ) -> QPSolution:
         """``sol``, or a re-solve with a raised slack weight that needs less slack (module docstring)."""
@@ -111,8 +120,14 @@ class SparseSolver(StepSolver):
                 again = self.backend.solve(x0)
                 if not again.success or again.x is None or again.x[slack].sum() >= sol.x[slack].sum():
                     return sol
-                sol = QPSolution(again.x, again.y, True, again.status, sol.iterations + again.iterations,
-                                 sol.solve_time_s + again.solve_time_s)  # fmt: skip
+                sol = QPSolution(
+                    again.x,
+                    again.y,
+                    True,
+                    again.status,
+                    sol.iterations + again.iterations,
+                    sol.solve_time_s + again.solve_time_s,
+                )
             return sol
         finally:
             if weight != self.settings.slack_weight:  # a re-solve was capped
@@ -133,9 +148,16 @@ class SparseSolver(StepSolver):
         key = drones.tobytes() + rows.pairs.tobytes() + rows.labels.tobytes()
         if rebuilt or self._qp is None or key != self._qp_key:
             self._qp = MPCQP(
-                drones.shape[0], self.dim, self.dt_s, self.limits, self.settings, rows.pairs, rows.singles,
-                self.families, self.loop,
-            )  # fmt: skip
+                drones.shape[0],
+                self.dim,
+                self.dt_s,
+                self.limits,
+                self.settings,
+                rows.pairs,
+                rows.singles,
+                self.families,
+                self.loop,
+            )
             self._qp_key = key
         return self._qp
 
@@ -154,7 +176,15 @@ class SparseSolver(StepSolver):
         if ob.any() and sep.obstacles is not None:
             center, required = sep.obstacles.center_m[obstacle], sep.obstacles.required_m[obstacle] + margin
         return QPContext(
-            drones.shape[0], self.dim, self.settings.horizon, (mpc_qp.sep_rows.start, mpc_qp.sep_rows.stop),
-            qp.start_m, pairs, (self.limits.d_min_m or 0.0) + margin, sep.metric, rows.singles[ob],
-            center, required,
-        )  # fmt: skip
+            drones.shape[0],
+            self.dim,
+            self.settings.horizon,
+            (mpc_qp.sep_rows.start, mpc_qp.sep_rows.stop),
+            qp.start_m,
+            pairs,
+            (self.limits.d_min_m or 0.0) + margin,
+            sep.metric,
+            rows.singles[ob],
+            center,
+            required,
+        )

@@ -151,8 +151,9 @@ class SplitQP(StepSolver):
             history.append((best.value, time.perf_counter() - t0, time.process_time() - c0))
         sol, active = step_qp.solution(best)
         if sol.success and self.iterations:
-            sol = QPSolution(sol.x, sol.y, True, f"{sol.status}; split {rounds} rounds", sol.iterations,
-                             sol.solve_time_s)  # fmt: skip
+            sol = QPSolution(
+                sol.x, sol.y, True, f"{sol.status}; split {rounds} rounds", sol.iterations, sol.solve_time_s
+            )
         hist = np.array(history)
         hist[:, 0] += step_qp.c_sq
         return SplitRun(sol, active, rounds, hist, seen)
@@ -204,10 +205,16 @@ class SplitStep:
         keep = np.flatnonzero(local[rows.singles] >= 0)
         sel = slice(None) if keep.shape[0] == rows.singles.shape[0] else keep  # every item: no copies
         got = pd.solve_each(
-            qp.start_m[drones], qp.targets_mps[:, drones], qp.u_prev_mps[drones], local[rows.singles[sel]],
-            rows.single_coeffs[sel], self.lower(shift)[sel], warm_u[:, drones], rows.single_hard[sel],
+            qp.start_m[drones],
+            qp.targets_mps[:, drones],
+            qp.u_prev_mps[drones],
+            local[rows.singles[sel]],
+            rows.single_coeffs[sel],
+            self.lower(shift)[sel],
+            warm_u[:, drones],
+            rows.single_hard[sel],
             rows.single_on[sel],
-        )  # fmt: skip
+        )
         self.iterations, self.time_s = self.iterations + got.iterations, self.time_s + got.time_s
         it = self._copy(base, shift, drones)
         it.v[drones], it.s[drones], it.cost[drones], it.soft[drones] = got.v, got.s, got.cost, got.soft
@@ -231,12 +238,30 @@ class SplitStep:
         if base is None:
             nu, h = self.pd.settings.horizon * self.pd.dim, self.pd.settings.horizon
             empty: list[Array] = [np.empty(0)] * m
-            return Iterate(shift, np.zeros((m, nu)), np.zeros((m, h)), np.zeros(m), np.zeros(m, dtype=bool),
-                           list(empty), [np.empty(0, np.intp)] * m, list(empty), [None] * m)  # fmt: skip
+            return Iterate(
+                shift,
+                np.zeros((m, nu)),
+                np.zeros((m, h)),
+                np.zeros(m),
+                np.zeros(m, dtype=bool),
+                list(empty),
+                [np.empty(0, np.intp)] * m,
+                list(empty),
+                [None] * m,
+            )
         redone = set(drones.tolist())
-        return Iterate(shift, base.v.copy(), base.s.copy(), base.cost.copy(), base.soft.copy(),
-                       list(base.lams), list(base.rows), list(base.mu), list(base.solves),
-                       {i: v for i, v in base.sens.items() if i not in redone})  # fmt: skip
+        return Iterate(
+            shift,
+            base.v.copy(),
+            base.s.copy(),
+            base.cost.copy(),
+            base.soft.copy(),
+            list(base.lams),
+            list(base.rows),
+            list(base.mu),
+            list(base.solves),
+            {i: v for i, v in base.sens.items() if i not in redone},
+        )
 
     def sensitivity(self, it: Iterate, i: int) -> Sensitivity | None:
         """Drone i's sensitivity in ``it`` (computed once; None for a failed solve)."""
@@ -362,7 +387,15 @@ def joint_rows(rows: SeparationRows) -> SeparationRows:
     pairs = np.column_stack([rows.singles[first], rows.singles[second]])
     lower = rows.single_lower[first] + rows.single_lower[second]
     return SeparationRows(
-        pairs, rows.single_coeffs[first], lower, rows.single_on[first], rows.singles[ob], rows.labels[ob],
-        rows.single_coeffs[ob], rows.single_lower[ob], rows.single_on[ob], rows.single_hard[first],
+        pairs,
+        rows.single_coeffs[first],
+        lower,
+        rows.single_on[first],
+        rows.singles[ob],
+        rows.labels[ob],
+        rows.single_coeffs[ob],
+        rows.single_lower[ob],
+        rows.single_on[ob],
+        rows.single_hard[first],
         rows.single_hard[ob],
-    )  # fmt: skip
+    )

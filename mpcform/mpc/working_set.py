@@ -28,7 +28,13 @@ WORKING_MIN_ROWS = 5000  # ... in a call whose drones to solve times constant ro
 
 
 def reachable_rows(
-    n: int, singles: Array, coeffs: Array, lower: Array, hard: Array | None, on: Array | None, ends: Array,
+    n: int,
+    singles: Array,
+    coeffs: Array,
+    lower: Array,
+    hard: Array | None,
+    on: Array | None,
+    ends: Array,
     step_m: float | None,
 ) -> tuple[Array, Array, Array, Array, Array, Array]:
     """The separation rows that can be active, sorted by drone (item order kept within a drone):
@@ -123,8 +129,17 @@ class Stack:
 
 
 def stack(
-    const_v: Array, near: Array, b_lo: Array, b_hi: Array, some: Array, sep_a: Array, sep_lo: Array,
-    sep_drone: Array, sep_local: Array, n_sep: Array, inf: float,
+    const_v: Array,
+    near: Array,
+    b_lo: Array,
+    b_hi: Array,
+    some: Array,
+    sep_a: Array,
+    sep_lo: Array,
+    sep_drone: Array,
+    sep_local: Array,
+    n_sep: Array,
+    inf: float,
 ) -> Stack:
     """The rows of drones ``some`` (m,): their constant rows ``near`` (m, c) of ``const_v`` (c, H d),
     bounds ``b_lo``, ``b_hi`` (n or 1, c), and separation rows ``sep_a`` (G, H d) with lower bounds

@@ -49,8 +49,9 @@ def animation_file() -> str:
     return MP4_FILE if FFMpegWriter.isAvailable() else ANIMATION_FILE
 
 
-def frame_times(t0_s: float, t1_s: float, speed: float = 1.0, fps: int = 10,
-                max_frames: int = MAX_FRAMES) -> tuple[Array, int]:  # fmt: skip
+def frame_times(
+    t0_s: float, t1_s: float, speed: float = 1.0, fps: int = 10, max_frames: int = MAX_FRAMES
+) -> tuple[Array, int]:
     """Flight times of the frames and the frame rate: frames ``speed / fps`` seconds of flight
     apart, at the highest rate of :data:`FPS_CHOICES` up to ``fps`` that needs at most
     ``max_frames`` frames. The video lasts ``(t1 - t0) / speed`` seconds (plus one frame)."""
@@ -65,9 +66,16 @@ def frame_times(t0_s: float, t1_s: float, speed: float = 1.0, fps: int = 10,
     return t0_s + np.arange(count) * speed / rate, rate
 
 
-def animate_run(run: RunData, path: str | Path, *, speed: float = 1.0, fps: int = 10,
-                max_frames: int = MAX_FRAMES, progress: Progress | None = None,
-                dpi: int = 80) -> Path:  # fmt: skip
+def animate_run(
+    run: RunData,
+    path: str | Path,
+    *,
+    speed: float = 1.0,
+    fps: int = 10,
+    max_frames: int = MAX_FRAMES,
+    progress: Progress | None = None,
+    dpi: int = 80,
+) -> Path:
     """Write the flight to ``path``: MP4 for a ``.mp4`` suffix (needs ffmpeg), else a GIF."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -77,8 +85,16 @@ def animate_run(run: RunData, path: str | Path, *, speed: float = 1.0, fps: int 
     t = run.trajectory.t_s
     times, rate = frame_times(float(t[0]), float(t[-1]), speed, fps, max_frames)
     scene = _Scene(run, speed, dpi)
-    anim = FuncAnimation(scene.fig, scene.update, frames=times, init_func=lambda: [], blit=False,
-                         interval=1000 / rate, repeat=False, cache_frame_data=False)  # fmt: skip
+    anim = FuncAnimation(
+        scene.fig,
+        scene.update,
+        frames=times,
+        init_func=lambda: [],
+        blit=False,
+        interval=1000 / rate,
+        repeat=False,
+        cache_frame_data=False,
+    )
     writer = FFMpegWriter(fps=rate) if mp4 else GifWriter(scene.render, fps=rate)
     callback = None if progress is None else (lambda i, n: progress(i + 1, n))
     anim.save(str(path), writer=writer, dpi=dpi, progress_callback=callback)
@@ -105,8 +121,13 @@ class GifWriter(AbstractMovieWriter):
         self.images.append(Image.fromarray(self.render()))
 
     def finish(self) -> None:
-        self.images[0].save(self.outfile, save_all=True, append_images=self.images[1:],
-                            duration=int(round(1000 / self.fps)), loop=0)  # fmt: skip
+        self.images[0].save(
+            self.outfile,
+            save_all=True,
+            append_images=self.images[1:],
+            duration=int(round(1000 / self.fps)),
+            loop=0,
+        )
 
 
 class _FrameCanvas(FigureCanvasAgg):
@@ -143,23 +164,59 @@ class _Scene:
             both = np.concatenate([p[..., [a, b]].reshape(-1, 2), ref[..., [a, b]].reshape(-1, 2)])
             lo, hi = both.min(axis=0), both.max(axis=0)
             pad = 0.06 * float((hi - lo).max()) + 0.3
-            ax.set(xlim=(lo[0] - pad, hi[0] + pad), ylim=(lo[1] - pad, hi[1] + pad),
-                   xlabel=f"{AXIS_NAMES[a]} [m]", ylabel=f"{AXIS_NAMES[b]} [m]", aspect="equal")  # fmt: skip
+            ax.set(
+                xlim=(lo[0] - pad, hi[0] + pad),
+                ylim=(lo[1] - pad, hi[1] + pad),
+                xlabel=f"{AXIS_NAMES[a]} [m]",
+                ylabel=f"{AXIS_NAMES[b]} [m]",
+                aspect="equal",
+            )
             ax.grid(True, alpha=0.3)
             trail_colour = colours if few else [PATH_GREY] * run.n
-            self.artists.append({
-                "plane": (a, b),
-                "trails": [ax.plot([], [], color=c, lw=1.0, alpha=0.7)[0] for c in trail_colour],
-                "links": [ax.plot([], [], color="0.3", lw=1.0)[0] for _ in self.edges],
-                "refs": ax.plot([], [], ls="none", marker="o", ms=1.5 * ms, mfc="none", mec="k", mew=0.6,
-                                label="reference p*_i")[0],
-                "leaders": ax.plot([], [], ls="none", marker="*", ms=13, mfc="gold", mec="k", mew=0.6,
-                                   zorder=5, label="leader" if run.formation.leaders else None)[0],
-                "drones": ax.scatter(p[0, :, a], p[0, :, b], s=ms**2, c=colours, zorder=4, edgecolors="k",
-                                     linewidths=0.3, label="drones"),
-            })  # fmt: skip
-            ax.set_title(f"{AXIS_NAMES[a]}-{AXIS_NAMES[b]}" + (" (top view)" if (a, b) == (0, 1) else ""),
-                         fontsize="small")  # fmt: skip
+            self.artists.append(
+                {
+                    "plane": (a, b),
+                    "trails": [ax.plot([], [], color=c, lw=1.0, alpha=0.7)[0] for c in trail_colour],
+                    "links": [ax.plot([], [], color="0.3", lw=1.0)[0] for _ in self.edges],
+                    "refs": ax.plot(
+                        [],
+                        [],
+                        ls="none",
+                        marker="o",
+                        ms=1.5 * ms,
+                        mfc="none",
+                        mec="k",
+                        mew=0.6,
+                        label="reference p*_i",
+                    )[0],
+                    "leaders": ax.plot(
+                        [],
+                        [],
+                        ls="none",
+                        marker="*",
+                        ms=13,
+                        mfc="gold",
+                        mec="k",
+                        mew=0.6,
+                        zorder=5,
+                        label="leader" if run.formation.leaders else None,
+                    )[0],
+                    "drones": ax.scatter(
+                        p[0, :, a],
+                        p[0, :, b],
+                        s=ms**2,
+                        c=colours,
+                        zorder=4,
+                        edgecolors="k",
+                        linewidths=0.3,
+                        label="drones",
+                    ),
+                }
+            )
+            ax.set_title(
+                f"{AXIS_NAMES[a]}-{AXIS_NAMES[b]}" + (" (top view)" if (a, b) == (0, 1) else ""),
+                fontsize="small",
+            )
         self.artists[0]["trails"][0].set_label(f"last {TRAIL_S:g} s")
         handles, labels = axes[0].get_legend_handles_labels()
         self.fig.legend(
@@ -177,8 +234,10 @@ class _Scene:
         for art in self.artists:
             a, b = art["plane"]
             for i, line in enumerate(art["trails"]):
-                line.set_data(np.append(traj.positions_m[window, i, a], p[i, a]),
-                              np.append(traj.positions_m[window, i, b], p[i, b]))  # fmt: skip
+                line.set_data(
+                    np.append(traj.positions_m[window, i, a], p[i, a]),
+                    np.append(traj.positions_m[window, i, b], p[i, b]),
+                )
             for (i, j), line in zip(self.edges, art["links"], strict=True):
                 line.set_data(p[[i, j], a], p[[i, j], b])
             art["refs"].set_data(ref[:, a], ref[:, b])

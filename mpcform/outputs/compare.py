@@ -45,32 +45,36 @@ def comparison_records(runs: Sequence[RunData]) -> list[dict[str, Any]]:
         # step times of the QP steps when there are any, else of the run's (first) other mode
         mode = "qp" if "qp" in times else next(iter(times), None)
         stats = times.get(mode) or {}
-        records.append({
-            "run": label,
-            "directory": str(run.directory),
-            "scenario": run.name,
-            "controller": s.get("controller"),
-            "solver": s.get("solver"),
-            "final_tracking_error": m.get("final_tracking_error"),
-            "max_tracking_error": m.get("max_tracking_error"),
-            "tracking_cost": tracking_cost_m2s(run.trajectory),
-            "min_separation_segments": m.get("min_separation_segments"),
-            "max_speed": m.get("max_speed"),
-            "violations": f"{m.get('separation_violations', '-')}/{m.get('speed_violations', '-')}",
-            "qp_solves": m.get("qp_solves"),
-            "fast_path_steps": m.get("fast_path_steps"),
-            "solver_failures": m.get("solver_failures"),
-            "step_mode": mode,
-            "step_ms_median": stats.get("median"),
-            "step_ms_p90": stats.get("p90"),
-        })  # fmt: skip
+        records.append(
+            {
+                "run": label,
+                "directory": str(run.directory),
+                "scenario": run.name,
+                "controller": s.get("controller"),
+                "solver": s.get("solver"),
+                "final_tracking_error": m.get("final_tracking_error"),
+                "max_tracking_error": m.get("max_tracking_error"),
+                "tracking_cost": tracking_cost_m2s(run.trajectory),
+                "min_separation_segments": m.get("min_separation_segments"),
+                "max_speed": m.get("max_speed"),
+                "violations": f"{m.get('separation_violations', '-')}/{m.get('speed_violations', '-')}",
+                "qp_solves": m.get("qp_solves"),
+                "fast_path_steps": m.get("fast_path_steps"),
+                "solver_failures": m.get("solver_failures"),
+                "step_mode": mode,
+                "step_ms_median": stats.get("median"),
+                "step_ms_p90": stats.get("p90"),
+            }
+        )
     return records
 
 
 def markdown_table(records: Sequence[dict[str, Any]]) -> str:
     """The records as a markdown table (columns :data:`COLUMNS`)."""
-    lines = ["| " + " | ".join(title for _, title in COLUMNS) + " |",
-             "| " + " | ".join("---" for _ in COLUMNS) + " |"]  # fmt: skip
+    lines = [
+        "| " + " | ".join(title for _, title in COLUMNS) + " |",
+        "| " + " | ".join("---" for _ in COLUMNS) + " |",
+    ]
     for rec in records:
         lines.append("| " + " | ".join(_cell(rec.get(key)) for key, _ in COLUMNS) + " |")
     return "\n".join(lines)

@@ -91,21 +91,46 @@ def time_colour(run: RunData) -> tuple[Any, Normalize]:
     return TIME_CMAP, Normalize(float(t[0]), float(t[-1]))
 
 
-def draw_snapshot(ax: Axes, xy: Array, edges: list[tuple[int, int]], colour: Any, t_s: float,
-                  size: float, label: str = "text", anchor: int = 0) -> None:  # fmt: skip
+def draw_snapshot(
+    ax: Axes,
+    xy: Array,
+    edges: list[tuple[int, int]],
+    colour: Any,
+    t_s: float,
+    size: float,
+    label: str = "text",
+    anchor: int = 0,
+) -> None:
     """One formation snapshot in a plane: its edges, drones and its time, ``t = ... s``, written
     beside drone ``anchor`` (``label="text"``) or as its legend entry (``"legend"``)."""
     for a, b in edges:
         ax.plot(xy[[a, b], 0], xy[[a, b], 1], color=colour, lw=1.3, zorder=3)
-    ax.scatter(xy[:, 0], xy[:, 1], color=colour, s=16 * size, zorder=3.1, edgecolors="k", lw=0.3,
-               label=f"snapshot t = {t_s:.3g} s" if label == "legend" else None)  # fmt: skip
+    ax.scatter(
+        xy[:, 0],
+        xy[:, 1],
+        color=colour,
+        s=16 * size,
+        zorder=3.1,
+        edgecolors="k",
+        lw=0.3,
+        label=f"snapshot t = {t_s:.3g} s" if label == "legend" else None,
+    )
     if label == "text":  # beside drone ``anchor``, pushed outward from the snapshot's centre
         away = xy[anchor] - xy.mean(axis=0)
         away = away / norm if (norm := float(np.linalg.norm(away))) > 0 else np.array([0.0, 1.0])
         box = {"boxstyle": "round,pad=0.15", "fc": "white", "ec": colour, "alpha": 0.85}
-        ax.annotate(f"t = {t_s:.3g} s", xy[anchor], xytext=tuple(14 * away), textcoords="offset points",
-                    ha="center", va="center", fontsize="x-small", zorder=5, gid=SNAPSHOT_LABEL,
-                    bbox=box)  # fmt: skip
+        ax.annotate(
+            f"t = {t_s:.3g} s",
+            xy[anchor],
+            xytext=tuple(14 * away),
+            textcoords="offset points",
+            ha="center",
+            va="center",
+            fontsize="x-small",
+            zorder=5,
+            gid=SNAPSHOT_LABEL,
+            bbox=box,
+        )
 
 
 def envelope(ax: Axes, t_s: Array, values: Array, colour: Any, label: str, *, stairs: bool = False) -> None:
@@ -113,8 +138,17 @@ def envelope(ax: Axes, t_s: Array, values: Array, colour: Any, label: str, *, st
     lo, mid, hi = values.min(axis=1), np.median(values, axis=1), values.max(axis=1)
     if stairs:  # a command is held over its step: repeat the last value at the end
         lo, mid, hi = (np.append(x, x[-1]) for x in (lo, mid, hi))
-    ax.fill_between(t_s, lo, hi, color=colour, alpha=BAND_ALPHA, lw=0, step="post" if stairs else None,
-                    label=f"{label}: min-max over drones", gid="envelope")  # fmt: skip
+    ax.fill_between(
+        t_s,
+        lo,
+        hi,
+        color=colour,
+        alpha=BAND_ALPHA,
+        lw=0,
+        step="post" if stairs else None,
+        label=f"{label}: min-max over drones",
+        gid="envelope",
+    )
     ax.plot(
         t_s,
         mid,
@@ -141,20 +175,45 @@ def mark_closest_pair(ax: Axes, run: RunData, axes: tuple[int, int] = (0, 1)) ->
     k, i, j, dist = closest_pair(run.trajectory.positions_m)
     xy = run.trajectory.positions_m[k][[i, j]][:, list(axes)]
     t = float(run.trajectory.t_s[k])
-    ax.plot(xy[:, 0], xy[:, 1], color=CLOSEST_COLOUR, lw=2.2, marker="o", ms=5, zorder=6,
-            label=f"closest pair {i}-{j}: {dist:.2f} m at t = {t:.3g} s")  # fmt: skip
+    ax.plot(
+        xy[:, 0],
+        xy[:, 1],
+        color=CLOSEST_COLOUR,
+        lw=2.2,
+        marker="o",
+        ms=5,
+        zorder=6,
+        label=f"closest pair {i}-{j}: {dist:.2f} m at t = {t:.3g} s",
+    )
     if run.d_min_m is not None:  # touching circles of radius d_min / 2: the separation is kept
         for centre in xy:
-            ax.add_patch(Circle(tuple(centre), run.d_min_m / 2, fill=False, color=CLOSEST_COLOUR, lw=0.9,
-                                ls="--", zorder=6))  # fmt: skip
+            ax.add_patch(
+                Circle(
+                    tuple(centre),
+                    run.d_min_m / 2,
+                    fill=False,
+                    color=CLOSEST_COLOUR,
+                    lw=0.9,
+                    ls="--",
+                    zorder=6,
+                )
+            )
 
 
 def draw_leaders(ax: Axes, xy: Array, run: RunData) -> None:
     """The leaders of a consensus run (stars) at positions ``xy`` (n, 2)."""
     leaders = list(run.formation.leaders)
     if leaders:
-        ax.scatter(xy[leaders, 0], xy[leaders, 1], marker="*", s=170, color="gold", edgecolors="k",
-                   zorder=6, label="leader (sees the commanded scale)")  # fmt: skip
+        ax.scatter(
+            xy[leaders, 0],
+            xy[leaders, 1],
+            marker="*",
+            s=170,
+            color="gold",
+            edgecolors="k",
+            zorder=6,
+            label="leader (sees the commanded scale)",
+        )
 
 
 def draw_graph(ax: Axes, run: RunData) -> None:
@@ -197,19 +256,32 @@ def draw_obstacles(ax: Axes, run: RunData, axes: tuple[int, int] = (0, 1)) -> No
         centre, radius, clearance = row[list(axes)], float(row[run.dim]), float(row[run.dim + 1])
         if not np.isfinite(clearance):
             clearance = 0.5 * d_min if d_min is not None else 0.0
-        ax.add_patch(Circle(tuple(centre), radius, color="0.75", zorder=1,
-                            label="obstacle" if k == 0 else None))  # fmt: skip
+        ax.add_patch(
+            Circle(tuple(centre), radius, color="0.75", zorder=1, label="obstacle" if k == 0 else None)
+        )
         if clearance > 0:
-            ax.add_patch(Circle(tuple(centre), radius + clearance, fill=False, ls=":", color="0.3",
-                                zorder=1, label="required clearance" if k == 0 else None))  # fmt: skip
+            ax.add_patch(
+                Circle(
+                    tuple(centre),
+                    radius + clearance,
+                    fill=False,
+                    ls=":",
+                    color="0.3",
+                    zorder=1,
+                    label="required clearance" if k == 0 else None,
+                )
+            )
 
 
 def equal_3d(ax: Any, points: Array) -> None:
     """Equal, cubic 3D axes around ``points`` (m, 3), with at most 5 ticks per axis."""
     lo, hi = points.min(axis=0), points.max(axis=0)
     mid, half = (lo + hi) / 2, max(float((hi - lo).max()) / 2, 0.5) * 1.05
-    ax.set(xlim=(mid[0] - half, mid[0] + half), ylim=(mid[1] - half, mid[1] + half),
-           zlim=(mid[2] - half, mid[2] + half))  # fmt: skip
+    ax.set(
+        xlim=(mid[0] - half, mid[0] + half),
+        ylim=(mid[1] - half, mid[1] + half),
+        zlim=(mid[2] - half, mid[2] + half),
+    )
     ax.set_box_aspect((1, 1, 1))
     for axis in (ax.xaxis, ax.yaxis, ax.zaxis):
         axis.set_major_locator(MaxNLocator(5))

@@ -67,8 +67,15 @@ CHECK_RATE_HZ = 500.0  # sampling of the pieces for limits, floor and separation
 LIMIT_SLACK = 0.9  # the retiming aims at this fraction of each limit (the fit adds a little)
 PROVENANCE_JSON = "provenance.json"
 YAW_MODES = ("zero", "formation")
-__all__ = ["POLY_HEADER", "SETPOINT_COLUMNS", "ExportOptions", "ExportResult", "export_run", "read_poly",
-           "read_setpoints"]  # fmt: skip
+__all__ = [
+    "POLY_HEADER",
+    "SETPOINT_COLUMNS",
+    "ExportOptions",
+    "ExportResult",
+    "export_run",
+    "read_poly",
+    "read_setpoints",
+]
 
 
 @dataclass(frozen=True)

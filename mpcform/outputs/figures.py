@@ -51,8 +51,15 @@ from mpcform.outputs.rundata import RunData
 from mpcform.sim.metrics import command_speeds_mps, min_separations_m, tracking_errors_m
 from mpcform.sim.safety import obstacle_distances_along, required_clearance_m
 
-FIGURE_FILES = ("top_view.png", "view_3d.png", "tracking_error.png", "separation.png", "speed.png",
-                "clearance.png", "scale.png")  # fmt: skip
+FIGURE_FILES = (
+    "top_view.png",
+    "view_3d.png",
+    "tracking_error.png",
+    "separation.png",
+    "speed.png",
+    "clearance.png",
+    "scale.png",
+)
 LINESTYLES = ("-", "--", ":", "-.")  # runs of a comparison: overlapping curves stay visible
 LOG_FLOOR_M = 1e-14  # tracking errors below this (exact starts) are not drawn on the log axis
 AXIS_HEADROOM = 1.1  # a time-series axis ends at most 10 % above what it must show
@@ -103,8 +110,15 @@ def separation(run: RunData) -> Figure:
     if run.d_min_m is not None:
         ax.axhline(run.d_min_m, label=f"d_min = {run.d_min_m:g} m", **LIMIT_STYLE)
     k, i, j, dist = closest_pair(run.trajectory.positions_m)
-    ax.plot(t[k], dist, "o", color=CLOSEST_COLOUR, ms=7, zorder=5,
-            label=f"closest: drones {i}-{j}, {dist:.3g} m at t = {t[k]:.3g} s")  # fmt: skip
+    ax.plot(
+        t[k],
+        dist,
+        "o",
+        color=CLOSEST_COLOUR,
+        ms=7,
+        zorder=5,
+        label=f"closest: drones {i}-{j}, {dist:.3g} m at t = {t[k]:.3g} s",
+    )
     ax.set_ylim(0.0, AXIS_HEADROOM * float(max(sep.max(), run.d_min_m or 0.0)))
     _finish(ax, run, "Separation", "minimum separation [m]")
     return fig
@@ -124,8 +138,16 @@ def speeds(run: RunData) -> Figure:
     if v_max is not None and v_max <= top:
         ax.axhline(v_max, label=f"v_max = {v_max:g} m/s", **LIMIT_STYLE)
     elif v_max is not None:
-        ax.text(0.99, 0.97, f"v_max = {v_max:g} m/s (off scale: {v_max / speed.max():.3g}x the peak)",
-                transform=ax.transAxes, ha="right", va="top", fontsize="small", color="tab:red")  # fmt: skip
+        ax.text(
+            0.99,
+            0.97,
+            f"v_max = {v_max:g} m/s (off scale: {v_max / speed.max():.3g}x the peak)",
+            transform=ax.transAxes,
+            ha="right",
+            va="top",
+            fontsize="small",
+            color="tab:red",
+        )
     ax.set_ylim(0.0, top)
     _finish(ax, run, "Command speeds", "speed ||u_i|| [m/s]")
     return fig
@@ -157,8 +179,14 @@ def clearance(run: RunData) -> Figure:
     for k, ob in enumerate(obstacles):
         surface = dist[:, :, k].min(axis=1) - ob.radius_m
         tag = f"obstacle {k}" if len(obstacles) > 1 else "obstacle"
-        ax.plot(t_mid, surface, color=colours(k % 10), ls=LINESTYLES[k % len(LINESTYLES)], lw=1.4,
-                label=f"{tag}: closest drone, min {surface.min():.3g} m")  # fmt: skip
+        ax.plot(
+            t_mid,
+            surface,
+            color=colours(k % 10),
+            ls=LINESTYLES[k % len(LINESTYLES)],
+            lw=1.4,
+            label=f"{tag}: closest drone, min {surface.min():.3g} m",
+        )
         m = int(np.argmin(surface))
         ax.plot(t_mid[m], surface[m], "o", color=CLOSEST_COLOUR, ms=6, zorder=5)
         if len(set(required)) > 1:
@@ -181,8 +209,9 @@ def scale(run: RunData) -> Figure:
     drawn = estimates is not None and not formation.scale_is_relative  # absolute, like s_hat_i
     fitted, shaped = fitted_scales_in_shape(formation.offsets_m, traj.positions_m)
     fit_style = FIT_UNDER_ESTIMATES if drawn else {"color": MEDIAN_COLOUR, "lw": 1.4}
-    ax.plot(traj.t_s, np.where(shaped, fitted, np.nan), label="best fit of the drones' positions",
-            **fit_style)  # fmt: skip
+    ax.plot(
+        traj.t_s, np.where(shaped, fitted, np.nan), label="best fit of the drones' positions", **fit_style
+    )
     ref = formation.scale_ref
     if ref is None:
         ref = fitted_scales_in_shape(formation.offsets_m, traj.reference_m)[0]
@@ -191,8 +220,14 @@ def scale(run: RunData) -> Figure:
     if not shaped.all():
         t_in = traj.t_s[shaped]
         for k, (a, b) in enumerate(_runs(~shaped)):
-            ax.axvspan(traj.t_s[a], traj.t_s[b], color="0.85", lw=0, zorder=0,
-                       label="not in the template's shape" if k == 0 else None)  # fmt: skip
+            ax.axvspan(
+                traj.t_s[a],
+                traj.t_s[b],
+                color="0.85",
+                lw=0,
+                zorder=0,
+                label="not in the template's shape" if k == 0 else None,
+            )
         since = f"; in shape from t = {t_in[0]:.3g} s" if t_in.size else ""
         notes.append(f"not drawn while the drones do not hold the template's shape{since}")
     if estimates is not None and drawn:
@@ -200,8 +235,16 @@ def scale(run: RunData) -> Figure:
     elif estimates is not None:
         notes.append("estimates s_hat_i not drawn: they need the template's scale (formation.npz)")
     if notes:
-        ax.text(0.01, 0.02, "\n".join(notes), transform=ax.transAxes, fontsize="small", va="bottom",
-                color="0.25", gid="scale-note")  # fmt: skip
+        ax.text(
+            0.01,
+            0.02,
+            "\n".join(notes),
+            transform=ax.transAxes,
+            fontsize="small",
+            va="bottom",
+            color="0.25",
+            gid="scale-note",
+        )
     _finish(ax, run, "Scale", f"formation scale s{rel}")
     return fig
 
@@ -222,9 +265,22 @@ def draw_scale_estimates(ax: Any, t_s: Array, estimates: Array, leaders: Sequenc
     names = ", ".join(map(str, leaders))
     label = f"leader {names} (sees s*)" if len(leaders) == 1 else f"leaders {names} (see s*)"
     for k, i in enumerate(leaders):
-        ax.plot(t_s, estimates[:, i], ls="-" if n > PER_DRONE_MAX else "none", color="goldenrod", lw=1.0,
-                marker="*", markevery=stars, ms=11, mfc="gold", mec="k", mew=0.6, zorder=4, gid=LEADER_GID,
-                label=label if k == 0 else None)  # fmt: skip
+        ax.plot(
+            t_s,
+            estimates[:, i],
+            ls="-" if n > PER_DRONE_MAX else "none",
+            color="goldenrod",
+            lw=1.0,
+            marker="*",
+            markevery=stars,
+            ms=11,
+            mfc="gold",
+            mec="k",
+            mew=0.6,
+            zorder=4,
+            gid=LEADER_GID,
+            label=label if k == 0 else None,
+        )
 
 
 def fitted_scales_in_shape(offsets_m: Array, positions_m: Array) -> tuple[Array, Array]:
@@ -234,8 +290,9 @@ def fitted_scales_in_shape(offsets_m: Array, positions_m: Array) -> tuple[Array,
     size = float(np.sqrt((template.offsets**2).sum(axis=1).mean()))
     fits = [fit_formation(template, p) for p in positions_m]
     scales = np.array([f.state.scale for f in fits])
-    shaped = np.array([f.scale_identifiable and f.residual_rms_m <= SHAPE_TOL * f.state.scale * size
-                       for f in fits])  # fmt: skip
+    shaped = np.array(
+        [f.scale_identifiable and f.residual_rms_m <= SHAPE_TOL * f.state.scale * size for f in fits]
+    )
     return scales, shaped
 
 

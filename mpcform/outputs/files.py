@@ -35,8 +35,18 @@ TRAJECTORY_NPZ = "trajectory.npz"
 TRAJECTORY_CSV = "trajectory.csv"
 SUMMARY_JSON = "summary.json"
 OUTPUT_FILES = (TRAJECTORY_NPZ, TRAJECTORY_CSV, SUMMARY_JSON)
-SUMMARY_KEYS = ("scenario", "n", "dim", "dt", "steps", "controller", "solver", "limits",
-                "provenance", "metrics")  # fmt: skip
+SUMMARY_KEYS = (
+    "scenario",
+    "n",
+    "dim",
+    "dt",
+    "steps",
+    "controller",
+    "solver",
+    "limits",
+    "provenance",
+    "metrics",
+)
 DEPENDENCIES = ("numpy", "scipy", "osqp", "piqp", "qpsolvers", "casadi", "ruckig")
 AXES = ("x", "y", "z")
 
@@ -48,9 +58,13 @@ def csv_header(dim: int) -> list[str]:
 
 
 TRUE_ARRAYS = {
-    "t_true": "t_s", "p_true": "positions_m", "v_true": "velocities_mps", "p_ref_true": "reference_m",
-    "quat_true": "quat_xyzw", "thrust_true": "thrust_N",
-}  # fmt: skip
+    "t_true": "t_s",
+    "p_true": "positions_m",
+    "v_true": "velocities_mps",
+    "p_ref_true": "reference_m",
+    "quat_true": "quat_xyzw",
+    "thrust_true": "thrust_N",
+}
 """Keys of ``trajectory.npz`` for the :class:`~mpcform.sim.trajectory.TrueTrajectory` fields."""
 SCALE_ESTIMATES = "scale_estimates"
 """Key of ``trajectory.npz`` for the per-drone scale estimates (T, n), written only when recorded."""
@@ -64,9 +78,13 @@ def write_trajectory_npz(path: Path, trajectory: Trajectory) -> None:
     true = {} if traj.true is None else {key: getattr(traj.true, name) for key, name in TRUE_ARRAYS.items()}
     optional = true | {SCALE_ESTIMATES: traj.scale_estimates}
     np.savez_compressed(
-        path, t=traj.t_s, p=traj.positions_m, u=traj.commands_mps, p_ref=traj.reference_m,
+        path,
+        t=traj.t_s,
+        p=traj.positions_m,
+        u=traj.commands_mps,
+        p_ref=traj.reference_m,
         **{key: value for key, value in optional.items() if value is not None},
-    )  # fmt: skip
+    )
 
 
 def write_trajectory_csv(path: Path, trajectory: Trajectory) -> None:
@@ -82,8 +100,7 @@ def write_trajectory_csv(path: Path, trajectory: Trajectory) -> None:
         for j, tj in enumerate(t):
             for i in range(n):
                 cmd = u[j][i] if j < steps else empty
-                writer.writerow([repr(tj), i, *map(repr, p[j][i]), *map(_cell, cmd),
-                                 *map(repr, ref[j][i])])  # fmt: skip
+                writer.writerow([repr(tj), i, *map(repr, p[j][i]), *map(_cell, cmd), *map(repr, ref[j][i])])
 
 
 def provenance(
@@ -168,35 +185,58 @@ def format_summary(summary: dict[str, Any]) -> str:
     m, lim = summary["metrics"], summary["limits"]
     solver = f", solver {summary['solver']}" if summary["solver"] else ""
     rows = [
-        ("scenario", f"{summary['scenario']} (n = {summary['n']}, {summary['dim']}D, "
-                     f"{summary['steps']} steps of {summary['dt']:g} s)"),
+        (
+            "scenario",
+            f"{summary['scenario']} (n = {summary['n']}, {summary['dim']}D, "
+            f"{summary['steps']} steps of {summary['dt']:g} s)",
+        ),
         ("controller", f"{summary['controller']}{solver}"),
         ("final tracking error", _m(m["final_tracking_error"], "m")),
         ("max tracking error", _m(m["max_tracking_error"], "m")),
-        ("min separation", f"{_m(m['min_separation'], 'm')} at samples, "
-                           f"{_m(m['min_separation_segments'], 'm')} along segments "
-                           f"(d_min {_m(lim['d_min'], 'm')})"),
+        (
+            "min separation",
+            f"{_m(m['min_separation'], 'm')} at samples, "
+            f"{_m(m['min_separation_segments'], 'm')} along segments "
+            f"(d_min {_m(lim['d_min'], 'm')})",
+        ),
         ("max speed", f"{_m(m['max_speed'], 'm/s')} (v_max {_m(lim['v_max'], 'm/s')})"),
         ("violations", f"{m['separation_violations']} separation, {m['speed_violations']} speed"),
-        ("qp solves", f"{m['qp_solves']} ({m['fast_path_steps']} fast-path steps, "
-                      f"{m['solver_failures']} failures, max slack {_m(m['max_slack'], 'm')})"),
-    ]  # fmt: skip
+        (
+            "qp solves",
+            f"{m['qp_solves']} ({m['fast_path_steps']} fast-path steps, "
+            f"{m['solver_failures']} failures, max slack {_m(m['max_slack'], 'm')})",
+        ),
+    ]
     if "completion" in m:
         done = m["time_to_complete"]
         end = f" from t = {done:.4g} s" if done is not None else f", {m['stalled_drones']} stalled"
         rows.append(("completion", f"{m['completion']:.0%} of drones at their final targets{end}"))
     if "obstacle_violations" in m:
-        rows.append(("obstacles", f"min clearance {_m(m['min_obstacle_clearance'], 'm')} from a surface, "
-                                  f"{m['obstacle_violations']} violations"))
+        rows.append(
+            (
+                "obstacles",
+                f"min clearance {_m(m['min_obstacle_clearance'], 'm')} from a surface, "
+                f"{m['obstacle_violations']} violations",
+            )
+        )
     plant = summary.get("plant")
     if plant is not None and plant.get("kind") != "ideal" and "min_separation_true" in m:
         model = ", its velocity loop in the rows" if plant.get("velocity_loop_modelled") else ""
-        rows.append(("true motion", f"{plant['kind']} plant (margin {_m(plant['margin'], 'm')}{model}): min "
-                     f"separation {_m(m['min_separation_true'], 'm')}, {m['separation_violations_true']} "
-                     f"violations, max speed {_m(m['max_speed_true'], 'm/s')}"))
+        rows.append(
+            (
+                "true motion",
+                f"{plant['kind']} plant (margin {_m(plant['margin'], 'm')}{model}): min "
+                f"separation {_m(m['min_separation_true'], 'm')}, {m['separation_violations_true']} "
+                f"violations, max speed {_m(m['max_speed_true'], 'm/s')}",
+            )
+        )
     for mode, st in m["step_time_ms"].items():
-        rows.append((f"step time {mode}", f"median {st['median']:.3g} ms, p90 {st['p90']:.3g} ms, "
-                                          f"max {st['max']:.3g} ms"))  # fmt: skip
+        rows.append(
+            (
+                f"step time {mode}",
+                f"median {st['median']:.3g} ms, p90 {st['p90']:.3g} ms, max {st['max']:.3g} ms",
+            )
+        )
     width = max(len(label) for label, _ in rows)
     return "\n".join(f"{label:<{width}}  {value}" for label, value in rows)
 

@@ -82,8 +82,14 @@ def view_3d(run: RunData) -> Figure:
     return fig
 
 
-def draw_plan(ax: Axes, run: RunData, plane: tuple[int, int], *, labels: str = "text",
-              snapshots: np.ndarray | None = None) -> None:  # fmt: skip
+def draw_plan(
+    ax: Axes,
+    run: RunData,
+    plane: tuple[int, int],
+    *,
+    labels: str = "text",
+    snapshots: np.ndarray | None = None,
+) -> None:
     """Paths, reference paths, snapshots, start and end, obstacles, graph and closest pair in one plane."""
     a, b = plane
     p, ref, t = run.trajectory.positions_m, run.trajectory.reference_m, run.trajectory.t_s
@@ -92,14 +98,29 @@ def draw_plan(ax: Axes, run: RunData, plane: tuple[int, int], *, labels: str = "
     colours = drone_colours(run.n)
     for i in range(run.n):
         label = f"drone {i}" if few else ("drone paths" if i == 0 else None)
-        ax.plot(p[:, i, a], p[:, i, b], color=colours[i] if few else PATH_GREY, lw=2.4 if few else 0.7,
-                alpha=0.7 if few else 0.6, zorder=2, label=label)  # fmt: skip
+        ax.plot(
+            p[:, i, a],
+            p[:, i, b],
+            color=colours[i] if few else PATH_GREY,
+            lw=2.4 if few else 0.7,
+            alpha=0.7 if few else 0.6,
+            zorder=2,
+            label=label,
+        )
     if np.ptp(ref, axis=0).max() > 0:
         for i in range(run.n):
             ax.plot(ref[:, i, a], ref[:, i, b], label="reference path" if i == 0 else None, **REFERENCE_STYLE)
     else:  # a constant reference: its points, not paths
-        ax.scatter(ref[0, :, a], ref[0, :, b], marker="x", s=30, color="k", lw=0.8, zorder=4.5,
-                   label="reference p*_i (fixed)")  # fmt: skip
+        ax.scatter(
+            ref[0, :, a],
+            ref[0, :, b],
+            marker="x",
+            s=30,
+            color="k",
+            lw=0.8,
+            zorder=4.5,
+            label="reference p*_i (fixed)",
+        )
     edges = skeleton_edges(run)
     cmap, norm = time_colour(run)
     size = marker_scale(run.n)

@@ -139,8 +139,14 @@ def load_run(directory: str | Path) -> RunData:
         true = None
         if "t_true" in arrays:
             true = TrueTrajectory(**{name: arrays.get(key) for key, name in TRUE_ARRAYS.items()})  # type: ignore[arg-type]
-        trajectory = Trajectory(arrays["t"], arrays["p"], arrays["u"], arrays["p_ref"], true=true,
-                                scale_estimates=arrays.get(SCALE_ESTIMATES))  # fmt: skip
+        trajectory = Trajectory(
+            arrays["t"],
+            arrays["p"],
+            arrays["u"],
+            arrays["p_ref"],
+            true=true,
+            scale_estimates=arrays.get(SCALE_ESTIMATES),
+        )
     except ValidationError as exc:
         raise RunDirError(str(root / TRAJECTORY_NPZ), str(exc)) from None
     summary_path = root / SUMMARY_JSON

@@ -61,9 +61,17 @@ def write_viewer_html(
     corners (d,) of a box, +-inf for open sides; ``curves``: name -> (T,) values (NaN: none).
     """
     data = viewer_payload(
-        t_s=t_s, positions_m=positions_m, d_min_m=d_min_m, v_max_mps=v_max_mps, edges=edges,
-        obstacles=obstacles, geofence=geofence, reference_m=reference_m, title=title, curves=curves,
-    )  # fmt: skip
+        t_s=t_s,
+        positions_m=positions_m,
+        d_min_m=d_min_m,
+        v_max_mps=v_max_mps,
+        edges=edges,
+        obstacles=obstacles,
+        geofence=geofence,
+        reference_m=reference_m,
+        title=title,
+        curves=curves,
+    )
     out = Path(path)
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(render_html(data), encoding="utf-8")
@@ -189,8 +197,10 @@ def _obstacles(obstacles: Array | None, d: int, d_min: float | None) -> list[lis
         return []
     arr = np.array(obstacles, dtype=float)
     if arr.ndim != 2 or arr.shape[1] not in (d + 1, d + 2):
-        raise ValidationError("obstacles", f"expected (k, {d + 1} or {d + 2}) rows of centre, radius"
-                              f"[, clearance], got shape {arr.shape}")  # fmt: skip
+        raise ValidationError(
+            "obstacles",
+            f"expected (k, {d + 1} or {d + 2}) rows of centre, radius[, clearance], got shape {arr.shape}",
+        )
     if not np.all(np.isfinite(arr[:, : d + 1])) or np.any(arr[:, d] <= 0):
         raise ValidationError("obstacles", f"expected finite centres and radii > 0, got {arr.tolist()}")
     clearance = arr[:, d + 1] if arr.shape[1] == d + 2 else np.full(arr.shape[0], np.nan)
@@ -209,11 +219,15 @@ def _geofence(geofence: tuple[Array, Array] | None, d: int) -> dict[str, list[fl
     try:
         lo, hi = (np.array(corner, dtype=float).reshape(-1) for corner in geofence)
     except (TypeError, ValueError) as exc:
-        raise ValidationError("geofence", f"expected (min, max) corners of {d} numbers, "
-                              f"got {geofence!r}") from exc  # fmt: skip
+        raise ValidationError(
+            "geofence", f"expected (min, max) corners of {d} numbers, got {geofence!r}"
+        ) from exc
     if lo.shape != (d,) or hi.shape != (d,) or np.any(np.isnan(lo) | np.isnan(hi)) or np.any(lo >= hi):
-        raise ValidationError("geofence", f"expected (min, max) with min < max per axis, {d} numbers each, "
-                              f"got {lo.tolist()} and {hi.tolist()}")  # fmt: skip
+        raise ValidationError(
+            "geofence",
+            f"expected (min, max) with min < max per axis, {d} numbers each, "
+            f"got {lo.tolist()} and {hi.tolist()}",
+        )
     return {"min_m": [_sig(v, 6) for v in lo], "max_m": [_sig(v, 6) for v in hi]}
 
 

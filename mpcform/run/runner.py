@@ -40,9 +40,14 @@ def run_scenario(
     ctrl = build_controller(scenario, controller, solver)
     sim = scenario.simulation
     result = simulate(
-        ctrl, scenario.initial_positions_m, sim.duration_s,
-        plant=scenario.plant, noise_std_m=sim.noise_std_m, seed=scenario.seed, progress=progress,
-    )  # fmt: skip
+        ctrl,
+        scenario.initial_positions_m,
+        sim.duration_s,
+        plant=scenario.plant,
+        noise_std_m=sim.noise_std_m,
+        seed=scenario.seed,
+        progress=progress,
+    )
     limits = scenario.limits
     is_mpc = (controller or scenario.controller.kind) == "mpc"
     summary = build_summary(
@@ -73,10 +78,13 @@ def plant_record(scenario: Scenario, wind_clip_fraction: float) -> dict[str, Any
     whether the MPC's rows model the plant's velocity loop (``controller.plant_model``)."""
     rob, spec = scenario.robustness, scenario.controller
     return {
-        "kind": scenario.plant.kind, "margin": rob.margin_m, "a_max": rob.a_max_mps2,
-        "margin_valid_below_speed": rob.valid_speed_mps, "wind_clip_fraction": wind_clip_fraction,
+        "kind": scenario.plant.kind,
+        "margin": rob.margin_m,
+        "a_max": rob.a_max_mps2,
+        "margin_valid_below_speed": rob.valid_speed_mps,
+        "wind_clip_fraction": wind_clip_fraction,
         "velocity_loop_modelled": bool(rob.loop) and spec.kind == "mpc" and spec.mpc.plant_model,
-    }  # fmt: skip
+    }
 
 
 def describe(scenario: Scenario) -> str:

@@ -140,8 +140,9 @@ def load_job(job: SweepJob) -> Scenario:
     base = load_scenario(job.path)  # readable, valid TOML (errors name the file)
     data = tomllib.loads(scenario_text(Path(job.path).read_bytes()))
     data = apply_overrides(data, job.overrides + ((("seed", job.seed),) if job.seed is not None else ()))
-    return scenario_from_dict(data, source=base.source, source_sha256=base.source_sha256,
-                              default_name=Path(job.path).stem)  # fmt: skip
+    return scenario_from_dict(
+        data, source=base.source, source_sha256=base.source_sha256, default_name=Path(job.path).stem
+    )
 
 
 def apply_overrides(data: Mapping[str, Any], overrides: Iterable[Override]) -> dict[str, Any]:
@@ -185,15 +186,32 @@ def run_job(job: SweepJob) -> dict[str, Any]:
         record["seed"] = scenario.seed
         run = run_scenario(scenario, None, solver=job.solver)
     except Exception as exc:  # noqa: BLE001 - one failed job must not end the sweep
-        record.update(success=False, error=f"{type(exc).__name__}: {' '.join(str(exc).split())}",
-                      failed_checks=["error"], wall_s=time.perf_counter() - start)  # fmt: skip
+        record.update(
+            success=False,
+            error=f"{type(exc).__name__}: {' '.join(str(exc).split())}",
+            failed_checks=["error"],
+            wall_s=time.perf_counter() - start,
+        )
         return record
     m, sim = run.summary["metrics"], run.simulation
-    record.update({key: m[key] for key in (
-        "final_tracking_error", "max_tracking_error", "min_separation", "min_separation_segments",
-        "max_speed", "separation_violations", "speed_violations", "qp_solves", "fast_path_steps",
-        "solver_failures", "max_slack",
-    )})  # fmt: skip
+    record.update(
+        {
+            key: m[key]
+            for key in (
+                "final_tracking_error",
+                "max_tracking_error",
+                "min_separation",
+                "min_separation_segments",
+                "max_speed",
+                "separation_violations",
+                "speed_violations",
+                "qp_solves",
+                "fast_path_steps",
+                "solver_failures",
+                "max_slack",
+            )
+        }
+    )
     modes = np.array([info.mode for info in sim.infos])
     ms = 1e3 * sim.step_times_s
     qp = ms[(modes == "qp") | (modes == "fallback")]
@@ -310,20 +328,27 @@ def aggregate(records: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
             return [float(r[key]) for r in rs if r.get(key) is not None and np.isfinite(r[key])]
 
         final, seps = values("final_tracking_error"), values("min_separation_segments")
-        out.append({
-            "table": "groups", "params": runs[0]["params"], "runs": len(runs), "successes": wins,
-            "success_rate": wins / len(runs), "errors": len(runs) - len(ok),
-            "min_separation_segments": min(seps, default=float("nan")),
-            "final_tracking_error_median": _median(final),
-            "final_tracking_error_max": max(final, default=float("nan")),
-            "max_tracking_error": max(values("max_tracking_error"), default=float("nan")),
-            "separation_violations": int(sum(values("separation_violations"))),
-            "speed_violations": int(sum(values("speed_violations"))),
-            "solver_failures": int(sum(values("solver_failures"))),
-            "step_ms_median": _median(values("step_ms_median")),
-            "qp_ms_median": _median(values("qp_ms_median")),
-            "qp_ms_p90": _median(values("qp_ms_p90")), "wall_s": float(sum(values("wall_s", runs))),
-        })  # fmt: skip
+        out.append(
+            {
+                "table": "groups",
+                "params": runs[0]["params"],
+                "runs": len(runs),
+                "successes": wins,
+                "success_rate": wins / len(runs),
+                "errors": len(runs) - len(ok),
+                "min_separation_segments": min(seps, default=float("nan")),
+                "final_tracking_error_median": _median(final),
+                "final_tracking_error_max": max(final, default=float("nan")),
+                "max_tracking_error": max(values("max_tracking_error"), default=float("nan")),
+                "separation_violations": int(sum(values("separation_violations"))),
+                "speed_violations": int(sum(values("speed_violations"))),
+                "solver_failures": int(sum(values("solver_failures"))),
+                "step_ms_median": _median(values("step_ms_median")),
+                "qp_ms_median": _median(values("qp_ms_median")),
+                "qp_ms_p90": _median(values("qp_ms_p90")),
+                "wall_s": float(sum(values("wall_s", runs))),
+            }
+        )
     return out
 
 
@@ -337,19 +362,26 @@ def params_text(params: Mapping[str, Any]) -> str:
 
 
 COLUMNS = [
-    ("params", "parameters", "{}"), ("runs", "runs", "{}"), ("success_rate", "success", "{:.0%}"),
-    ("errors", "errors", "{}"), ("min_separation_segments", "min sep [m]", "{:.3f}"),
+    ("params", "parameters", "{}"),
+    ("runs", "runs", "{}"),
+    ("success_rate", "success", "{:.0%}"),
+    ("errors", "errors", "{}"),
+    ("min_separation_segments", "min sep [m]", "{:.3f}"),
     ("final_tracking_error_median", "final err med [m]", "{:.3f}"),
     ("final_tracking_error_max", "final err max", "{:.3f}"),
-    ("max_tracking_error", "max err", "{:.3f}"), ("solver_failures", "fallbacks", "{}"),
-    ("step_ms_median", "step med [ms]", "{:.2f}"), ("qp_ms_median", "QP med [ms]", "{:.2f}"),
-    ("qp_ms_p90", "QP p90", "{:.2f}"), ("wall_s", "wall [s]", "{:.1f}"),
-]  # fmt: skip
+    ("max_tracking_error", "max err", "{:.3f}"),
+    ("solver_failures", "fallbacks", "{}"),
+    ("step_ms_median", "step med [ms]", "{:.2f}"),
+    ("qp_ms_median", "QP med [ms]", "{:.2f}"),
+    ("qp_ms_p90", "QP p90", "{:.2f}"),
+    ("wall_s", "wall [s]", "{:.1f}"),
+]
 
 
 def markdown_table(groups: Sequence[dict[str, Any]]) -> str:
     """The groups as a markdown table (NaN shown as ``-``)."""
     return tables.markdown_table(groups, COLUMNS, {"params": lambda v: params_text(v or {})})
+
 
 def failures_text(records: Sequence[dict[str, Any]]) -> str:
     """One line per failed run: its parameters, seed and why (its error, or the checks it failed)."""

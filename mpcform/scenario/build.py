@@ -31,12 +31,17 @@ def build_controller(
     spec = scenario.controller
     kind = spec.kind if kind is None else kind
     if kind not in CONTROLLER_KINDS:
-        raise ScenarioError("controller.kind", f"expected one of {listing(CONTROLLER_KINDS)}, "
-                            f"got {kind!r}{did_you_mean(kind, CONTROLLER_KINDS)}")  # fmt: skip
+        raise ScenarioError(
+            "controller.kind",
+            f"expected one of {listing(CONTROLLER_KINDS)}, "
+            f"got {kind!r}{did_you_mean(kind, CONTROLLER_KINDS)}",
+        )
     solver_name = solver.name if isinstance(solver, QPBackend) else solver
     if solver is not None and kind != "mpc":
-        raise ScenarioError("controller.solver", f"a solver ({solver_name!r}) applies only to the mpc "
-                            f"controller, this run uses {kind!r}")  # fmt: skip
+        raise ScenarioError(
+            "controller.solver",
+            f"a solver ({solver_name!r}) applies only to the mpc controller, this run uses {kind!r}",
+        )
     ref, dt, limits = scenario.reference, scenario.simulation.dt_s, scenario.limits
     v_max = limits.v_max_mps if spec.saturate else None
     with as_scenario_error("controller"):
@@ -49,11 +54,15 @@ def build_controller(
             return NullSpaceController(ref, dt, settings, v_max)
         if kind == "consensus":
             if scenario.graph is None:
-                raise ScenarioError("graph", "missing table [graph]: the consensus controller needs a "
-                                    f"communication graph (kind = {listing(GRAPH_KINDS)})")  # fmt: skip
+                raise ScenarioError(
+                    "graph",
+                    "missing table [graph]: the consensus controller needs a "
+                    f"communication graph (kind = {listing(GRAPH_KINDS)})",
+                )
             consensus = spec.consensus or ConsensusSettings(spec.gain_per_s)
-            return ConsensusController(ref, scenario.graph, dt, consensus, v_max, scenario.network,
-                                       scenario.allow_disconnected)  # fmt: skip
+            return ConsensusController(
+                ref, scenario.graph, dt, consensus, v_max, scenario.network, scenario.allow_disconnected
+            )
     from mpcform.mpc.planner import MPCPlanner
 
     backend: str | QPBackend = spec.solver
@@ -84,6 +93,9 @@ def check_sparse_solver(mpc: MPCSettings, field: str, solver: str | QPBackend) -
     """A solver named for a planner that solves per drone would be ignored: an error."""
     name = solver.name if isinstance(solver, QPBackend) else solver
     if mpc.solves_per_drone:
-        raise ScenarioError(field, f"{name!r} solves the sparse QP, but this scenario solves each "
-                            "drone's QP with DAQP (controller.coupling = \"decoupled\", per_drone = "
-                            "true); set controller.per_drone = false to use it")  # fmt: skip
+        raise ScenarioError(
+            field,
+            f"{name!r} solves the sparse QP, but this scenario solves each "
+            'drone\'s QP with DAQP (controller.coupling = "decoupled", per_drone = '
+            "true); set controller.per_drone = false to use it",
+        )

@@ -207,8 +207,9 @@ def _replace_table(doc: dict[str, Any], name: str, dim: int) -> bool:
     return True
 
 
-def _sweep(parse: Any, doc: dict[str, Any], problems: list[Problem], table: Table, dim: int,
-           tainted: set[str]) -> None:  # fmt: skip
+def _sweep(
+    parse: Any, doc: dict[str, Any], problems: list[Problem], table: Table, dim: int, tainted: set[str]
+) -> None:
     """Call ``parse`` until it passes, reporting each offending key and setting it aside.
 
     A bad required number or vector is replaced by a neutral placeholder (so the later build

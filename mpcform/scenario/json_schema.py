@@ -85,8 +85,15 @@ def _object(table: Table) -> dict[str, Any]:
             if others:
                 then["properties"] = others
             if then:
-                rules.append({"if": {"properties": {table.selector: {"const": variant}},
-                                     "required": [table.selector]}, "then": then})  # fmt: skip
+                rules.append(
+                    {
+                        "if": {
+                            "properties": {table.selector: {"const": variant}},
+                            "required": [table.selector],
+                        },
+                        "then": then,
+                    }
+                )
         if rules:
             out["allOf"] = rules
     return out

@@ -25,12 +25,19 @@ def key_reference_markdown() -> str:
 
 def _type_text(key: Key) -> str:
     base = {
-        "int": "integer", "float": "float", "bool": "boolean", "string": "string",
-        "vector": "d numbers", "bounds": "d numbers (+-inf allowed)",
-        "rotation": "float (d = 2) or 3 numbers (d = 3)", "points": "n rows of d numbers",
-        "table": "inline table", "tables": "array of tables",
-        "indices": "list of integers >= 0", "pairs": "list of [i, j] integer pairs",
-    }[key.type]  # fmt: skip
+        "int": "integer",
+        "float": "float",
+        "bool": "boolean",
+        "string": "string",
+        "vector": "d numbers",
+        "bounds": "d numbers (+-inf allowed)",
+        "rotation": "float (d = 2) or 3 numbers (d = 3)",
+        "points": "n rows of d numbers",
+        "table": "inline table",
+        "tables": "array of tables",
+        "indices": "list of integers >= 0",
+        "pairs": "list of [i, j] integer pairs",
+    }[key.type]
     if key.choices:
         quote = '"' if key.type == "string" else ""
         return f"{base}: {listing(key.choices, quote)}"

@@ -82,8 +82,12 @@ def scenario_from_dict(
     start, positions = _initial(tpl, init)
     limits = _limits(parse_table(data, "limits", dim), dim)
     obstacles = _obstacles(data.get("obstacles"), dim)
-    check_start(positions, "initial.positions" if init["positions"] is not None else "initial.centroid",
-                limits, obstacles)  # fmt: skip
+    check_start(
+        positions,
+        "initial.positions" if init["positions"] is not None else "initial.centroid",
+        limits,
+        obstacles,
+    )
     ref = parse_table(data, "reference", dim)
     reference = _reference(tpl, start, ref, limits)
     if isinstance(reference, ConstantReference):
@@ -96,9 +100,9 @@ def scenario_from_dict(
     controller = _decentralised_settings(controller, parse_table(data, "controller", dim), limits)
     if sim.duration_s < sim.dt_s:
         raise ScenarioError(
-            "simulation.duration", f"expected at least one step, dt = {sim.dt_s:g} s; "
-            f"got {sim.duration_s:g} s",
-        )  # fmt: skip
+            "simulation.duration",
+            f"expected at least one step, dt = {sim.dt_s:g} s; got {sim.duration_s:g} s",
+        )
     if init["perturbation"] > 0.0:
         rng = np.random.default_rng([seed, 1])  # independent of the simulation noise (seed)
         positions = positions + rng.normal(0.0, init["perturbation"], positions.shape)
@@ -161,14 +165,17 @@ def _initial(tpl: Template, init: dict[str, Any]) -> tuple[FormationState, Array
     """The reference's start state and the (unperturbed) start positions (n, d)."""
     if init["positions"] is not None:
         if any(init[k] is not None for k in ("centroid", "rotation", "scale")):
-            raise ScenarioError("initial.positions", "give either positions or a formation state "
-                                "(centroid, rotation, scale), not both")  # fmt: skip
+            raise ScenarioError(
+                "initial.positions",
+                "give either positions or a formation state (centroid, rotation, scale), not both",
+            )
         check_distinct(np.asarray(init["positions"], dtype=float), "initial.positions", "start positions")
         with as_scenario_error("initial"):
             return fit_formation(tpl, init["positions"]).state, np.array(init["positions"])
     if init["centroid"] is None:
-        raise ScenarioError("initial.centroid", "missing: give centroid (with optional rotation "
-                            "and scale) or positions")  # fmt: skip
+        raise ScenarioError(
+            "initial.centroid", "missing: give centroid (with optional rotation and scale) or positions"
+        )
     with as_scenario_error("initial"):
         scale = 1.0 if init["scale"] is None else init["scale"]
         start = FormationState.from_param(init["centroid"], init["rotation"], scale)
@@ -209,12 +216,22 @@ def _mission(tpl: Template, start: FormationState, ref: dict[str, Any], limits: 
                 raise ScenarioError(
                     f"{prefix}.{exc.field}", str(exc).removeprefix(f"{exc.field}: ")
                 ) from None
-        keyframes.append({"centroid_m": k["centroid"], "rotation": k["rotation"], "scale": k["scale"],
-                          "hold_s": k["hold"], "template": switch})  # fmt: skip
+        keyframes.append(
+            {
+                "centroid_m": k["centroid"],
+                "rotation": k["rotation"],
+                "scale": k["scale"],
+                "hold_s": k["hold"],
+                "template": switch,
+            }
+        )
     derived = [key for key in ("speed_fraction", "drone_acceleration", "drone_jerk") if ref[key] is not None]
     if limits.v_max_mps is None and derived:
-        raise ScenarioError(f"reference.{derived[0]}", "applies only with limits.v_max (the limits "
-                            "are derived from the drones' speed bound), which is unset")  # fmt: skip
+        raise ScenarioError(
+            f"reference.{derived[0]}",
+            "applies only with limits.v_max (the limits "
+            "are derived from the drones' speed bound), which is unset",
+        )
     try:
         budget = None
         if limits.v_max_mps is not None:
@@ -264,8 +281,10 @@ def _decentralised_settings(spec: ControllerSpec, c: dict[str, Any], limits: Lim
     nullspace = given(NULLSPACE_FIELDS, "nullspace")
     if nullspace.get("objective") == "repulsion" and "repulsion_radius_m" not in nullspace:
         if limits.d_min_m is None:
-            raise ScenarioError("controller.repulsion_radius", "missing: set it, or limits.d_min "
-                                "(the default radius is 1.5 * d_min)")  # fmt: skip
+            raise ScenarioError(
+                "controller.repulsion_radius",
+                "missing: set it, or limits.d_min (the default radius is 1.5 * d_min)",
+            )
         nullspace["repulsion_radius_m"] = 1.5 * limits.d_min_m
     with as_scenario_error("controller"):
         return dataclasses.replace(
@@ -311,11 +330,16 @@ def _obstacles(raw: Any, dim: int) -> tuple[SphereObstacle, ...]:
 
 
 _ATTRS = {
-    "limits": {"v_max": "v_max_mps", "d_min": "d_min_m", "a_max": "a_max_mps2",
-               "geofence_min": "geofence_min_m", "geofence_max": "geofence_max_m",
-               "downwash": "downwash_kappa"},
+    "limits": {
+        "v_max": "v_max_mps",
+        "d_min": "d_min_m",
+        "a_max": "a_max_mps2",
+        "geofence_min": "geofence_min_m",
+        "geofence_max": "geofence_max_m",
+        "downwash": "downwash_kappa",
+    },
     "simulation": {"dt": "dt_s", "duration": "duration_s", "noise": "noise_std_m"},
-}  # fmt: skip
+}
 
 
 def _renamed(values: dict[str, Any], table: str) -> dict[str, Any]:

@@ -40,8 +40,9 @@ def parse_top_level(data: Mapping[str, Any]) -> dict[str, Any]:
     values = parse_keys(top, scalars, "", dim=2, n=None)
     name = values["name"]
     if name is not None and (not re.fullmatch(r"[A-Za-z0-9_][A-Za-z0-9_.-]*", name)):
-        raise ScenarioError("name", f"expected letters, digits, '_', '-' or '.' (it names the "
-                            f"output directory), got {name!r}")  # fmt: skip
+        raise ScenarioError(
+            "name", f"expected letters, digits, '_', '-' or '.' (it names the output directory), got {name!r}"
+        )
     return values
 
 
@@ -103,8 +104,10 @@ def _convert(key: Key, value: Any, field: str, dim: int, n: int | None) -> Any:
         if not isinstance(value, str):
             raise ScenarioError(field, f"expected a string, got {value!r}")
         if key.choices and value not in key.choices:
-            raise ScenarioError(field, f"expected one of {listing(key.choices)}, got {value!r}"
-                                f"{did_you_mean(value, key.choices)}")  # fmt: skip
+            raise ScenarioError(
+                field,
+                f"expected one of {listing(key.choices)}, got {value!r}{did_you_mean(value, key.choices)}",
+            )
         return value
     if key.type in ("int", "float"):
         number = _number(value, integer=key.type == "int")

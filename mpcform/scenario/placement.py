@@ -32,17 +32,23 @@ def check_distinct(points_m: Array, field: str, what: str = "offsets") -> None:
         return
     tol = COINCIDENT_RTOL * max(1.0, float(np.abs(points_m).max()))
     if float(np.abs(points_m).max()) <= tol:
-        raise ScenarioError(field, f"all {n} {what} are zero: the drones would share one point, and no "
-                            "separation d_min > 0 can hold between them")  # fmt: skip
+        raise ScenarioError(
+            field,
+            f"all {n} {what} are zero: the drones would share one point, and no "
+            "separation d_min > 0 can hold between them",
+        )
     dist, idx = cKDTree(points_m).query(points_m, k=2)
     i = int(np.argmin(dist[:, 1]))
     if dist[i, 1] > tol:
         return
     j = int(idx[i, 1] if idx[i, 1] != i else idx[i, 0])
     i, j = min(i, j), max(i, j)
-    raise ScenarioError(field, f"{what} {i} and {j} coincide at {_point(points_m[i])} (distance "
-                        f"{dist[i, 1]:.3g} m): no separation d_min > 0 can hold between them; "
-                        "expected distinct points")  # fmt: skip
+    raise ScenarioError(
+        field,
+        f"{what} {i} and {j} coincide at {_point(points_m[i])} (distance "
+        f"{dist[i, 1]:.3g} m): no separation d_min > 0 can hold between them; "
+        "expected distinct points",
+    )
 
 
 def check_start(positions_m: Array, field: str, limits: Limits, obstacles: Obstacles) -> None:
@@ -52,10 +58,13 @@ def check_start(positions_m: Array, field: str, limits: Limits, obstacles: Obsta
         outside = np.flatnonzero(((positions_m < lo) | (positions_m > hi)).any(axis=1))
         if outside.size:
             i = int(outside[0])
-            raise ScenarioError(field, f"drone {i}{_more(outside)} starts at {_point(positions_m[i])}, "
-                                f"outside the geofence box limits.geofence_min = {_point(lo)} to "
-                                f"limits.geofence_max = {_point(hi)}; expected every start "
-                                "inside it")  # fmt: skip
+            raise ScenarioError(
+                field,
+                f"drone {i}{_more(outside)} starts at {_point(positions_m[i])}, "
+                f"outside the geofence box limits.geofence_min = {_point(lo)} to "
+                f"limits.geofence_max = {_point(hi)}; expected every start "
+                "inside it",
+            )
     _clear_of_obstacles(positions_m, field, "starts", limits, obstacles)
 
 
@@ -82,10 +91,13 @@ def _clear_of_obstacles(
         if inside.size:
             i = int(inside[np.argmin(dist[inside])])
             clearance = "d_min / 2" if ob.clearance_m is None else "clearance"
-            raise ScenarioError(field, f"drone {i}{_more(inside)} {verb} at {_point(points_m[i])}, "
-                                f"{dist[i]:.4g} m from the centre of obstacles[{k}], inside its radius + "
-                                f"{clearance} = {need:.4g} m; expected every drone at least that "
-                                f"far{note}")  # fmt: skip
+            raise ScenarioError(
+                field,
+                f"drone {i}{_more(inside)} {verb} at {_point(points_m[i])}, "
+                f"{dist[i]:.4g} m from the centre of obstacles[{k}], inside its radius + "
+                f"{clearance} = {need:.4g} m; expected every drone at least that "
+                f"far{note}",
+            )
 
 
 def _more(indices: Array) -> str:

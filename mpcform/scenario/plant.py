@@ -25,9 +25,10 @@ def parse_plant(data: Mapping[str, Any], dim: int, dt_s: float) -> PlantSpec:
     raw_sim = data.get("simulation")
     if isinstance(raw_sim, Mapping) and "lag" in raw_sim:
         raise ScenarioError(
-            "simulation.lag", f"moved: write [plant] with kind = \"lag\" and time_constant = "
-            f"{raw_sim['lag']!r} (the same time constant [s]); simulation.lag is no longer read"
-        )  # fmt: skip
+            "simulation.lag",
+            f'moved: write [plant] with kind = "lag" and time_constant = '
+            f"{raw_sim['lag']!r} (the same time constant [s]); simulation.lag is no longer read",
+        )
     p = parse_table(data, "plant", dim)
     if p["kind"] == "quadrotor":
         check_rate(p["rate"], dt_s)
@@ -54,9 +55,10 @@ def check_rate(rate_hz: float, dt_s: float) -> None:
     ratio = rate_hz * dt_s
     if ratio < 1.0 - RATE_RTOL or abs(ratio - round(ratio)) > RATE_RTOL * ratio:
         raise ScenarioError(
-            "plant.rate", f"expected a multiple of the control rate 1 / dt = {1.0 / dt_s:g} Hz, "
-            f"got {rate_hz:g} Hz ({ratio:.6g} inner steps per control step)"
-        )  # fmt: skip
+            "plant.rate",
+            f"expected a multiple of the control rate 1 / dt = {1.0 / dt_s:g} Hz, "
+            f"got {rate_hz:g} Hz ({ratio:.6g} inner steps per control step)",
+        )
 
 
 def with_plant_kind(scenario: Scenario, kind: str) -> Scenario:

@@ -103,8 +103,13 @@ _MPC = ("mpc",)
 _GOAL = ("constant", "exponential")
 _MISSION = ("mission",)
 # scenario key -> MPCSettings field (the remaining mpc keys share their name with the field)
-MPC_FIELDS = {"gain": "gain_per_s", "margin": "margin_m", "tie_break": "tie_break_rad",
-              "time_limit": "time_limit_s", "split_budget": "split_budget_s"}  # fmt: skip
+MPC_FIELDS = {
+    "gain": "gain_per_s",
+    "margin": "margin_m",
+    "tie_break": "tie_break_rad",
+    "time_limit": "time_limit_s",
+    "split_budget": "split_budget_s",
+}
 
 
 def _mpc_key(name: str, type_: str, doc: str, unit: str = "", **kw: Any) -> Key:

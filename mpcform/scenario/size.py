@@ -128,8 +128,10 @@ def check_memory(
         f"{2 * (est.horizon or 0) - 1:,}",
     }
     shown = [f"{what[k]}: {b / GIB:,.1f} GiB" for k, b in parts.items() if b >= 0.01 * est.total_bytes]
-    fix = {"simulation.duration": "shorten simulation.duration (or raise simulation.dt)",
-           "controller.horizon": "lower controller.horizon"}.get(key, "use fewer drones")  # fmt: skip
+    fix = {
+        "simulation.duration": "shorten simulation.duration (or raise simulation.dt)",
+        "controller.horizon": "lower controller.horizon",
+    }.get(key, "use fewer drones")
     raise ScenarioError(
         key,
         f"the run would need about {est.total_gib:,.1f} GiB of memory ({'; '.join(shown)}), above the "

@@ -100,9 +100,11 @@ class Scenario:
         valid, v_max = self.robustness.valid_speed_mps, self.limits.v_max_mps
         if v_max is None or not v_max > valid:
             return None
-        return (f"plant: its margin holds for commands below {valid:.3g} m/s (beyond, drag in the "
-                "strongest wind plus a_max may exceed the tilt or thrust authority) and limits.v_max "
-                f"is {v_max:.3g} m/s (lower limits.v_max, limits.a_max or the wind's bound)")  # fmt: skip
+        return (
+            f"plant: its margin holds for commands below {valid:.3g} m/s (beyond, drag in the "
+            "strongest wind plus a_max may exceed the tilt or thrust authority) and limits.v_max "
+            f"is {v_max:.3g} m/s (lower limits.v_max, limits.a_max or the wind's bound)"
+        )
 
     def spacing_warning(self, controller: str | None = None) -> str | None:
         """A line when the MPC cannot reach the final formation under the plant: its closest pair
@@ -118,10 +120,12 @@ class Scenario:
         closest = min_pair_distance(final)  # inf for one drone
         if keep is None or closest >= keep:
             return None
-        return (f"plant: the final formation's closest pair is {closest:.3g} m apart, below the "
-                f"{keep:.3g} m (d_min + 2 x margin {rob.margin_m:.3g} m) the MPC keeps under this "
-                "plant: those drones stop short of their targets (widen the formation, lower "
-                "limits.a_max or set plant.margin)")  # fmt: skip
+        return (
+            f"plant: the final formation's closest pair is {closest:.3g} m apart, below the "
+            f"{keep:.3g} m (d_min + 2 x margin {rob.margin_m:.3g} m) the MPC keeps under this "
+            "plant: those drones stop short of their targets (widen the formation, lower "
+            "limits.a_max or set plant.margin)"
+        )
 
     @property
     def steps(self) -> int:

@@ -81,9 +81,10 @@ class PlantSpec:
             positive("plant.margin", self.margin_m, allow_zero=True)
         if self.kind == "ideal" and self.wind is not None:
             raise ValidationError(
-                "plant.wind", "the ideal plant is the planner's own model and takes no wind: choose "
-                "plant.kind = lag, second_order or quadrotor"
-            )  # fmt: skip
+                "plant.wind",
+                "the ideal plant is the planner's own model and takes no wind: choose "
+                "plant.kind = lag, second_order or quadrotor",
+            )
 
     @property
     def ideal(self) -> bool:
@@ -116,18 +117,25 @@ class PlantSpec:
     def build(self, n: int, dim: int, seed: int | np.random.SeedSequence = 0) -> Plant:
         """The plant for ``n`` drones in ``dim`` dimensions; ``seed`` feeds its wind and noise."""
         common: dict[str, object] = {
-            "wind": self.wind, "noise_std_m": self.measurement_noise_m, "seed": seed,
+            "wind": self.wind,
+            "noise_std_m": self.measurement_noise_m,
+            "seed": seed,
             "samples_per_step": self.samples_per_step,
-        }  # fmt: skip
+        }
         if self.kind == "ideal":
             return IdealPlant(n, dim, **common)
         if self.kind == "lag":
             return lag_plant(n, dim, self.time_constant_s, **common)  # type: ignore[arg-type]
         if self.kind == "second_order":
             return second_order_plant(
-                n, dim, self.damping, self.natural_frequency_rad_s, zeta_z=self.damping_z,
-                omega_z_rad_s=self.natural_frequency_z_rad_s, **common,  # type: ignore[arg-type]
-            )  # fmt: skip
+                n,
+                dim,
+                self.damping,
+                self.natural_frequency_rad_s,
+                zeta_z=self.damping_z,
+                omega_z_rad_s=self.natural_frequency_z_rad_s,
+                **common,  # type: ignore[arg-type]
+            )
         from mpcform.sim.quadrotor import QuadrotorPlant, QuadrotorSpec
 
         spec = QuadrotorSpec(self.platform, self.model, self.rate_hz, altitude_m=self.altitude_m)

@@ -46,9 +46,9 @@ def obstacle_distances_along(path_m: Array, obstacles: tuple[SphereObstacle, ...
     return out
 
 
-def obstacle_metrics(path_m: Array, obstacles: tuple[SphereObstacle, ...], d_min_m: float | None) -> tuple[
-    float | None, int
-]:
+def obstacle_metrics(
+    path_m: Array, obstacles: tuple[SphereObstacle, ...], d_min_m: float | None
+) -> tuple[float | None, int]:
     """``(min clearance from any obstacle's surface along the segments [m], violations)``; a violation
     is a (segment, drone, obstacle) that comes closer than the required clearance (None, 0 without
     obstacles)."""

@@ -43,8 +43,11 @@ class SimulationResult(Trajectory):
     def __post_init__(self) -> None:
         super().__post_init__()
         if len(self.infos) != self.steps or self.step_times_s.shape != (self.steps,):
-            raise ValidationError("simulation result", f"expected {self.steps} step infos and step times, "
-                                  f"got {len(self.infos)} and shape {self.step_times_s.shape}")  # fmt: skip
+            raise ValidationError(
+                "simulation result",
+                f"expected {self.steps} step infos and step times, "
+                f"got {len(self.infos)} and shape {self.step_times_s.shape}",
+            )
 
 
 def plant_seed(seed: int) -> np.random.SeedSequence:
@@ -113,13 +116,25 @@ def simulate(
     ref, _ = controller.reference.targets(t)
     dense = concat_samples(parts)
     true = TrueTrajectory(
-        dense.t_s, dense.p_true_m, dense.v_true_mps, controller.reference.targets(dense.t_s)[0],
-        dense.quat_xyzw, dense.thrust_N,
-    )  # fmt: skip
+        dense.t_s,
+        dense.p_true_m,
+        dense.v_true_mps,
+        controller.reference.targets(dense.t_s)[0],
+        dense.quat_xyzw,
+        dense.thrust_N,
+    )
     return SimulationResult(
-        t, pos, cmd, ref, tuple(infos), times, controller.name, true=true,
-        scale_estimates=s_hat, wind_clip_fraction=plant.wind_clip_fraction,
-    )  # fmt: skip
+        t,
+        pos,
+        cmd,
+        ref,
+        tuple(infos),
+        times,
+        controller.name,
+        true=true,
+        scale_estimates=s_hat,
+        wind_clip_fraction=plant.wind_clip_fraction,
+    )
 
 
 def _estimates_record(controller: Controller, steps: int) -> Array | None:

@@ -144,9 +144,13 @@ def stage_order(ctx: QPContext, A: sp.csc_matrix, lo: Array, hi: Array) -> Stage
                 scale[r] = s
         order.extend(lincon[k])
     return StageOrder(
-        var_perm, np.array(order, dtype=np.intp), scale,
-        [x.shape[0] for x in xs], [u.shape[0] for u in us] + [0], [len(c) for c in lincon],
-    )  # fmt: skip
+        var_perm,
+        np.array(order, dtype=np.intp),
+        scale,
+        [x.shape[0] for x in xs],
+        [u.shape[0] for u in us] + [0],
+        [len(c) for c in lincon],
+    )
 
 
 class CasadiConicBackend(StoredQP):

@@ -37,11 +37,17 @@ class CasadiIpoptBackend(StoredQP):
         self._casadi = casadi
         o = options
         self._options = {
-            "print_time": False, "error_on_fail": False,
-            "ipopt": given(print_level=0, sb="yes", tol=o.eps_abs, constr_viol_tol=o.eps_abs,
-                           max_iter=o.max_iter,
-                           max_cpu_time=o.time_limit_s if o.time_limit_s > 0 else None),
-        }  # fmt: skip
+            "print_time": False,
+            "error_on_fail": False,
+            "ipopt": given(
+                print_level=0,
+                sb="yes",
+                tol=o.eps_abs,
+                constr_viol_tol=o.eps_abs,
+                max_iter=o.max_iter,
+                max_cpu_time=o.time_limit_s if o.time_limit_s > 0 else None,
+            ),
+        }
 
     def solve(self, x0: Array | None = None) -> QPSolution:
         if self._P is None:

@@ -48,11 +48,25 @@ class OSQPBackend(QPBackend):
 
     def setup(self, P: sp.csc_matrix, q: Array, A: sp.csc_matrix, lo: Array, hi: Array) -> None:
         o = self.options
-        extra = given(eps_abs=o.eps_abs, eps_rel=o.eps_rel, max_iter=o.max_iter,
-                      time_limit=o.time_limit_s if o.time_limit_s > 0 else None)  # fmt: skip
+        extra = given(
+            eps_abs=o.eps_abs,
+            eps_rel=o.eps_rel,
+            max_iter=o.max_iter,
+            time_limit=o.time_limit_s if o.time_limit_s > 0 else None,
+        )
         solver = self._osqp.OSQP()
-        solver.setup(P.copy(), q, A.copy(), lo, hi, verbose=False, polishing=True, warm_starting=True,
-                     adaptive_rho=True, **extra)  # fmt: skip
+        solver.setup(
+            P.copy(),
+            q,
+            A.copy(),
+            lo,
+            hi,
+            verbose=False,
+            polishing=True,
+            warm_starting=True,
+            adaptive_rho=True,
+            **extra,
+        )
         self._solver, self._nnz_a, self._own_max_iter = solver, A.nnz, int(solver.settings.max_iter)
 
     def limit_iterations(self, max_iter: int | None) -> None:
@@ -76,9 +90,13 @@ class OSQPBackend(QPBackend):
         info = res.info
         ok = info.status_val in (1, 2) and res.x is not None and bool(np.all(np.isfinite(res.x)))
         return QPSolution(
-            res.x.copy() if ok else None, res.y.copy() if ok else None, ok, str(info.status),
-            int(info.iter), elapsed,
-        )  # fmt: skip
+            res.x.copy() if ok else None,
+            res.y.copy() if ok else None,
+            ok,
+            str(info.status),
+            int(info.iter),
+            elapsed,
+        )
 
 
 class PIQPBackend(QPBackend):
@@ -161,9 +179,13 @@ class PIQPBackend(QPBackend):
             y[eq] = res.y
             y[~eq] = res.z_u - res.z_l
         return QPSolution(
-            np.array(res.x) if ok else None, y if ok else None, ok,
-            str(status).split(".")[-1].lower(), int(res.info.iter), elapsed,
-        )  # fmt: skip
+            np.array(res.x) if ok else None,
+            y if ok else None,
+            ok,
+            str(status).split(".")[-1].lower(),
+            int(res.info.iter),
+            elapsed,
+        )
 
 
 @dataclass(eq=False)

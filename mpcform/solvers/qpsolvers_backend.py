@@ -53,8 +53,9 @@ class RowSplit:
         return y
 
 
-def qpsolvers_form(P_upper: sp.spmatrix, q: Array, A: sp.spmatrix, lo: Array, hi: Array,
-                   dense: bool = False) -> tuple[Any, RowSplit]:  # fmt: skip
+def qpsolvers_form(
+    P_upper: sp.spmatrix, q: Array, A: sp.spmatrix, lo: Array, hi: Array, dense: bool = False
+) -> tuple[Any, RowSplit]:
     """``l <= A z <= u`` (P upper triangular) as a :class:`qpsolvers.Problem` (full symmetric P,
     rows with ``l == u`` as equalities, each finite side of the others as a row of ``G z <= h``)."""
     import qpsolvers
@@ -79,8 +80,14 @@ def qpsolvers_settings(solver: str, options: SolverOptions) -> dict[str, Any]:
     a, r, it = options.eps_abs, options.eps_rel, options.max_iter
     tl = options.time_limit_s if options.time_limit_s > 0 else None
     gap_check = True if a is not None else None
-    with_gap = given(eps_abs=a, eps_rel=r, eps_duality_gap_abs=a, eps_duality_gap_rel=r,
-                     check_duality_gap=gap_check, max_iter=it)  # fmt: skip
+    with_gap = given(
+        eps_abs=a,
+        eps_rel=r,
+        eps_duality_gap_abs=a,
+        eps_duality_gap_rel=r,
+        check_duality_gap=gap_check,
+        max_iter=it,
+    )
     table: dict[str, dict[str, Any]] = {
         "clarabel": given(tol_feas=a, tol_gap_abs=a, tol_gap_rel=r, max_iter=it, time_limit=tl),
         "cvxopt": given(feastol=a, abstol=a, reltol=r, maxiters=it),
@@ -126,9 +133,12 @@ class QPSolversBackend(StoredQP):
                 warnings.simplefilter("ignore")
                 problem, rows = qpsolvers_form(self._P, self._q, self._A, self._lo, self._hi, self._dense)
                 sol = self._qpsolvers.solve_problem(
-                    problem, solver=self.solver, initvals=x0 if self.warm_starts else None, verbose=False,
+                    problem,
+                    solver=self.solver,
+                    initvals=x0 if self.warm_starts else None,
+                    verbose=False,
                     **self._settings,
-                )  # fmt: skip
+                )
         except Exception as exc:  # noqa: BLE001 - a solver's own error is this solve's failure status
             return failed(f"error: {type(exc).__name__}: {exc}", time.perf_counter() - start)
         elapsed = time.perf_counter() - start

@@ -128,8 +128,10 @@ def test_missing_file(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> Non
         (["run", WORKED, "--controller", "trackin"], ("--controller", "did you mean 'tracking'")),
         (["run", WORKED, "--solver", "osqp"], ("only to the mpc controller",)),
         (["run", WORKED, "--controller", "mpc", "--solver", "nope"], ("solver", "unknown solver")),
-        (["run", str(ROOT / "scenarios" / "formation_flight_100.toml"), "--solver", "osqp"],
-         ("solver: 'osqp' solves the sparse QP", "per_drone = false")),  # decoupled, per drone
+        (
+            ["run", str(ROOT / "scenarios" / "formation_flight_100.toml"), "--solver", "osqp"],
+            ("solver: 'osqp' solves the sparse QP", "per_drone = false"),
+        ),  # decoupled, per drone
     ],
 )
 def test_bad_overrides(

@@ -221,8 +221,11 @@ def test_pinv_of_full_rank_jacobian_is_the_normal_equation_inverse():
     np.testing.assert_allclose(jacobian_pinv(jac).matrix, expected, atol=1e-10)
 
 
-ISOTROPIC = [Template.polygon(6, radius=1.2), Template.polygon(3), Template.centred(
-    [[s0, s1, s2] for s0 in (-1, 1) for s1 in (-1, 1) for s2 in (-1, 1)])[0]]
+ISOTROPIC = [
+    Template.polygon(6, radius=1.2),
+    Template.polygon(3),
+    Template.centred([[s0, s1, s2] for s0 in (-1, 1) for s1 in (-1, 1) for s2 in (-1, 1)])[0],
+]
 
 
 @pytest.mark.parametrize("tpl", ISOTROPIC, ids=lambda t: f"{t.n}x{t.dim}")

@@ -116,8 +116,15 @@ def test_random_scenarios_hold_speed_and_separation(seed: int, n: int, dim: int,
 
 @pytest.mark.parametrize(
     ("n", "coupling"),
-    [(4, "joint"), (8, "joint"), (12, "joint"), (16, "joint"), (4, "decoupled"), (12, "decoupled"),
-     (16, "decoupled")],  # decoupled 16: a symmetric ring stalls until the tie-break angle grows
+    [
+        (4, "joint"),
+        (8, "joint"),
+        (12, "joint"),
+        (16, "joint"),
+        (4, "decoupled"),
+        (12, "decoupled"),
+        (16, "decoupled"),
+    ],  # decoupled 16: a symmetric ring stalls until the tie-break angle grows
 )
 def test_planar_swaps_finish(n: int, coupling: str) -> None:
     ref, start = swap(n, 2)

@@ -50,7 +50,7 @@ def test_lag_second_order_and_quadrotor_with_wind() -> None:
 @pytest.mark.parametrize(
     ("text", "field", "says"),
     [
-        ('[simulation]\nlag = 0.1\n', "simulation.lag", 'kind = "lag"'),
+        ("[simulation]\nlag = 0.1\n", "simulation.lag", 'kind = "lag"'),
         ('[plant]\nkind = "rocket"\n', "plant.kind", "quadrotor"),
         ('[plant]\nkind = "lag"\ntime_constant = -0.1\n', "plant.time_constant", "> 0"),
         ('[plant]\nkind = "second_order"\ndamping = 0.0\n', "plant.damping", "> 0"),
@@ -62,8 +62,8 @@ def test_lag_second_order_and_quadrotor_with_wind() -> None:
         ('[plant]\nkind = "lag"\n[plant.wind]\nmean = [1.0, nan]\n', "plant.wind.mean", "finite"),
         (f"{LAG_WIND}gust_bound = -1.0\n", "plant.wind.gust_bound", ">= 0"),
         (f"{LAG_WIND}gusts = 1.0\n", "plant.wind.gusts", "unknown"),
-        ('[plant]\n[plant.wind]\nmean = [1.0, 0.0]\n', "plant.wind", "does not apply"),
-        ('[plant]\nmeasurement_noise = -0.1\n', "plant.measurement_noise", ">= 0"),
+        ("[plant]\n[plant.wind]\nmean = [1.0, 0.0]\n", "plant.wind", "does not apply"),
+        ("[plant]\nmeasurement_noise = -0.1\n", "plant.measurement_noise", ">= 0"),
     ],
 )
 def test_bad_plant_keys_name_the_key(text: str, field: str, says: str) -> None:

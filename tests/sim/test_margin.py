@@ -106,8 +106,13 @@ LINEAR = [
     ("second_order", {"damping": 0.7, "natural_frequency_rad_s": 6.0}),
     (
         "second_order",
-        {"damping": 0.5, "natural_frequency_rad_s": 8.0, "damping_z": 0.9, "natural_frequency_z_rad_s": 4.0,
-         "wind": GUSTY},
+        {
+            "damping": 0.5,
+            "natural_frequency_rad_s": 8.0,
+            "damping_z": 0.9,
+            "natural_frequency_z_rad_s": 4.0,
+            "wind": GUSTY,
+        },
     ),
 ]
 QUAD = [("quadrotor", {}), ("quadrotor", {"wind": GUSTY})]
@@ -170,7 +175,8 @@ def test_chord_margin_bounds_the_bend_within_an_interval(kind: str) -> None:
 
 
 MODELLED = [
-    ("lag", 3, GUSTY), ("second_order", 2, GUSTY),
+    ("lag", 3, GUSTY),
+    ("second_order", 2, GUSTY),
     pytest.param("quadrotor", 3, None, marks=needs_flight),
     pytest.param("quadrotor", 3, GUSTY, marks=needs_flight),
     pytest.param("quadrotor", 2, GUSTY, marks=needs_flight),
