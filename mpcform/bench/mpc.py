@@ -45,11 +45,12 @@ from mpcform.formation.template import Template
 from mpcform.mpc.limits import Limits, SphereObstacle, tightened
 from mpcform.mpc.planner import MPCPlanner
 from mpcform.mpc.settings import MPCSettings, mode_settings
+from mpcform.mpc.strategy import as_sparse
 from mpcform.outputs import tables
 from mpcform.reference.base import ConstantReference, Reference
 from mpcform.scenario.load import load_scenario
 from mpcform.solvers.base import QPBackend, QPSolution, SolverOptions
-from mpcform.solvers.registry import DEFAULT_SOLVER, make_backend
+from mpcform.solvers.registry import make_backend
 
 DEFAULT_CVXPY_BUDGET_S = 60.0
 """cvxpy's time budget per case [s] (wall, compilation included)."""
@@ -102,7 +103,7 @@ class MPCCase:
     settings: MPCSettings
     obstacles: tuple[SphereObstacle, ...] = ()
 
-    def planner(self, settings: MPCSettings, solver: str | QPBackend) -> MPCPlanner:
+    def planner(self, settings: MPCSettings, solver: str | QPBackend | None) -> MPCPlanner:
         return MPCPlanner(
             self.reference, self.dt_s, self.limits, settings, obstacles=self.obstacles, solver=solver
         )
@@ -136,8 +137,9 @@ def scenario_case(path: str | Path, coupling: str) -> MPCCase:
             f"{sc.simulation.noise_std_m:g} m",
         )
     mode = mode_settings(coupling, sc.controller.mpc.horizon)
+    solve = sc.controller.mpc.solve if mode.solves_per_drone == sc.controller.mpc.solves_per_drone else None
     settings = replace(
-        sc.controller.mpc, coupling=mode.coupling, grouping=mode.grouping, per_drone=mode.per_drone
+        sc.controller.mpc, coupling=mode.coupling, grouping=mode.grouping, solve=solve or mode.strategy
     )
     limits, obstacles = tightened(sc.limits, sc.obstacles, sc.robustness.margin_m, sc.robustness.a_max_mps2)
     dt = sc.simulation.dt_s
@@ -167,10 +169,10 @@ def bench_case(
 ) -> dict[str, Any]:
     """One case: our step times by mode, the raw-solver, rollout and (optionally) cvxpy references."""
     st = case.settings
-    options = SolverOptions(st.eps_abs, st.eps_rel, st.max_iter, st.time_limit_s)
+    options = as_sparse(st.strategy).options
     rec = RecordingBackend(make_backend(solver, options))
     per_drone = st.solves_per_drone  # then --solver is cvxpy's only
-    planner = case.planner(st, DEFAULT_SOLVER if per_drone else rec)
+    planner = case.planner(st, None if per_drone else rec)
     p = case.start_m.copy()
     planner.reset(0.0, p)
     ours = {mode: _Series() for mode in ("qp", "fast_path", "fallback")}
@@ -225,7 +227,9 @@ def _cvxpy_row(
     """The cvxpy reference: every step's QP recorded without the fast path (per drone: the same
     rows as one sparse QP), solved through cvxpy within ``budget_s``; ratios against ``ours``."""
     full = RecordingBackend(make_backend(solver, options))
-    no_fast = case.planner(replace(case.settings, fast_path=False, per_drone=False), full)
+    no_fast = case.planner(
+        replace(case.settings, fast_path=False, solve=as_sparse(case.settings.strategy)), full
+    )
     q = case.start_m.copy()
     no_fast.reset(0.0, q)
     for j in range(case.steps):

@@ -36,10 +36,11 @@ import scipy.sparse as sp
 
 from mpcform._validate import Array
 from mpcform.errors import MPCFormError, ScenarioError, ValidationError
+from mpcform.mpc.strategy import as_sparse
 from mpcform.scenario.build import check_sparse_solver
 from mpcform.scenario.check import located_problem
 from mpcform.scenario.load import load_scenario
-from mpcform.solvers.base import QPBackend, QPContext, QPSolution, SolverOptions
+from mpcform.solvers.base import QPBackend, QPContext, QPSolution
 from mpcform.solvers.registry import make_backend
 
 FORMAT = "mpcform-qp"
@@ -270,10 +271,9 @@ def record_scenario(path: str | Path, solver: str | None = None) -> list[Recorde
     from mpcform.run.runner import run_scenario
 
     scenario = load_scenario(path)
-    st = scenario.controller.mpc
-    options = SolverOptions(st.eps_abs, st.eps_rel, st.max_iter, st.time_limit_s)
+    sparse = as_sparse(scenario.controller.mpc.strategy)
     recorder = RecordingBackend(
-        make_backend(solver or scenario.controller.solver, options), scenario.name, scenario.simulation.dt_s
+        make_backend(solver or sparse.backend, sparse.options), scenario.name, scenario.simulation.dt_s
     )
 
     def at_step(done: int, total: int) -> None:
@@ -302,8 +302,8 @@ def export_problems(
     for path in scenarios:
         try:
             scenario = load_scenario(path)  # per-drone DAQP solves no sparse QP to record:
-            name = solver or scenario.controller.solver
-            check_sparse_solver(scenario.controller.mpc, "controller.per_drone", name)
+            name = solver or as_sparse(scenario.controller.mpc.strategy).backend
+            check_sparse_solver(scenario.controller.mpc, "controller.solve.kind", name)
         except ScenarioError as exc:
             raise MPCFormError(located_problem(exc, path).text(path)) from None
     kept: list[list[RecordedQP]] = []

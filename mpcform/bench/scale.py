@@ -30,7 +30,7 @@ import time
 import tracemalloc
 from collections.abc import Callable, Sequence
 from contextlib import ExitStack
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
@@ -42,6 +42,7 @@ from mpcform.errors import ValidationError
 from mpcform.formation.geometry import min_segment_distance
 from mpcform.mpc.planner import MPCPlanner
 from mpcform.mpc.settings import MPCSettings, mode_settings
+from mpcform.mpc.step_info import MPCStepInfo
 from mpcform.outputs import tables
 from mpcform.run.parallel import blas_threads, process_pool
 from mpcform.solvers.registry import DEFAULT_SOLVER
@@ -49,9 +50,9 @@ from mpcform.solvers.registry import DEFAULT_SOLVER
 DEFAULT_N = (10, 30, 100, 300, 1000)
 
 
-def _solver(settings: MPCSettings, solver: str) -> str:
-    """The backend for a mode: the per-drone decoupled mode takes no sparse solver."""
-    return DEFAULT_SOLVER if settings.solves_per_drone else solver
+def _solver(settings: MPCSettings, solver: str) -> str | None:
+    """The backend for a mode: the per-drone decoupled mode takes no sparse solver (None)."""
+    return None if settings.solves_per_drone else solver
 
 
 def _maxrss_mib() -> float:
@@ -76,9 +77,10 @@ def _closed_loop(planner: MPCPlanner, p: Array, steps: int, budget_s: float) -> 
         spent += elapsed
         times[out.info.mode].append(1e3 * elapsed)
         cpu[out.info.mode].append(1e3 * elapsed_cpu)
-        if out.info.mode != "fast_path":
-            qp_drones.append(out.info.qp_drones)
-        max_slack = max(max_slack, out.info.max_slack_m)
+        info = cast(MPCStepInfo, out.info)
+        if info.mode != "fast_path":
+            qp_drones.append(info.qp_drones)
+        max_slack = max(max_slack, info.max_slack_m)
         p_next = p + DT_S * out.command_mps
         min_seg = min(min_seg, min_segment_distance(p, p_next))
         p, done = p_next, j + 1
@@ -201,7 +203,7 @@ def run(
     modes = [coupling] + (["monolithic"] if monolithic_budget_s > 0 else [])
     for mode in modes:  # bad input fails here, before any case process starts
         settings = mode_settings(mode, horizon)
-        if solver != _solver(settings, solver):
+        if settings.solves_per_drone and solver != DEFAULT_SOLVER:  # --solver given for a per-drone mode
             raise ValidationError(
                 "--solver",
                 f"mode {mode!r} solves each drone's QP with DAQP, not "

@@ -23,6 +23,7 @@ from mpcform.mpc.planner import MPCPlanner
 from mpcform.mpc.problem import StepQP
 from mpcform.mpc.sparse import SparseSolver
 from mpcform.mpc.split import SplitQP, joint_rows
+from mpcform.mpc.strategy import PerDroneSolve, SplitPolicy, as_sparse
 from mpcform.scenario.build import build_controller
 from mpcform.scenario.load import load_scenario
 from mpcform.solvers.base import SolverOptions
@@ -41,7 +42,8 @@ FLOOR_PCT = 1e-4  # the figure's lowest gap [%]
 def record(path: str, rounds: int, steps: int | None) -> tuple[MPCPlanner, list[StepQP]]:
     """Fly ``path`` decoupled with ``rounds`` split rounds; the planner and the QPs it solved."""
     sc = load_scenario(path)
-    mpc = replace(sc.controller.mpc, coupling="decoupled", per_drone=True, split_iterations=max(rounds, 1))
+    per_drone = PerDroneSolve(split=SplitPolicy(iterations=max(rounds, 1)))
+    mpc = replace(sc.controller.mpc, coupling="decoupled", solve=per_drone)
     sc = replace(sc, controller=replace(sc.controller, mpc=mpc))
     planner = build_controller(sc, "mpc")
     if not isinstance(planner, MPCPlanner):  # build_controller makes the kind asked for
@@ -68,12 +70,11 @@ def curves(planner: MPCPlanner, qps: list[StepQP], rounds: int) -> dict[str, Arr
     and the joint backend's wall seconds (Q,)."""
     st = planner.settings
     split = SplitQP(planner._solver.per_drone, rounds, None)  # type: ignore[attr-defined]
-    joint_st = replace(st, coupling="joint", split_iterations=0, split_budget_s=None)
+    sparse = as_sparse(st.strategy)
+    joint_st = replace(st, coupling="joint", solve=sparse)
     args = (planner.dim, planner.dt_s, planner.limits, joint_st, planner._families, planner._separation)
     accurate = SparseSolver(make_backend("qpsolvers:clarabel", ACCURATE), *args)
-    fast = SparseSolver(
-        make_backend(DEFAULT_SOLVER, SolverOptions(st.eps_abs, st.eps_rel, st.max_iter, 0.0)), *args
-    )
+    fast = SparseSolver(make_backend(DEFAULT_SOLVER, sparse.options), *args)
     out: dict[str, list[Any]] = {"cost": [], "wall": [], "cpu": [], "joint": [], "joint_wall": []}
     for qp in qps:
         hist = split.run(qp).history

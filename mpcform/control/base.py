@@ -20,29 +20,14 @@ FEEDFORWARDS = ("jacobian", "secant")
 
 @dataclass(frozen=True)
 class StepInfo:
-    """What one control step did.
-
-    ``mode``: ``law`` (closed form), ``fast_path`` (eq. 14 rollout met every QP row), ``qp``
-    (solved), or ``fallback`` (solver failed; certified safe command). ``slack_pairs`` lists the
-    drone pairs (or ``(drone, -1 - obstacle)``) whose separation rows needed slack; ``qp_drones``
-    how many drones the QP was solved for (the others' groups took the fast path). Liveness
-    (:mod:`mpcform.mpc.liveness`): ``stalled`` drones that started to stall at this step,
-    ``resolving`` drones whose tie-break is escalated, ``resolved`` escalations that ended at this
-    step (the drone left conflict).
-    """
+    """What one control step did: ``mode`` ``law`` (closed form), ``fast_path`` (eq. 14 rollout
+    met every QP row), ``qp`` (solved) or ``fallback`` (solver failed; certified safe command),
+    ``saturated`` commands scaled into the speed limit, and the solver's ``status``. The planner
+    reports more in its own record (:class:`mpcform.mpc.step_info.MPCStepInfo`)."""
 
     mode: str
     saturated: int = 0
     status: str = "ok"
-    iterations: int = 0
-    solve_time_s: float = 0.0
-    active_rows: int = 0
-    max_slack_m: float = 0.0
-    slack_pairs: tuple[tuple[int, int], ...] = ()
-    qp_drones: int = 0
-    stalled: int = 0
-    resolving: int = 0
-    resolved: int = 0
 
 
 @dataclass(frozen=True)

@@ -1,4 +1,4 @@
-"""Decoupled mode solved drone by drone: one small dense QP per drone, with DAQP.
+"""Decoupled mode solved drone by drone: one small dense QP per drone (DAQP by default).
 
 In decoupled mode every separation row involves one drone, so the planner's sparse QP
 (:mod:`mpcform.mpc.qp`) is block-diagonal per drone. Eliminating the positions
@@ -9,7 +9,9 @@ In decoupled mode every separation row involves one drone, so the planner's spar
          a_r^T x_{e_r} + s_{e_r} >= b_r,  s >= 0
 
 (``L`` strictly lower triangular ones, so ``(M u)_j = u_j + k x_j``): the sparse QP's block,
-with a positive-definite Hessian. Two things make it cheap:
+with a positive-definite Hessian, solved by a per-drone backend
+(:class:`~mpcform.solvers.dense.DenseQPBackend`, chosen by :class:`~mpcform.mpc.strategy.PerDroneSolve`;
+"DAQP" below is whichever it is). Two things make it cheap:
 
 - in the variables ``v = M u`` (``v_j = u_j + k x_j``, what the cost compares with ``c_j``) the
   cost is ``0.5 ||v - c||^2``: DAQP gets an identity Hessian (its cheapest setup), the constant
@@ -27,8 +29,7 @@ with a positive-definite Hessian. Two things make it cheap:
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
-from typing import Any
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy.linalg import solve_triangular
@@ -51,12 +52,8 @@ from mpcform.mpc.working_set import (
     working_sets,
 )
 from mpcform.solvers.base import QPSolution, failed
+from mpcform.solvers.dense import NO_BOUND, DenseQPBackend, DenseSolution
 
-PER_DRONE_SOLVER = "daqp (per drone)"  # the planner's solver_name in decoupled mode with per_drone
-
-DAQP_INF = 1e30  # DAQP's "no bound"
-DAQP_OK = 1
-PRIMAL_TOL = 1e-9  # DAQP row feasibility tolerance (its default 1e-6 shows in the plans)
 MIN_SLACK_QUADRATIC = 1e-6  # keeps the soft QP's Hessian positive definite when w2 = 0
 Solved = tuple[QPSolution, int]  # a solution and its number of active rows
 
@@ -68,7 +65,8 @@ class DroneSolves:
     v: Array  # (n, H d) the solutions in v = M u
     s: Array  # (n, H) slacks (zero where the hard QP was feasible)
     cost: Array  # (n,) objective values 0.5 ||v||^2 - c^T v (+ the slack penalty)
-    flags: Array  # (n,) DAQP exit flags
+    flags: Array  # (n,) the backend's exit flags
+    ok: Array  # (n,) the solves that succeeded
     soft: Array  # (n,) the drones solved with slacks
     lams: list[Array]  # per drone, the rows' multipliers (soft: the slacks' H bounds, then constant
     # rows, then separation rows; a row at its lower bound has a multiplier <= 0)
@@ -86,10 +84,10 @@ class DroneSolves:
 class PerDroneQP(StepSolver):
     """The per-drone condensed QPs of the decoupled planner: everything constant built once.
 
-    ``families`` are the limits' rows (:func:`mpcform.mpc.rows.limit_rows`).
+    ``families`` are the limits' rows (:func:`mpcform.mpc.rows.limit_rows`); ``backend`` solves
+    each drone's QP (its name, with " (per drone)", is the planner's ``solver_name``).
     """
 
-    name = PER_DRONE_SOLVER
     warm_starts = True  # nearly active rows of the warm start start DAQP's active set
 
     def __init__(
@@ -99,11 +97,10 @@ class PerDroneQP(StepSolver):
         limits: Limits,
         settings: MPCSettings,
         families: tuple[LimitRows, ...],
+        backend: DenseQPBackend,
         loop: VelocityLoop | None = None,
     ) -> None:
-        import daqp
-
-        self._daqp = daqp
+        self.backend, self.name = backend, f"{backend.name} (per drone)"
         self.dim, self.dt_s, self.limits, self.settings = dim, dt_s, limits, settings
         h, k = settings.horizon, settings.gain_per_s
         self._nu = nu = h * dim
@@ -122,7 +119,6 @@ class PerDroneQP(StepSolver):
         self._eye = np.eye(nu)
         w2 = max(settings.slack_quadratic, MIN_SLACK_QUADRATIC)
         self._hess_soft = np.diag(np.concatenate([np.full(h, w2), np.ones(nu)]))
-        self._options: dict[str, Any] = {"iter_limit": settings.max_iter, "primal_tol": PRIMAL_TOL}
         self._a, self._lo, self._hi = np.zeros((0, nu)), np.zeros(0), np.zeros(0)  # _buffers
         fixed = all(family.fixed_bounds for family in families)  # the same for every drone at every step
         self._fixed = dense_bounds(families, np.zeros((1, dim)), np.zeros((1, dim))) if fixed else None
@@ -166,7 +162,7 @@ class PerDroneQP(StepSolver):
         ``solve_time_s`` is the time spent inside DAQP), and the number of active rows.
         """
         got = self.solve_each(p0, c, u_prev, singles, coeffs, lower, warm_u, hard, on)
-        return self.solution(got.v, got.s, got.flags, got.lams, got.iterations, got.time_s)
+        return self.solution(got.v, got.s, got.ok, got.flags, got.lams, got.iterations, got.time_s)
 
     def solve_each(
         self,
@@ -196,7 +192,8 @@ class PerDroneQP(StepSolver):
         a, lo, hi = self._buffers(n_const + int(counts.max(initial=0)))
         b_lo, b_hi = self._fixed if self._fixed is not None else dense_bounds(self.families, p0, u_prev)
         offsets = [0, *np.cumsum(counts).tolist()]
-        v_out, s_out, flags, lams = [np.empty(0)] * n, np.zeros((n, h)), [DAQP_OK] * n, [np.empty(0)] * n
+        v_out, s_out, lams = [np.empty(0)] * n, np.zeros((n, h)), [np.empty(0)] * n
+        flags, ok = [0] * n, [True] * n
         const_c, owner = c_v @ self._const_v.T, np.repeat(np.arange(n), counts)
         at_x = owner * h + sep_end - 1  # each row's position x_e among the drones'
         cost, free, sep_c_at = np.zeros(n), within_bounds(const_c, b_lo, b_hi), None
@@ -214,20 +211,21 @@ class PerDroneQP(StepSolver):
                 v_out[i], lams[i] = c_v[i], zero[: n_const + counts[i]]
         iters, in_daqp = 0, 0.0
 
-        def hard_qp(i: int, aa: Array, hh: Array, ll: Array) -> Array:
-            """Drone i's hard QP with the rows ``aa`` and bounds; DAQP's multipliers."""
+        def keep(i: int, got: DenseSolution, t0: float) -> Array:
+            """Drone i's solve ``got`` (started at ``t0``) recorded; its multipliers."""
             nonlocal iters, in_daqp
-            t0 = time.perf_counter()
-            v_out[i], cost[i], flags[i], info = self._daqp.solve(
-                self._eye, f_v[i], aa, hh, ll, primal_start=v_warm[i], **self._options
-            )
             in_daqp += time.perf_counter() - t0
-            iters += info["iterations"]
-            return info["lam"]
+            v_out[i], cost[i], flags[i], ok[i] = got.x, got.cost, got.exit_flag, got.success
+            iters += got.iterations
+            return got.multipliers
+
+        def hard_qp(i: int, aa: Array, hh: Array, ll: Array) -> Array:
+            """Drone i's hard QP with the rows ``aa`` and bounds; its multipliers."""
+            t0 = time.perf_counter()
+            return keep(i, self.backend.solve(self._eye, f_v[i], aa, hh, ll, v_warm[i]), t0)
 
         def solve(i: int, soft: bool = False) -> None:
             """Drone i's hard (or ``soft``) QP with all its rows, in the buffer; its multipliers."""
-            nonlocal iters, in_daqp
             first, last = offsets[i], offsets[i + 1]
             m = n_const + last - first
             if self._fixed is None:
@@ -238,12 +236,11 @@ class PerDroneQP(StepSolver):
                 lams[i] = hard_qp(i, a[:m], hi[:m], lo[:m])
                 return
             t0 = time.perf_counter()
-            v_out[i], s_out[i], flags[i], cost[i], info = self._solve_soft(
+            got = self._solve_soft(
                 f_v[i], a[:m], hi[:m], lo[:m], sep_end[first:last], sep_soft[first:last], n_const
             )
-            in_daqp += time.perf_counter() - t0
-            iters += info["iterations"]
-            lams[i] = info["lam"]
+            lams[i] = keep(i, replace(got, x=got.x[h:]), t0)
+            s_out[i] = got.x[:h]
 
         busy = np.flatnonzero(~free)
         near = working_sets(self._const_v, const_c, v_warm, b_lo, b_hi, busy)
@@ -267,7 +264,7 @@ class PerDroneQP(StepSolver):
                 place[of_g],
                 g - np.asarray(offsets)[of_g],
                 counts[busy],
-                DAQP_INF,
+                NO_BOUND,
             )
             cuts, fs = stk.starts, stk.full_starts
             parts = [
@@ -287,9 +284,9 @@ class PerDroneQP(StepSolver):
             again = misses(self._const_v, v_all[busy], near, b_lo, b_hi, busy)
             at_v = row_values(self._x_of_v, v_all, sep_c, at_x)
             again |= separation_misses(at_v, sep_lo, given, owner, n)[busy]
-            for i in busy[again | (np.array(flags)[busy] != DAQP_OK)].tolist():
+            for i in busy[again | ~np.array(ok)[busy]].tolist():
                 solve(i)
-        soft = [i for i in range(n) if flags[i] != DAQP_OK]  # else the hard optimum (s = 0)
+        soft = [i for i in range(n) if not ok[i]]  # else the hard optimum (s = 0)
         for i in soft:
             solve(i, soft=True)
         v_all = np.array(v_out).reshape(n, nu)
@@ -300,6 +297,7 @@ class PerDroneQP(StepSolver):
             s_out,
             cost,
             np.array(flags),
+            np.array(ok),
             is_soft,
             lams,
             at,
@@ -313,18 +311,20 @@ class PerDroneQP(StepSolver):
             in_daqp,
         )
 
-    def solution(self, v: Array, s: Array, flags: Array, lams: list[Array], iters: int, t_s: float) -> Solved:
-        """The drones' solves (``v`` (n, H d), slacks ``s`` (n, H), DAQP's exit flags and
-        multipliers; ``t_s`` the time in DAQP) as one solution ``[u | x | s]`` (as :meth:`solve_drones`
-        returns it)."""
+    def solution(
+        self, v: Array, s: Array, ok: Array, flags: Array, lams: list[Array], iters: int, t_s: float
+    ) -> Solved:
+        """The drones' solves (``v`` (n, H d), slacks ``s`` (n, H), which succeeded, the backend's
+        exit flags and multipliers; ``t_s`` the time in the backend) as one solution ``[u | x | s]``
+        (as :meth:`solve_drones` returns it)."""
         h, n = self.settings.horizon, v.shape[0]
-        bad = np.flatnonzero((flags != DAQP_OK) | ~np.isfinite(v).all(axis=1))
+        bad = np.flatnonzero(~ok | ~np.isfinite(v).all(axis=1))
         if bad.size:
-            status = f"daqp: exit flag {flags[bad[0]]} (drone {bad[0]})"
+            status = f"{self.backend.name}: exit flag {flags[bad[0]]} (drone {bad[0]})"
             return failed(status, t_s, iters), 0
         u_out, x_out = self.inputs_positions(v)
         flat = [w.reshape(n, h, -1).transpose(1, 0, 2).ravel() for w in (u_out, x_out, s)]
-        sol = QPSolution(np.concatenate(flat), None, True, "daqp: optimal", iters, t_s)
+        sol = QPSolution(np.concatenate(flat), None, True, f"{self.backend.name}: optimal", iters, t_s)
         active = np.count_nonzero(np.abs(np.concatenate(lams)) > ACTIVE_TOL) if n else 0
         return sol, int(active)
 
@@ -370,7 +370,7 @@ class PerDroneQP(StepSolver):
         first: only the separation part and per-drone bounds are rewritten)."""
         if self._a.shape[0] < size:
             size = max(size, 2 * self._a.shape[0])
-            self._a, self._lo, self._hi = np.empty((size, self._nu)), np.empty(size), np.full(size, DAQP_INF)
+            self._a, self._lo, self._hi = np.empty((size, self._nu)), np.empty(size), np.full(size, NO_BOUND)
             n_const = self._const_v.shape[0]
             self._a[:n_const] = self._const_v
             if self._fixed is not None:  # the same bounds for every drone at every step: kept here
@@ -379,8 +379,9 @@ class PerDroneQP(StepSolver):
 
     def _solve_soft(
         self, f_v: Array, a: Array, hi: Array, lo: Array, end: Array, soft: Array, n_const: int
-    ) -> tuple[Array, Array, int, float, dict[str, Any]]:
-        """The drone's QP with its slacks (first, simple bounds ``s >= 0``; Hessian ``diag(w2, I)``).
+    ) -> DenseSolution:
+        """The drone's QP with its slacks (first, simple bounds ``s >= 0``; Hessian ``diag(w2, I)``):
+        its solution ``[s | v]``.
 
         The slacks are not scaled to a unit Hessian: a column ``1 / sqrt(w2)`` would scale DAQP's
         row tolerance up with it (measured: 3.5e-8 misses at ``w2 = 0``)."""
@@ -388,22 +389,20 @@ class PerDroneQP(StepSolver):
         a_s = np.zeros((a.shape[0], h))
         a_s[n_const + np.arange(end.shape[0]), end - 1] = soft
         f = np.concatenate([np.full(h, st.slack_weight), f_v])
-        z, cost, flag, info = self._daqp.solve(
+        return self.backend.solve(
             self._hess_soft,
             f,
             np.hstack([a_s, a]),
-            np.concatenate([np.full(h, DAQP_INF), hi]),
+            np.concatenate([np.full(h, NO_BOUND), hi]),
             np.concatenate([np.zeros(h), lo]),
-            **self._options,
         )
-        return z[h:], z[:h], flag, cost, info
 
 
 def dense_bounds(families: tuple[LimitRows, ...], p0: Array, u_prev: Array) -> tuple[Array, Array]:
     """Lower and upper bounds (n, rows) of the constant rows of ``families`` for each drone (starts
-    ``p0``, last commands ``u_prev`` (n, d)); :data:`DAQP_INF` where a row has none."""
+    ``p0``, last commands ``u_prev`` (n, d)); :data:`~mpcform.solvers.dense.NO_BOUND` where a row has none."""
     n = p0.shape[0]
     if not families:
         return np.zeros((n, 0)), np.zeros((n, 0))
-    lo, hi = zip(*(family.dense_bounds(p0, u_prev, DAQP_INF) for family in families), strict=True)
+    lo, hi = zip(*(family.dense_bounds(p0, u_prev, NO_BOUND) for family in families), strict=True)
     return np.hstack(lo), np.hstack(hi)

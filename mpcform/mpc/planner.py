@@ -34,7 +34,7 @@ from dataclasses import replace
 import numpy as np
 
 from mpcform._validate import Array, positive
-from mpcform.control.base import Controller, ControlStep, StepInfo, feedforward_targets
+from mpcform.control.base import Controller, ControlStep, feedforward_targets
 from mpcform.control.laws import check_gain_dt
 from mpcform.errors import ValidationError
 from mpcform.mpc.candidates import Candidates, CandidateSelector, qp_drones
@@ -42,20 +42,19 @@ from mpcform.mpc.certify import Certifier
 from mpcform.mpc.limits import Limits, SphereObstacle
 from mpcform.mpc.liveness import TieBreak
 from mpcform.mpc.loop import VelocityLoop
-from mpcform.mpc.per_drone import PerDroneQP
 from mpcform.mpc.plan import Plan, guess, rollout, warm_start
-from mpcform.mpc.problem import StepQP, StepSolver
+from mpcform.mpc.problem import StepQP
 from mpcform.mpc.rows import limit_rows, row_ends, violators
 from mpcform.mpc.separation import Separation, SeparationRows
 from mpcform.mpc.settings import MPCSettings
-from mpcform.mpc.sparse import SparseSolver
 from mpcform.mpc.split import SplitQP
+from mpcform.mpc.step_info import FAST_PATH, MPCStepInfo, pairs_of
+from mpcform.mpc.step_solvers import build_step_solvers
+from mpcform.mpc.strategy import with_backend
 from mpcform.reference.base import Reference
-from mpcform.solvers.base import QPBackend, QPSolution, SolverOptions
-from mpcform.solvers.registry import DEFAULT_SOLVER, make_backend
+from mpcform.solvers.base import QPBackend, QPSolution
 
 SLACK_REPORT_M = 1e-6  # slack above this is reported
-FAST_PATH = StepInfo("fast_path")  # a fast-path step that ends no escalation (frozen: shared)
 
 
 class MPCPlanner(Controller):
@@ -75,16 +74,19 @@ class MPCPlanner(Controller):
         limits: Limits | None = None,
         settings: MPCSettings | None = None,
         obstacles: tuple[SphereObstacle, ...] = (),
-        solver: str | QPBackend = DEFAULT_SOLVER,
+        solver: str | QPBackend | None = None,
         loop: VelocityLoop | None = None,
     ) -> None:
         self.reference, self.dt_s = reference, positive("simulation.dt", dt_s)
         self.limits = limits = limits or Limits()
-        self.settings = settings = settings or MPCSettings()
+        settings = settings or MPCSettings()
+        if solver is not None:  # the sparse strategy's backend replaced (a per-drone one refuses)
+            settings = replace(settings, solve=with_backend(settings.strategy, solver, "controller.solver"))
+        self.settings = settings
         check_gain_dt(settings.gain_per_s, dt_s)
         self.n, self.dim = reference.template.n, reference.template.dim
         self.obstacles = tuple(obstacles)
-        _check_limits(self.dim, limits, self.obstacles, solver, settings)
+        _check_limits(self.dim, limits, self.obstacles)
         self.loop = _check_loop(loop, self.dim, settings)
         self._families = limit_rows(self.dim, dt_s, limits, settings)
         self._separation = sep = Separation(self.dim, limits, settings, self.obstacles)
@@ -95,19 +97,12 @@ class MPCPlanner(Controller):
         if self.loop is not None:  # certify where the loop takes the drones in the interval
             loop = self.loop
             self._certifier.drift = lambda u0: loop.first(self._loop_state, u0)
-        self._solver: StepSolver  # the sparse QP with a backend, or DAQP per drone
-        self._stalled_solver: StepSolver | None = None  # the split rounds while a drone is stalled
-        if settings.solves_per_drone:
-            self._solver = PerDroneQP(self.dim, dt_s, limits, settings, self._families, loop)
-            if settings.split_iterations:  # the pair rows' split points iterated (mpc.split)
-                self._solver = SplitQP(self._solver, settings.split_iterations, settings.split_budget_s)
-            elif settings.stalled_split:  # only while a drone is stalled (liveness)
-                self._stalled_solver = SplitQP(self._solver, settings.stalled_split, settings.split_budget_s)
-        else:
-            st = settings
-            options = SolverOptions(st.eps_abs, st.eps_rel, st.max_iter, st.time_limit_s)
-            backend = solver if isinstance(solver, QPBackend) else make_backend(solver, options)
-            self._solver = SparseSolver(backend, self.dim, dt_s, limits, settings, self._families, sep, loop)
+        # the sparse QP with a backend, or each drone's QP; the split rounds while a drone is stalled
+        instance = solver if isinstance(solver, QPBackend) else None
+        self._solver, self._stalled_solver = build_step_solvers(
+            settings, self.dim, dt_s, limits, self._families, sep, loop, instance
+        )
+        self._splits = isinstance(self._solver, SplitQP)  # a pair's split moves both its drones
         self.solver_name = self._solver.name
         self._tie_break = TieBreak(self.n, settings.tie_break_rad, dt_s)
         self.reset(0.0, np.zeros((self.n, self.dim)))
@@ -187,7 +182,7 @@ class MPCPlanner(Controller):
         solver = self._solver
         if self._stalled_solver is not None and self._tie_break.resolving:
             solver = self._stalled_solver
-        if solver is not self._solver or st.split_iterations:  # a pair's split moves both its drones
+        if solver is not self._solver or self._splits:  # a pair's split moves both its drones
             linked = rows.labels[(rows.labels[:, 1] >= 0) & rows.single_on]
         drones = qp_drones(bad, linked) if grouped else np.arange(self.n)
         qp_rows, relaxed = self._hard_first_rows(rows)
@@ -208,13 +203,13 @@ class MPCPlanner(Controller):
             status, solved = status + "; command failed certification", u[0]
         u, x, note = self._certifier.fallback(self._plan, p0, cand, horizon, solved, self._u_prev)
         self._accept(p0, u, x)
-        info = StepInfo(
+        info = MPCStepInfo(
             "fallback",
             status=f"{status}; {note}",
             iterations=sol.iterations,
             solve_time_s=sol.solve_time_s,
             max_slack_m=inside_m,
-            slack_pairs=_pairs_of(inside),
+            slack_pairs=pairs_of(inside),
             **self._liveness(),
         )
         return ControlStep(u[0].copy(), info)
@@ -270,7 +265,7 @@ class MPCPlanner(Controller):
         self._tie_break.clear()
         self._plan, self._u_prev = nominal, nominal.inputs_mps[0].copy()
         resolved = self._tie_break.resolved
-        info = StepInfo("fast_path", resolved=resolved) if resolved else FAST_PATH
+        info = MPCStepInfo("fast_path", resolved=resolved) if resolved else FAST_PATH
         return ControlStep(nominal.inputs_mps[0].copy(), info)
 
     def _merge(self, drones: Array, z: Array, u_nom: Array, x_nom: Array) -> tuple[Array, Array]:
@@ -294,7 +289,7 @@ class MPCPlanner(Controller):
         inside_m: float,
         inside: Array,
         relaxed: bool = False,
-    ) -> StepInfo:
+    ) -> MPCStepInfo:
         """What a certified solve ``z`` reports: its solver figures and the slack it needed (the
         items whose rows positions ``x`` (H, n, d) miss, and the items ``inside`` that start
         ``inside_m`` inside their required distance)."""
@@ -304,14 +299,14 @@ class MPCPlanner(Controller):
         if relaxed or slack.max(initial=0.0) > SLACK_REPORT_M / 2:
             planned, missed = self._separation.shortfall(x, rows, SLACK_REPORT_M)
             shortfall, missed = max(shortfall, planned), np.concatenate([inside, missed])
-        return StepInfo(
+        return MPCStepInfo(
             "qp",
             status=sol.status,
             iterations=sol.iterations,
             solve_time_s=sol.solve_time_s,
             active_rows=active,
             max_slack_m=max(shortfall, 0.0),
-            slack_pairs=_pairs_of(missed),
+            slack_pairs=pairs_of(missed),
             qp_drones=int(drones.shape[0]),
             **self._liveness(),
         )
@@ -333,19 +328,12 @@ def _check_loop(loop: VelocityLoop | None, dim: int, settings: MPCSettings) -> V
     return loop
 
 
-def _pairs_of(labels: Array) -> tuple[tuple[int, int], ...]:
-    """Item labels (m, 2) as sorted unique tuples."""
-    return tuple(sorted({(int(a), int(b)) for a, b in labels}))
-
-
 def _check_limits(
     dim: int,
     limits: Limits,
     obstacles: tuple[SphereObstacle, ...],
-    solver: str | QPBackend,
-    settings: MPCSettings,
 ) -> None:
-    """The limits, obstacles and solver fit a ``dim``-dimensional formation and each other."""
+    """The limits and obstacles fit a ``dim``-dimensional formation and each other."""
     for idx, ob in enumerate(obstacles):
         if ob.center_m.shape != (dim,):
             got = ob.center_m.tolist()
@@ -360,14 +348,6 @@ def _check_limits(
     if limits.geofence_min_m is not None and limits.geofence_min_m.shape != (dim,):
         raise ValidationError(
             "limits.geofence_min", f"expected {dim} numbers, got {limits.geofence_min_m.tolist()}"
-        )
-    if settings.solves_per_drone and solver != DEFAULT_SOLVER:  # it would be ignored
-        text = repr(solver) if isinstance(solver, str) else f"the backend {solver.name!r}"
-        raise ValidationError(
-            "controller.solver",
-            f"{text} solves the sparse QP, but decoupled mode "
-            "solves each drone's QP with DAQP here; set controller.per_drone = false "
-            "to use it",
         )
 
 

@@ -7,6 +7,7 @@ from dataclasses import dataclass
 from mpcform._validate import positive
 from mpcform.control.base import FEEDFORWARDS
 from mpcform.errors import ValidationError
+from mpcform.mpc.strategy import PerDroneSolve, SolveStrategy, SparseSolve, check_strategy, default_strategy
 
 VELOCITY_SETS = ("polytope", "box")
 COUPLINGS = ("joint", "decoupled")
@@ -37,19 +38,9 @@ class MPCSettings:
       ``"decoupled"`` (each pair row split into two per-drone rows about the guess's midpoint,
       ``c^T (p_i - m) >= d_min / 2``: slightly more conservative, but the QP is block-diagonal
       per drone, so it scales to large swarms; the same continuous-time guarantee holds).
-    - ``per_drone`` (decoupled only): solve each drone's block as a small dense QP with DAQP
-      (:mod:`mpcform.mpc.per_drone`) instead of one sparse block-diagonal QP with the ``solver``
-      (naming another solver is then an error). DAQP solves to 1e-9 row feasibility; of the
-      solver settings below only ``max_iter`` applies to it.
-    - ``split_iterations`` (decoupled with ``per_drone``): rounds that move each pair row's split
-      point from the midpoint towards the joint optimum (:mod:`mpcform.mpc.split`); every round's
-      plans meet the joint pair rows, and the rounds converge to the joint QP's optimum
-      (0: the midpoint split). ``split_budget_s``: no new round starts after this much wall time
-      of a step's solve [s] (None: no limit).
-    - ``stalled_split`` (decoupled with ``per_drone``; ignored otherwise): the split rounds of a
-      step in which a drone is stalled in conflict (its tie-break escalated,
-      :mod:`mpcform.mpc.liveness`), when ``split_iterations`` is 0: the midpoint split jams rings
-      of drones that joint-quality splits let pass (0: never).
+    - ``solve``: how the rows are solved (:mod:`mpcform.mpc.strategy`): :class:`SparseSolve` (the
+      sparse QP with a backend) or, with decoupled rows, :class:`PerDroneSolve` (each drone's dense
+      QP, DAQP by default, with its split policy). None: per drone when decoupled, else sparse.
     - ``grouping``: solve only the groups of drones (connected by pair rows within reach) that
       hold a conflict; the other groups' optimum is their eq. 14 rollout (needs ``fast_path``).
       Equal to the monolithic QP up to solver tolerance.
@@ -58,7 +49,6 @@ class MPCSettings:
       linearisation), write the separation rows on where its velocity loop really takes the drones,
       with the last interval's velocity offset estimated (:mod:`mpcform.mpc.loop`); the cost and
       eq. 14 are unchanged. No effect on the ideal plant.
-    - ``eps_abs`` / ``eps_rel`` / ``max_iter`` / ``time_limit_s``: solver tolerances and limits.
     """
 
     horizon: int = 10
@@ -71,22 +61,20 @@ class MPCSettings:
     margin_m: float = 2e-3
     tie_break_rad: float = 0.5
     coupling: str = "joint"
-    per_drone: bool = True
-    split_iterations: int = 0
-    split_budget_s: float | None = None
-    stalled_split: int = 10
+    solve: SolveStrategy | None = None
     grouping: bool = True
     fast_path: bool = True
     plant_model: bool = True
-    eps_abs: float = 1e-4
-    eps_rel: float = 1e-4
-    max_iter: int = 4000
-    time_limit_s: float = 0.0
+
+    @property
+    def strategy(self) -> SolveStrategy:
+        """The solve strategy: ``solve``, or the coupling's default (:func:`default_strategy`)."""
+        return self.solve or default_strategy(self.coupling)
 
     @property
     def solves_per_drone(self) -> bool:
-        """Whether the planner solves each drone's QP with DAQP (decoupled mode with ``per_drone``)."""
-        return self.coupling == "decoupled" and self.per_drone
+        """Whether the planner solves each drone's QP on its own (:class:`PerDroneSolve`)."""
+        return isinstance(self.strategy, PerDroneSolve)
 
     def __post_init__(self) -> None:
         if isinstance(self.horizon, bool) or not isinstance(self.horizon, int) or self.horizon < 1:
@@ -114,24 +102,7 @@ class MPCSettings:
         positive("controller.slack_quadratic", self.slack_quadratic, allow_zero=True)
         positive("controller.margin", self.margin_m, allow_zero=True)
         positive("controller.tie_break", self.tie_break_rad, allow_zero=True)
-        positive("controller.eps_abs", self.eps_abs)
-        positive("controller.eps_rel", self.eps_rel, allow_zero=True)
-        if isinstance(self.max_iter, bool) or not isinstance(self.max_iter, int) or self.max_iter < 1:
-            raise ValidationError("controller.max_iter", f"expected an integer >= 1, got {self.max_iter!r}")
-        positive("controller.time_limit", self.time_limit_s, allow_zero=True)
-        split = self.split_iterations
-        if isinstance(split, bool) or not isinstance(split, int) or split < 0:
-            raise ValidationError("controller.split_iterations", f"expected an integer >= 0, got {split!r}")
-        if split and not self.solves_per_drone:
-            raise ValidationError(
-                "controller.split_iterations",
-                f"expected 0 unless coupling = 'decoupled' with per_drone = true, got {split!r}",
-            )
-        if self.split_budget_s is not None:
-            positive("controller.split_budget", self.split_budget_s)
-        stalled = self.stalled_split
-        if isinstance(stalled, bool) or not isinstance(stalled, int) or stalled < 0:
-            raise ValidationError("controller.stalled_split", f"expected an integer >= 0, got {stalled!r}")
+        check_strategy(self.coupling, self.strategy)
 
 
 PLANNER_MODES = ("decoupled", "decoupled-sparse", "joint", "monolithic")
@@ -144,7 +115,7 @@ def mode_settings(mode: str, horizon: int) -> MPCSettings:
     """Planner settings of a mode of :data:`PLANNER_MODES`, otherwise the defaults:
 
     - ``decoupled``: decoupled rows, grouping, each conflicted drone's QP solved by DAQP;
-    - ``decoupled-sparse``: the same rows as one sparse block-diagonal QP (``per_drone=False``);
+    - ``decoupled-sparse``: the same rows as one sparse block-diagonal QP (:class:`SparseSolve`);
     - ``joint``: joint pair rows, grouping;
     - ``monolithic``: joint rows without grouping: one QP over every drone whenever a solve is needed.
     """
@@ -152,5 +123,6 @@ def mode_settings(mode: str, horizon: int) -> MPCSettings:
         return MPCSettings(horizon=horizon, coupling="joint", grouping=False)
     if mode not in PLANNER_MODES:
         raise ValidationError("mode", f"expected one of {PLANNER_MODES}, got {mode!r}")
-    coupling, _, solve = mode.partition("-")
-    return MPCSettings(horizon=horizon, coupling=coupling, grouping=True, per_drone=solve != "sparse")
+    coupling, _, sparse = mode.partition("-")
+    solve = SparseSolve() if sparse or coupling == "joint" else PerDroneSolve()
+    return MPCSettings(horizon=horizon, coupling=coupling, grouping=True, solve=solve)

@@ -38,14 +38,13 @@ import numpy as np
 
 from mpcform._validate import Array
 from mpcform.errors import ValidationError
-from mpcform.mpc.per_drone import DAQP_OK, DroneSolves, PerDroneQP
+from mpcform.mpc.per_drone import DroneSolves, PerDroneQP
 from mpcform.mpc.problem import StepQP, StepSolver
 from mpcform.mpc.rows import row_ends
 from mpcform.mpc.sensitivity import Sensitivity
 from mpcform.mpc.separation import SeparationRows
 from mpcform.solvers.base import QPSolution
 
-SPLIT_SOLVER = "daqp (per drone, iterated split)"
 GRAD_TOL = 1e-8  # |dV/dt| below this on every row: converged
 SLACK_TOL_M = 1e-9  # a trial whose drone needs more slack than the midpoint by this is rejected
 SLOPE_TOL = 1e-12  # relative: a Newton step predicting less decrease than this ends the iteration
@@ -99,11 +98,11 @@ class SplitQP(StepSolver):
     after which no new round starts (None: none).
     """
 
-    name = SPLIT_SOLVER
     warm_starts = True
 
     def __init__(self, per_drone: PerDroneQP, iterations: int, budget_s: float | None) -> None:
         self.per_drone, self.iterations, self.budget_s = per_drone, iterations, budget_s
+        self.name = f"{per_drone.backend.name} (per drone, iterated split)"
 
     def reset(self) -> None:
         self.per_drone.reset()
@@ -166,7 +165,7 @@ class SplitStep:
     def __init__(self, per_drone: PerDroneQP, qp: StepQP) -> None:
         self.pd, self.qp, rows = per_drone, qp, qp.rows
         self.m, self.r = qp.start_m.shape[0], rows.single_lower.shape[1]
-        self.flags = np.full(self.m, DAQP_OK)  # each drone's last DAQP exit flag
+        self.ok, self.flags = np.ones(self.m, dtype=bool), np.zeros(self.m, dtype=int)  # each drone's last
         self.first, self.second = first, second = _sides(rows.labels)
         self.splittable = np.repeat(rows.single_on[first][:, None], self.r, axis=1)
         self.splittable[rows.single_hard[first], 0] = False
@@ -221,12 +220,12 @@ class SplitStep:
         item, row = np.divmod(got.rows, r)
         flat, cuts = keep[item] * r + row, got.offsets.tolist()  # global flat indices, per drone:
         rows_at = [flat[a:b] for a, b in zip(cuts[:-1], cuts[1:], strict=True)]
-        ok, mu = got.flags == DAQP_OK, pd.separation_multipliers(got)
+        ok, mu = got.ok, pd.separation_multipliers(got)
         for j, i in enumerate(drones.tolist()):
             it.rows[i], it.lams[i], it.mu[i] = rows_at[j], got.lams[j], mu[j]
             it.solves[i] = (got, j) if ok[j] else None
-        it.cost[drones[got.flags != DAQP_OK]] = np.inf
-        self.flags[drones] = got.flags  # the last exit flags, for a failed midpoint's report
+        it.cost[drones[~ok]] = np.inf
+        self.ok[drones], self.flags[drones] = ok, got.flags  # the last solves, for a failed midpoint's report
         if base is not None:  # a trial may not need more slack than the midpoint (the joint rows hold)
             more = got.s.max(axis=1, initial=0.0) > base.s[drones].max(axis=1, initial=0.0) + SLACK_TOL_M
             it.cost[drones[more]] = np.inf
@@ -360,8 +359,8 @@ class SplitStep:
 
     def solution(self, it: Iterate) -> tuple[QPSolution, int]:
         """The iterate as the planner's solution ``[u | x | s]`` and its number of active rows."""
-        flags = np.where(np.isfinite(it.cost), DAQP_OK, self.flags)
-        return self.pd.solution(it.v, it.s, flags, it.lams, self.iterations, self.time_s)
+        ok = np.isfinite(it.cost) | self.ok
+        return self.pd.solution(it.v, it.s, ok, self.flags, it.lams, self.iterations, self.time_s)
 
 
 def _sides(labels: Array) -> tuple[Array, Array]:

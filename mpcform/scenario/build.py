@@ -7,10 +7,11 @@ from mpcform.control.consensus import ConsensusController, ConsensusSettings
 from mpcform.control.graph import GRAPH_KINDS
 from mpcform.control.nullspace import NullSpaceController, NullSpaceSettings
 from mpcform.control.tracking import ProportionalController, TrackingController
-from mpcform.errors import ScenarioError, SolverError
+from mpcform.errors import ScenarioError, SolverError, ValidationError
 from mpcform.mpc.limits import tightened
 from mpcform.mpc.loop import VelocityLoop
 from mpcform.mpc.settings import MPCSettings
+from mpcform.mpc.strategy import with_backend
 from mpcform.scenario.parse import as_scenario_error
 from mpcform.scenario.schema import CONTROLLER_KINDS, did_you_mean, listing
 from mpcform.scenario.spec import Scenario
@@ -65,7 +66,7 @@ def build_controller(
             )
     from mpcform.mpc.planner import MPCPlanner
 
-    backend: str | QPBackend = spec.solver
+    backend: str | QPBackend | None = None
     if solver is not None:
         backend = solver if isinstance(solver, QPBackend) else check_solver_key(solver, "solver")
         check_sparse_solver(spec.mpc, "solver", backend)
@@ -90,12 +91,9 @@ def check_solver_key(name: str, field: str = "controller.solver") -> str:
 
 
 def check_sparse_solver(mpc: MPCSettings, field: str, solver: str | QPBackend) -> None:
-    """A solver named for a planner that solves per drone would be ignored: an error."""
-    name = solver.name if isinstance(solver, QPBackend) else solver
-    if mpc.solves_per_drone:
-        raise ScenarioError(
-            field,
-            f"{name!r} solves the sparse QP, but this scenario solves each "
-            'drone\'s QP with DAQP (controller.coupling = "decoupled", per_drone = '
-            "true); set controller.per_drone = false to use it",
-        )
+    """A sparse backend named for a planner that solves per drone would be ignored: an error
+    naming ``field`` (:func:`mpcform.mpc.strategy.with_backend`)."""
+    try:
+        with_backend(mpc.strategy, solver, field)
+    except ValidationError as exc:
+        raise ScenarioError(field, str(exc).removeprefix(f"{exc.field}: ")) from None

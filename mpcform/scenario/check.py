@@ -245,7 +245,9 @@ def _tables(doc: dict[str, Any]) -> list[tuple[Table, dict[str, Any], str]]:
         elif table.array:
             items = doc.get(table.name)
         else:
-            raw = doc.get(table.name)
+            raw: Any = doc
+            for part in table.name.split("."):  # [controller.solve] inside [controller]
+                raw = raw.get(part) if isinstance(raw, dict) else None
             if isinstance(raw, dict):
                 out.append((table, raw, table.name))
             continue

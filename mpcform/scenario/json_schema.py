@@ -43,7 +43,7 @@ def scenario_json_schema() -> dict[str, Any]:
     """The JSON Schema of a scenario document (a dict, ready for :func:`json.dumps`)."""
     top = _object(TABLES[""])
     for table in SCHEMA:
-        if not table.name or table.name == "reference.keyframes":
+        if not table.name or "." in table.name:  # keyframes and [controller.solve]: inside their table
             continue
         ref = {"$ref": f"#/$defs/{table.name}"}
         top["properties"][table.name] = (
@@ -140,6 +140,8 @@ def _type(key: Key, table: Table) -> dict[str, Any]:
         return {"type": "array", "items": {"$ref": "#/$defs/reference_keyframes"}, "minItems": 1}
     if key.name == "template":  # a keyframe's template switch: a [template] table
         return {"$ref": "#/$defs/template"}
+    if key.name == "solve":  # [controller.solve]
+        return {"$ref": "#/$defs/controller_solve"}
     if key.name == "wind":  # [plant.wind]
         return WIND
     group = {"type": "number", "exclusiveMinimum": 0}  # max_velocity, max_acceleration, max_jerk

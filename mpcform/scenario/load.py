@@ -32,13 +32,13 @@ from mpcform.mpc.settings import MPCSettings
 from mpcform.reference.base import ConstantReference, ExponentialReference, Reference
 from mpcform.reference.keyframes import DEFAULT_SPEED_FRACTION, MissionLimits, SpeedBudget
 from mpcform.reference.mission import MissionReference
-from mpcform.scenario.build import check_solver_key, check_sparse_solver
+from mpcform.scenario.mpc_keys import DEPRECATED, MPC_FIELDS, MPC_KEYS
 from mpcform.scenario.parse import as_scenario_error, parse_keys, parse_table, parse_top_level
 from mpcform.scenario.placement import check_distinct, check_goal, check_start
 from mpcform.scenario.plant import parse_plant
-from mpcform.scenario.schema import CONSENSUS_FIELDS, MPC_FIELDS, NULLSPACE_FIELDS, TABLES
+from mpcform.scenario.schema import CONSENSUS_FIELDS, NULLSPACE_FIELDS, TABLES
+from mpcform.scenario.solve import solve_strategy
 from mpcform.scenario.spec import ControllerSpec, Scenario, SimulationSpec
-from mpcform.solvers.registry import DEFAULT_SOLVER
 
 
 def load_scenario(path: str | Path) -> Scenario:
@@ -255,20 +255,19 @@ def _limits(lim: dict[str, Any], dim: int) -> Limits:
         return Limits(**_renamed(lim, "limits"))
 
 
-_MPC_KEYS = {k.name for k in TABLES["controller"].keys if k.when == ("mpc",) and k.name != "solver"}
+_MPC_KEYS = {k.name for k in MPC_KEYS if k.name != "solve" and k.name not in DEPRECATED}
 
 
 def _controller(c: dict[str, Any], dt_s: float) -> ControllerSpec:
+    deprecations: list[str] = []
+    solve = solve_strategy(c, c["coupling"], deprecations) if c["kind"] == "mpc" else None
     with as_scenario_error("controller"):
         check_gain_dt(c["gain"], dt_s)
         given = {MPC_FIELDS.get(k, k): v for k, v in c.items() if k in _MPC_KEYS and v is not None}
         feedforward = c["feedforward"] or "jacobian"
-        mpc = MPCSettings(**{**given, "gain_per_s": c["gain"], "feedforward": feedforward})
-    solver = check_solver_key(c["solver"] or DEFAULT_SOLVER)
-    if c["solver"] is not None:
-        check_sparse_solver(mpc, "controller.solver", solver)
+        mpc = MPCSettings(**{**given, "gain_per_s": c["gain"], "feedforward": feedforward, "solve": solve})
     saturate = True if c["saturate"] is None else c["saturate"]
-    return ControllerSpec(c["kind"], c["gain"], feedforward, saturate, mpc, solver)
+    return ControllerSpec(c["kind"], c["gain"], feedforward, saturate, mpc, deprecations=tuple(deprecations))
 
 
 def _decentralised_settings(spec: ControllerSpec, c: dict[str, Any], limits: Limits) -> ControllerSpec:

@@ -8,17 +8,15 @@ against it and :mod:`mpcform.scenario.keys` renders it (``mpcform keys``, ``scen
 from __future__ import annotations
 
 import dataclasses
-import difflib
-from collections.abc import Iterable
-from dataclasses import dataclass
 from typing import Any
 
 from mpcform.control.base import FEEDFORWARDS
 from mpcform.control.consensus import CONSENSUS_LAWS, RELATIVE_POSITIONS, ConsensusSettings
 from mpcform.control.graph import GRAPH_KINDS
 from mpcform.control.nullspace import OBJECTIVES, NullSpaceSettings
-from mpcform.mpc.settings import COUPLINGS, VELOCITY_SETS, MPCSettings
 from mpcform.reference.keyframes import DEFAULT_SPEED_FRACTION
+from mpcform.scenario.key_types import Key, Table, did_you_mean, listing
+from mpcform.scenario.mpc_keys import MPC_KEYS, SOLVE_TABLE
 from mpcform.sim.plant_spec import (
     DEFAULT_ALTITUDE_M,
     DEFAULT_DAMPING,
@@ -28,7 +26,6 @@ from mpcform.sim.plant_spec import (
 )
 from mpcform.sim.plants import KINDS as PLANT_KINDS
 from mpcform.sim.so_rpy import MODELS, PLATFORMS
-from mpcform.solvers.registry import DEFAULT_SOLVER
 
 FORMAT_VERSION = 1
 SHAPES = ("polygon", "ring", "line", "grid", "sphere", "explicit")
@@ -37,86 +34,9 @@ CONTROLLER_KINDS = ("proportional", "tracking", "mpc", "consensus", "nullspace")
 GRAPH_POINTS = ("template", "initial")
 
 
-@dataclass(frozen=True)
-class Key:
-    """One scenario key.
-
-    ``type``: ``int``, ``float``, ``bool``, ``string``, ``vector`` (d numbers), ``bounds``
-    (d numbers, +-inf allowed), ``rotation`` (an angle for d = 2, a rotation vector for
-    d = 3), ``points`` (rows of d numbers), ``indices`` (drone indices) or ``pairs`` (pairs
-    of drone indices), ``table`` (an inline table, checked by its user) or ``tables`` (an
-    array of tables). ``when`` lists the values of the table's
-    selector key (``shape`` or ``kind``) the key applies to (empty: always). ``bound`` is a
-    lower bound of numbers (``"> 0"``, ``">= 1"``). ``shown_default`` replaces the default in
-    the docs.
-    """
-
-    name: str
-    type: str
-    doc: str
-    unit: str = ""
-    default: Any = None
-    required: bool = False
-    when: tuple[str, ...] = ()
-    choices: tuple[Any, ...] = ()
-    bound: str = ""
-    shown_default: str | None = None
-
-    @property
-    def bound_text(self) -> str:
-        """The bound as a suffix of a type's text (``" > 0"``), or ``""``."""
-        return f" {self.bound}" if self.bound else ""
-
-    def within_bound(self, x: float) -> bool:
-        """Whether the number ``x`` meets ``bound`` (always, when there is none)."""
-        if not self.bound:
-            return True
-        op, low = self.bound.split()
-        return x > float(low) if op == ">" else x >= float(low)
-
-
-@dataclass(frozen=True)
-class Table:
-    """A scenario table (``""``: the top level); ``selector`` names the key choosing a variant."""
-
-    name: str
-    doc: str
-    keys: tuple[Key, ...]
-    required: bool = True
-    selector: str | None = None
-    array: bool = False
-
-    def key(self, name: str) -> Key:
-        """The key called ``name`` (it must exist)."""
-        return next(k for k in self.keys if k.name == name)
-
-    @property
-    def title(self) -> str:
-        """The table as TOML writes its header (``[limits]``, ``[[obstacles]]``; ``Top level``)."""
-        if not self.name:
-            return "Top level"
-        return f"[[{self.name}]]" if self.array else f"[{self.name}]"
-
-
-_MPC_DEFAULTS = {f.name: f.default for f in dataclasses.fields(MPCSettings)}
 _MPC = ("mpc",)
 _GOAL = ("constant", "exponential")
 _MISSION = ("mission",)
-# scenario key -> MPCSettings field (the remaining mpc keys share their name with the field)
-MPC_FIELDS = {
-    "gain": "gain_per_s",
-    "margin": "margin_m",
-    "tie_break": "tie_break_rad",
-    "time_limit": "time_limit_s",
-    "split_budget": "split_budget_s",
-}
-
-
-def _mpc_key(name: str, type_: str, doc: str, unit: str = "", **kw: Any) -> Key:
-    default = _MPC_DEFAULTS[MPC_FIELDS.get(name, name)]
-    return Key(name, type_, doc, unit, default, when=_MPC, **kw)
-
-
 # scenario key -> ConsensusSettings / NullSpaceSettings field (others share the field's name)
 CONSENSUS_FIELDS = {"gamma": "gamma_per_s", "leader_gain": "leader_gain_per_s"}
 NULLSPACE_FIELDS = {"repulsion_radius": "repulsion_radius_m", "repulsion_gain": "repulsion_gain_per_s"}
@@ -264,49 +184,9 @@ SCHEMA: tuple[Table, ...] = (
                        bound="> 0"),
         _nullspace_key("energy_weight", "float", "Weight w in [0, 1] of the energy objective "
                        "(1: minimum norm; shape errors are then not corrected).", bound=">= 0"),
-        _mpc_key("horizon", "int", "Plan length H in steps.", bound=">= 1"),
-        _mpc_key("velocity_set", "string", "Speed constraint set inscribed in the ball.",
-                 choices=VELOCITY_SETS),
-        _mpc_key("facets", "int", "Half-spaces of the velocity polytope (auto: 16 planar, "
-                 "32 spatial).", bound=">= 4", shown_default="auto"),
-        _mpc_key("slack_weight", "float", "Exact L1 penalty on separation slack.", "1/m",
-                 bound="> 0"),
-        _mpc_key("slack_quadratic", "float", "Quadratic slack penalty (conditioning).", "1/m^2",
-                 bound=">= 0"),
-        _mpc_key("margin", "float", "Tightening of separation and obstacle rows.", "m",
-                 bound=">= 0"),
-        _mpc_key("tie_break", "float", "Right turn of conflicted drones' desired velocities, "
-                 "so symmetric swaps circulate; grows while a drone stays stalled (0: off).", "rad",
-                 bound=">= 0"),
-        _mpc_key("coupling", "string", "`joint` pair rows, or `decoupled` per-drone rows about "
-                 "the pair midpoint (block-diagonal QP, for large swarms).", choices=COUPLINGS),
-        _mpc_key("per_drone", "bool", "With `decoupled`: solve each conflicted drone's QP with DAQP "
-                 "(small dense QPs, the fast way; of the solver keys only `max_iter` applies) instead "
-                 "of one sparse QP with `solver`."),
-        _mpc_key("split_iterations", "int", "With `decoupled` and `per_drone`: rounds that move each "
-                 "pair row's split point from the midpoint towards the joint optimum (every round's plans "
-                 "meet the joint pair rows; 0: the midpoint split).", bound=">= 0"),
-        _mpc_key("split_budget", "float", "Wall time of a step's split rounds after which no new "
-                 "round starts.", "s", bound="> 0", shown_default="none"),
-        _mpc_key("stalled_split", "int", "With `decoupled` and `per_drone` (and `split_iterations` "
-                 "0): split rounds in the steps where a drone is stalled in conflict (rings the "
-                 "midpoint split jams pass; 0: never).", bound=">= 0"),
-        _mpc_key("grouping", "bool", "Solve only the groups of drones that hold a conflict; the others "
-                 "take their eq. 14 rollout (exact)."),
-        _mpc_key("fast_path", "bool", "Skip the solver when the eq. 14 rollout meets every row."),
-        _mpc_key("plant_model", "bool", "With a `lag`, `second_order` or `quadrotor` plant (its hover "
-                 "linearisation): separation rows on where its velocity loop really takes the drones "
-                 "(a braking drone overshoots its commands), with the last interval's velocity offset "
-                 "(wind) estimated; cost and eq. 14 unchanged."),
-        _mpc_key("eps_abs", "float", "Solver absolute tolerance.", bound="> 0"),
-        _mpc_key("eps_rel", "float", "Solver relative tolerance.", bound=">= 0"),
-        _mpc_key("max_iter", "int", "Solver iteration limit.", bound=">= 1"),
-        _mpc_key("time_limit", "float", "Solver time limit per QP (0: none).", "s", bound=">= 0"),
-        Key("solver", "string", "QP backend: `osqp`, `piqp`, `qpsolvers:<name>`, "
-            "`casadi:<plugin>` (see `mpcform solvers`); `--solver` overrides it. Not with "
-            "`decoupled` and `per_drone`.",
-            when=_MPC, shown_default=f'"{DEFAULT_SOLVER}"'),
+        *MPC_KEYS,
     ), selector="kind"),
+    SOLVE_TABLE,
     Table("graph", "Communication graph of the consensus controller, undirected, and its link "
           "effects; other controllers ignore it.", (
         Key("kind", "string", "`complete`, `ring` (i talks to i +- 1), `path`, `k_nearest`, "
@@ -386,16 +266,8 @@ SCHEMA: tuple[Table, ...] = (
         Key("clearance", "float", "Distance kept from the surface.", "m",
             shown_default="d_min / 2", bound=">= 0"),
     ), required=False, array=True),
-)  # fmt: skip
+)  # fmt: skip # the tables of keys read best with each key's text aligned under it
 TABLES = {t.name: t for t in SCHEMA}
 
 
-def listing(values: tuple[Any, ...], quote: str = "'") -> str:
-    """``values`` as a comma-separated list, each quoted (for messages and the key reference)."""
-    return ", ".join(f"{quote}{v}{quote}" for v in values)
-
-
-def did_you_mean(word: str, choices: Iterable[object]) -> str:
-    """``"; did you mean 'x'?"`` for the closest of ``choices`` to a misspelt ``word``, else ``""``."""
-    close = difflib.get_close_matches(word, [str(c) for c in choices], n=1)
-    return f"; did you mean {close[0]!r}?" if close else ""
+__all__ = ["SCHEMA", "TABLES", "Key", "Table", "did_you_mean", "listing"]

@@ -24,16 +24,17 @@ from mpcform.sim.plant_spec import PlantSpec, Robustness
 
 @dataclass(frozen=True)
 class ControllerSpec:
-    """Controller ``kind`` and every parameter (defaults filled, ``mpc`` settings validated)."""
+    """Controller ``kind`` and every parameter (defaults filled, ``mpc`` settings validated, the
+    solve strategy among them); ``deprecations``: a line per key of the last release's spelling."""
 
     kind: str
     gain_per_s: float
     feedforward: str
     saturate: bool
     mpc: MPCSettings
-    solver: str
     consensus: ConsensusSettings | None = None
     nullspace: NullSpaceSettings | None = None
+    deprecations: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -89,10 +90,11 @@ class Scenario:
 
     def warnings(self, controller: str | None = None) -> list[str]:
         """The plant's warnings for a run with ``controller`` (None: the file's): the spacing and
-        the speed warnings."""
+        the speed warnings; first the deprecated keys of the file."""
+        old = list(self.controller.deprecations)
         if (controller or self.controller.kind) != "mpc":
-            return []
-        return [w for w in (self.spacing_warning(controller), self.speed_warning()) if w is not None]
+            return old
+        return old + [w for w in (self.spacing_warning(controller), self.speed_warning()) if w is not None]
 
     def speed_warning(self) -> str | None:
         """A line when ``limits.v_max`` exceeds the speed below which the quadrotor's margin holds

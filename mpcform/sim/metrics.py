@@ -103,9 +103,9 @@ def run_metrics(
         "qp_solves": int(sum(i.mode in ("qp", "fallback") for i in result.infos)),
         "fast_path_steps": int((modes == "fast_path").sum()),
         "solver_failures": int((modes == "fallback").sum()),
-        "max_slack": float(max((i.max_slack_m for i in result.infos), default=0.0)),
-        "stall_events": int(sum(i.stalled for i in result.infos)),
-        "resolutions": int(sum(i.resolved for i in result.infos)),
+        "max_slack": float(max((getattr(i, "max_slack_m", 0.0) for i in result.infos), default=0.0)),
+        "stall_events": int(sum(getattr(i, "stalled", 0) for i in result.infos)),
+        "resolutions": int(sum(getattr(i, "resolved", 0) for i in result.infos)),
         "step_time_ms": {
             mode: _stats(1e3 * result.step_times_s[modes == mode]) for mode in sorted(set(modes.tolist()))
         },

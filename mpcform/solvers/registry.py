@@ -1,6 +1,10 @@
-"""The one table of QP backends (:data:`FAMILIES`): every solver name is looked up here.
+"""The tables of QP backends: every solver name is looked up here.
 
-Solver names (``--solver``, scenario key ``controller.solver``, ``mpcform solvers``):
+:data:`FAMILIES` holds the backends of the planner's sparse QP (``[controller.solve]`` with
+``kind = "sparse"``, ``--solver``, ``mpcform solvers``); :data:`PER_DRONE_FAMILIES` those of the
+per-drone dense QPs of decoupled mode (``kind = "per_drone"``): ``daqp`` (the default) and
+``qpsolvers:<name>``. A new per-drone backend is one module
+(:class:`~mpcform.solvers.dense.DenseQPBackend`) and one row there. Sparse solver names:
 
 - ``osqp``, ``piqp``: persistent solver objects (set up once per sparsity pattern, then updated);
 - ``qpsolvers:<name>``: any solver installed for qpsolvers, called afresh each step (warm-started
@@ -24,13 +28,17 @@ import difflib
 from collections.abc import Callable, Collection, Mapping, Sequence
 from dataclasses import dataclass, field
 from importlib.util import find_spec
+from typing import Any
 
 from mpcform.errors import SolverError
 from mpcform.solvers.base import QPBackend, SolverOptions
 from mpcform.solvers.casadi_conic import CASADI_CONIC_PLUGINS, CASADI_WARM, CasadiConicBackend
+from mpcform.solvers.daqp_dense import DaqpBackend
+from mpcform.solvers.dense import DenseQPBackend
 from mpcform.solvers.exact import CasadiIpoptBackend
 from mpcform.solvers.persistent import OSQPBackend, PIQPBackend
 from mpcform.solvers.qpsolvers_backend import QPSOLVERS_WARM, QPSolversBackend
+from mpcform.solvers.qpsolvers_dense import QPSolversDenseBackend
 
 DEFAULT_SOLVER = "piqp"
 """Chosen on measurements (see README, "Solvers", and ``mpcform bench solvers``): the separation
@@ -73,7 +81,7 @@ class Family:
 
     key: str
     form: str
-    build: Callable[[str, SolverOptions], QPBackend]
+    build: Callable[[str, SolverOptions], Any]
     known: Callable[[], Sequence[str]]
     installed: Callable[[str], bool]
     warm: Collection[str]
@@ -134,9 +142,12 @@ def _single(backend: type[QPBackend], installed: Callable[[], bool], note: str, 
     )
 
 
+def _warm_text(solver: str) -> str:
+    return "warm start via initvals" if solver in QPSOLVERS_WARM else "cold"
+
+
 def _qpsolvers_note(solver: str) -> str:
-    warm = "warm start via initvals" if solver in QPSOLVERS_WARM else "cold"
-    return f"qpsolvers, set up every call, {warm}"
+    return f"qpsolvers, set up every call, {_warm_text(solver)}"
 
 
 FAMILIES: tuple[Family, ...] = (
@@ -189,7 +200,36 @@ FAMILIES: tuple[Family, ...] = (
 """Every backend family, in the order ``mpcform solvers`` lists them."""
 PERSISTENT_SOLVERS = tuple(f.key for f in FAMILIES if f.persistent)
 """The persistent backends' names (``bench mpc`` and ``bench scale`` measure these)."""
-_BY_KEY = {f.key: f for f in FAMILIES}
+DEFAULT_PER_DRONE_SOLVER = "daqp"
+"""The per-drone backend of decoupled mode (``PerDroneSolve``): DAQP's dual active set is exact on
+these small dense QPs and gives the multipliers the split rounds use."""
+PER_DRONE_FAMILIES: tuple[Family, ...] = (
+    Family(
+        key="daqp",
+        form="daqp",
+        build=lambda _member, options: DaqpBackend(options.max_iter),
+        known=lambda: ("daqp",),
+        installed=lambda _member: _installed("daqp"),
+        warm={"daqp"},
+        persistent=False,
+        describe=lambda _member: "dual active set on each drone's dense QP (warm start)",
+        install="pip install daqp",
+    ),
+    Family(
+        key="qpsolvers:",
+        form="qpsolvers:<name> (one of {members})",
+        build=lambda solver, options: QPSolversDenseBackend(solver, options.max_iter),
+        known=lambda: sorted({*QPSOLVERS_KNOWN, *_qpsolvers_available()}),
+        listed=lambda: sorted({*QPSOLVERS_LISTED, *_qpsolvers_available()}),
+        installed=lambda solver: solver in _qpsolvers_available(),
+        warm=QPSOLVERS_WARM,
+        persistent=False,
+        describe=lambda solver: f"qpsolvers on each drone's dense QP to 1e-10, {_warm_text(solver)}",
+        install='pip install "qpsolvers[{member}]" (or "mpcform[solvers]")',
+    ),
+)
+"""The per-drone backends (:class:`~mpcform.solvers.dense.DenseQPBackend`), in listing order: one
+row per backend family, as :data:`FAMILIES` for the sparse QP."""
 
 
 @dataclass(frozen=True)
@@ -208,44 +248,46 @@ class SolverInfo:
     note: str
 
 
-def _family(name: str) -> tuple[Family | None, str]:
+def _family(name: str, families: tuple[Family, ...]) -> tuple[Family | None, str]:
     """The row a name falls under (full name first, then prefix) and its member."""
-    if name in _BY_KEY:
-        return _BY_KEY[name], name
+    by_key = {f.key: f for f in families}
+    if name in by_key:
+        return by_key[name], name
     prefix, colon, member = name.partition(":")
-    return _BY_KEY.get(prefix + colon) if colon else None, member
+    return by_key.get(prefix + colon) if colon else None, member
 
 
-def _lookup(name: str) -> tuple[Family, str]:
+def _lookup(name: str, families: tuple[Family, ...] = FAMILIES) -> tuple[Family, str]:
     """The row and member of a known name; raises :class:`SolverError` listing the accepted
     forms, with a did-you-mean hint, for an unknown one."""
-    family, member = _family(name)
+    family, member = _family(name, families)
     if family is not None and member in family.known():
         return family, member
-    every = [f.full_name(m) for f in FAMILIES for m in f.known()]
+    every = [f.full_name(m) for f in families for m in f.known()]
     close = difflib.get_close_matches(name, every, n=1)
     hint = f"; did you mean {close[0]!r}?" if close else ""
     why = f"{family.refused[member]}; " if family is not None and member in family.refused else ""
-    forms = [f.form.format(members=", ".join(f.known())) for f in FAMILIES]
+    forms = [f.form.format(members=", ".join(f.known())) for f in families]
     expected = f"{', '.join(forms[:-1])} or {forms[-1]}"
-    raise SolverError(name, f"unknown solver; {why}expected {expected}{hint}")
+    kind = "per-drone solver" if families is PER_DRONE_FAMILIES else "solver"
+    raise SolverError(name, f"unknown {kind}; {why}expected {expected}{hint}")
 
 
-def check_solver_name(name: str) -> str:
-    """Return ``name`` if it names a backend (installed or not), else raise :class:`SolverError`
-    listing the accepted forms, with a did-you-mean hint."""
-    _lookup(name)
+def check_solver_name(name: str, per_drone: bool = False) -> str:
+    """Return ``name`` if it names a backend (installed or not; ``per_drone``: a per-drone one),
+    else raise :class:`SolverError` listing the accepted forms, with a did-you-mean hint."""
+    _lookup(name, PER_DRONE_FAMILIES if per_drone else FAMILIES)
     return name
 
 
-def solver_names() -> list[str]:
+def solver_names(per_drone: bool = False) -> list[str]:
     """Every name :func:`solver_infos` lists, in its order."""
-    return [name for f in FAMILIES for name in f.listed_names()]
+    return [name for f in (PER_DRONE_FAMILIES if per_drone else FAMILIES) for name in f.listed_names()]
 
 
-def solver_info(name: str) -> SolverInfo:
+def solver_info(name: str, per_drone: bool = False) -> SolverInfo:
     """Whether ``name`` is installed and usable here (raises :class:`SolverError` if unknown)."""
-    family, member = _lookup(name)
+    family, member = _lookup(name, PER_DRONE_FAMILIES if per_drone else FAMILIES)
     installed = family.installed(member)
     reason = family.unsupported.get(member)
     if not installed:
@@ -258,9 +300,9 @@ def solver_info(name: str) -> SolverInfo:
     return SolverInfo(name, installed, usable, member in family.warm, family.persistent, note)
 
 
-def solver_infos() -> list[SolverInfo]:
+def solver_infos(per_drone: bool = False) -> list[SolverInfo]:
     """Every backend this package knows: installed or not, usable or not (``mpcform solvers``)."""
-    return [solver_info(name) for name in solver_names()]
+    return [solver_info(name, per_drone) for name in solver_names(per_drone)]
 
 
 def make_backend(name: str, options: SolverOptions) -> QPBackend:
@@ -273,4 +315,16 @@ def make_backend(name: str, options: SolverOptions) -> QPBackend:
     if not info.usable:
         raise SolverError(name, info.note)
     family, member = _lookup(name)
-    return family.build(member, options)
+    backend: QPBackend = family.build(member, options)
+    return backend
+
+
+def make_per_drone_backend(name: str, max_iter: int | None) -> DenseQPBackend:
+    """The per-drone backend called ``name`` (``daqp`` or ``qpsolvers:<name>``), capped at
+    ``max_iter`` iterations a solve; raises :class:`SolverError` as :func:`make_backend`."""
+    info = solver_info(name, per_drone=True)
+    if not info.usable:
+        raise SolverError(name, info.note)
+    family, member = _lookup(name, PER_DRONE_FAMILIES)
+    backend: DenseQPBackend = family.build(member, SolverOptions(None, None, max_iter))
+    return backend

@@ -173,5 +173,5 @@ def test_export_checks_every_scenario_and_option_before_running(tmp_path: Path) 
         export_problems([bad], tmp_path / "out", per_scenario=0)
     decoupled = tmp_path / "decoupled.toml"
     decoupled.write_text(TINY.replace("horizon = 5", 'horizon = 5\ncoupling = "decoupled"'))
-    with pytest.raises(MPCFormError, match="controller.per_drone: 'piqp' solves the sparse QP"):
+    with pytest.raises(MPCFormError, match="controller.solve.kind: 'piqp' solves the sparse QP"):
         export_problems([decoupled], tmp_path / "out")

@@ -130,7 +130,7 @@ def test_missing_file(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> Non
         (["run", WORKED, "--controller", "mpc", "--solver", "nope"], ("solver", "unknown solver")),
         (
             ["run", str(ROOT / "scenarios" / "formation_flight_100.toml"), "--solver", "osqp"],
-            ("solver: 'osqp' solves the sparse QP", "per_drone = false"),
+            ("solver: 'osqp' solves the sparse QP", "set kind = 'sparse'"),
         ),  # decoupled, per drone
     ],
 )

@@ -14,18 +14,21 @@ from hypothesis import strategies as st
 from mpcform.formation.state import FormationState
 from mpcform.formation.template import Template
 from mpcform.mpc.limits import Limits, SphereObstacle
-from mpcform.mpc.per_drone import PER_DRONE_SOLVER, PerDroneQP
+from mpcform.mpc.per_drone import PerDroneQP
 from mpcform.mpc.planner import MPCPlanner
 from mpcform.mpc.settings import MPCSettings
+from mpcform.mpc.strategy import SparseSolve
 from mpcform.reference.base import ConstantReference
 from mpcform.sim.simulation import simulate
 from mpcform.solvers.base import QPBackend, QPSolution, SolverOptions
+from mpcform.solvers.daqp_dense import DaqpBackend
 from mpcform.solvers.registry import make_backend
 
 # The sparse reference: Clarabel at tight tolerances (PIQP stops ~3e-6 away at any tolerance here).
 # Where plans differ by more than ~1e-6 (an optimum at a vertex of the velocity polygon), the
 # per-drone one has the lower cost: the comparison is by cost, plans only loosely.
-ACCURATE = {"eps_abs": 1e-10, "eps_rel": 1e-10}
+ACCURATE = SparseSolve("qpsolvers:clarabel", SolverOptions(1e-10, 1e-10, 4000, 0.0))
+PER_DRONE_SOLVER = "daqp (per drone)"
 REFERENCE = "qpsolvers:clarabel"
 PLAN_TOL = 1e-4
 
@@ -92,9 +95,8 @@ def pair(
     """The planner per drone, and the same decoupled QP solved as one sparse QP to high accuracy
     (with the backend that records its QPs)."""
     per = MPCPlanner(ref, 0.1, lim, MPCSettings(coupling="decoupled", **kw), obstacles)
-    sparse = MPCSettings(coupling="decoupled", per_drone=False, **kw, **ACCURATE)
-    options = SolverOptions(sparse.eps_abs, sparse.eps_rel, sparse.max_iter, sparse.time_limit_s)
-    qps = SparseQPs(make_backend(REFERENCE, options))
+    sparse = MPCSettings(coupling="decoupled", solve=ACCURATE, **kw)
+    qps = SparseQPs(make_backend(REFERENCE, ACCURATE.options))
     return per, MPCPlanner(ref, 0.1, lim, sparse, obstacles, solver=qps), qps
 
 
@@ -172,7 +174,7 @@ def test_a_failed_drone_solve_falls_back(monkeypatch: pytest.MonkeyPatch) -> Non
             info = {"iterations": 3, "lam": np.zeros(args[2].shape[0])}
             return np.full(args[1].shape[0], np.nan), 0.0, -6, info
 
-    monkeypatch.setattr(solver, "_daqp", Failing)
+    monkeypatch.setattr(solver.backend, "_daqp", Failing)
     res = simulate(planner, start, 1.0)
     failed = [i for i in res.infos if i.mode == "fallback"]
     assert failed and all("daqp: exit flag -6" in i.status for i in failed)
@@ -186,7 +188,7 @@ def test_rows_over_v_are_the_rows_over_positions(dim: int) -> None:
     ``u = M^-1 v`` and ``x_e = dt sum_{j<e} u_j`` (built here from scratch)."""
     h, dt, k = 4, 0.1, 1.3
     settings = MPCSettings(horizon=h, gain_per_s=k, coupling="decoupled")
-    qp = PerDroneQP(dim, dt, LIMITS, settings, ())
+    qp = PerDroneQP(dim, dt, LIMITS, settings, (), DaqpBackend())
     rng = np.random.default_rng(dim)
     a, end, v = rng.normal(size=(9, dim)), rng.integers(1, h + 1, 9), rng.normal(size=h * dim)
     m = np.eye(h * dim) + k * dt * np.kron(np.tril(np.ones((h, h)), -1), np.eye(dim))
@@ -234,7 +236,7 @@ def test_no_slack_where_the_drone_qps_are_feasible(v_max: float, monkeypatch: py
             solve = PerDroneQP.solve
 
             def counted(self: PerDroneQP, qp: Any, check: HardFeasibility = check, solve: Any = solve) -> Any:
-                self._daqp = check
+                self.backend._daqp = check  # type: ignore[attr-defined]
                 check.steps.append(True)
                 return solve(self, qp)
 
@@ -259,7 +261,7 @@ def test_rows_with_a_velocity_loop_are_on_the_true_positions() -> None:
     st = MPCSettings(horizon=h, coupling="decoupled")
     from mpcform.mpc.rows import limit_rows
 
-    per = PerDroneQP(dim, 0.1, LIMITS, st, limit_rows(dim, 0.1, LIMITS, st), loop)
+    per = PerDroneQP(dim, 0.1, LIMITS, st, limit_rows(dim, 0.1, LIMITS, st), DaqpBackend(), loop)
     rng = np.random.default_rng(5)
     v = rng.normal(size=h * dim)
     u = (per._m_inv @ v).reshape(h, dim)
@@ -307,7 +309,7 @@ def test_a_drone_whose_target_meets_its_rows_skips_daqp_and_gets_daqps_solve(
     from mpcform.mpc import per_drone
 
     qp, calls = _recorded_calls(case, 0, 5, 4.0, monkeypatch)
-    skipped, daqp = 0, qp._daqp
+    skipped, daqp = 0, qp.backend._daqp
 
     class Counted:  # DAQP, counting its calls
         calls = 0
@@ -317,7 +319,7 @@ def test_a_drone_whose_target_meets_its_rows_skips_daqp_and_gets_daqps_solve(
             Counted.calls += 1
             return daqp.solve(*args, **kwargs)
 
-    monkeypatch.setattr(qp, "_daqp", Counted)
+    monkeypatch.setattr(qp.backend, "_daqp", Counted)
     for args in calls:
         before = Counted.calls
         fast = qp.solve_each(*args)
@@ -326,7 +328,7 @@ def test_a_drone_whose_target_meets_its_rows_skips_daqp_and_gets_daqps_solve(
             middle = Counted.calls
             every = qp.solve_each(*args)
         skipped += (Counted.calls - middle) - (middle - before)
-        assert np.array_equal(fast.v, every.v) and np.array_equal(fast.flags, every.flags)
+        assert np.array_equal(fast.v, every.v) and np.array_equal(fast.ok, every.ok)
         assert all(np.array_equal(a, b) for a, b in zip(fast.lams, every.lams, strict=True))
         assert np.array_equal(fast.cost, every.cost)
     assert skipped >= 10

@@ -19,6 +19,7 @@ from mpcform.formation.template import Template
 from mpcform.mpc.limits import Limits, SphereObstacle
 from mpcform.mpc.planner import MPCPlanner
 from mpcform.mpc.settings import MPCSettings
+from mpcform.mpc.strategy import SparseSolve
 from mpcform.reference.base import ConstantReference, ExponentialReference, Profile
 from mpcform.sim.simulation import SimulationResult, simulate
 from mpcform.solvers.base import QPBackend, QPSolution, SolverOptions
@@ -320,8 +321,8 @@ MODES = [("joint", True), ("decoupled", True), ("decoupled", False)]  # (couplin
 def translating_run(tpl: Template, v: list[float], start: np.ndarray, mode: tuple[str, bool], fast_path: bool,
                     duration_s: float = 0.5) -> np.ndarray:  # fmt: skip
     """Commands of a planner (horizon 8, v_max 20, d_min 0.3, tight tolerances) tracking ``Translating``."""
-    st_ = MPCSettings(horizon=8, coupling=mode[0], per_drone=mode[1], fast_path=fast_path, eps_abs=1e-8,
-                      eps_rel=1e-8)  # fmt: skip
+    tight = SparseSolve(options=SolverOptions(1e-8, 1e-8, 4000))
+    st_ = MPCSettings(horizon=8, coupling=mode[0], solve=None if mode[1] else tight, fast_path=fast_path)
     planner = MPCPlanner(Translating(tpl, v), 0.1, Limits(v_max_mps=20.0, d_min_m=0.3), st_)
     return simulate(planner, start, duration_s).commands_mps
 

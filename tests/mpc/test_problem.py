@@ -15,6 +15,7 @@ from mpcform.mpc.separation import Separation
 from mpcform.mpc.settings import MPCSettings
 from mpcform.mpc.sparse import SparseSolver
 from mpcform.solvers.base import SolverOptions
+from mpcform.solvers.daqp_dense import DaqpBackend
 from mpcform.solvers.registry import make_backend
 
 DT = 0.1
@@ -22,15 +23,15 @@ DT = 0.1
 
 @pytest.mark.parametrize("kind", ["sparse", "per drone"])
 def test_solvers_return_the_rollout_when_no_row_is_active(kind: str) -> None:
-    st = MPCSettings(horizon=4, gain_per_s=2.0, coupling="decoupled", eps_abs=1e-9, eps_rel=1e-9)
+    options = SolverOptions(1e-9, 1e-9, 4000)
+    st = MPCSettings(horizon=4, gain_per_s=2.0, coupling="decoupled")
     lim = Limits(v_max_mps=10.0, d_min_m=0.5)
     families, sep = limit_rows(2, DT, lim, st), Separation(2, lim, st, ())
     solver: StepSolver
     if kind == "sparse":
-        options = SolverOptions(st.eps_abs, st.eps_rel, st.max_iter)
         solver = SparseSolver(make_backend("piqp", options), 2, DT, lim, st, families, sep)
     else:
-        solver = PerDroneQP(2, DT, lim, st, families)
+        solver = PerDroneQP(2, DT, lim, st, families, DaqpBackend())
     p0 = np.array([[0.0, 0.0], [2.0, 0.0], [4.0, 1.0]])
     c = np.random.default_rng(0).uniform(-1.0, 1.0, (4, 3, 2))
     cand = Candidates(np.array([[0, 1]]), np.ones(1, bool), np.empty((0, 2), int), np.empty(0, bool), True)

@@ -4,6 +4,7 @@ import pytest
 
 from mpcform.errors import ValidationError
 from mpcform.mpc.settings import GROUPED_MODES, PLANNER_MODES, MPCSettings, mode_settings
+from mpcform.mpc.strategy import PerDroneSolve, SparseSolve, SplitPolicy
 
 
 def test_defaults_are_valid():
@@ -25,14 +26,6 @@ def test_defaults_are_valid():
         ("slack_quadratic", -1.0, "controller.slack_quadratic"),
         ("margin_m", -1e-3, "controller.margin"),
         ("tie_break_rad", float("nan"), "controller.tie_break"),
-        ("eps_abs", 0.0, "controller.eps_abs"),
-        ("eps_rel", -1.0, "controller.eps_rel"),
-        ("max_iter", 0, "controller.max_iter"),
-        ("time_limit_s", -1.0, "controller.time_limit"),
-        ("split_iterations", -1, "controller.split_iterations"),
-        ("split_iterations", 2.0, "controller.split_iterations"),
-        ("split_iterations", 3, "controller.split_iterations.*decoupled"),  # joint coupling
-        ("split_budget_s", 0.0, "controller.split_budget"),
     ],
 )
 def test_bad_settings_are_rejected(field, value, match):
@@ -53,7 +46,11 @@ def test_mode_settings():
         mode_settings("nope", 4)
 
 
-def test_split_iterations_need_the_per_drone_decoupled_mode():
-    assert MPCSettings(coupling="decoupled", split_iterations=3, split_budget_s=0.01).split_iterations == 3
-    with pytest.raises(ValidationError, match="controller.split_iterations"):
-        MPCSettings(coupling="decoupled", per_drone=False, split_iterations=3)
+def test_the_strategy_follows_the_coupling_unless_given():
+    assert isinstance(MPCSettings().strategy, SparseSolve)
+    assert MPCSettings(coupling="decoupled").strategy == PerDroneSolve()
+    split = PerDroneSolve(split=SplitPolicy(3, budget_s=0.01))
+    assert MPCSettings(coupling="decoupled", solve=split).strategy.split.iterations == 3  # type: ignore[union-attr]
+    assert MPCSettings(coupling="decoupled", solve=SparseSolve()).solves_per_drone is False
+    with pytest.raises(ValidationError, match="controller.solve.kind"):
+        MPCSettings(coupling="joint", solve=PerDroneSolve())

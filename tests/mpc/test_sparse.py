@@ -16,6 +16,7 @@ from mpcform.mpc.rows import limit_rows
 from mpcform.mpc.separation import Separation, SeparationRows
 from mpcform.mpc.settings import MPCSettings
 from mpcform.mpc.sparse import SparseSolver
+from mpcform.mpc.strategy import SparseSolve
 from mpcform.solvers.base import QPBackend, QPContext, QPSolution, SolverOptions
 
 DT = 0.1
@@ -69,7 +70,7 @@ def step_qp(
 
 
 def solver(coupling: str = "joint") -> tuple[SparseSolver, Recording, Separation]:
-    st = MPCSettings(horizon=3, coupling=coupling, per_drone=False)
+    st = MPCSettings(horizon=3, coupling=coupling, solve=SparseSolve())
     sep = Separation(2, LIMITS, st, (OBSTACLE,))
     backend = Recording()
     return SparseSolver(backend, 2, DT, LIMITS, st, limit_rows(2, DT, LIMITS, st), sep), backend, sep
@@ -168,7 +169,7 @@ def test_no_slack_wherever_the_hard_qp_is_feasible(v_max: float, coupling: str) 
     checked = 0
     for dt in (0.1, 0.05, 0.02, 0.01):
         for ref, start in crowd_and_swap():
-            st_ = MPCSettings(horizon=8, gain_per_s=2.0, coupling=coupling, per_drone=False)
+            st_ = MPCSettings(horizon=8, gain_per_s=2.0, coupling=coupling, solve=SparseSolve())
             backend = HardCheck(2, st_.slack_weight)
             planner = MPCPlanner(ref, dt, Limits(v_max_mps=v_max, d_min_m=0.3), st_, solver=backend)
             res = simulate(planner, start, 60 * dt)

@@ -16,7 +16,8 @@ from mpcform.mpc.problem import StepQP
 from mpcform.mpc.rows import row_ends
 from mpcform.mpc.settings import MPCSettings
 from mpcform.mpc.sparse import SparseSolver
-from mpcform.mpc.split import SPLIT_SOLVER, SplitQP, joint_rows
+from mpcform.mpc.split import SplitQP, joint_rows
+from mpcform.mpc.strategy import PerDroneSolve, SparseSolve, SplitPolicy
 from mpcform.reference.base import ConstantReference
 from mpcform.sim.simulation import simulate
 from mpcform.solvers.base import SolverOptions
@@ -40,7 +41,9 @@ def swap(n: int, dim: int, seed: int, noise_m: float = 0.3) -> tuple[ConstantRef
 def step_qps(n: int, dim: int, seed: int, steps: int) -> tuple[MPCPlanner, list[StepQP]]:
     """The QPs of a decoupled split planner's first ``steps`` steps (pair sides in them)."""
     ref, start = swap(n, dim, seed)
-    planner = MPCPlanner(ref, DT, LIMITS, MPCSettings(coupling="decoupled", split_iterations=200))
+    planner = MPCPlanner(
+        ref, DT, LIMITS, MPCSettings(coupling="decoupled", solve=PerDroneSolve(split=SplitPolicy(200)))
+    )
     qps: list[StepQP] = []
     solve = planner._solver.solve
 
@@ -65,7 +68,7 @@ def tracking(planner: MPCPlanner, qp: StepQP, z: np.ndarray) -> tuple[float, flo
 
 def joint_optimum(planner: MPCPlanner, qp: StepQP) -> float:
     """The joint QP with the same rows (same normals, the sides' bounds added), by Clarabel."""
-    settings = MPCSettings(coupling="joint", eps_abs=1e-10, eps_rel=1e-10)
+    settings = MPCSettings(coupling="joint", solve=SparseSolve(options=SolverOptions(1e-10, 1e-10, 4000)))
     backend = make_backend("qpsolvers:clarabel", SolverOptions(1e-10, 1e-10, 4000, 0.0))
     solver = SparseSolver(backend, planner.dim, DT, LIMITS, settings, planner._families, planner._separation)
     joint = replace(qp, rows=joint_rows(qp.rows), warm=None, rebuilt=True)
@@ -81,7 +84,7 @@ def test_every_iterate_meets_the_joint_rows_and_the_cost_falls_to_no_less_than_t
     n: int, dim: int, seed: int
 ) -> None:
     planner, qps = step_qps(n, dim, seed, 12)
-    assert qps and planner.solver_name == SPLIT_SOLVER
+    assert qps and planner.solver_name == "daqp (per drone, iterated split)"
     split = SplitQP(planner._solver.per_drone, 30, None)  # type: ignore[attr-defined]
     ends = row_ends(planner.settings.horizon)
     for qp in qps:
@@ -121,7 +124,7 @@ def test_small_encounters_reach_the_joint_optimum(n: int, dim: int, seed: int, s
 def test_the_planner_reports_the_rounds_and_keeps_the_pairs_apart() -> None:
     ref, start = swap(5, 2, 5)
     for rounds in (0, 20):
-        st = MPCSettings(coupling="decoupled", split_iterations=rounds, stalled_split=0)
+        st = MPCSettings(coupling="decoupled", solve=PerDroneSolve(split=SplitPolicy(rounds, stalled=0)))
         res = simulate(MPCPlanner(ref, DT, LIMITS, st), start, 4.0)
         qp = [i for i in res.infos if i.mode == "qp"]
         assert qp and all(("split" in i.status) == bool(rounds) for i in qp)
@@ -146,7 +149,7 @@ def test_every_run_of_the_random_families_completes_safely_with_split_rounds() -
 
     bad = []
     for sc in family(1, 80):
-        sc["controller"].update(coupling="decoupled", split_iterations=10)
+        sc["controller"].update(coupling="decoupled", solve={"kind": "per_drone", "split_iterations": 10})
         out = outcome(sc)
         checks = ("separation_violations", "approached", "unseparated", "obstacle_violations")
         finite = all(np.isfinite(i.solve_time_s) for i in out["infos"])

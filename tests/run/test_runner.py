@@ -13,9 +13,10 @@ from saved_runs import SCENARIOS, shortened
 from mpcform._validate import Array
 from mpcform.formation.kinematics import forward_kinematics
 from mpcform.formation.state import FormationState
+from mpcform.mpc.strategy import as_sparse
 from mpcform.run.runner import describe, run_scenario
 from mpcform.scenario.load import load_scenario
-from mpcform.solvers.base import QPBackend, QPSolution, SolverOptions
+from mpcform.solvers.base import QPBackend, QPSolution
 from mpcform.solvers.registry import make_backend
 
 BUNDLED = sorted(SCENARIOS.glob("*.toml"))
@@ -108,8 +109,7 @@ class Renamed(QPBackend):
 def test_a_backend_instance_drives_the_mpc_as_its_name_would() -> None:
     pytest.importorskip("osqp")
     scenario = shortened(load_scenario(SCENARIOS / "swap_planar_8.toml"), 20)
-    st = scenario.controller.mpc
-    options = SolverOptions(st.eps_abs, st.eps_rel, st.max_iter, st.time_limit_s)
+    options = as_sparse(scenario.controller.mpc.strategy).options
     by_name = run_scenario(scenario, solver="osqp")
     backend = Renamed(make_backend("osqp", options))
     by_instance = run_scenario(scenario, solver=backend)

@@ -9,6 +9,7 @@ import pytest
 from saved_runs import SCENARIOS
 
 from mpcform import MPCSettings, ScenarioError, TrackingController
+from mpcform.mpc.strategy import PerDroneSolve
 from mpcform.scenario.build import build_controller, check_solver_key
 from mpcform.scenario.load import load_scenario
 from mpcform.scenario.spec import Scenario
@@ -20,7 +21,7 @@ WORKED = SCENARIOS / "worked_example.toml"
 
 def per_drone(scenario: Scenario) -> Scenario:
     """``scenario`` with the MPC in decoupled mode, each drone's QP solved by DAQP."""
-    mpc = MPCSettings(gain_per_s=scenario.controller.gain_per_s, coupling="decoupled", per_drone=True)
+    mpc = MPCSettings(gain_per_s=scenario.controller.gain_per_s, coupling="decoupled", solve=PerDroneSolve())
     return dataclasses.replace(scenario, controller=dataclasses.replace(scenario.controller, mpc=mpc))
 
 
@@ -65,7 +66,7 @@ def test_a_solver_for_a_planner_solving_per_drone_is_an_error() -> None:
     s = per_drone(load_scenario(WORKED))
     assert build_controller(s, "mpc").name == "mpc"
     for solver in ("osqp", make_backend("osqp", SolverOptions())):
-        with pytest.raises(ScenarioError, match="'osqp' solves the sparse QP.*per_drone = false") as err:
+        with pytest.raises(ScenarioError, match="'osqp' solves the sparse QP.*set kind = 'sparse'") as err:
             build_controller(s, "mpc", solver=solver)
         assert err.value.field == "solver"
 

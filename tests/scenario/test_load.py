@@ -15,7 +15,9 @@ from saved_runs import SCENARIOS
 from mpcform import MPCSettings, ScenarioError
 from mpcform.formation.kinematics import forward_kinematics
 from mpcform.formation.state import FormationState
+from mpcform.mpc.strategy import PerDroneSolve, SparseSolve, SplitPolicy
 from mpcform.scenario.load import load_scenario, scenario_from_dict, scenario_text
+from mpcform.solvers.base import SolverOptions
 from mpcform.solvers.registry import DEFAULT_SOLVER
 
 WORKED = SCENARIOS / "worked_example.toml"
@@ -45,7 +47,7 @@ def test_defaults_and_objects() -> None:
     s = scenario_from_dict(mutated({"seed": DELETE, "name": DELETE}), default_name="fallback")
     assert s.name == "fallback" and s.seed == 0 and s.dim == 2 and s.n == 3
     assert s.controller.kind == "tracking" and s.controller.gain_per_s == 2.0
-    assert s.controller.saturate is True and s.controller.solver == DEFAULT_SOLVER
+    assert s.controller.saturate is True and s.controller.mpc.strategy == SparseSolve(DEFAULT_SOLVER)
     assert s.controller.mpc == MPCSettings(gain_per_s=2.0)
     assert s.limits.v_max_mps == 3.0 and s.limits.a_max_mps2 is None and s.obstacles == ()
     assert s.simulation.noise_std_m == 0.0 and s.plant.ideal and s.steps == 500
@@ -122,7 +124,27 @@ BAD_INPUTS: list[tuple[str, dict[str, Any], str, str]] = [
     ("unknown solver", {"controller.kind": "mpc", "controller.solver": "osqq"},
      "controller.solver", "did you mean 'osqp'"),
     ("solver ignored per drone", {"controller.kind": "mpc", "controller.coupling": "decoupled",
-                                  "controller.solver": "osqp"}, "controller.solver", "per_drone = false"),
+                                  "controller.solver": "osqp"}, "controller.solver", 'kind = "sparse"'),
+    ("per drone with joint rows", {"controller.kind": "mpc", "controller.solve.kind": "per_drone"},
+     "controller.solve.kind", "coupling = 'decoupled'"),
+    ("solve without a kind", {"controller.kind": "mpc", "controller.solve.backend": "osqp"},
+     "controller.solve.kind", "missing required key"),
+    ("tolerance of a per-drone solve", {"controller.kind": "mpc", "controller.coupling": "decoupled",
+     "controller.solve.kind": "per_drone", "controller.solve.eps_abs": 1e-6},
+     "controller.solve.eps_abs", "does not apply to kind = 'per_drone'"),
+    ("split rounds of a sparse solve", {"controller.kind": "mpc", "controller.solve.kind": "sparse",
+     "controller.solve.stalled_split": 3}, "controller.solve.stalled_split", "only to 'per_drone'"),
+    ("sparse backend per drone", {"controller.kind": "mpc", "controller.coupling": "decoupled",
+     "controller.solve.kind": "per_drone", "controller.solve.backend": "osqp"},
+     "controller.solve.backend", "unknown per-drone solver"),
+    ("old tolerance per drone", {"controller.kind": "mpc", "controller.coupling": "decoupled",
+     "controller.eps_abs": 1e-6}, "controller.eps_abs", 'kind = "sparse"'),
+    ("old split rounds, sparse", {"controller.kind": "mpc", "controller.stalled_split": 3},
+     "controller.stalled_split", "does not apply to this sparse solve"),
+    ("old per_drone, joint rows", {"controller.kind": "mpc", "controller.per_drone": True},
+     "controller.per_drone", "coupling = 'decoupled'"),
+    ("old key beside the table", {"controller.kind": "mpc", "controller.max_iter": 10,
+     "controller.solve.kind": "sparse"}, "controller.max_iter", "not beside"),
     ("shorter than a step", {"simulation.duration": 0.01}, "simulation.duration", "one step"),
     ("path in name", {"name": "../x"}, "name", "directory"),
 ]  # fmt: skip
@@ -169,3 +191,39 @@ def test_a_byte_order_mark_is_accepted(tmp_path: Path) -> None:
     s = load_scenario(path)
     assert s.n == 3 and s.source_sha256 == hashlib.sha256(raw).hexdigest()  # the hash of the file as it is
     assert scenario_text(raw) == WORKED.read_text()
+
+
+def test_the_solve_table_and_the_old_keys_give_the_same_strategy_with_one_deprecation_line_each() -> None:
+    new = scenario_from_dict(
+        mutated(
+            {
+                "controller.kind": "mpc",
+                "controller.coupling": "decoupled",
+                "controller.solve.kind": "per_drone",
+                "controller.solve.split_iterations": 4,
+                "controller.solve.max_iter": 99,
+            }
+        )
+    )
+    old = scenario_from_dict(
+        mutated(
+            {
+                "controller.kind": "mpc",
+                "controller.coupling": "decoupled",
+                "controller.split_iterations": 4,
+                "controller.max_iter": 99,
+            }
+        )
+    )
+    assert new.controller.mpc == old.controller.mpc
+    assert new.controller.mpc.strategy == PerDroneSolve(max_iter=99, split=SplitPolicy(iterations=4))
+    assert new.warnings() == [] or all("deprecated" not in w for w in new.warnings())
+    lines = [w for w in old.warnings() if "deprecated" in w]
+    assert lines == [
+        "controller.max_iter is deprecated: write [controller.solve] max_iter = 99",
+        "controller.split_iterations is deprecated: write [controller.solve] split_iterations = 4",
+    ]
+    sparse = scenario_from_dict(
+        mutated({"controller.kind": "mpc", "controller.solver": "osqp", "controller.eps_abs": 1e-6})
+    )
+    assert sparse.controller.mpc.strategy == SparseSolve("osqp", SolverOptions(1e-6, 1e-4, 4000, 0.0))

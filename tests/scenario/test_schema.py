@@ -7,15 +7,17 @@ import dataclasses
 import pytest
 
 from mpcform import MPCSettings
-from mpcform.scenario.schema import MPC_FIELDS, SCHEMA, TABLES, Key, did_you_mean, listing
+from mpcform.scenario.mpc_keys import DEPRECATED, MPC_FIELDS
+from mpcform.scenario.schema import SCHEMA, TABLES, Key, did_you_mean, listing
 
 
 def test_every_key_is_documented_and_every_mpc_setting_has_a_key() -> None:
     for table in SCHEMA:
         for key in table.keys:
             assert key.doc and key.type, (table.name, key.name)
-    mpc_keys = {k.name for k in TABLES["controller"].keys if "mpc" in k.when or not k.when}
-    settings = {MPC_FIELDS.get(k, k) for k in mpc_keys} - {"kind", "solver"}
+    keys = TABLES["controller"].keys
+    mpc_keys = {k.name for k in keys if ("mpc" in k.when or not k.when) and k.name not in DEPRECATED}
+    settings = {MPC_FIELDS.get(k, k) for k in mpc_keys} - {"kind"}
     assert settings == {f.name for f in dataclasses.fields(MPCSettings)}
 
 

@@ -10,6 +10,7 @@ from saved_runs import SCENARIOS, shortened
 
 from mpcform.control.base import StepInfo
 from mpcform.formation.kinematics import forward_kinematics
+from mpcform.mpc.step_info import MPCStepInfo
 from mpcform.run.runner import run_scenario
 from mpcform.scenario.load import load_scenario
 from mpcform.sim.metrics import (
@@ -43,9 +44,9 @@ RESULT = SimulationResult(
     commands_mps=np.diff(POSITIONS, axis=0),  # speeds (sqrt5, 2, 0), (0, 0, 2.4), 0
     reference_m=REFERENCE,
     infos=(
-        StepInfo("qp", max_slack_m=0.01),
+        MPCStepInfo("qp", max_slack_m=0.01),
         StepInfo("fast_path"),
-        StepInfo("fallback", max_slack_m=0.2),
+        MPCStepInfo("fallback", max_slack_m=0.2),
     ),
     step_times_s=np.array([0.003, 0.001, 0.005]),
     controller="test",

@@ -16,6 +16,7 @@ from mpcform.formation.template import Template
 from mpcform.mpc.limits import Limits
 from mpcform.mpc.planner import MPCPlanner
 from mpcform.mpc.settings import MPCSettings
+from mpcform.mpc.strategy import SparseSolve
 from mpcform.reference.base import ConstantReference
 from mpcform.sim.simulation import simulate
 from mpcform.solvers.base import SolverOptions
@@ -121,7 +122,9 @@ def active_start() -> ActiveStart:
 def active_command(active_start: ActiveStart) -> np.ndarray:
     """piqp's first input [m/s] at :func:`active_start`, solved at 1e-9."""
     ref, p, t = active_start
-    settings = MPCSettings(horizon=6, eps_abs=1e-9, eps_rel=1e-9, fast_path=False)
+    settings = MPCSettings(
+        horizon=6, solve=SparseSolve(options=SolverOptions(1e-9, 1e-9, 4000)), fast_path=False
+    )
     planner = MPCPlanner(ref, 0.1, Limits(v_max_mps=1.0, d_min_m=0.5), settings, solver="piqp")
     planner.reset(t, p)
     out = planner.step(t, p)
@@ -137,7 +140,9 @@ def first_input_agrees(active_start: ActiveStart, active_command: np.ndarray) ->
     def check(name: str, tolerance_mps: float, eps: float = 1e-7) -> None:
         _require_usable(name)
         ref, p, t = active_start
-        settings = MPCSettings(horizon=6, eps_abs=eps, eps_rel=eps, fast_path=False)
+        settings = MPCSettings(
+            horizon=6, solve=SparseSolve(options=SolverOptions(eps, eps, 4000)), fast_path=False
+        )
         planner = MPCPlanner(ref, 0.1, Limits(v_max_mps=1.0, d_min_m=0.5), settings, solver=name)
         planner.reset(t, p)
         out = planner.step(t, p)

@@ -1,0 +1,38 @@
+"""What one planner step did: the MPC's step record (:class:`MPCStepInfo`)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from mpcform._validate import Array
+from mpcform.control.base import StepInfo
+
+
+@dataclass(frozen=True)
+class MPCStepInfo(StepInfo):
+    """A planner step: the generic record (``mode`` ``fast_path`` | ``qp`` | ``fallback``, solver
+    ``status``) and the solve's figures: ``iterations``, ``solve_time_s`` [s], ``active_rows``,
+    ``max_slack_m`` [m] with ``slack_pairs``, the drone pairs (or ``(drone, -1 - obstacle)``)
+    whose separation rows needed slack, and ``qp_drones``, how many drones the QP was solved for
+    (the others' groups took the fast path). Liveness (:mod:`mpcform.mpc.liveness`): ``stalled``
+    drones that started to stall at this step, ``resolving`` drones whose tie-break is escalated,
+    ``resolved`` escalations that ended at this step (the drone left conflict)."""
+
+    iterations: int = 0
+    solve_time_s: float = 0.0
+    active_rows: int = 0
+    max_slack_m: float = 0.0
+    slack_pairs: tuple[tuple[int, int], ...] = ()
+    qp_drones: int = 0
+    stalled: int = 0
+    resolving: int = 0
+    resolved: int = 0
+
+
+FAST_PATH = MPCStepInfo("fast_path")
+"""A fast-path step that ends no escalation (frozen: shared)."""
+
+
+def pairs_of(labels: Array) -> tuple[tuple[int, int], ...]:
+    """Item labels (m, 2) as sorted unique tuples."""
+    return tuple(sorted({(int(a), int(b)) for a, b in labels}))
