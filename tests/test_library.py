@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from saved_runs import SCENARIOS, shortened
 
-from mpcform.outputs.export import export_run
+from mpcform.outputs.flight.export import export_run
 from mpcform.outputs.rundata import formation_data, load_run, write_formation_npz
 from mpcform.run.runner import run_scenario
 from mpcform.scenario.load import load_scenario

@@ -2,7 +2,7 @@
 
 ``mpcform.cli.main`` wires these in; each command is a thin layer over library functions
 (:mod:`mpcform.outputs.rundata`, :mod:`mpcform.outputs.figures`, :mod:`mpcform.outputs.animation`,
-:mod:`mpcform.outputs.export`, :mod:`mpcform.outputs.compare`, :mod:`mpcform.scenario.check`).
+:mod:`mpcform.outputs.flight.export`, :mod:`mpcform.outputs.compare`, :mod:`mpcform.scenario.check`).
 ``run --plot/--animate/--export`` draws and exports the run in memory; ``plot``, ``compare`` and
 ``export`` read saved runs. Plotting is imported only when a figure is asked for, after checking
 that matplotlib is installed (else exit 2 with the install hint).
@@ -19,7 +19,7 @@ from typing import Any
 
 from mpcform.cli.progress import ProgressBar
 from mpcform.errors import MPCFormError, ValidationError
-from mpcform.outputs.export import (
+from mpcform.outputs.flight.export import (
     CRAZYFLIE_MAX_PIECES,
     DEFAULT_RATE_HZ,
     YAW_MODES,
@@ -27,8 +27,8 @@ from mpcform.outputs.export import (
     ExportResult,
     export_run,
 )
-from mpcform.outputs.flight_limits import FlightLimits, platform_thrust_acc_mps2
-from mpcform.outputs.polynomial import DEFAULT_TOLERANCE_M
+from mpcform.outputs.flight.limits import FlightLimits, platform_thrust_acc_mps2
+from mpcform.outputs.flight.polynomial import DEFAULT_TOLERANCE_M
 from mpcform.outputs.rundata import RunData, formation_data, load_run, write_formation_npz
 from mpcform.run.runner import RunResult
 from mpcform.scenario.spec import Scenario

@@ -193,7 +193,7 @@ def test_compare_runs(tmp_path: Path) -> None:
 
 def test_plotting_is_imported_only_when_asked_for() -> None:
     code = (
-        "import sys, mpcform, mpcform.cli.main, mpcform.cli.handlers, mpcform.outputs.export\n"
+        "import sys, mpcform, mpcform.cli.main, mpcform.cli.handlers, mpcform.outputs.flight.export\n"
         "import mpcform.outputs.rundata, mpcform.outputs.compare, mpcform.sim.metrics\n"
         "assert 'matplotlib' not in sys.modules, 'matplotlib imported with the package'\n"
         "import mpcform.outputs.figures, mpcform.outputs.animation\n"

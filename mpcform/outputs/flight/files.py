@@ -15,7 +15,7 @@ import numpy as np
 
 from mpcform._validate import Array
 from mpcform.errors import ValidationError
-from mpcform.outputs.polynomial import POLY_DEGREE, PiecewisePolynomial
+from mpcform.outputs.flight.polynomial import POLY_DEGREE, PiecewisePolynomial
 
 SETPOINT_COLUMNS = (
     "t",

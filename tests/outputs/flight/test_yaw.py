@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from mpcform.outputs.yaw import formation_yaw
+from mpcform.outputs.flight.yaw import formation_yaw
 
 
 def test_planar_and_spatial_rotations_about_z() -> None:

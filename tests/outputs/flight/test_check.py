@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 from saved_runs import short_run
 
-from mpcform.outputs.export import export_run
-from mpcform.outputs.flight_check import drone_models_available, fly_export
-from mpcform.outputs.polynomial import PiecewisePolynomial
+from mpcform.outputs.flight.check import drone_models_available, fly_export
+from mpcform.outputs.flight.export import export_run
+from mpcform.outputs.flight.polynomial import PiecewisePolynomial
 from mpcform.outputs.rundata import load_run
 
 needs_drone_models = pytest.mark.skipif(not drone_models_available(), reason="needs drone-models")
@@ -40,7 +40,7 @@ def test_export_records_the_flown_swarm(tmp_path: Path) -> None:
 
 
 def test_skipped_without_drone_models(monkeypatch: pytest.MonkeyPatch) -> None:
-    from mpcform.outputs import flight_check
+    from mpcform.outputs.flight import check as flight_check
 
     monkeypatch.setattr(flight_check, "drone_models_available", lambda: False)
     poly = PiecewisePolynomial(0.0, np.array([1.0]), np.zeros((1, 4, 8)))

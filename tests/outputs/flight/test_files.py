@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from mpcform.errors import ValidationError
-from mpcform.outputs.flight_files import (
+from mpcform.outputs.flight.files import (
     POLY_HEADER,
     SETPOINT_COLUMNS,
     read_poly,

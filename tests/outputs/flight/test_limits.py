@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from mpcform.errors import ValidationError
-from mpcform.outputs.flight_limits import (
+from mpcform.outputs.flight.limits import (
     DEFAULT_MAX_ACC_MPS2,
     FlightLimits,
     body_rates,

@@ -8,7 +8,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from mpcform.errors import ValidationError
-from mpcform.outputs.polynomial import (
+from mpcform.outputs.flight.polynomial import (
     CONTINUITY,
     PiecewisePolynomial,
     fit_piecewise_polynomial,
@@ -81,7 +81,7 @@ def test_rest_ends_start_and_stop_at_rest_exactly() -> None:
 def test_same_as_scipy_lsq_spline() -> None:
     from scipy.interpolate import make_lsq_spline
 
-    from mpcform.outputs.polynomial import knots
+    from mpcform.outputs.flight.polynomial import knots
 
     t = np.linspace(0.0, 5.0, 101)
     y = np.cos(1.3 * t)

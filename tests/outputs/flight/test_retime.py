@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from mpcform.outputs.polynomial import fit_positions
-from mpcform.outputs.retime import retime
+from mpcform.outputs.flight.polynomial import fit_positions
+from mpcform.outputs.flight.retime import retime
 
 
 def _path():  # two drones crossing at 1 m/s for 4 s, with a turn

@@ -12,7 +12,7 @@ import pytest
 from saved_runs import SCENARIOS, short_run, shortened
 
 from mpcform.errors import ValidationError
-from mpcform.outputs.export import (
+from mpcform.outputs.flight.export import (
     CRAZYFLIE_MAX_PIECES,
     POLY_HEADER,
     PROVENANCE_JSON,
@@ -22,7 +22,7 @@ from mpcform.outputs.export import (
     read_poly,
     read_setpoints,
 )
-from mpcform.outputs.flight_limits import FlightLimits
+from mpcform.outputs.flight.limits import FlightLimits
 from mpcform.outputs.rundata import load_run
 from mpcform.run.runner import run_scenario
 from mpcform.scenario.load import load_scenario

@@ -1,7 +1,7 @@
 """One time scaling of the whole swarm's planned paths, from rest to rest (for flight exports).
 
 The planned positions are a path ``P(tau)`` of the original time ``tau``: their degree-7
-least-squares fit (:func:`mpcform.outputs.polynomial.fit_positions`, continuous up to the jerk,
+least-squares fit (:func:`mpcform.outputs.flight.polynomial.fit_positions`, continuous up to the jerk,
 within half the export's tolerance; an interpolating spline would carry the kinks of the
 held velocity commands into huge path accelerations). The export
 flies ``P(s(t))`` with one ``s(t)`` for every drone, planned by ruckig as a 1-DoF motion from
@@ -27,7 +27,7 @@ from ruckig import Trajectory as RuckigTrajectory
 
 from mpcform._validate import Array, positive
 from mpcform.errors import MPCFormError
-from mpcform.outputs.polynomial import PiecewisePolynomial
+from mpcform.outputs.flight.polynomial import PiecewisePolynomial
 
 GRID_S = 0.002  # sampling of s(t) [s]; its inverse is interpolated on this grid
 DERIVATIVE_SAMPLES = 200  # per piece, to find the largest path derivatives

@@ -18,7 +18,7 @@ from importlib import metadata
 import numpy as np
 
 from mpcform._validate import Array
-from mpcform.outputs.polynomial import PiecewisePolynomial
+from mpcform.outputs.flight.polynomial import PiecewisePolynomial
 from mpcform.sim.plant_spec import PlantSpec
 
 INTERVAL_S = 0.02  # 10 inner steps of the 500 Hz plant (the plant records >= 10 samples per call)

@@ -11,8 +11,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from mpcform.outputs.crazyswarm import CRAZYFLIE_MAX_PIECES, FLY_PY, crazyflies_yaml, write_files
-from mpcform.outputs.flight_files import POLY_HEADER
+from mpcform.outputs.flight.crazyswarm import CRAZYFLIE_MAX_PIECES, FLY_PY, crazyflies_yaml, write_files
+from mpcform.outputs.flight.files import POLY_HEADER
 
 
 def _poly_file(path: Path, pieces: int, start: list[float]) -> None:

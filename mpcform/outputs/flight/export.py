@@ -5,9 +5,9 @@ For every drone of a run (:class:`~mpcform.outputs.rundata.RunData`, in memory a
 
 1. the planned positions (planar runs at ``altitude_m``, then shifted by ``offset_m``) are
    retimed with one time scaling ``s(t)`` for the whole swarm, from rest to rest, within the
-   speed, acceleration and jerk limits (:mod:`mpcform.outputs.retime`);
+   speed, acceleration and jerk limits (:mod:`mpcform.outputs.flight.retime`);
 2. the retimed positions are fitted by 7th-order pieces continuous up to the jerk, at rest at
-   both ends (:mod:`mpcform.outputs.polynomial`); every planned sample, at its retimed time, is
+   both ends (:mod:`mpcform.outputs.flight.polynomial`); every planned sample, at its retimed time, is
    within ``tolerance_m`` of the float32 pieces;
 3. the pieces are checked: lowest point against ``floor_m`` (refused below it), speed,
    acceleration, jerk, body rate and thrust against :class:`FlightLimits` (refused unless
@@ -18,9 +18,9 @@ For every drone of a run (:class:`~mpcform.outputs.rundata.RunData`, in memory a
    resampled at ``rate_hz``: ``t, x, y, z, vx, vy, vz, ax, ay, az, yaw, omega_x, omega_y,
    omega_z``, every column a derivative of the pieces; omega the body rates from flatness, what
    ``cmdFullState(pos, vel, acc, yaw, omega)`` takes), ``crazyflies.yaml`` and ``fly.py``
-   (:mod:`mpcform.outputs.crazyswarm`) and ``provenance.json``.
+   (:mod:`mpcform.outputs.flight.crazyswarm`) and ``provenance.json``.
 
-Yaw is 0, or with ``yaw="formation"`` the formation's rotation about z (:mod:`mpcform.outputs.yaw`).
+Yaw is 0, or with ``yaw="formation"`` the formation's rotation about z (:mod:`mpcform.outputs.flight.yaw`).
 """
 
 from __future__ import annotations
@@ -34,10 +34,10 @@ import numpy as np
 
 from mpcform._validate import Array, positive
 from mpcform.errors import ValidationError
-from mpcform.outputs import crazyswarm
 from mpcform.outputs.files import json_safe, provenance
-from mpcform.outputs.flight_check import FlightCheck, fly_export
-from mpcform.outputs.flight_files import (
+from mpcform.outputs.flight import crazyswarm
+from mpcform.outputs.flight.check import FlightCheck, fly_export
+from mpcform.outputs.flight.files import (
     POLY_HEADER,
     SETPOINT_COLUMNS,
     read_poly,
@@ -45,8 +45,8 @@ from mpcform.outputs.flight_files import (
     write_poly,
     write_setpoints,
 )
-from mpcform.outputs.flight_limits import FlightEnvelope, FlightLimits, body_rates, envelope
-from mpcform.outputs.polynomial import (
+from mpcform.outputs.flight.limits import FlightEnvelope, FlightLimits, body_rates, envelope
+from mpcform.outputs.flight.polynomial import (
     DEFAULT_TOLERANCE_M,
     MAX_PIECE_S,
     PiecewisePolynomial,
@@ -54,9 +54,9 @@ from mpcform.outputs.polynomial import (
     fit_piecewise_polynomial,
     fit_positions,
 )
-from mpcform.outputs.retime import Retiming, retime
+from mpcform.outputs.flight.retime import Retiming, retime
+from mpcform.outputs.flight.yaw import formation_yaw
 from mpcform.outputs.rundata import RunData
-from mpcform.outputs.yaw import formation_yaw
 
 CRAZYFLIE_MAX_PIECES = crazyswarm.CRAZYFLIE_MAX_PIECES
 DEFAULT_ALTITUDE_M = 1.0
