@@ -1,4 +1,4 @@
-"""The ``bench``, ``problems`` and ``sweep`` subcommands of ``mpcform`` (wired in by :mod:`mpcform.cli.main`).
+"""The ``bench`` and ``problems`` subcommands of ``mpcform`` (wired in by :mod:`mpcform.cli.main`).
 
 The benchmark modules are imported only when a benchmark runs (or its options are listed).
 """
@@ -6,71 +6,11 @@ The benchmark modules are imported only when a benchmark runs (or its options ar
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from pathlib import Path
-from typing import Any
 
-from mpcform.scenario.size import DEFAULT_MAX_MEMORY_GIB
+from mpcform.cli.options import print_bench, progress, seconds, solver_help
 from mpcform.solvers.registry import DEFAULT_SOLVER, PERSISTENT_SOLVERS
-
-
-def solver_help(what: str = "QP backend") -> str:
-    """Help text naming the solvers: the registry's backends and the two families."""
-    from mpcform.solvers.casadi_conic import CASADI_CONIC_PLUGINS
-
-    named = ", ".join(f"{b} (default)" if b == DEFAULT_SOLVER else b for b in PERSISTENT_SOLVERS)
-    return (
-        f"{what}: {named}, qpsolvers:<name>, casadi:<plugin> ({', '.join(CASADI_CONIC_PLUGINS)}) "
-        "or casadi:ipopt; `mpcform solvers` shows which are installed"
-    )
-
-
-def max_memory_gib(text: str) -> float:
-    """The ``--max-memory`` value: a number of GiB > 0."""
-    try:
-        value = float(text)
-    except ValueError:
-        value = float("nan")
-    if not value > 0 or value == float("inf"):
-        raise argparse.ArgumentTypeError(f"expected a number of GiB > 0, got {text!r}")
-    return value
-
-
-def seconds(text: str) -> float:
-    """A time budget [s]: a finite number >= 0."""
-    try:
-        value = float(text)
-    except ValueError:
-        value = float("nan")
-    if not 0 <= value < float("inf"):
-        raise argparse.ArgumentTypeError(f"expected a number of seconds >= 0, got {text!r}")
-    return value
-
-
-def add_max_memory(cmd: argparse.ArgumentParser, per: str = "run") -> None:
-    """The ``--max-memory GIB`` option (see :mod:`mpcform.scenario.size`)."""
-    cmd.add_argument(
-        "--max-memory",
-        type=max_memory_gib,
-        default=DEFAULT_MAX_MEMORY_GIB,
-        metavar="GIB",
-        help=f"refuse a {per} estimated to need more memory than this [GiB] "
-        f"(default {DEFAULT_MAX_MEMORY_GIB:g})",
-    )
-
-
-def print_bench(table: str, rows: list[dict[str, Any]], json_path: str | None) -> None:
-    """Print a benchmark's markdown and write its records to ``json_path`` (if given)."""
-    print(table)
-    if json_path:
-        Path(json_path).write_text(json.dumps(rows, indent=2, default=float) + "\n")
-
-
-def progress(text: str) -> None:
-    """A progress line on stderr, when it is a terminal."""
-    if sys.stderr.isatty():
-        print(text, file=sys.stderr, flush=True)
 
 
 # ---- bench ----------------------------------------------------------------------------------
@@ -334,68 +274,3 @@ def add_problems(sub: argparse._SubParsersAction) -> None:
     export.add_argument(
         "--solver", metavar="NAME", help=solver_help("solver driving the runs (default: the scenario's)")
     )
-
-
-# ---- sweep ----------------------------------------------------------------------------------
-SWEEP_HELP = "run a scenario over seeds and parameter values in parallel"
-SWEEP_DESCRIPTION = (
-    "Run one scenario file over a grid of seeds and parameter values (the Cartesian product of "
-    "--seeds and every --set list), in worker processes or on a dask cluster, and print one "
-    "markdown row per parameter combination: success rate over the seeds, separation, tracking "
-    "errors, fallbacks and step times, then the failed runs. A run succeeds when it raised "
-    "nothing, kept d_min (also along the straight segments) and v_max, and ended within --tol of "
-    "its reference. Every combination is validated before the first run."
-)
-
-
-def _sweep(args: argparse.Namespace) -> int:
-    from mpcform.run import sweep
-
-    seeds = sweep.parse_seeds(args.seeds) if args.seeds else None
-    sets = [sweep.parse_set(text) for text in args.set]
-    jobs = sweep.build_jobs(args.scenario, seeds, sets, args.solver, args.tol)
-
-    def report(done: int, total: int) -> None:
-        progress(f"sweep: {done}/{total} runs")
-
-    records = sweep.run_sweep(
-        jobs, args.jobs, args.executor, args.scheduler, progress=report, max_memory_gib=args.max_memory
-    )
-    groups = sweep.aggregate(records)
-    failed = sweep.failures_text(records)
-    print_bench(
-        sweep.markdown_table(groups) + (f"\n\nfailed runs:\n{failed}" if failed else ""),
-        groups + records,
-        args.json,
-    )
-    return 0
-
-
-def add_sweep(sub: argparse._SubParsersAction) -> None:
-    """``sweep``."""
-    from mpcform.run.sweep import DEFAULT_TOLERANCE_M, EXECUTORS
-
-    cmd = sub.add_parser("sweep", help=SWEEP_HELP, description=SWEEP_DESCRIPTION)
-    cmd.set_defaults(func=_sweep)
-    cmd.add_argument("scenario", metavar="SCENARIO", help="scenario TOML file")
-    cmd.add_argument("--seeds", metavar="SPEC", help="seeds, e.g. 0..19 or 0,3,7 (default: the file's)")
-    cmd.add_argument(
-        "--set",
-        action="append",
-        default=[],
-        metavar="KEY=V1,V2",
-        help="a dotted scenario key and its values, e.g. controller.horizon=5,10",
-    )
-    cmd.add_argument("--jobs", type=int, default=1, metavar="N", help="worker processes")
-    cmd.add_argument("--solver", metavar="NAME", help=solver_help("override controller.solver (mpc)"))
-    cmd.add_argument(
-        "--tol",
-        type=float,
-        default=DEFAULT_TOLERANCE_M,
-        metavar="M",
-        help="final tracking error of a successful run [m] (>= 0)",
-    )
-    cmd.add_argument("--executor", default="process", choices=EXECUTORS, help="process pool or dask cluster")
-    cmd.add_argument("--scheduler", metavar="ADDRESS", help="dask scheduler (default: a local cluster)")
-    cmd.add_argument("--json", metavar="PATH", help="also write groups and runs as a JSON list of records")
-    add_max_memory(cmd, "run (each run of the sweep)")

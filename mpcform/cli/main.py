@@ -20,8 +20,9 @@ from importlib import metadata
 from pathlib import Path
 from typing import NoReturn
 
-from mpcform.cli import bench_commands
+from mpcform.cli import bench_commands, sweep_commands
 from mpcform.cli import handlers as cli_runner
+from mpcform.cli.options import add_max_memory, solver_help
 from mpcform.cli.paths import check_output_dir, check_output_paths
 from mpcform.errors import MPCFormError, ScenarioError, ValidationError
 from mpcform.outputs.files import OUTPUT_FILES, format_summary
@@ -150,7 +151,7 @@ def build_parser() -> argparse.ArgumentParser:
         cmd.set_defaults(func=func)
         if name in ("run", "validate"):
             cmd.add_argument("scenario", metavar="SCENARIO", help="scenario TOML file")
-            bench_commands.add_max_memory(cmd)
+            add_max_memory(cmd)
         if name == "run":
             cmd.add_argument("--out", metavar="DIR", help="output dir (default: results/<name>/)")
             cmd.add_argument(
@@ -161,7 +162,7 @@ def build_parser() -> argparse.ArgumentParser:
             cmd.add_argument(
                 "--solver",
                 metavar="NAME",
-                help=bench_commands.solver_help("override controller.solver (mpc)"),
+                help=solver_help("override controller.solver (mpc)"),
             )
             cmd.add_argument(
                 "--plant",
@@ -178,7 +179,7 @@ def build_parser() -> argparse.ArgumentParser:
             )
     bench_commands.add_bench(sub)
     bench_commands.add_problems(sub)
-    bench_commands.add_sweep(sub)
+    sweep_commands.add_sweep(sub)
     cli_runner.add_commands(sub)  # plot, compare, export
     return parser
 

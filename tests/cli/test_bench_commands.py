@@ -1,5 +1,5 @@
-"""The bench, problems and sweep subcommands' options: solver help, --max-memory, --cvxpy-budget, the
-sweep's description."""
+"""The bench and problems subcommands' wiring: the benchmark families, their options and the checks
+made before a benchmark runs."""
 
 from __future__ import annotations
 
@@ -7,44 +7,42 @@ import argparse
 
 import pytest
 
-from mpcform.cli.bench_commands import SWEEP_DESCRIPTION, max_memory_gib, seconds, solver_help
-from mpcform.cli.main import build_parser
-from mpcform.solvers.casadi_conic import CASADI_CONIC_PLUGINS
-from mpcform.solvers.registry import DEFAULT_SOLVER, PERSISTENT_SOLVERS
+from mpcform.cli.main import build_parser, main
 
 
-def test_solver_help_names_the_backends_and_the_families() -> None:
-    text = solver_help()
-    for name in PERSISTENT_SOLVERS:
-        assert name in text
-    assert f"{DEFAULT_SOLVER} (default)" in text and "qpsolvers:<name>" in text and "casadi:<plugin>" in text
-    assert all(plugin in text for plugin in CASADI_CONIC_PLUGINS) and "casadi:ipopt" in text
+def _choices(parser: argparse.ArgumentParser) -> dict[str, argparse.ArgumentParser]:
+    sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+    return dict(sub.choices)
 
 
-@pytest.mark.parametrize("text", ["0", "-1", "nan", "inf", "lots"])
-def test_max_memory_must_be_a_positive_number(text: str) -> None:
-    with pytest.raises(argparse.ArgumentTypeError, match="expected a number of GiB > 0"):
-        max_memory_gib(text)
+def test_bench_has_one_subcommand_per_family() -> None:
+    bench = _choices(build_parser())["bench"]
+    assert list(_choices(bench)) == ["mpc", "solvers", "closed-loop", "scale", "split", "plant"]
+    problems = _choices(build_parser())["problems"]
+    assert list(_choices(problems)) == ["export"]
 
 
-def test_max_memory_value() -> None:
-    assert max_memory_gib("0.5") == 0.5 and max_memory_gib("64") == 64.0
+def test_every_bench_writes_json_records() -> None:
+    for name, cmd in _choices(_choices(build_parser())["bench"]).items():
+        assert "--json PATH" in cmd.format_help(), name
 
 
-@pytest.mark.parametrize("text", ["-1", "nan", "inf", "soon"])
-def test_seconds_must_be_a_finite_number_at_least_zero(text: str) -> None:
-    with pytest.raises(argparse.ArgumentTypeError, match="expected a number of seconds >= 0"):
-        seconds(text)
+def test_bench_mpc_defaults() -> None:
+    args = build_parser().parse_args(["bench", "mpc"])
+    assert args.n == [8, 16, 32, 64] and args.spatial_n == [20] and args.steps == 60
+    assert args.coupling == "joint" and args.cvxpy_budget == 60.0 and args.scenarios is None
 
 
-def test_seconds_value() -> None:
-    assert seconds("0") == 0.0 and seconds("60") == 60.0
+@pytest.mark.parametrize("budget", ["-1", "inf"])
+def test_bench_mpc_refuses_a_bad_cvxpy_budget(budget: str, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["bench", "mpc", "--cvxpy-budget", budget]) == 2
+    assert "expected a number of seconds >= 0" in capsys.readouterr().err
 
 
-def test_sweep_has_a_description_and_max_memory() -> None:
-    sub = next(a for a in build_parser()._actions if isinstance(a, argparse._SubParsersAction))
-    sweep = sub.choices["sweep"]
-    assert sweep.description == SWEEP_DESCRIPTION
-    assert "--max-memory" in sweep.format_help() and "--tol" in sweep.format_help()
-    for command in ("run", "validate"):
-        assert "--max-memory GIB" in sub.choices[command].format_help()
+@pytest.mark.parametrize("extra", [["--rounds", "0", "-1"], ["--steps", "0"]])
+def test_bench_split_refuses_negative_rounds_before_running(
+    extra: list[str], capsys: pytest.CaptureFixture[str]
+) -> None:
+    assert main(["bench", "split", *extra]) == 2
+    captured = capsys.readouterr()
+    assert captured.out == "" and "--rounds must be >= 0 and --steps >= 1" in captured.err

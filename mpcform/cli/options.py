@@ -1,0 +1,72 @@
+"""What the subcommands' wiring shares: option types (``--max-memory``, a time budget), the solvers'
+help text, and how the table commands print (markdown on stdout, ``--json`` records, progress lines
+on a terminal's stderr)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+from typing import Any
+
+from mpcform.scenario.size import DEFAULT_MAX_MEMORY_GIB
+from mpcform.solvers.registry import DEFAULT_SOLVER, PERSISTENT_SOLVERS
+
+
+def solver_help(what: str = "QP backend") -> str:
+    """Help text naming the solvers: the registry's backends and the two families."""
+    from mpcform.solvers.casadi_conic import CASADI_CONIC_PLUGINS
+
+    named = ", ".join(f"{b} (default)" if b == DEFAULT_SOLVER else b for b in PERSISTENT_SOLVERS)
+    return (
+        f"{what}: {named}, qpsolvers:<name>, casadi:<plugin> ({', '.join(CASADI_CONIC_PLUGINS)}) "
+        "or casadi:ipopt; `mpcform solvers` shows which are installed"
+    )
+
+
+def max_memory_gib(text: str) -> float:
+    """The ``--max-memory`` value: a number of GiB > 0."""
+    try:
+        value = float(text)
+    except ValueError:
+        value = float("nan")
+    if not value > 0 or value == float("inf"):
+        raise argparse.ArgumentTypeError(f"expected a number of GiB > 0, got {text!r}")
+    return value
+
+
+def seconds(text: str) -> float:
+    """A time budget [s]: a finite number >= 0."""
+    try:
+        value = float(text)
+    except ValueError:
+        value = float("nan")
+    if not 0 <= value < float("inf"):
+        raise argparse.ArgumentTypeError(f"expected a number of seconds >= 0, got {text!r}")
+    return value
+
+
+def add_max_memory(cmd: argparse.ArgumentParser, per: str = "run") -> None:
+    """The ``--max-memory GIB`` option (see :mod:`mpcform.scenario.size`)."""
+    cmd.add_argument(
+        "--max-memory",
+        type=max_memory_gib,
+        default=DEFAULT_MAX_MEMORY_GIB,
+        metavar="GIB",
+        help=f"refuse a {per} estimated to need more memory than this [GiB] "
+        f"(default {DEFAULT_MAX_MEMORY_GIB:g})",
+    )
+
+
+def print_bench(table: str, rows: list[dict[str, Any]], json_path: str | None) -> None:
+    """Print a benchmark's markdown and write its records to ``json_path`` (if given)."""
+    print(table)
+    if json_path:
+        Path(json_path).write_text(json.dumps(rows, indent=2, default=float) + "\n")
+
+
+def progress(text: str) -> None:
+    """A progress line on stderr, when it is a terminal."""
+    if sys.stderr.isatty():
+        print(text, file=sys.stderr, flush=True)
