@@ -34,7 +34,6 @@ import numpy as np
 from scipy.linalg import solve_triangular
 
 from mpcform._validate import Array
-from mpcform.mpc.limits import Limits
 from mpcform.mpc.loop import VelocityLoop
 from mpcform.mpc.problem import ACTIVE_TOL, StepQP, StepSolver
 from mpcform.mpc.rows import LimitRows, position_table, positions_of_inputs, row_ends
@@ -51,6 +50,7 @@ from mpcform.mpc.working_set import (
     working_sets,
 )
 from mpcform.solvers.base import QPSolution, failed
+from mpcform.world.limits import Limits
 
 PER_DRONE_SOLVER = "daqp (per drone)"  # the planner's solver_name in decoupled mode with per_drone
 

@@ -39,7 +39,6 @@ from mpcform.control.laws import check_gain_dt
 from mpcform.errors import ValidationError
 from mpcform.mpc.candidates import Candidates, CandidateSelector, qp_drones
 from mpcform.mpc.certify import Certifier
-from mpcform.mpc.limits import Limits, SphereObstacle
 from mpcform.mpc.liveness import TieBreak
 from mpcform.mpc.loop import VelocityLoop
 from mpcform.mpc.per_drone import PerDroneQP
@@ -53,6 +52,8 @@ from mpcform.mpc.split import SplitQP
 from mpcform.reference.base import Reference
 from mpcform.solvers.base import QPBackend, QPSolution, SolverOptions
 from mpcform.solvers.registry import DEFAULT_SOLVER, make_backend
+from mpcform.world.limits import Limits
+from mpcform.world.obstacles import SphereObstacle, resolve_clearances
 
 SLACK_REPORT_M = 1e-6  # slack above this is reported
 FAST_PATH = StepInfo("fast_path")  # a fast-path step that ends no escalation (frozen: shared)
@@ -83,7 +84,7 @@ class MPCPlanner(Controller):
         self.settings = settings = settings or MPCSettings()
         check_gain_dt(settings.gain_per_s, dt_s)
         self.n, self.dim = reference.template.n, reference.template.dim
-        self.obstacles = tuple(obstacles)
+        self.obstacles = resolve_clearances(tuple(obstacles), limits.d_min_m)  # unset: d_min / 2
         _check_limits(self.dim, limits, self.obstacles, solver, settings)
         self.loop = _check_loop(loop, self.dim, settings)
         self._families = limit_rows(self.dim, dt_s, limits, settings)

@@ -57,7 +57,7 @@ def test_the_run_in_memory_is_the_run_read_back(tmp_path: Path) -> None:
     limits = (scenario.limits.d_min_m, scenario.limits.v_max_mps)
     assert (memory.d_min_m, memory.v_max_mps) == (saved.d_min_m, saved.v_max_mps) == limits
     assert np.ptp(memory.formation.scale_ref) > 0  # the mission starts shrinking the formation for the gap
-    assert np.isnan(memory.formation.obstacles[:, 3]).all()  # clearance unset: d_min / 2
+    assert (memory.formation.obstacles[:, 3] == 0.5 * scenario.limits.d_min_m).all()  # unset: resolved
 
 
 def test_without_formation_data_the_start_shape_is_used(tmp_path: Path) -> None:
