@@ -4,6 +4,11 @@ import numpy as np
 import pytest
 
 from mpcform.errors import ValidationError
+from mpcform.formation.state import FormationState
+from mpcform.formation.template import Template
+from mpcform.mpc.planner import MPCPlanner
+from mpcform.reference.base import ConstantReference
+from mpcform.world.limits import Limits
 from mpcform.world.obstacles import SphereObstacle, obstacle_arrays, require_resolved, resolve_clearances
 
 
@@ -55,3 +60,11 @@ def test_consumers_refuse_unresolved_clearances():
 def test_bad_obstacles_are_rejected(args, match):
     with pytest.raises(ValidationError, match=match):
         SphereObstacle(*args)
+
+
+def test_the_python_entry_points_resolve_unset_clearances_as_the_loader_does():
+    tpl = Template.polygon(3, radius=1.0)
+    ref = ConstantReference(tpl, FormationState.from_param([0.0, 0.0], 0.0, 1.0))
+    unset = SphereObstacle([5.0, 0.0], 1.0)
+    planner = MPCPlanner(ref, 0.1, Limits(v_max_mps=1.0, d_min_m=0.4), obstacles=(unset,))
+    assert planner.obstacles[0].clearance_m == 0.5 * 0.4 and unset.clearance_m is None
