@@ -22,7 +22,6 @@ from mpcform.formation.kinematics import (
 )
 from mpcform.formation.state import FormationState
 from mpcform.formation.template import Template
-from mpcform.mpc.limits import Limits, SphereObstacle
 from mpcform.mpc.settings import MPCSettings
 from mpcform.reference.base import ConstantReference, ExponentialReference
 from mpcform.reference.keyframes import Keyframe, MissionLimits, SpeedBudget
@@ -32,6 +31,9 @@ from mpcform.run.runner import run_scenario
 from mpcform.scenario.load import load_scenario
 from mpcform.sim.metrics import run_metrics
 from mpcform.sim.simulation import simulate
+from mpcform.world.limits import Limits
+from mpcform.world.obstacles import SphereObstacle
+from mpcform.world.world import World
 
 try:
     __version__ = metadata.version("mpcform")
@@ -62,6 +64,7 @@ __all__ = [
     "Template",
     "TrackingController",
     "ValidationError",
+    "World",
     "__version__",
     "fit_formation",
     "formation_jacobian",

@@ -18,11 +18,11 @@ MAX_CLASS_LINES = 250
 
 LAYERS = (
     ("mpcform.errors", "mpcform._validate"),
+    ("mpcform.world",),
     ("mpcform.formation",),
     ("mpcform.reference",),
     ("mpcform.control", "mpcform.solvers"),
-    ("mpcform.mpc",),
-    ("mpcform.sim",),
+    ("mpcform.mpc", "mpcform.sim"),
     ("mpcform.scenario",),
     ("mpcform.outputs",),
     ("mpcform.run",),
@@ -30,6 +30,9 @@ LAYERS = (
     ("mpcform.cli",),
 )
 """The pipeline, lowest first: a module may import its own layer and the layers below it."""
+
+SIBLINGS = (("mpcform.mpc", "mpcform.sim"),)
+"""Subpackages that share a layer but must not import each other (both build on mpcform.world)."""
 
 
 def _module_name(path: Path) -> str:
@@ -92,6 +95,24 @@ def test_layers_import_downwards_only() -> None:
         if target != "mpcform" and _layer(target) > _layer(name)
     ]
     assert not upward, "\n".join(upward)
+
+
+def _in(name: str, package: str) -> bool:
+    return name == package or name.startswith(package + ".")
+
+
+def test_siblings_do_not_import_each_other() -> None:
+    """The planner (mpcform.mpc) and the simulators (mpcform.sim) meet only in the layers below."""
+    crossing = [
+        f"{name}:{line} imports {target}"
+        for pair in SIBLINGS
+        for a, b in (pair, pair[::-1])
+        for name in MODULES
+        if _in(name, a)
+        for target, _, line in imports(name)
+        if _in(target, b)
+    ]
+    assert not crossing, "\n".join(crossing)
 
 
 def test_no_module_imports_the_package_root() -> None:

@@ -42,7 +42,6 @@ from mpcform.bench.stats import median_p90
 from mpcform.errors import ValidationError
 from mpcform.formation.state import FormationState
 from mpcform.formation.template import Template
-from mpcform.mpc.limits import Limits, SphereObstacle, tightened
 from mpcform.mpc.planner import MPCPlanner
 from mpcform.mpc.settings import MPCSettings, mode_settings
 from mpcform.mpc.strategy import as_sparse
@@ -51,6 +50,8 @@ from mpcform.reference.base import ConstantReference, Reference
 from mpcform.scenario.load import load_scenario
 from mpcform.solvers.base import QPBackend, QPSolution, SolverOptions
 from mpcform.solvers.registry import make_backend
+from mpcform.world.limits import Limits, tightened
+from mpcform.world.obstacles import SphereObstacle
 
 DEFAULT_CVXPY_BUDGET_S = 60.0
 """cvxpy's time budget per case [s] (wall, compilation included)."""

@@ -27,8 +27,8 @@ from mpcform.errors import ValidationError
 from mpcform.formation.kinematics import velocity_size
 from mpcform.formation.state import FormationState
 from mpcform.formation.template import Template
-from mpcform.mpc.limits import Limits
 from mpcform.reference.base import ExponentialReference, Profile, Reference
+from mpcform.world.limits import Limits
 
 SCENARIOS = ("formation", "crossing")
 SPACING_M = 1.5  # lattice spacing of every formation [m] (constant density)

@@ -17,8 +17,9 @@ from scipy.sparse.csgraph import connected_components
 
 from mpcform._validate import Array
 from mpcform.formation.geometry import pairs_within, vector_norms
-from mpcform.mpc.limits import Limits, SphereObstacle, obstacle_arrays
 from mpcform.mpc.settings import MPCSettings
+from mpcform.world.limits import Limits
+from mpcform.world.obstacles import SphereObstacle, obstacle_arrays
 
 
 @dataclass(frozen=True)
@@ -44,7 +45,8 @@ class CandidateSelector:
     Reach over the horizon: a pair within ``d_min kappa + margin + 2 v_max H dt`` (both drones
     fly towards each other), a drone within ``margin + v_max H dt`` of its required distance from
     an obstacle's centre; ``v_max`` times ``speed_gain`` for a velocity loop that overshoots
-    (:attr:`mpcform.mpc.loop.VelocityLoop.speed_gain`).
+    (:attr:`mpcform.mpc.loop.VelocityLoop.speed_gain`). The obstacles' clearances are resolved
+    (:func:`mpcform.world.obstacles.resolve_clearances`).
     """
 
     def __init__(
@@ -58,7 +60,7 @@ class CandidateSelector:
     ) -> None:
         self.n, self.limits, self.settings = n, limits, settings
         self.travel_m = (limits.v_max_mps or 0.0) * speed_gain * settings.horizon * dt_s  # farthest [m]
-        self.ob_center_m, self.ob_required_m = obstacle_arrays(obstacles, limits.d_min_m)
+        self.ob_center_m, self.ob_required_m = obstacle_arrays(obstacles)
         self.reset()
 
     def reset(self) -> None:

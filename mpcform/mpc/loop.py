@@ -35,8 +35,7 @@ from scipy.linalg import expm
 
 from mpcform._validate import Array
 from mpcform.errors import ValidationError
-
-LoopGroup = tuple[Array, Array, Array, tuple[int, ...]]  # (A (s, s), B (s,), c (s,), axes)
+from mpcform.world.loop import LoopGroup
 
 
 @dataclass(frozen=True, eq=False)

@@ -35,7 +35,6 @@ import numpy as np
 from scipy.linalg import solve_triangular
 
 from mpcform._validate import Array
-from mpcform.mpc.limits import Limits
 from mpcform.mpc.loop import VelocityLoop
 from mpcform.mpc.problem import ACTIVE_TOL, StepQP, StepSolver
 from mpcform.mpc.rows import LimitRows, position_table, positions_of_inputs, row_ends
@@ -53,6 +52,7 @@ from mpcform.mpc.working_set import (
 )
 from mpcform.solvers.base import QPSolution, failed
 from mpcform.solvers.dense import NO_BOUND, DenseQPBackend, DenseSolution
+from mpcform.world.limits import Limits
 
 MIN_SLACK_QUADRATIC = 1e-6  # keeps the soft QP's Hessian positive definite when w2 = 0
 Solved = tuple[QPSolution, int]  # a solution and its number of active rows

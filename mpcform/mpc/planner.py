@@ -39,7 +39,6 @@ from mpcform.control.laws import check_gain_dt
 from mpcform.errors import ValidationError
 from mpcform.mpc.candidates import Candidates, CandidateSelector, qp_drones
 from mpcform.mpc.certify import Certifier
-from mpcform.mpc.limits import Limits, SphereObstacle
 from mpcform.mpc.liveness import TieBreak
 from mpcform.mpc.loop import VelocityLoop
 from mpcform.mpc.plan import Plan, guess, rollout, warm_start
@@ -53,6 +52,8 @@ from mpcform.mpc.step_solvers import build_step_solvers
 from mpcform.mpc.strategy import with_backend
 from mpcform.reference.base import Reference
 from mpcform.solvers.base import QPBackend, QPSolution
+from mpcform.world.limits import Limits
+from mpcform.world.obstacles import SphereObstacle, resolve_clearances
 
 SLACK_REPORT_M = 1e-6  # slack above this is reported
 
@@ -85,7 +86,7 @@ class MPCPlanner(Controller):
         self.settings = settings
         check_gain_dt(settings.gain_per_s, dt_s)
         self.n, self.dim = reference.template.n, reference.template.dim
-        self.obstacles = tuple(obstacles)
+        self.obstacles = resolve_clearances(tuple(obstacles), limits.d_min_m)  # unset: d_min / 2
         _check_limits(self.dim, limits, self.obstacles)
         self.loop = _check_loop(loop, self.dim, settings)
         self._families = limit_rows(self.dim, dt_s, limits, settings)

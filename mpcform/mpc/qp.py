@@ -30,7 +30,6 @@ import numpy as np
 import scipy.sparse as sp
 
 from mpcform._validate import Array
-from mpcform.mpc.limits import Limits
 from mpcform.mpc.loop import VelocityLoop
 from mpcform.mpc.rows import (
     Layout,
@@ -42,6 +41,7 @@ from mpcform.mpc.rows import (
     true_position_rows,
 )
 from mpcform.mpc.settings import MPCSettings
+from mpcform.world.limits import Limits
 
 
 class MPCQP:

@@ -25,9 +25,9 @@ from scipy.spatial import HalfspaceIntersection
 
 from mpcform._validate import Array
 from mpcform.formation.geometry import squared_norms
-from mpcform.mpc.limits import Limits
 from mpcform.mpc.loop import VelocityLoop
 from mpcform.mpc.settings import MPCSettings
+from mpcform.world.limits import Limits
 
 INF = np.inf
 INSCRIBED = 1.0 - 1e-9  # ||u||^2 below this times h^2: inside the velocity set, rounding included

@@ -19,7 +19,6 @@ import numpy as np
 
 from mpcform._validate import Array
 from mpcform.errors import ValidationError
-from mpcform.mpc.limits import Limits
 from mpcform.mpc.loop import VelocityLoop
 from mpcform.mpc.problem import ACTIVE_TOL, StepQP, StepSolver
 from mpcform.mpc.qp import MPCQP
@@ -27,6 +26,7 @@ from mpcform.mpc.rows import LimitRows
 from mpcform.mpc.separation import Separation, SeparationRows
 from mpcform.mpc.settings import MPCSettings
 from mpcform.solvers.base import QPBackend, QPContext, QPSolution
+from mpcform.world.limits import Limits
 
 RAISE = 30.0  # the slack weight is raised this many fold per re-solve
 MAX_RAISES = 3  # at most this many re-solves (w1 up to 27,000 times the setting)

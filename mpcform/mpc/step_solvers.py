@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-from mpcform.mpc.limits import Limits
 from mpcform.mpc.loop import VelocityLoop
 from mpcform.mpc.per_drone import PerDroneQP
 from mpcform.mpc.problem import StepSolver
@@ -14,6 +13,7 @@ from mpcform.mpc.split import SplitQP
 from mpcform.mpc.strategy import PerDroneSolve
 from mpcform.solvers.base import QPBackend
 from mpcform.solvers.registry import make_backend, make_per_drone_backend
+from mpcform.world.limits import Limits
 
 
 def build_step_solvers(

@@ -251,11 +251,8 @@ def plan_size(
 
 def draw_obstacles(ax: Axes, run: RunData, axes: tuple[int, int] = (0, 1)) -> None:
     """Each obstacle as a grey disc in the plane of ``axes``, its clearance as a dotted ring."""
-    d_min = run.d_min_m
-    for k, row in enumerate(run.formation.obstacles):
-        centre, radius, clearance = row[list(axes)], float(row[run.dim]), float(row[run.dim + 1])
-        if not np.isfinite(clearance):
-            clearance = 0.5 * d_min if d_min is not None else 0.0
+    for k, ob in enumerate(run.obstacles):  # clearances resolved (older runs' NaN: d_min / 2)
+        centre, radius, clearance = ob.center_m[list(axes)], ob.radius_m, ob.resolved_clearance_m
         ax.add_patch(
             Circle(tuple(centre), radius, color="0.75", zorder=1, label="obstacle" if k == 0 else None)
         )

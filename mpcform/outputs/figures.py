@@ -36,7 +36,6 @@ from matplotlib.figure import Figure
 from mpcform._validate import Array
 from mpcform.formation.kinematics import fit_formation
 from mpcform.formation.template import Template
-from mpcform.mpc.limits import SphereObstacle
 from mpcform.outputs.drawing import (
     CLOSEST_COLOUR,
     LIMIT_STYLE,
@@ -49,7 +48,7 @@ from mpcform.outputs.drawing import (
 from mpcform.outputs.plan_views import new_figure, top_view, view_3d
 from mpcform.outputs.rundata import RunData
 from mpcform.sim.metrics import command_speeds_mps, min_separations_m, tracking_errors_m
-from mpcform.sim.safety import obstacle_distances_along, required_clearance_m
+from mpcform.sim.safety import obstacle_distances_along
 
 FIGURE_FILES = (
     "top_view.png",
@@ -165,17 +164,13 @@ def speed_axis_top(data_max: float, v_max: float | None) -> float:
 def clearance(run: RunData) -> Figure:
     """Distance [m] of the drones to each obstacle's surface along the segments (min over drones),
     against its required clearance (radius + clearance from the centre; default d_min / 2)."""
-    traj, d = run.trajectory, run.dim
-    rows = run.formation.obstacles
-    obstacles = tuple(
-        SphereObstacle(row[:d], float(row[d]), float(row[d + 1]) if np.isfinite(row[d + 1]) else None)
-        for row in rows
-    )
+    traj = run.trajectory
+    obstacles = run.obstacles  # clearances resolved (older runs' NaN: d_min / 2)
     dist = obstacle_distances_along(traj.positions_m, obstacles)  # (T - 1, n, m) to the centres
     t_mid = 0.5 * (traj.t_s[1:] + traj.t_s[:-1])  # one value per segment, at its middle
     fig, ax = _series_axes()
     colours = colormaps["tab10"]
-    required = [required_clearance_m(ob, run.d_min_m) - ob.radius_m for ob in obstacles]
+    required = [ob.required_distance_m - ob.radius_m for ob in obstacles]
     for k, ob in enumerate(obstacles):
         surface = dist[:, :, k].min(axis=1) - ob.radius_m
         tag = f"obstacle {k}" if len(obstacles) > 1 else "obstacle"

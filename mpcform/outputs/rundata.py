@@ -5,9 +5,10 @@ The figures and the exports also need what only the scenario knows: the template
 the best-fit scale and the formation's edges), the reference's scale and the obstacles.
 ``mpcform run --plot/--export`` takes them from the scenario in memory (:func:`formation_data`)
 and saves them as ``formation.npz`` beside the other files: ``offsets`` (n, d) [m],
-``scale_ref`` (T,), ``obstacles`` (k, d + 2) [m] (centre, radius, clearance; NaN clearance:
-d_min / 2), and for a consensus run ``graph_edges`` (m, 2) and ``leaders`` (k,) (the
-communication graph's links and the drones that see the commanded scale; absent otherwise).
+``scale_ref`` (T,), ``obstacles`` (k, d + 2) [m] (centre, radius, clearance as resolved; a NaN
+clearance, as runs saved before the clearance was resolved on loading have it: d_min / 2), and
+for a consensus run ``graph_edges`` (m, 2) and ``leaders`` (k,) (the communication graph's links
+and the drones that see the commanded scale; absent otherwise).
 :func:`load_run` reads a directory back into the same :class:`RunData`; without
 ``formation.npz`` it falls back to the reference's start shape (scale then relative to the start).
 """
@@ -25,6 +26,7 @@ from mpcform._validate import Array
 from mpcform.errors import ValidationError
 from mpcform.outputs.files import SCALE_ESTIMATES, SUMMARY_JSON, TRAJECTORY_NPZ, TRUE_ARRAYS
 from mpcform.sim.trajectory import Trajectory, TrueTrajectory
+from mpcform.world.obstacles import SphereObstacle, resolve_clearances
 
 if TYPE_CHECKING:
     from mpcform.scenario.spec import Scenario
@@ -41,8 +43,9 @@ class FormationData:
     """The scenario's side of a run: ``offsets_m`` (n, d), the template (or, without
     ``formation.npz``, the reference's start shape ``s0 R0 r_i``); ``scale_ref`` (T,), the
     reference's scale, or None when unknown; ``obstacles`` (k, d + 2): centre, radius,
-    clearance (NaN: d_min / 2) of each sphere; ``graph_edges`` (m, 2), the communication graph
-    of a consensus run (None: no graph), and ``leaders``, its drones that see the commanded scale."""
+    clearance (NaN in older runs: d_min / 2, :attr:`RunData.obstacles`) of each sphere;
+    ``graph_edges`` (m, 2), the communication graph of a consensus run (None: no graph), and
+    ``leaders``, its drones that see the commanded scale."""
 
     offsets_m: Array
     scale_ref: Array | None
@@ -84,6 +87,17 @@ class RunData:
     @property
     def v_max_mps(self) -> float | None:
         return _limit(self.summary, "v_max")
+
+    @property
+    def obstacles(self) -> tuple[SphereObstacle, ...]:
+        """The saved obstacles with their clearances resolved: a NaN clearance (a run saved before
+        the clearance was resolved on loading) is half of the run's d_min."""
+        d, rows = self.dim, self.formation.obstacles
+        saved = tuple(
+            SphereObstacle(row[:d], float(row[d]), float(row[d + 1]) if np.isfinite(row[d + 1]) else None)
+            for row in rows
+        )
+        return resolve_clearances(saved, self.d_min_m)
 
     @property
     def label(self) -> str:

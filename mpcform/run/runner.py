@@ -62,9 +62,7 @@ def run_scenario(
         seed=scenario.seed,
         scenario_file=scenario.source,
         scenario_sha256=scenario.source_sha256,
-        metrics=run_metrics(
-            result, limits.v_max_mps, limits.d_min_m, limits=limits, obstacles=scenario.obstacles
-        ),
+        metrics=run_metrics(result, scenario.world),
         steps=result.commands_mps.shape[0],
         plant=plant_record(scenario, result.wind_clip_fraction),
     )

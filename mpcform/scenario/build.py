@@ -8,7 +8,6 @@ from mpcform.control.graph import GRAPH_KINDS
 from mpcform.control.nullspace import NullSpaceController, NullSpaceSettings
 from mpcform.control.tracking import ProportionalController, TrackingController
 from mpcform.errors import ScenarioError, SolverError, ValidationError
-from mpcform.mpc.limits import tightened
 from mpcform.mpc.loop import VelocityLoop
 from mpcform.mpc.settings import MPCSettings
 from mpcform.mpc.strategy import with_backend
@@ -17,6 +16,7 @@ from mpcform.scenario.schema import CONTROLLER_KINDS, did_you_mean, listing
 from mpcform.scenario.spec import Scenario
 from mpcform.solvers.base import QPBackend
 from mpcform.solvers.registry import check_solver_name
+from mpcform.world.limits import tightened
 
 
 def build_controller(
@@ -27,7 +27,7 @@ def build_controller(
     ``solver`` is a backend name (checked like the ``controller.solver`` key) or a
     :class:`~mpcform.solvers.base.QPBackend` instance the MPC planner solves with as it is
     (e.g. a recording wrapper). The MPC planner keeps the limits tightened by the plant's robust
-    margin (:func:`mpcform.mpc.limits.tightened`; nothing changes for the ideal plant).
+    margin (:func:`mpcform.world.limits.tightened`; nothing changes for the ideal plant).
     """
     spec = scenario.controller
     kind = spec.kind if kind is None else kind

@@ -27,7 +27,6 @@ from mpcform.formation.kinematics import fit_formation, forward_kinematics
 from mpcform.formation.rotation import rotation_matrix
 from mpcform.formation.state import FormationState
 from mpcform.formation.template import Template
-from mpcform.mpc.limits import Limits, SphereObstacle
 from mpcform.mpc.settings import MPCSettings
 from mpcform.reference.base import ConstantReference, ExponentialReference, Reference
 from mpcform.reference.keyframes import DEFAULT_SPEED_FRACTION, MissionLimits, SpeedBudget
@@ -39,6 +38,8 @@ from mpcform.scenario.plant import parse_plant
 from mpcform.scenario.schema import CONSENSUS_FIELDS, NULLSPACE_FIELDS, TABLES
 from mpcform.scenario.solve import solve_strategy
 from mpcform.scenario.spec import ControllerSpec, Scenario, SimulationSpec
+from mpcform.world.limits import Limits
+from mpcform.world.obstacles import SphereObstacle, resolve_clearances
 
 
 def load_scenario(path: str | Path) -> Scenario:
@@ -81,7 +82,7 @@ def scenario_from_dict(
     init = parse_table(data, "initial", dim, tpl.n)
     start, positions = _initial(tpl, init)
     limits = _limits(parse_table(data, "limits", dim), dim)
-    obstacles = _obstacles(data.get("obstacles"), dim)
+    obstacles = resolve_clearances(_obstacles(data.get("obstacles"), dim), limits.d_min_m)  # unset: d_min / 2
     check_start(
         positions,
         "initial.positions" if init["positions"] is not None else "initial.centroid",
@@ -93,7 +94,7 @@ def scenario_from_dict(
     if isinstance(reference, ConstantReference):
         goal = reference.start_positions_m()
         field = "reference.centroid" if ref["centroid"] is not None else "reference"
-        check_goal(goal, field, limits, obstacles)
+        check_goal(goal, field, obstacles)
     sim = SimulationSpec(**_renamed(parse_table(data, "simulation", dim), "simulation"))
     plant = parse_plant(data, dim, sim.dt_s)
     controller = _controller(parse_table(data, "controller", dim), sim.dt_s)

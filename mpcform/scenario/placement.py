@@ -5,8 +5,9 @@ Checked when a scenario is loaded, each as a :class:`~mpcform.errors.ScenarioErr
 - two template offsets (or two explicit start positions) at one point: no separation d_min > 0
   can hold between them, and a template whose offsets are all zero has no shape;
 - a start (before the seeded perturbation) inside an obstacle, closer to its centre than
-  ``radius + clearance`` (the clearance defaults to d_min / 2, as the planner's obstacle rows),
-  or outside the geofence box;
+  ``radius + clearance`` (the obstacles' clearances resolved, an unset one to d_min / 2 as for
+  the planner's obstacle rows: :func:`mpcform.world.obstacles.resolve_clearances`), or outside
+  the geofence box;
 - a constant reference whose goal puts a drone inside an obstacle: it would hold it there.
 
 A moving reference (exponential, mission) may pass through obstacles: the MPC goes around them.
@@ -19,7 +20,8 @@ from scipy.spatial import cKDTree
 
 from mpcform._validate import Array
 from mpcform.errors import ScenarioError
-from mpcform.mpc.limits import Limits, SphereObstacle
+from mpcform.world.limits import Limits
+from mpcform.world.obstacles import SphereObstacle
 
 Obstacles = tuple[SphereObstacle, ...]
 COINCIDENT_RTOL = 1e-9  # points closer than this times max(1 m, their extent) coincide
@@ -65,37 +67,29 @@ def check_start(positions_m: Array, field: str, limits: Limits, obstacles: Obsta
                 f"limits.geofence_max = {_point(hi)}; expected every start "
                 "inside it",
             )
-    _clear_of_obstacles(positions_m, field, "starts", limits, obstacles)
+    _clear_of_obstacles(positions_m, field, "starts", obstacles)
 
 
-def check_goal(goal_m: Array, field: str, limits: Limits, obstacles: Obstacles) -> None:
+def check_goal(goal_m: Array, field: str, obstacles: Obstacles) -> None:
     """Raise when a constant reference's goal positions (n, d) put a drone inside an obstacle."""
     note = " (a moving reference, exponential or mission, may pass through obstacles)"
-    _clear_of_obstacles(goal_m, field, "has its constant goal", limits, obstacles, note)
+    _clear_of_obstacles(goal_m, field, "has its constant goal", obstacles, note)
 
 
-def required_distance_m(obstacle: SphereObstacle, limits: Limits) -> float:
-    """Radius plus clearance [m]: the clearance defaults to half of d_min (0 without d_min)."""
-    return obstacle.required_distance_m(limits.d_min_m)
-
-
-def _clear_of_obstacles(
-    points_m: Array, field: str, verb: str, limits: Limits, obstacles: Obstacles, note: str = ""
-) -> None:
+def _clear_of_obstacles(points_m: Array, field: str, verb: str, obstacles: Obstacles, note: str = "") -> None:
     for k, ob in enumerate(obstacles):
         if ob.center_m.shape != points_m.shape[1:]:
             continue  # reported elsewhere (obstacles[k].center has the wrong length)
-        need = required_distance_m(ob, limits)
+        need = ob.required_distance_m
         dist = np.linalg.norm(points_m - ob.center_m, axis=1)
         inside = np.flatnonzero(dist < need)
         if inside.size:
             i = int(inside[np.argmin(dist[inside])])
-            clearance = "d_min / 2" if ob.clearance_m is None else "clearance"
             raise ScenarioError(
                 field,
                 f"drone {i}{_more(inside)} {verb} at {_point(points_m[i])}, "
                 f"{dist[i]:.4g} m from the centre of obstacles[{k}], inside its radius + "
-                f"{clearance} = {need:.4g} m; expected every drone at least that "
+                f"clearance = {need:.4g} m; expected every drone at least that "
                 f"far{note}",
             )
 

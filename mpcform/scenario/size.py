@@ -158,7 +158,7 @@ def _candidates(scenario: Scenario) -> tuple[int, int]:
     items = 0
     if scenario.obstacles:
         centres = np.array([o.center_m for o in scenario.obstacles])
-        required = np.array([o.required_distance_m(lim.d_min_m) for o in scenario.obstacles])
+        required = np.array([o.required_distance_m for o in scenario.obstacles])
         reach = required + st.margin_m + 2.0 * travel
         for points in samples:
             near = cKDTree(points).query_ball_point(centres, reach, return_length=True)

@@ -16,10 +16,12 @@ from mpcform.control.nullspace import NullSpaceSettings
 from mpcform.formation.geometry import min_pair_distance
 from mpcform.formation.state import FormationState
 from mpcform.formation.template import Template
-from mpcform.mpc.limits import Limits, SphereObstacle, tightened
 from mpcform.mpc.settings import MPCSettings
 from mpcform.reference.base import Reference
 from mpcform.sim.plant_spec import PlantSpec, Robustness
+from mpcform.world.limits import Limits, tightened
+from mpcform.world.obstacles import SphereObstacle, resolve_clearances
+from mpcform.world.world import World
 
 
 @dataclass(frozen=True)
@@ -55,6 +57,8 @@ class Scenario:
     explicit start positions). Where the reference puts the drones at t = 0 is
     ``reference.start_positions_m()``: not the start positions when the reference does not begin
     at the start formation (a constant reference holds its goal from t = 0, as in the swaps).
+    ``obstacles`` have their clearances resolved (unset: half of ``limits.d_min_m``,
+    :func:`mpcform.world.obstacles.resolve_clearances`) when the scenario is made.
     """
 
     name: str
@@ -75,10 +79,18 @@ class Scenario:
     allow_disconnected: bool = False
     plant: PlantSpec = dataclasses.field(default_factory=PlantSpec)
 
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "obstacles", resolve_clearances(tuple(self.obstacles), self.limits.d_min_m))
+
     @property
     def n(self) -> int:
         """Number of drones."""
         return self.template.n
+
+    @property
+    def world(self) -> World:
+        """The limits and the (resolved) obstacles together."""
+        return World(self.limits, self.obstacles)
 
     @functools.cached_property
     def robustness(self) -> Robustness:
@@ -111,7 +123,7 @@ class Scenario:
     def spacing_warning(self, controller: str | None = None) -> str | None:
         """A line when the MPC cannot reach the final formation under the plant: its closest pair
         is nearer than ``d_min + 2 margin``, the distance the planner keeps between two drones
-        (:func:`mpcform.mpc.limits.tightened`); those drones then stop short of their targets.
+        (:func:`mpcform.world.limits.tightened`); those drones then stop short of their targets.
         None otherwise (an ideal plant, no d_min, a controller other than ``controller`` or the
         file's ``mpc``)."""
         rob = self.robustness

@@ -24,7 +24,6 @@ from mpcform._validate import Array
 from mpcform.formation.geometry import count_pairs_within, min_pair_distances
 from mpcform.formation.kinematics import fit_formation
 from mpcform.formation.template import Template
-from mpcform.mpc.limits import Limits, SphereObstacle
 from mpcform.sim.completion import COMPLETION_TOL_M, completion_metrics
 from mpcform.sim.safety import (
     downwash_metric,
@@ -35,6 +34,9 @@ from mpcform.sim.safety import (
 )
 from mpcform.sim.simulation import SimulationResult
 from mpcform.sim.trajectory import Trajectory, TrueTrajectory
+from mpcform.world.limits import Limits
+from mpcform.world.obstacles import SphereObstacle
+from mpcform.world.world import World
 
 REL_TOL = 1e-9  # violations are counted beyond this relative tolerance
 
@@ -71,17 +73,17 @@ def tracking_cost_m2s(trajectory: Trajectory) -> float:
 
 # ---- the summary's metrics ---------------------------------------------------------------
 def run_metrics(
-    result: SimulationResult,
-    v_max_mps: float | None,
-    d_min_m: float | None,
-    *,
-    limits: Limits | None = None,
-    obstacles: tuple[SphereObstacle, ...] = (),
-    completion_tol_m: float = COMPLETION_TOL_M,
+    result: SimulationResult, world: World | None = None, *, completion_tol_m: float = COMPLETION_TOL_M
 ) -> dict[str, Any]:
     """Tracking, separation, speed, solver, timing and completion metrics of one run (JSON-ready);
-    with ``limits`` and ``obstacles`` also the geofence and obstacle metrics, and with the plant's
-    dense motion (``result.true``) the ``*_true`` metrics."""
+    with a ``world`` (:class:`~mpcform.world.world.World`: its limits' ``v_max`` and ``d_min``, its
+    obstacles with their resolved clearances) also the speed and separation violations, the
+    geofence, downwash and obstacle metrics, and with the plant's dense motion (``result.true``)
+    the ``*_true`` metrics."""
+    limits = None if world is None else world.limits
+    obstacles = () if world is None else world.obstacles
+    v_max_mps = None if limits is None else limits.v_max_mps
+    d_min_m = None if limits is None else limits.d_min_m
     err = tracking_errors_m(result).max(axis=1)
     speed = command_speeds_mps(result)
     pos = result.positions_m
@@ -109,23 +111,19 @@ def run_metrics(
         "step_time_ms": {
             mode: _stats(1e3 * result.step_times_s[modes == mode]) for mode in sorted(set(modes.tolist()))
         },
-        **_path_metrics(result.positions_m, "", d_min_m, limits, obstacles),
-        **({} if result.true is None else _true_metrics(result.true, d_min_m, limits, obstacles)),
+        **_path_metrics(result.positions_m, "", limits, obstacles),
+        **({} if result.true is None else _true_metrics(result.true, limits, obstacles)),
         **completion_metrics(result, completion_tol_m),
     }
 
 
 def _path_metrics(
-    path: Array,
-    suffix: str,
-    d_min_m: float | None,
-    limits: Limits | None,
-    obstacles: tuple[SphereObstacle, ...],
+    path: Array, suffix: str, limits: Limits | None, obstacles: tuple[SphereObstacle, ...]
 ) -> dict[str, Any]:
     """Obstacle, geofence and downwash separation of a path (straight between its samples)."""
     out: dict[str, Any] = {}
     if obstacles:
-        clearance, violations = obstacle_metrics(path, obstacles, d_min_m)
+        clearance, violations = obstacle_metrics(path, obstacles)
         out |= {f"min_obstacle_clearance{suffix}": clearance, f"obstacle_violations{suffix}": violations}
     if limits is not None:
         out[f"geofence_violations{suffix}"] = geofence_violations(path, limits)
@@ -136,11 +134,11 @@ def _path_metrics(
 
 
 def _true_metrics(
-    true: TrueTrajectory, d_min_m: float | None, limits: Limits | None, obstacles: tuple[SphereObstacle, ...]
+    true: TrueTrajectory, limits: Limits | None, obstacles: tuple[SphereObstacle, ...]
 ) -> dict[str, Any]:
     """The safety and tracking metrics of the plant's dense true motion (distances linear between
     dense samples)."""
-    p = true.positions_m
+    p, d_min_m = true.positions_m, None if limits is None else limits.d_min_m
     out: dict[str, Any] = {
         "min_separation_true": _finite_or_none(min_separation_along(p)),
         "separation_violations_true": 0 if d_min_m is None else separation_violations(p, d_min_m),
@@ -148,9 +146,9 @@ def _true_metrics(
         "max_tracking_error_true": float(np.linalg.norm(p - true.reference_m, axis=-1).max()),
     }
     if obstacles:
-        clearance, violations = obstacle_metrics(p, obstacles, d_min_m)
+        clearance, violations = obstacle_metrics(p, obstacles)
         out |= {"min_obstacle_clearance_true": clearance, "obstacle_violations_true": violations}
-    return out | _path_metrics(p, "_true", d_min_m, limits, ())
+    return out | _path_metrics(p, "_true", limits, ())
 
 
 def _stats(ms: np.ndarray) -> dict[str, float]:

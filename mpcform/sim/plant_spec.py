@@ -15,9 +15,9 @@ import numpy as np
 
 from mpcform._validate import positive
 from mpcform.errors import ValidationError
-from mpcform.mpc.loop import LoopGroup
 from mpcform.sim.plants import KINDS, SAMPLES_PER_STEP, IdealPlant, Plant, lag_plant, second_order_plant
 from mpcform.sim.wind import Wind
+from mpcform.world.loop import LoopGroup
 
 DEFAULT_TIME_CONSTANT_S = 0.1
 DEFAULT_DAMPING = 0.7

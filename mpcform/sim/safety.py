@@ -11,7 +11,8 @@ import numpy as np
 
 from mpcform._validate import Array
 from mpcform.formation.geometry import closest_on_segments, count_pairs_within, min_path_distance
-from mpcform.mpc.limits import Limits, SphereObstacle
+from mpcform.world.limits import Limits
+from mpcform.world.obstacles import SphereObstacle
 
 TOL_M = 1e-9
 """A distance short of its requirement by at most this much [m] is not a violation."""
@@ -30,11 +31,6 @@ def separation_violations(path_m: Array, d_min_m: float, metric: Array | None = 
     return count_pairs_within(p, d_min_m - TOL_M)
 
 
-def required_clearance_m(obstacle: SphereObstacle, d_min_m: float | None) -> float:
-    """Distance [m] a drone keeps from an obstacle's centre: radius + clearance (default d_min / 2)."""
-    return float(obstacle.required_distance_m(d_min_m))
-
-
 def obstacle_distances_along(path_m: Array, obstacles: tuple[SphereObstacle, ...]) -> Array:
     """Smallest distance [m] of each drone's segment to each obstacle's centre, (T - 1, n, m)."""
     t, n, d = path_m.shape
@@ -46,17 +42,16 @@ def obstacle_distances_along(path_m: Array, obstacles: tuple[SphereObstacle, ...
     return out
 
 
-def obstacle_metrics(
-    path_m: Array, obstacles: tuple[SphereObstacle, ...], d_min_m: float | None
-) -> tuple[float | None, int]:
+def obstacle_metrics(path_m: Array, obstacles: tuple[SphereObstacle, ...]) -> tuple[float | None, int]:
     """``(min clearance from any obstacle's surface along the segments [m], violations)``; a violation
-    is a (segment, drone, obstacle) that comes closer than the required clearance (None, 0 without
+    is a (segment, drone, obstacle) that comes closer than its required distance, radius plus
+    resolved clearance (:func:`mpcform.world.obstacles.resolve_clearances`; None, 0 without
     obstacles)."""
     if not obstacles:
         return None, 0
     dist = obstacle_distances_along(path_m, obstacles)
     radius = np.array([ob.radius_m for ob in obstacles])
-    required = np.array([required_clearance_m(ob, d_min_m) for ob in obstacles])
+    required = np.array([ob.required_distance_m for ob in obstacles])
     return float((dist - radius).min()), int((dist < required - TOL_M).sum())
 
 

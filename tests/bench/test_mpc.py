@@ -29,8 +29,8 @@ TIMES = ("qp", "raw", "fast", "rollout")
 
 
 def test_recording_backend_keeps_every_problem_and_solves_like_its_inner_backend() -> None:
-    from mpcform.mpc.limits import Limits
     from mpcform.mpc.planner import MPCPlanner
+    from mpcform.world.limits import Limits
 
     ref, start = swap_case(4, 2)
     rec = RecordingBackend(make_backend("piqp", SolverOptions()))

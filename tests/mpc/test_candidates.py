@@ -5,8 +5,9 @@ from __future__ import annotations
 import numpy as np
 
 from mpcform.mpc.candidates import Candidates, CandidateSelector, mask_of, qp_drones
-from mpcform.mpc.limits import Limits, SphereObstacle
 from mpcform.mpc.settings import MPCSettings
+from mpcform.world.limits import Limits
+from mpcform.world.obstacles import SphereObstacle
 
 # v_max 1, horizon 2, dt 0.1: travel 0.2 m; pairs within reach 0.5 + 0.002 + 0.4 = 0.902 m, kept
 # within one more horizon of reach, 1.302 m
@@ -48,7 +49,7 @@ def test_downwash_widens_the_reach() -> None:
 def test_obstacle_items() -> None:
     """Obstacle radius 1 at (3, 0), required 1 + 0.25; gaps within 0.202 are in reach, within
     0.402 kept: drone 0 (gap 0.15) within reach, drone 1 (0.35) only kept, drone 2 (1.75) neither."""
-    ob = SphereObstacle(np.array([3.0, 0.0]), 1.0)
+    ob = SphereObstacle(np.array([3.0, 0.0]), 1.0, clearance_m=0.25)  # d_min / 2
     sel = CandidateSelector(3, 0.1, LIMITS, SETTINGS, (ob,))
     cand = sel.select(np.array([[1.6, 0.0], [3.0, 1.6], [3.0, -3.0]]))
     np.testing.assert_array_equal(cand.obstacles, [[0, 0], [1, 0]])

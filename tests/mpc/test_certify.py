@@ -6,10 +6,11 @@ import numpy as np
 
 from mpcform.mpc.candidates import Candidates
 from mpcform.mpc.certify import Certifier
-from mpcform.mpc.limits import Limits, SphereObstacle
 from mpcform.mpc.plan import Plan
 from mpcform.mpc.separation import Separation
 from mpcform.mpc.settings import MPCSettings
+from mpcform.world.limits import Limits
+from mpcform.world.obstacles import SphereObstacle
 
 DT = 0.1
 

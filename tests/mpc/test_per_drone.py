@@ -13,7 +13,6 @@ from hypothesis import strategies as st
 
 from mpcform.formation.state import FormationState
 from mpcform.formation.template import Template
-from mpcform.mpc.limits import Limits, SphereObstacle
 from mpcform.mpc.per_drone import PerDroneQP
 from mpcform.mpc.planner import MPCPlanner
 from mpcform.mpc.settings import MPCSettings
@@ -23,6 +22,8 @@ from mpcform.sim.simulation import simulate
 from mpcform.solvers.base import QPBackend, QPSolution, SolverOptions
 from mpcform.solvers.daqp_dense import DaqpBackend
 from mpcform.solvers.registry import make_backend
+from mpcform.world.limits import Limits
+from mpcform.world.obstacles import SphereObstacle
 
 # The sparse reference: Clarabel at tight tolerances (PIQP stops ~3e-6 away at any tolerance here).
 # Where plans differ by more than ~1e-6 (an optimum at a vertex of the velocity polygon), the

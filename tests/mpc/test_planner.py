@@ -16,13 +16,14 @@ from mpcform.formation.geometry import closest_on_segments, min_segment_distance
 from mpcform.formation.kinematics import forward_kinematics
 from mpcform.formation.state import FormationState
 from mpcform.formation.template import Template
-from mpcform.mpc.limits import Limits, SphereObstacle
 from mpcform.mpc.planner import MPCPlanner
 from mpcform.mpc.settings import MPCSettings
 from mpcform.mpc.strategy import SparseSolve
 from mpcform.reference.base import ConstantReference, ExponentialReference, Profile
 from mpcform.sim.simulation import SimulationResult, simulate
 from mpcform.solvers.base import QPBackend, QPSolution, SolverOptions
+from mpcform.world.limits import Limits
+from mpcform.world.obstacles import SphereObstacle
 
 SOLVERS = ["osqp", "piqp"]
 

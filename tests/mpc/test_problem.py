@@ -6,7 +6,6 @@ import numpy as np
 import pytest
 
 from mpcform.mpc.candidates import Candidates
-from mpcform.mpc.limits import Limits
 from mpcform.mpc.per_drone import PerDroneQP
 from mpcform.mpc.plan import rollout
 from mpcform.mpc.problem import StepQP, StepSolver
@@ -17,6 +16,7 @@ from mpcform.mpc.sparse import SparseSolver
 from mpcform.solvers.base import SolverOptions
 from mpcform.solvers.daqp_dense import DaqpBackend
 from mpcform.solvers.registry import make_backend
+from mpcform.world.limits import Limits
 
 DT = 0.1
 

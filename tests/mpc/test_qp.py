@@ -5,11 +5,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from mpcform.mpc.limits import Limits
 from mpcform.mpc.plan import rollout
 from mpcform.mpc.qp import MPCQP
 from mpcform.mpc.rows import limit_rows, row_ends
 from mpcform.mpc.settings import MPCSettings
+from mpcform.world.limits import Limits
 
 DT = 0.1
 FENCE = {"geofence_min_m": [-9.0, -9.0], "geofence_max_m": [9.0, 9.0]}

@@ -9,7 +9,6 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.spatial import HalfspaceIntersection
 
-from mpcform.mpc.limits import Limits
 from mpcform.mpc.rows import (
     AccelerationRows,
     GeofenceRows,
@@ -29,6 +28,7 @@ from mpcform.mpc.rows import (
     violators,
 )
 from mpcform.mpc.settings import MPCSettings
+from mpcform.world.limits import Limits
 
 DT = 0.1
 

@@ -8,9 +8,11 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from mpcform.mpc.candidates import Candidates
-from mpcform.mpc.limits import Limits, SphereObstacle
-from mpcform.mpc.separation import PairSeparation, Separation, segment_normals
+from mpcform.mpc.separation import Separation
+from mpcform.mpc.separation_units import PairSeparation, segment_normals
 from mpcform.mpc.settings import MPCSettings
+from mpcform.world.limits import Limits
+from mpcform.world.obstacles import SphereObstacle
 
 MARGIN = 2e-3  # the default margin
 
@@ -132,7 +134,7 @@ def test_clear_means_no_joint_or_obstacle_row_is_missed(seed: int) -> None:
     p0 = rng.uniform(-3.0, 3.0, (n, 2))  # about half of the draws pass the clear test
     guess = p0 + np.cumsum(np.concatenate([np.zeros((1, n, 2)), rng.uniform(-0.1, 0.1, (h, n, 2))]), axis=0)
     x = np.cumsum(rng.uniform(-0.1, 0.1, (h, n, 2)), axis=0)
-    ob = SphereObstacle(np.array([0.0, 0.0]), 0.3)
+    ob = SphereObstacle(np.array([0.0, 0.0]), 0.3, clearance_m=0.25)  # d_min / 2
     sep = Separation(2, Limits(v_max_mps=1.0, d_min_m=0.5), MPCSettings(horizon=h), (ob,))
     everything = cand([[i, k] for i in range(n) for k in range(i + 1, n)], [[i, 0] for i in range(n)])
     rows = sep.rows(p0, guess, everything)
@@ -163,7 +165,7 @@ def test_clear_fails_head_on() -> None:
 
 def test_first_segment_items_within_reach() -> None:
     p0 = np.array([[0.0, 0.0], [1.0, 0.0]])
-    ob = SphereObstacle(np.array([0.0, 2.0]), 0.5)
+    ob = SphereObstacle(np.array([0.0, 2.0]), 0.5, clearance_m=0.2)  # d_min / 2
     sep = Separation(2, Limits(v_max_mps=1.0, d_min_m=0.4), MPCSettings(), (ob,))
     c = cand([[0, 1]], [[1, 0]])
     (a, b, d_pair), (oa, ob_, d_ob) = sep.first_segment(p0, p0 + 0.1, c)
@@ -211,7 +213,7 @@ def test_blocked_targets_are_the_pairs_within_d_min_in_the_metric() -> None:
     """Targets 0.45 m apart block each other under d_min 0.5, 0.6 m apart do not; with downwash
     (kappa 2) a vertical 0.8 m counts as 0.4 m; obstacles never block (a moving reference may pass
     through one)."""
-    ob = SphereObstacle(np.array([5.0, 5.0, 0.0]), 1.0)
+    ob = SphereObstacle(np.array([5.0, 5.0, 0.0]), 1.0, clearance_m=0.25)
     sep = Separation(3, Limits(v_max_mps=1.0, d_min_m=0.5, downwash_kappa=2.0), MPCSettings(), (ob,))
     targets = np.array([[0, 0, 0], [0.45, 0, 0], [3, 0, 0], [3, 0, 0.8], [6, 0, 0], [5, 5, 0.0]])
     np.testing.assert_array_equal(sep.blocked_targets(targets), [True, True, True, True, False, False])
@@ -224,7 +226,7 @@ def test_targets_within_two_tubes_of_the_tightened_distance_are_blocked() -> Non
     """A plant tube of 0.04 m (limits tightened to d_min 0.58): targets 0.6 m apart are blocked
     (0.6 < 0.58 + 2 x 0.04: the plant cannot hold both without the pair in conflict), 0.7 m apart
     are not; without a tube 0.6 m apart are not."""
-    from mpcform.mpc.limits import tightened
+    from mpcform.world.limits import tightened
 
     targets = np.array([[0.0, 0.0], [0.6, 0.0], [5.0, 0.0], [5.7, 0.0]])
     planned, _ = tightened(Limits(v_max_mps=1.0, d_min_m=0.5), (), 0.04, None)
@@ -245,7 +247,7 @@ def test_the_block_size_leaves_the_rows(kappa: float | None, monkeypatch: pytest
     guess = p0 + np.cumsum(np.concatenate([np.zeros((1, n, 3)), rng.uniform(-0.1, 0.1, (h, n, 3))]), axis=0)
     x = np.cumsum(rng.uniform(-0.1, 0.1, (h, n, 3)), axis=0)
     lim = Limits(v_max_mps=1.0, d_min_m=0.5, downwash_kappa=kappa)
-    ob = SphereObstacle(np.zeros(3), 0.2)
+    ob = SphereObstacle(np.zeros(3), 0.2, clearance_m=0.25)
     sep = Separation(3, lim, MPCSettings(horizon=h, coupling="decoupled"), (ob,))
     items = cand([[i, k] for i in range(n) for k in range(i + 1, n)], [[i, 0] for i in range(n)])
     out = []
@@ -272,7 +274,7 @@ def test_the_clear_test_answers_the_same_when_it_tries_the_least_clear_first(see
     p0 = grid + rng.uniform(-0.08, 0.08, (n, 2)) + 3.0
     guess = p0 + np.cumsum(np.concatenate([np.zeros((1, n, 2)), rng.uniform(-0.02, 0.02, (h, n, 2))]), axis=0)
     x = np.cumsum(rng.uniform(-0.02, 0.02, (h, n, 2)), axis=0)
-    ob = SphereObstacle(np.zeros(2), 0.5)
+    ob = SphereObstacle(np.zeros(2), 0.5, clearance_m=0.175)  # d_min / 2
     sep = Separation(2, Limits(v_max_mps=1.0, d_min_m=0.35), MPCSettings(horizon=h), (ob,))
     answers = []
     for first in (1, 10_000):

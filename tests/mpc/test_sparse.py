@@ -10,7 +10,6 @@ import scipy.sparse as sp
 from helpers import crowd_and_swap
 
 from mpcform.mpc.candidates import Candidates
-from mpcform.mpc.limits import Limits, SphereObstacle
 from mpcform.mpc.problem import StepQP
 from mpcform.mpc.rows import limit_rows
 from mpcform.mpc.separation import Separation, SeparationRows
@@ -18,10 +17,12 @@ from mpcform.mpc.settings import MPCSettings
 from mpcform.mpc.sparse import SparseSolver
 from mpcform.mpc.strategy import SparseSolve
 from mpcform.solvers.base import QPBackend, QPContext, QPSolution, SolverOptions
+from mpcform.world.limits import Limits
+from mpcform.world.obstacles import SphereObstacle
 
 DT = 0.1
 LIMITS = Limits(v_max_mps=1.0, d_min_m=0.5)
-OBSTACLE = SphereObstacle(np.array([0.0, 3.0]), 0.5)
+OBSTACLE = SphereObstacle(np.array([0.0, 3.0]), 0.5, clearance_m=0.25)  # d_min / 2
 
 
 class Recording(QPBackend):

@@ -10,7 +10,6 @@ import pytest
 
 from mpcform.formation.state import FormationState
 from mpcform.formation.template import Template
-from mpcform.mpc.limits import Limits
 from mpcform.mpc.planner import MPCPlanner
 from mpcform.mpc.problem import StepQP
 from mpcform.mpc.rows import row_ends
@@ -22,6 +21,7 @@ from mpcform.reference.base import ConstantReference
 from mpcform.sim.simulation import simulate
 from mpcform.solvers.base import SolverOptions
 from mpcform.solvers.registry import make_backend
+from mpcform.world.limits import Limits
 
 LIMITS = Limits(v_max_mps=1.0, d_min_m=0.5)
 DT = 0.1

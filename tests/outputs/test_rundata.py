@@ -41,6 +41,21 @@ def test_round_trip_with_formation_data(tmp_path: Path) -> None:
     assert np.allclose(formation.offsets_m.mean(axis=0), 0.0)
 
 
+def test_an_older_runs_unset_clearance_reads_as_half_of_d_min(tmp_path: Path) -> None:
+    """Runs saved before the clearance was resolved on loading hold NaN for an unset one."""
+    run = short_run("mission_obstacle_gap", tmp_path, steps=3)
+    data = load_run(tmp_path)
+    d_min = data.d_min_m
+    assert d_min is not None and run.simulation.t_s.shape[0] == 4
+    assert [o.clearance_m for o in data.obstacles] == [0.5 * d_min] * len(data.obstacles)  # saved resolved
+    saved = data.formation.obstacles.copy()
+    saved[:, -1] = np.nan  # as an older run saved it
+    write_formation_npz(tmp_path, FormationData(data.formation.offsets_m, data.formation.scale_ref, saved))
+    old = load_run(tmp_path)
+    assert np.isnan(old.formation.obstacles[:, -1]).all()
+    assert [o.clearance_m for o in old.obstacles] == [0.5 * d_min] * len(old.obstacles)
+
+
 def test_the_run_in_memory_is_the_run_read_back(tmp_path: Path) -> None:
     scenario = shortened(load_scenario(SCENARIOS / "mission_obstacle_gap.toml"), 12)
     run = run_scenario(scenario, tmp_path)
@@ -57,7 +72,7 @@ def test_the_run_in_memory_is_the_run_read_back(tmp_path: Path) -> None:
     limits = (scenario.limits.d_min_m, scenario.limits.v_max_mps)
     assert (memory.d_min_m, memory.v_max_mps) == (saved.d_min_m, saved.v_max_mps) == limits
     assert np.ptp(memory.formation.scale_ref) > 0  # the mission starts shrinking the formation for the gap
-    assert np.isnan(memory.formation.obstacles[:, 3]).all()  # clearance unset: d_min / 2
+    assert (memory.formation.obstacles[:, 3] == 0.5 * scenario.limits.d_min_m).all()  # unset: resolved
 
 
 def test_without_formation_data_the_start_shape_is_used(tmp_path: Path) -> None:

@@ -82,6 +82,10 @@ def test_templates_and_obstacles() -> None:
     data["obstacles"] = [{"center": [0.0, 9.0], "radius": 0.5}, {"center": [9.0, 0.0], "radius": 1}]
     s = scenario_from_dict(data)
     assert s.n == 2 and len(s.obstacles) == 2 and s.obstacles[1].radius_m == 1.0
+    d_min = s.limits.d_min_m or 0.0
+    assert [o.clearance_m for o in s.obstacles] == [0.5 * d_min] * 2  # resolved when loaded
+    data["obstacles"][0]["clearance"] = 0.1
+    assert scenario_from_dict(data).obstacles[0].clearance_m == 0.1
 
 
 NOT_CENTRED = {"shape": "explicit", "offsets": [[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]]}

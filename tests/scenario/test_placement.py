@@ -11,9 +11,10 @@ import pytest
 from saved_runs import SCENARIOS
 
 from mpcform.errors import ScenarioError
-from mpcform.mpc.limits import Limits, SphereObstacle
 from mpcform.scenario.load import scenario_from_dict
-from mpcform.scenario.placement import check_distinct, check_goal, check_start, required_distance_m
+from mpcform.scenario.placement import check_distinct, check_goal, check_start
+from mpcform.world.limits import Limits
+from mpcform.world.obstacles import SphereObstacle, resolve_clearances
 
 
 def obstacles_doc(**changes: Any) -> dict[str, Any]:
@@ -45,12 +46,13 @@ def test_a_start_inside_an_obstacle_names_the_start_key_drone_and_obstacle() -> 
 
 def test_the_clearance_defaults_to_half_of_d_min() -> None:
     lim, ob = Limits(d_min_m=0.5), SphereObstacle(np.zeros(2), 1.0)
-    assert required_distance_m(ob, lim) == 1.25
-    assert required_distance_m(SphereObstacle(np.zeros(2), 1.0, 0.0), lim) == 1.0
-    check_start(np.array([[1.25, 0.0]]), "initial.positions", lim, (ob,))  # on the boundary: fine
-    with pytest.raises(ScenarioError, match=r"d_min / 2 = 1.25 m"):
-        check_start(np.array([[1.24, 0.0]]), "initial.positions", lim, (ob,))
-    check_start(np.array([[1.01, 0.0]]), "initial.positions", Limits(), (ob,))  # no d_min: radius only
+    resolved = resolve_clearances((ob,), lim.d_min_m)
+    assert resolved[0].required_distance_m == 1.25
+    check_start(np.array([[1.25, 0.0]]), "initial.positions", lim, resolved)  # on the boundary: fine
+    with pytest.raises(ScenarioError, match=r"clearance = 1.25 m"):
+        check_start(np.array([[1.24, 0.0]]), "initial.positions", lim, resolved)
+    no_d_min = resolve_clearances((ob,), None)
+    check_start(np.array([[1.01, 0.0]]), "initial.positions", Limits(), no_d_min)  # radius only
 
 
 def test_a_start_outside_the_geofence() -> None:
@@ -93,7 +95,7 @@ def test_a_constant_goal_without_a_centroid_names_the_reference_table() -> None:
     scenario_from_dict(data)  # the goal is the start, which is clear
     goal = scenario_from_dict(data).reference.start_positions_m()
     with pytest.raises(ScenarioError) as info:
-        check_goal(goal, "reference", Limits(d_min_m=0.5), (SphereObstacle(goal[0], 0.1),))
+        check_goal(goal, "reference", resolve_clearances((SphereObstacle(goal[0], 0.1),), 0.5))
     assert info.value.field == "reference" and "drone 0" in str(info.value)
 
 

@@ -22,6 +22,8 @@ from mpcform.sim.metrics import (
     tracking_errors_m,
 )
 from mpcform.sim.simulation import SimulationResult
+from mpcform.world.limits import Limits
+from mpcform.world.world import World
 
 # Three planar drones A, B, C over four samples (dt = 1 s).
 # p0 -> p1: A (0,0) -> (2,1) and B (2,0) -> (0,0) pass each other: their relative position runs
@@ -54,7 +56,7 @@ RESULT = SimulationResult(
 
 
 def test_tracking_and_separation_metrics():
-    m = run_metrics(RESULT, None, None)
+    m = run_metrics(RESULT)
     assert m["final_tracking_error"] == pytest.approx(0.1)
     assert m["max_tracking_error"] == pytest.approx(0.5)
     assert m["min_separation"] == pytest.approx(0.6)
@@ -74,17 +76,17 @@ def test_tracking_and_separation_metrics():
     ],
 )
 def test_separation_violations_count_sample_pairs(d_min, violations):
-    assert run_metrics(RESULT, None, d_min)["separation_violations"] == violations
+    assert run_metrics(RESULT, World(Limits(d_min_m=d_min)))["separation_violations"] == violations
 
 
 # speeds above v_max over the (step, drone) pairs; B flies at exactly 2 m/s: no violation
 @pytest.mark.parametrize(("v_max", "violations"), [(3.0, 0), (2.4, 0), (2.0, 2), (1.0, 3)])
 def test_speed_violations_count_step_drones(v_max, violations):
-    assert run_metrics(RESULT, v_max, None)["speed_violations"] == violations
+    assert run_metrics(RESULT, World(Limits(v_max_mps=v_max)))["speed_violations"] == violations
 
 
 def test_solver_and_timing_metrics():
-    m = run_metrics(RESULT, 3.0, 0.5)
+    m = run_metrics(RESULT, World(Limits(3.0, 0.5)))
     assert (m["qp_solves"], m["fast_path_steps"], m["solver_failures"]) == (2, 1, 1)
     assert m["max_slack"] == pytest.approx(0.2)
     assert set(m["step_time_ms"]) == {"qp", "fast_path", "fallback"}
@@ -102,7 +104,7 @@ def test_single_drone_has_no_separation():
         np.array([0.001]),
         "test",
     )
-    m = run_metrics(single, 1.0, 0.5)
+    m = run_metrics(single, World(Limits(1.0, 0.5)))
     assert m["min_separation"] is None and m["min_separation_segments"] is None
     assert m["separation_violations"] == 0 and m["qp_solves"] == 0
 
@@ -114,7 +116,7 @@ def test_series_are_the_per_sample_values_behind_the_metrics():
     np.testing.assert_allclose(min_separations_m(RESULT), [2.0, np.sqrt(5.0), 0.6, 0.6])
     speeds = [[np.sqrt(5.0), 2.0, 0.0], [0.0, 0.0, 2.4], [0.0, 0.0, 0.0]]
     np.testing.assert_allclose(command_speeds_mps(RESULT), speeds)
-    m = run_metrics(RESULT, None, None)
+    m = run_metrics(RESULT)
     assert m["max_tracking_error"] == tracking_errors_m(RESULT).max()
     assert m["min_separation"] == min_separations_m(RESULT).min()
     assert m["max_speed"] == command_speeds_mps(RESULT).max()

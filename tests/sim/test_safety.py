@@ -3,16 +3,16 @@
 import numpy as np
 import pytest
 
-from mpcform.mpc.limits import Limits, SphereObstacle
 from mpcform.sim.safety import (
     TOL_M,
     downwash_metric,
     geofence_violations,
     min_separation_along,
     obstacle_metrics,
-    required_clearance_m,
     separation_violations,
 )
+from mpcform.world.limits import Limits
+from mpcform.world.obstacles import SphereObstacle
 
 
 def crossing() -> np.ndarray:
@@ -32,13 +32,13 @@ def test_separation_along_segments_sees_what_samples_miss() -> None:
 def test_obstacle_clearance_and_violations_along_segments() -> None:
     path = np.array([[[-3.0, 0.9]], [[3.0, 0.9]]])  # passes 0.9 m from the centre
     ob = SphereObstacle(np.array([0.0, 0.0]), 0.5, clearance_m=0.3)
-    assert required_clearance_m(ob, None) == pytest.approx(0.8)
-    clearance, violations = obstacle_metrics(path, (ob,), None)
+    assert ob.required_distance_m == pytest.approx(0.8)
+    clearance, violations = obstacle_metrics(path, (ob,))
     assert clearance == pytest.approx(0.4) and violations == 0
-    near = SphereObstacle(np.array([0.0, 0.0]), 0.5)  # clearance d_min / 2 = 0.5
-    clearance, violations = obstacle_metrics(path, (near,), 1.0)
+    near = SphereObstacle(np.array([0.0, 0.0]), 0.5).resolved(1.0)  # clearance d_min / 2 = 0.5
+    clearance, violations = obstacle_metrics(path, (near,))
     assert clearance == pytest.approx(0.4) and violations == 1
-    assert obstacle_metrics(path, (), 1.0) == (None, 0)
+    assert obstacle_metrics(path, ()) == (None, 0)
 
 
 def test_geofence_counts_samples_outside_the_box() -> None:

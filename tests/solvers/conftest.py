@@ -13,7 +13,6 @@ import pytest
 from mpcform.bench.problems import RecordedQP, load_problem, problem_files
 from mpcform.formation.state import FormationState
 from mpcform.formation.template import Template
-from mpcform.mpc.limits import Limits
 from mpcform.mpc.planner import MPCPlanner
 from mpcform.mpc.settings import MPCSettings
 from mpcform.mpc.strategy import SparseSolve
@@ -21,6 +20,7 @@ from mpcform.reference.base import ConstantReference
 from mpcform.sim.simulation import simulate
 from mpcform.solvers.base import SolverOptions
 from mpcform.solvers.registry import make_backend, solver_info
+from mpcform.world.limits import Limits
 
 ROOT = Path(__file__).resolve().parents[2]
 ActiveStart = tuple[ConstantReference, np.ndarray, float]

@@ -9,9 +9,9 @@ from typing import Any
 import numpy as np
 import pytest
 
-from mpcform.mpc.limits import Limits
 from mpcform.mpc.planner import MPCPlanner
 from mpcform.mpc.settings import MPCSettings
+from mpcform.world.limits import Limits
 
 RECORDED: dict[str, dict[str, Any]] = {
     "casadi:osqp": dict(objective=1e-5, residual=1e-5, eps=1e-6),

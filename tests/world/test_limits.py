@@ -1,10 +1,11 @@
-"""Limits and obstacles: accepted values are stored, bad ones name their field."""
+"""Limits: accepted values are stored, bad ones name their field; the tube tightens them."""
 
 import numpy as np
 import pytest
 
 from mpcform.errors import ValidationError
-from mpcform.mpc.limits import Limits, SphereObstacle, obstacle_arrays, tightened
+from mpcform.world.limits import Limits, tightened
+from mpcform.world.obstacles import SphereObstacle
 
 
 def test_limits_store_validated_values():
@@ -39,40 +40,10 @@ def test_bad_limits_are_rejected(kwargs, match):
         Limits(**kwargs)
 
 
-def test_sphere_obstacle():
-    obs = SphereObstacle([1.0, 2.0, 3.0], 0.5)
-    np.testing.assert_array_equal(obs.center_m, [1.0, 2.0, 3.0])
-    assert obs.radius_m == 0.5 and obs.clearance_m is None
-    assert SphereObstacle([0.0, 0.0], 1.0, clearance_m=0.0).clearance_m == 0.0
-
-
-def test_obstacle_arrays_keep_radius_plus_clearance():
-    obstacles = (SphereObstacle([1.0, 2.0], 0.5), SphereObstacle([3.0, 4.0], 1.0, clearance_m=0.1))
-    center, required = obstacle_arrays(obstacles, d_min_m=0.6)
-    np.testing.assert_array_equal(center, [[1.0, 2.0], [3.0, 4.0]])
-    np.testing.assert_allclose(required, [0.5 + 0.3, 1.0 + 0.1])  # unset clearance: half of d_min
-    np.testing.assert_allclose(obstacle_arrays(obstacles[:1], None)[1], [0.5])
-    assert obstacle_arrays((), 0.5)[1].shape == (0,)
-
-
-@pytest.mark.parametrize(
-    ("args", "match"),
-    [
-        (([0.0, np.nan], 1.0), "obstacles.center"),
-        (([[0.0, 0.0]], 1.0), "obstacles.center"),
-        (([0.0, 0.0], 0.0), "obstacles.radius"),
-        (([0.0, 0.0], 1.0, -0.1), "obstacles.clearance"),
-    ],
-)
-def test_bad_obstacles_are_rejected(args, match):
-    with pytest.raises(ValidationError, match=match):
-        SphereObstacle(*args)
-
-
 def test_tightened_limits_inflate_separation_obstacles_and_the_fence_by_the_tube():
 
     lim = Limits(1.0, 0.5, geofence_min_m=[-5.0, -5.0], geofence_max_m=[5.0, 5.0])
-    obstacles = (SphereObstacle([1.0, 0.0], 0.5), SphereObstacle([3.0, 0.0], 0.5, clearance_m=0.1))
+    obstacles = (SphereObstacle([1.0, 0.0], 0.5, clearance_m=0.25), SphereObstacle([3.0, 0.0], 0.5, 0.1))
     same = tightened(lim, obstacles, 0.0, None)
     assert same[0] is lim and same[1] is obstacles  # the ideal plant: the very same objects
     planned, inflated = tightened(lim, obstacles, 0.05, 2.0)
@@ -82,3 +53,8 @@ def test_tightened_limits_inflate_separation_obstacles_and_the_fence_by_the_tube
     assert [o.clearance_m for o in inflated] == pytest.approx([0.25 + 0.1, 0.1 + 0.1])
     kept = tightened(Limits(1.0, 0.5, a_max_mps2=1.0), (), 0.05, 2.0)[0]
     assert kept.a_max_mps2 == 1.0  # a declared a_max stays
+
+
+def test_tightened_needs_resolved_clearances():
+    with pytest.raises(ValidationError, match=r"obstacles\[0\]\.clearance"):
+        tightened(Limits(1.0, 0.5), (SphereObstacle([1.0, 0.0], 0.5),), 0.05, 2.0)

@@ -1,4 +1,5 @@
-"""Physical limits and static obstacles shared by the controllers and the MPC planner."""
+"""Physical limits shared by the controllers, the MPC planner and the metrics, and the limits a
+planner keeps for a plant that may be off its plan by a tube (:func:`tightened`)."""
 
 from __future__ import annotations
 
@@ -6,8 +7,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from mpcform._validate import Array, finite_array, positive
+from mpcform._validate import Array, positive
 from mpcform.errors import ValidationError
+from mpcform.world.obstacles import SphereObstacle, require_resolved
 
 
 @dataclass(frozen=True, eq=False)
@@ -55,42 +57,6 @@ class Limits:
             object.__setattr__(self, "geofence_max_m", hi_a)
 
 
-@dataclass(frozen=True, eq=False)
-class SphereObstacle:
-    """A static sphere (a disc when planar) of ``radius_m`` at ``center_m``; drones keep
-    ``clearance_m`` [m] from its surface (None: half of d_min)."""
-
-    center_m: Array
-    radius_m: float
-    clearance_m: float | None = None
-
-    def __post_init__(self) -> None:
-        object.__setattr__(self, "center_m", finite_array("obstacles.center", self.center_m, (None,)))
-        object.__setattr__(self, "radius_m", positive("obstacles.radius", self.radius_m))
-        if self.clearance_m is not None:
-            object.__setattr__(
-                self,
-                "clearance_m",
-                positive("obstacles.clearance", self.clearance_m, allow_zero=True),
-            )
-
-    def clearance_for(self, d_min_m: float | None) -> float:
-        """The clearance [m] kept from the surface: ``clearance_m``, else half of d_min (0 without)."""
-        return 0.5 * (d_min_m or 0.0) if self.clearance_m is None else self.clearance_m
-
-    def required_distance_m(self, d_min_m: float | None) -> float:
-        """Distance [m] a drone keeps from the centre: the radius plus :meth:`clearance_for`."""
-        return self.radius_m + self.clearance_for(d_min_m)
-
-
-def obstacle_arrays(obstacles: tuple[SphereObstacle, ...], d_min_m: float | None) -> tuple[Array, Array]:
-    """Centres (m, d) [m] and the distance (m,) [m] drones keep from each centre: the radius plus
-    the clearance (half of ``d_min`` when unset)."""
-    center = np.array([o.center_m for o in obstacles])
-    required = np.array([o.required_distance_m(d_min_m) for o in obstacles])
-    return center, required
-
-
 def _key(attr: str) -> str:
     return attr.rsplit("_", 1)[0].replace("_kappa", "") if attr != "downwash_kappa" else "downwash"
 
@@ -111,8 +77,10 @@ def tightened(
     ``clearance + 2 tube`` from every obstacle and the geofence shrunk by ``2 tube`` (the plan starts
     from a measured position up to a tube off the previous plan, and the next interval adds up to
     another: a static obstacle, unlike a pair, has no second drone to share it), and ``a_max_mps2``
-    (the bound on command changes the tube assumes) where the limits set none. A zero tube and no
-    new ``a_max`` return the inputs themselves."""
+    (the bound on command changes the tube assumes) where the limits set none. The obstacles'
+    clearances must be resolved (:func:`mpcform.world.obstacles.resolve_clearances`). A zero tube
+    and no new ``a_max`` return the inputs themselves."""
+    obstacles = require_resolved(obstacles)
     tube = positive("plant.margin", tube_m, allow_zero=True)
     a_max = limits.a_max_mps2 if limits.a_max_mps2 is not None else a_max_mps2
     if tube == 0.0 and a_max == limits.a_max_mps2:
@@ -132,6 +100,6 @@ def tightened(
         **fence,
     )
     inflated = tuple(
-        SphereObstacle(o.center_m, o.radius_m, o.clearance_for(limits.d_min_m) + 2 * tube) for o in obstacles
+        SphereObstacle(o.center_m, o.radius_m, o.resolved_clearance_m + 2 * tube) for o in obstacles
     )
     return planned, inflated

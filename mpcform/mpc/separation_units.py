@@ -1,0 +1,164 @@
+"""The two units of the separation rows (:mod:`mpcform.mpc.separation`): drone pairs
+(:class:`PairSeparation`, joint or decoupled) and obstacles (:class:`ObstacleSeparation`), each
+building its rows about the guess and answering the tests on a plan for its items; with the
+geometry they share (:func:`segment_normals`, :func:`inside`).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from mpcform._validate import Array
+from mpcform.formation.geometry import NearPairs, closest_on_segments, vector_norms
+from mpcform.mpc.rows import row_ends, row_segments
+from mpcform.mpc.settings import MPCSettings
+from mpcform.world.obstacles import SphereObstacle, obstacle_arrays
+
+BLOCK = 1024  # pairs whose decoupled rows are built at once (bounds the temporaries' size)
+RowPart = tuple[Array, Array, Array, Array, Array]  # (items or labels, coefficients, lower bounds, on, hard)
+Test = tuple[Array, Array, Array | float]  # (relative guess, relative positions, required distance)
+
+
+def segment_normals(rel: Array, segs: Array | None = None) -> Array:
+    """Unit normals (m, R, d) per row: the direction to each guess segment's point closest to the
+    origin (``rel`` (m, H + 1, d) are the guess's relative positions, ``segs`` (R,) each row's
+    segment; without ``segs`` one normal per segment, (m, H, d))."""
+    normal = closest_on_segments(rel[:, :-1], rel[:, 1:])  # (m, H, d), divided in place
+    dist = vector_norms(normal)
+    ok = dist > 1e-9
+    normal /= np.where(ok, dist, 1.0)[..., None]
+    normal[~ok] = np.eye(normal.shape[-1])[0]  # a coincident guess: any fixed unit vector is valid
+    return normal if segs is None else np.take(normal, segs, axis=1)
+
+
+class PairSeparation:
+    """``d_min`` [m] between drone pairs in the metric ``W = diag(metric)``, joint or decoupled."""
+
+    def __init__(self, d_min_m: float, metric: Array, settings: MPCSettings) -> None:
+        self.d_min_m, self.metric, self.margin_m = d_min_m, metric, settings.margin_m
+        self.unit_metric = bool(np.all(metric == 1.0))  # W = I: no scaling
+        self.joint = settings.coupling == "joint"
+        self.segs, self.ends = row_segments(settings.horizon), row_ends(settings.horizon)
+        self.near = NearPairs()  # the clear test's neighbour list, kept between steps
+
+    def relative(self, points: Array, i: Array, k: Array) -> Array:
+        """``W (p_i - p_k)`` for positions (..., n, d): (..., P, d)."""
+        return self.scaled(points[..., i, :] - points[..., k, :])
+
+    def scaled(self, v: Array) -> Array:
+        """``W v`` for vectors (..., d) (``v`` itself when ``W = I``)."""
+        return v if self.unit_metric else v * self.metric
+
+    def rows(self, p0: Array, path: Array, pairs: Array, on: Array) -> tuple[RowPart | None, RowPart | None]:
+        """The joint rows, or the decoupled one-drone rows (side i of every pair, then side k), of
+        ``pairs`` (P, 2) about the guess ``path`` (n, H + 1, d) (drone-major)."""
+        if not self.joint:
+            return None, self._sides(p0, path, pairs, on)
+        i, k = pairs[:, 0], pairs[:, 1]
+        rel = self.scaled(path[i] - path[k])  # (P, H + 1, d), metric space
+        coeffs = self.scaled(segment_normals(rel, self.segs))  # (P, R, d), world coordinates
+        hard, c0 = inside(rel[:, 0], self.d_min_m)
+        coeffs[hard, 0] = self.scaled(c0)
+        lower = self.d_min_m + self.margin_m - np.einsum("prd,pd->pr", coeffs, p0[i] - p0[k])
+        lower[hard, 0] = 0.0
+        return (pairs, coeffs, lower, on, hard), None
+
+    def _sides(self, p0: Array, path: Array, pairs: Array, on: Array) -> RowPart:
+        """The decoupled rows: two per-drone rows about the guess's midpoint ``m_e`` at each row's
+        position step, ``+-c^T (p0_side - m_e) >= (d_min + margin) / 2``, side i (+c) of every
+        pair, then side k (-c); built :data:`BLOCK` pairs at a time (the temporaries stay small)."""
+        p, r, d = pairs.shape[0], self.segs.shape[0], path.shape[2]
+        coeffs, lower, hard = np.empty((2 * p, r, d)), np.empty((2 * p, r)), np.empty(p, dtype=bool)
+        half = 0.5 * (self.d_min_m + self.margin_m)
+        for a in range(0, p, BLOCK):
+            b = min(a + BLOCK, p)
+            i, k = pairs[a:b, 0], pairs[a:b, 1]
+            g_i, g_k = path[i], path[k]  # (B, H + 1, d)
+            rel = self.scaled(g_i - g_k)  # metric space
+            normal = self.scaled(segment_normals(rel))  # (B, H, d), world coordinates
+            np.take(normal, self.segs, axis=1, out=coeffs[a:b])
+            hard[a:b], c0 = inside(rel[:, 0], self.d_min_m)
+            coeffs[a:b][hard[a:b], 0] = self.scaled(c0)
+            np.negative(coeffs[a:b], out=coeffs[p + a : p + b])
+            mid = np.add(g_i, g_k, out=g_i)  # the midpoints (B, H + 1, d), in place
+            mid *= 0.5
+            mid = np.take(mid, self.ends, axis=1)  # at each row's position step (B, R, d)
+            for side, out, fix in ((i, lower[a:b], np.subtract), (k, lower[p + a : p + b], np.add)):
+                gap = p0[side][:, None] - mid  # -(-c)^T gap = +c^T gap on side k
+                fix(half, np.einsum("prd,prd->pr", coeffs[a:b], gap), out=out)
+        hard2 = np.concatenate([hard, hard])
+        lower[hard2, 0] = 0.0
+        return np.concatenate([pairs, pairs[:, ::-1]]), coeffs, lower, np.concatenate([on, on]), hard2
+
+    def doubtful(self, p0: Array, spread: Array) -> tuple[Array, Array, Array]:
+        """The pairs ``(i, k)`` (of the neighbour list) the spread bound of :meth:`Separation.clear`
+        leaves in doubt, and by how much their start distance clears it (negative)."""
+        scaled = self.scaled(p0)  # the metric only shrinks lengths: world spreads bound it
+        need = self.d_min_m + self.margin_m
+        i, k = self.near.within(scaled, need + 2.0 * spread.max()).T
+        gap = vector_norms(np.take(scaled, i, axis=0) - np.take(scaled, k, axis=0))
+        clearance = gap - np.take(spread, i) - np.take(spread, k)
+        near = clearance < need
+        if not near.any():  # the common case: every pair clear
+            return i[:0], k[:0], clearance[:0]
+        return i[near], k[near], clearance[near] - need
+
+    def clear_test(self, guess: Array, pos: Array, i: Array, k: Array) -> Test:
+        """Relative guess and positions (H + 1, m, d) of the pairs ``(i, k)``."""
+        g, x = (self.scaled(np.take(v, i, axis=1) - np.take(v, k, axis=1)) for v in (guess, pos))
+        return g, x, self.d_min_m
+
+    def first_segment(self, p0: Array, p1: Array, pairs: Array) -> Test:
+        """Relative positions of ``pairs`` at the start and the end of the first segment."""
+        i, k = pairs.T
+        return self.relative(p0, i, k), self.relative(p1, i, k), self.d_min_m
+
+
+class ObstacleSeparation:
+    """Drones keep ``required_m`` (m,) [m] from the obstacles' centres ``center_m`` (m, d): the
+    radius plus each obstacle's resolved clearance (:func:`mpcform.world.obstacles.resolve_clearances`)."""
+
+    def __init__(self, obstacles: tuple[SphereObstacle, ...], settings: MPCSettings) -> None:
+        self.center_m, self.required_m = obstacle_arrays(obstacles)
+        self.margin_m, self.segs = settings.margin_m, row_segments(settings.horizon)
+
+    def rows(self, p0: Array, path: Array, items: Array, on: Array) -> RowPart:
+        """One-drone rows of the ``(drone, obstacle)`` items (O, 2) about the guess ``path``
+        (n, H + 1, d) (drone-major)."""
+        drone, ob = items[:, 0], items[:, 1]
+        center, required = self.center_m[ob], self.required_m[ob]
+        coeffs = segment_normals(path[drone] - center[:, None], self.segs)
+        hard, c0 = inside(p0[drone] - center, required)
+        coeffs[hard, 0] = c0
+        lower = required[:, None] + self.margin_m - np.einsum("ord,od->or", coeffs, p0[drone] - center)
+        lower[hard, 0] = 0.0
+        return np.column_stack([drone, -1 - ob]), coeffs, lower, on, hard
+
+    def doubtful(self, p0: Array, spread: Array) -> tuple[Array, Array, Array]:
+        """The ``(drone, obstacle)`` items that the per-drone spread bound (see
+        :meth:`Separation.clear`) leaves in doubt, and by how much they clear it (negative)."""
+        gap = vector_norms(p0[:, None] - self.center_m) - self.required_m - spread[:, None]
+        i, m = np.nonzero(gap < self.margin_m)
+        return i, m, gap[i, m] - self.margin_m
+
+    def clear_test(self, guess: Array, pos: Array, i: Array, m: Array) -> Test:
+        """Guess and positions (H + 1, m, d) of the items' drones relative to their obstacle."""
+        center = self.center_m[m]
+        return np.take(guess, i, axis=1) - center, np.take(pos, i, axis=1) - center, self.required_m[m]
+
+    def first_segment(self, p0: Array, p1: Array, items: Array) -> Test:
+        """Positions of the ``items``' drones relative to their obstacle at both ends of the first segment."""
+        i, m = items.T
+        return p0[i] - self.center_m[m], p1[i] - self.center_m[m], self.required_m[m]
+
+
+def inside(rel0: Array, required: Array | float) -> tuple[Array, Array]:
+    """Which items (m,) start inside their required distance (relative start positions ``rel0``
+    (m, d)), and their unit start normals (h, d) ``rel0 / |rel0|`` (a fixed axis if coincident)."""
+    dist = vector_norms(rel0)
+    hard = dist < np.broadcast_to(required, dist.shape)
+    c0 = np.zeros((int(hard.sum()), rel0.shape[1]))
+    c0[:, 0] = 1.0
+    ok = dist[hard] > 1e-12
+    c0[ok] = rel0[hard][ok] / dist[hard][ok, None]
+    return hard, c0
