@@ -1,25 +1,12 @@
-"""Decoupled mode solved drone by drone: one small dense QP per drone (DAQP by default).
+"""Decoupled mode solved drone by drone: each drone's condensed QP (:mod:`mpcform.mpc.condensed`)
+with a per-drone backend (:class:`~mpcform.solvers.dense.DenseQPBackend`, chosen by
+:class:`~mpcform.mpc.strategy.PerDroneSolve`; "DAQP" below is whichever it is).
 
-In decoupled mode every separation row involves one drone, so the planner's sparse QP
-(:mod:`mpcform.mpc.qp`) is block-diagonal per drone. Eliminating the positions
-(``x_e = dt sum_{j<e} u_j``) leaves per drone ``H d`` inputs and ``H`` slacks::
-
-    min  0.5 ||M u - c||^2 + w1 sum s + 0.5 w2 ||s||^2        M = I + k dt L (x) I_d
-    s.t. D u_j <= h,  |u_j - u_{j-1}| <= a_max dt,  lo <= x_e <= hi,
-         a_r^T x_{e_r} + s_{e_r} >= b_r,  s >= 0
-
-(``L`` strictly lower triangular ones, so ``(M u)_j = u_j + k x_j``): the sparse QP's block,
-with a positive-definite Hessian, solved by a per-drone backend
-(:class:`~mpcform.solvers.dense.DenseQPBackend`, chosen by :class:`~mpcform.mpc.strategy.PerDroneSolve`;
-"DAQP" below is whichever it is). Two things make it cheap:
-
-- in the variables ``v = M u`` (``v_j = u_j + k x_j``, what the cost compares with ``c_j``) the
-  cost is ``0.5 ||v - c||^2``: DAQP gets an identity Hessian (its cheapest setup), the constant
-  rows are transformed once (with their bounds, when those are the same for every drone), and a
-  separation row is a Kronecker product ``(w_e (x) a)^T v``, built only where it can be active;
-- with a velocity loop (:mod:`mpcform.mpc.loop`) the rows are on the loop's positions
-  ``x_e + sum_j G_{e,j} u_j``: only the table ``w_e`` changes (``u = M^-1 v`` is linear in v);
-- the slacks are almost always zero, so each drone is first solved without them: if that hard
+- A drone whose wish ``v = c`` meets every row gets it without a solver call (bit for bit DAQP's
+  solution, multipliers and cost).
+- Working sets (:mod:`mpcform.mpc.working_set`): each drone is first given only its rows near
+  their bound; a solve that misses another row, or fails, is solved again with all of them.
+- The slacks are almost always zero, so each drone is first solved without them: if that hard
   QP is feasible, its solution (``s = 0``) is the drone's plan, else the soft QP is solved. The
   L1 penalty is exact once ``w1`` exceeds the hard QP's multipliers at every step; those grow
   with speed and shrink with ``dt`` (a fixed ``w1`` is not exact everywhere), so the hard
@@ -32,12 +19,12 @@ import time
 from dataclasses import dataclass, replace
 
 import numpy as np
-from scipy.linalg import solve_triangular
 
 from mpcform._validate import Array
+from mpcform.mpc.condensed import CondensedDroneQP, dense_bounds
 from mpcform.mpc.loop import VelocityLoop
 from mpcform.mpc.problem import ACTIVE_TOL, StepQP, StepSolver
-from mpcform.mpc.rows import LimitRows, position_table, positions_of_inputs, row_ends
+from mpcform.mpc.rows import LimitRows
 from mpcform.mpc.sensitivity import Sensitivity, drone_sensitivity
 from mpcform.mpc.settings import MPCSettings
 from mpcform.mpc.working_set import (
@@ -54,7 +41,6 @@ from mpcform.solvers.base import QPSolution, failed
 from mpcform.solvers.dense import NO_BOUND, DenseQPBackend, DenseSolution
 from mpcform.world.limits import Limits
 
-MIN_SLACK_QUADRATIC = 1e-6  # keeps the soft QP's Hessian positive definite when w2 = 0
 Solved = tuple[QPSolution, int]  # a solution and its number of active rows
 
 
@@ -79,14 +65,27 @@ class DroneSolves:
     const_hi: Array
     iterations: int
     time_s: float  # inside DAQP
+    horizon: int
+    n_const: int  # constant rows per drone
+
+    def multipliers(self, i: int, everything: bool = False) -> Array:
+        """Drone i's multipliers of its separation rows (>= 0: the derivative of its optimal cost in
+        the rows' lower bounds), or with ``everything`` of its constant rows first."""
+        lam = self.lams[i][self.horizon if self.soft[i] else 0 :]
+        return lam if everything else -lam[self.n_const :]
+
+    def separation_multipliers(self) -> list[Array]:
+        """Every drone's :meth:`multipliers` of its separation rows, negated in one pass (views of
+        one array)."""
+        hard, soft = self.n_const, self.n_const + self.horizon  # rows to skip
+        parts = [lam[soft if s else hard :] for lam, s in zip(self.lams, self.soft.tolist(), strict=True)]
+        mu, cuts = -np.concatenate(parts), self.offsets.tolist()
+        return [mu[a:b] for a, b in zip(cuts[:-1], cuts[1:], strict=True)]
 
 
-class PerDroneQP(StepSolver):
-    """The per-drone condensed QPs of the decoupled planner: everything constant built once.
-
-    ``families`` are the limits' rows (:func:`mpcform.mpc.rows.limit_rows`); ``backend`` solves
-    each drone's QP (its name, with " (per drone)", is the planner's ``solver_name``).
-    """
+class PerDroneQP(CondensedDroneQP, StepSolver):
+    """The per-drone condensed QPs of the decoupled planner (:class:`CondensedDroneQP`), each solved
+    by ``backend`` (its name, with " (per drone)", is the planner's ``solver_name``)."""
 
     warm_starts = True  # nearly active rows of the warm start start DAQP's active set
 
@@ -100,28 +99,9 @@ class PerDroneQP(StepSolver):
         backend: DenseQPBackend,
         loop: VelocityLoop | None = None,
     ) -> None:
+        super().__init__(dim, dt_s, limits, settings, families, loop)
         self.backend, self.name = backend, f"{backend.name} (per drone)"
-        self.dim, self.dt_s, self.limits, self.settings = dim, dt_s, limits, settings
-        h, k = settings.horizon, settings.gain_per_s
-        self._nu = nu = h * dim
-        self.families = families
-        self._x_of_u = positions_of_inputs(h, dim, dt_s)  # x_1..x_H from u
-        self._m = np.eye(nu) + k * dt_s * np.kron(np.tril(np.ones((h, h)), -1), np.eye(dim))  # v = M u
-        self._m_inv = solve_triangular(self._m, np.eye(nu), lower=True)  # u = M^-1 v
-        rows = [family.dense() for family in families]  # constant rows over u; bounds per drone from _bounds
-        self._const_v = (np.vstack(rows) if rows else np.zeros((0, nu))) @ self._m_inv
-        self._const_pm = np.vstack([self._const_v, -self._const_v])  # one-sided: lower, then upper
-        self._ends = row_ends(h)
-        self._table = position_table(self._m_inv, h, dim, dt_s, loop).reshape(h, h, dim)  # x_e per axis
-        self._x_of_v = (self._table[:, None] * np.eye(dim)[:, None, :]).reshape(nu, nu)  # x_1..x_H from v
-        reach = 1.0 if loop is None else loop.reach_factor  # the longest step, with a loop's response
-        self._step_m = None if limits.v_max_mps is None else limits.v_max_mps * dt_s * reach
-        self._eye = np.eye(nu)
-        w2 = max(settings.slack_quadratic, MIN_SLACK_QUADRATIC)
-        self._hess_soft = np.diag(np.concatenate([np.full(h, w2), np.ones(nu)]))
-        self._a, self._lo, self._hi = np.zeros((0, nu)), np.zeros(0), np.zeros(0)  # _buffers
-        fixed = all(family.fixed_bounds for family in families)  # the same for every drone at every step
-        self._fixed = dense_bounds(families, np.zeros((1, dim)), np.zeros((1, dim))) if fixed else None
+        self._a, self._lo, self._hi = np.zeros((0, self._nu)), np.zeros(0), np.zeros(0)  # _buffers
 
     def solve(self, qp: StepQP) -> tuple[QPSolution, int]:
         """Solve every drone's QP (the one-drone separation rows within reach of ``qp.rows``)."""
@@ -236,9 +216,10 @@ class PerDroneQP(StepSolver):
                 lams[i] = hard_qp(i, a[:m], hi[:m], lo[:m])
                 return
             t0 = time.perf_counter()
-            got = self._solve_soft(
-                f_v[i], a[:m], hi[:m], lo[:m], sep_end[first:last], sep_soft[first:last], n_const
+            soft_qp = self.soft_problem(
+                f_v[i], a[:m], hi[:m], lo[:m], sep_end[first:last], sep_soft[first:last]
             )
+            got = self.backend.solve(*soft_qp)
             lams[i] = keep(i, replace(got, x=got.x[h:]), t0)
             s_out[i] = got.x[:h]
 
@@ -309,6 +290,8 @@ class PerDroneQP(StepSolver):
             b_hi,
             int(iters),
             in_daqp,
+            h,
+            n_const,
         )
 
     def solution(
@@ -328,42 +311,14 @@ class PerDroneQP(StepSolver):
         active = np.count_nonzero(np.abs(np.concatenate(lams)) > ACTIVE_TOL) if n else 0
         return sol, int(active)
 
-    def inputs_positions(self, v: Array) -> tuple[Array, Array]:
-        """Inputs and relative positions (n, H d) (step-major within a drone) of solutions ``v``
-        (n, H d): ``u = M^-1 v``, ``x_e = dt sum_{j<e} u_j``."""
-        u = v @ self._m_inv.T
-        return u, u @ self._x_of_u.T
-
-    def multipliers(self, solves: DroneSolves, i: int, everything: bool = False) -> Array:
-        """Drone i's multipliers of its separation rows (>= 0: the derivative of its optimal cost in
-        the rows' lower bounds), or with ``everything`` of its constant rows first."""
-        lam = solves.lams[i][self.settings.horizon if solves.soft[i] else 0 :]
-        return lam if everything else -lam[self._const_v.shape[0] :]
-
-    def separation_multipliers(self, solves: DroneSolves) -> list[Array]:
-        """Every drone's :meth:`multipliers` of its separation rows, negated in one pass (views of
-        one array)."""
-        hard, soft = self._const_v.shape[0], self._const_v.shape[0] + self.settings.horizon  # rows to skip
-        parts = [lam[soft if s else hard :] for lam, s in zip(solves.lams, solves.soft.tolist(), strict=True)]
-        mu, cuts = -np.concatenate(parts), solves.offsets.tolist()
-        return [mu[a:b] for a, b in zip(cuts[:-1], cuts[1:], strict=True)]
-
     def sensitivity(self, solves: DroneSolves, i: int) -> Sensitivity:
         """How drone i's optimum moves with its separation rows' lower bounds on its active set
         (:func:`mpcform.mpc.sensitivity.drone_sensitivity`)."""
         first, last, b = solves.offsets[i], solves.offsets[i + 1], min(i, solves.const_lo.shape[0] - 1)
         sep = self._rows_v(solves.sep_c[first:last], solves.sep_end[first:last])
-        lam = self.multipliers(solves, i, everything=True)
+        lam = solves.multipliers(i, everything=True)
         lo, hi = solves.const_lo[b], solves.const_hi[b]
         return drone_sensitivity(lam, solves.v[i], self._const_pm, sep, lo, hi, solves.sep_lo[first:last])
-
-    def _rows_v(self, coeffs: Array, end: Array, out: Array | None = None) -> Array:
-        """Separation rows (K, H d) over ``v`` (into ``out``) of coefficients ``coeffs`` (K, d) at
-        position steps ``end`` (K,): ``a^T x_e = (w_e (x) a)^T v``."""
-        rows = np.empty((end.shape[0], self._nu)) if out is None else out
-        table = self._table.take(end - 1, axis=0)  # (K, H, d)
-        np.multiply(table, coeffs[:, None], out=rows.reshape(table.shape))
-        return rows
 
     def _buffers(self, size: int) -> tuple[Array, Array, Array]:
         """Row and bound buffers with room for ``size`` rows (kept between calls; the constant rows
@@ -376,33 +331,3 @@ class PerDroneQP(StepSolver):
             if self._fixed is not None:  # the same bounds for every drone at every step: kept here
                 self._lo[:n_const], self._hi[:n_const] = self._fixed[0][0], self._fixed[1][0]
         return self._a, self._lo, self._hi
-
-    def _solve_soft(
-        self, f_v: Array, a: Array, hi: Array, lo: Array, end: Array, soft: Array, n_const: int
-    ) -> DenseSolution:
-        """The drone's QP with its slacks (first, simple bounds ``s >= 0``; Hessian ``diag(w2, I)``):
-        its solution ``[s | v]``.
-
-        The slacks are not scaled to a unit Hessian: a column ``1 / sqrt(w2)`` would scale DAQP's
-        row tolerance up with it (measured: 3.5e-8 misses at ``w2 = 0``)."""
-        st, h = self.settings, self.settings.horizon
-        a_s = np.zeros((a.shape[0], h))
-        a_s[n_const + np.arange(end.shape[0]), end - 1] = soft
-        f = np.concatenate([np.full(h, st.slack_weight), f_v])
-        return self.backend.solve(
-            self._hess_soft,
-            f,
-            np.hstack([a_s, a]),
-            np.concatenate([np.full(h, NO_BOUND), hi]),
-            np.concatenate([np.zeros(h), lo]),
-        )
-
-
-def dense_bounds(families: tuple[LimitRows, ...], p0: Array, u_prev: Array) -> tuple[Array, Array]:
-    """Lower and upper bounds (n, rows) of the constant rows of ``families`` for each drone (starts
-    ``p0``, last commands ``u_prev`` (n, d)); :data:`~mpcform.solvers.dense.NO_BOUND` where a row has none."""
-    n = p0.shape[0]
-    if not families:
-        return np.zeros((n, 0)), np.zeros((n, 0))
-    lo, hi = zip(*(family.dense_bounds(p0, u_prev, NO_BOUND) for family in families), strict=True)
-    return np.hstack(lo), np.hstack(hi)

@@ -47,7 +47,7 @@ from mpcform.mpc.rows import limit_rows, row_ends, violators
 from mpcform.mpc.separation import Separation, SeparationRows
 from mpcform.mpc.settings import MPCSettings
 from mpcform.mpc.split import SplitQP
-from mpcform.mpc.step_info import FAST_PATH, MPCStepInfo, pairs_of
+from mpcform.mpc.step_info import FAST_PATH, MPCStepInfo, solve_info
 from mpcform.mpc.step_solvers import build_step_solvers
 from mpcform.mpc.strategy import with_backend
 from mpcform.reference.base import Reference
@@ -204,15 +204,7 @@ class MPCPlanner(Controller):
             status, solved = status + "; command failed certification", u[0]
         u, x, note = self._certifier.fallback(self._plan, p0, cand, horizon, solved, self._u_prev)
         self._accept(p0, u, x)
-        info = MPCStepInfo(
-            "fallback",
-            status=f"{status}; {note}",
-            iterations=sol.iterations,
-            solve_time_s=sol.solve_time_s,
-            max_slack_m=inside_m,
-            slack_pairs=pairs_of(inside),
-            **self._liveness(),
-        )
+        info = solve_info("fallback", sol, f"{status}; {note}", 0, 0, inside_m, inside, self._tie_break)
         return ControlStep(u[0].copy(), info)
 
     def _true(self, u: Array, x: Array) -> Array:
@@ -256,11 +248,6 @@ class MPCPlanner(Controller):
         brake = self._certifier.within_limits(np.zeros_like(self._u_prev), self._u_prev)  # its "decelerate"
         return hard_first_rows(rows, (self.dt_s + self.loop.forced[1, 0]) * brake)
 
-    def _liveness(self) -> dict[str, int]:
-        """The tie-break's events of this step (StepInfo fields)."""
-        tb = self._tie_break
-        return {"stalled": tb.new_stalls, "resolving": tb.resolving, "resolved": tb.resolved}
-
     def _fast_path(self, nominal: Plan) -> ControlStep:
         """Accept the rollout's plan: its first input is the command."""
         self._tie_break.clear()
@@ -300,16 +287,8 @@ class MPCPlanner(Controller):
         if relaxed or slack.max(initial=0.0) > SLACK_REPORT_M / 2:
             planned, missed = self._separation.shortfall(x, rows, SLACK_REPORT_M)
             shortfall, missed = max(shortfall, planned), np.concatenate([inside, missed])
-        return MPCStepInfo(
-            "qp",
-            status=sol.status,
-            iterations=sol.iterations,
-            solve_time_s=sol.solve_time_s,
-            active_rows=active,
-            max_slack_m=max(shortfall, 0.0),
-            slack_pairs=pairs_of(missed),
-            qp_drones=int(drones.shape[0]),
-            **self._liveness(),
+        return solve_info(
+            "qp", sol, sol.status, active, drones.shape[0], max(shortfall, 0.0), missed, self._tie_break
         )
 
     def _accept(self, p0: Array, u: Array, x: Array) -> None:

@@ -220,7 +220,7 @@ class SplitStep:
         item, row = np.divmod(got.rows, r)
         flat, cuts = keep[item] * r + row, got.offsets.tolist()  # global flat indices, per drone:
         rows_at = [flat[a:b] for a, b in zip(cuts[:-1], cuts[1:], strict=True)]
-        ok, mu = got.ok, pd.separation_multipliers(got)
+        ok, mu = got.ok, got.separation_multipliers()
         for j, i in enumerate(drones.tolist()):
             it.rows[i], it.lams[i], it.mu[i] = rows_at[j], got.lams[j], mu[j]
             it.solves[i] = (got, j) if ok[j] else None

@@ -6,6 +6,8 @@ from dataclasses import dataclass
 
 from mpcform._validate import Array
 from mpcform.control.base import StepInfo
+from mpcform.mpc.liveness import TieBreak
+from mpcform.solvers.base import QPSolution
 
 
 @dataclass(frozen=True)
@@ -36,3 +38,31 @@ FAST_PATH = MPCStepInfo("fast_path")
 def pairs_of(labels: Array) -> tuple[tuple[int, int], ...]:
     """Item labels (m, 2) as sorted unique tuples."""
     return tuple(sorted({(int(a), int(b)) for a, b in labels}))
+
+
+def solve_info(
+    mode: str,
+    sol: QPSolution,
+    status: str,
+    active: int,
+    qp_drones: int,
+    slack_m: float,
+    slack_items: Array,
+    tie_break: TieBreak,
+) -> MPCStepInfo:
+    """The record of a step that called the solver (``mode`` ``qp`` or ``fallback``): the solve's
+    figures, the slack ``slack_m`` [m] its items ``slack_items`` (m, 2) needed, and the tie-break's
+    events of this step."""
+    return MPCStepInfo(
+        mode,
+        status=status,
+        iterations=sol.iterations,
+        solve_time_s=sol.solve_time_s,
+        active_rows=active,
+        max_slack_m=slack_m,
+        slack_pairs=pairs_of(slack_items),
+        qp_drones=int(qp_drones),
+        stalled=tie_break.new_stalls,
+        resolving=tie_break.resolving,
+        resolved=tie_break.resolved,
+    )

@@ -391,9 +391,9 @@ def test_separation_multipliers_are_each_drones_multipliers(monkeypatch: pytest.
     for solver, args in [(spatial, a) for a in calls] + [(qp, a) for a in close]:
         got = solver.solve_each(*args)
         soft += int(got.soft.sum())
-        every = solver.separation_multipliers(got)
+        every = got.separation_multipliers()
         assert len(every) == got.v.shape[0]
         for j, mu in enumerate(every):
-            assert np.array_equal(mu, solver.multipliers(got, j))
+            assert np.array_equal(mu, got.multipliers(j))
             assert mu.shape[0] == got.offsets[j + 1] - got.offsets[j]
     assert soft >= 1 and len(calls) >= 10
