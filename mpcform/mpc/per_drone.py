@@ -142,7 +142,7 @@ class PerDroneQP(CondensedDroneQP, StepSolver):
         ``solve_time_s`` is the time spent inside DAQP), and the number of active rows.
         """
         got = self.solve_each(p0, c, u_prev, singles, coeffs, lower, warm_u, hard, on)
-        return self.solution(got.v, got.s, got.ok, got.flags, got.lams, got.iterations, got.time_s)
+        return self.solution(got.v, got.s, got.ok, got.flags, got.lams, got.iterations, got.time_s, got.cost)
 
     def solve_each(
         self,
@@ -295,11 +295,20 @@ class PerDroneQP(CondensedDroneQP, StepSolver):
         )
 
     def solution(
-        self, v: Array, s: Array, ok: Array, flags: Array, lams: list[Array], iters: int, t_s: float
+        self,
+        v: Array,
+        s: Array,
+        ok: Array,
+        flags: Array,
+        lams: list[Array],
+        iters: int,
+        t_s: float,
+        cost: Array,
     ) -> Solved:
         """The drones' solves (``v`` (n, H d), slacks ``s`` (n, H), which succeeded, the backend's
-        exit flags and multipliers; ``t_s`` the time in the backend) as one solution ``[u | x | s]``
-        (as :meth:`solve_drones` returns it)."""
+        exit flags and multipliers; ``t_s`` the time in the backend; their costs) as one solution
+        ``[u | x | s]`` (as :meth:`solve_drones` returns it). Its objective is the drones' costs
+        summed: the sparse QP's objective at the same point (its block-diagonal cost in ``v``)."""
         h, n = self.settings.horizon, v.shape[0]
         bad = np.flatnonzero(~ok | ~np.isfinite(v).all(axis=1))
         if bad.size:
@@ -307,7 +316,8 @@ class PerDroneQP(CondensedDroneQP, StepSolver):
             return failed(status, t_s, iters), 0
         u_out, x_out = self.inputs_positions(v)
         flat = [w.reshape(n, h, -1).transpose(1, 0, 2).ravel() for w in (u_out, x_out, s)]
-        sol = QPSolution(np.concatenate(flat), None, True, f"{self.backend.name}: optimal", iters, t_s)
+        status = f"{self.backend.name}: optimal"
+        sol = QPSolution(np.concatenate(flat), None, True, status, iters, t_s, float(cost.sum()))
         active = np.count_nonzero(np.abs(np.concatenate(lams)) > ACTIVE_TOL) if n else 0
         return sol, int(active)
 

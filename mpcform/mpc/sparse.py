@@ -15,6 +15,8 @@ first solve's iterations (a re-solve that stops there keeps the solution before 
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
 from mpcform._validate import Array
@@ -120,14 +122,8 @@ class SparseSolver(StepSolver):
                 again = self.backend.solve(x0)
                 if not again.success or again.x is None or again.x[slack].sum() >= sol.x[slack].sum():
                     return sol
-                sol = QPSolution(
-                    again.x,
-                    again.y,
-                    True,
-                    again.status,
-                    sol.iterations + again.iterations,
-                    sol.solve_time_s + again.solve_time_s,
-                )
+                iterations, time_s = sol.iterations + again.iterations, sol.solve_time_s + again.solve_time_s
+                sol = replace(again, iterations=iterations, solve_time_s=time_s)
             return sol
         finally:
             if weight != self.settings.slack_weight:  # a re-solve was capped

@@ -32,7 +32,7 @@ limit is the joint optimum where the joint QP needs no slack.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -150,9 +150,7 @@ class SplitQP(StepSolver):
             history.append((best.value, time.perf_counter() - t0, time.process_time() - c0))
         sol, active = step_qp.solution(best)
         if sol.success and self.iterations:
-            sol = QPSolution(
-                sol.x, sol.y, True, f"{sol.status}; split {rounds} rounds", sol.iterations, sol.solve_time_s
-            )
+            sol = replace(sol, status=f"{sol.status}; split {rounds} rounds")
         hist = np.array(history)
         hist[:, 0] += step_qp.c_sq
         return SplitRun(sol, active, rounds, hist, seen)
@@ -360,7 +358,7 @@ class SplitStep:
     def solution(self, it: Iterate) -> tuple[QPSolution, int]:
         """The iterate as the planner's solution ``[u | x | s]`` and its number of active rows."""
         ok = np.isfinite(it.cost) | self.ok
-        return self.pd.solution(it.v, it.s, ok, self.flags, it.lams, self.iterations, self.time_s)
+        return self.pd.solution(it.v, it.s, ok, self.flags, it.lams, self.iterations, self.time_s, it.cost)
 
 
 def _sides(labels: Array) -> tuple[Array, Array]:

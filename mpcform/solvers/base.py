@@ -10,7 +10,8 @@ The backends themselves, and the names that select them, are in :mod:`mpcform.so
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
-from dataclasses import dataclass
+from collections.abc import Mapping
+from dataclasses import dataclass, field
 from typing import Any
 
 import scipy.sparse as sp
@@ -21,7 +22,9 @@ from mpcform._validate import Array
 @dataclass(frozen=True)
 class QPSolution:
     """Primal ``x`` and dual ``y`` (None unless ``success``; ``y`` also None when the backend
-    gives no duals), status text, iterations (0 when not reported) and wall time [s]."""
+    gives no duals), status text, iterations (0 when not reported), wall time [s], the
+    ``objective`` ``0.5 x^T P x + q^T x`` at ``x`` (None unless ``success``) and solver-specific
+    ``extras`` (residuals, gaps: whatever the backend reports)."""
 
     x: Array | None
     y: Array | None
@@ -29,6 +32,8 @@ class QPSolution:
     status: str
     iterations: int
     solve_time_s: float
+    objective: float | None = None
+    extras: Mapping[str, Any] = field(default_factory=dict)
 
 
 def failed(status: str, elapsed_s: float = 0.0, iterations: int = 0) -> QPSolution:

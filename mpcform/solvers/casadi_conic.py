@@ -182,7 +182,7 @@ class CasadiConicBackend(StoredQP):
                 x, y, stats = self._call(x0)
         except (RuntimeError, SolverError) as exc:
             return failed(f"error: {' '.join(str(exc).split())[:300]}", time.perf_counter() - start)
-        return casadi_solution(x, y, stats, time.perf_counter() - start)
+        return casadi_solution(x, y, stats, time.perf_counter() - start, self.objective(x))
 
     def _call(self, x0: Array | None) -> tuple[Array, Array | None, dict[str, Any]]:
         ca = self._casadi
@@ -226,10 +226,13 @@ class CasadiConicBackend(StoredQP):
         return x, y, dict(self._fn.stats())
 
 
-def casadi_solution(x: Array, y: Array | None, stats: dict[str, Any], elapsed_s: float) -> QPSolution:
-    """A solution from casadi's solver statistics: failed unless it reports success with a finite x."""
+def casadi_solution(
+    x: Array, y: Array | None, stats: dict[str, Any], elapsed_s: float, objective: float | None = None
+) -> QPSolution:
+    """A solution from casadi's solver statistics: failed unless it reports success with a finite x
+    (its ``objective`` given by the caller; the statistics are its extras)."""
     iters = max(0, int(stats.get("iter_count", 0) or 0))
     status = str(stats.get("return_status", "unknown"))
     if not stats.get("success", False) or not np.all(np.isfinite(x)):
         return failed(status, elapsed_s, iters)
-    return QPSolution(x, y, True, status, iters, elapsed_s)
+    return QPSolution(x, y, True, status, iters, elapsed_s, objective, stats)

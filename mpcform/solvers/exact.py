@@ -60,7 +60,7 @@ class CasadiIpoptBackend(StoredQP):
                 x, stats = self._call(self._context, x0)
         except RuntimeError as exc:
             return failed(f"error: {' '.join(str(exc).split())[:300]}", time.perf_counter() - start)
-        return casadi_solution(x, None, stats, time.perf_counter() - start)
+        return casadi_solution(x, None, stats, time.perf_counter() - start, self.objective(x))
 
     def _call(self, ctx: QPContext, x0: Array | None) -> tuple[Array, dict[str, Any]]:
         ca = self._casadi

@@ -96,6 +96,8 @@ class OSQPBackend(QPBackend):
             str(info.status),
             int(info.iter),
             elapsed,
+            float(info.obj_val) if ok else None,
+            {"prim_res": float(info.prim_res), "dual_res": float(info.dual_res)},
         )
 
 
@@ -178,13 +180,20 @@ class PIQPBackend(QPBackend):
         if ok:
             y[eq] = res.y
             y[~eq] = res.z_u - res.z_l
+        info = res.info
         return QPSolution(
             np.array(res.x) if ok else None,
             y if ok else None,
             ok,
             str(status).split(".")[-1].lower(),
-            int(res.info.iter),
+            int(info.iter),
             elapsed,
+            float(info.primal_obj) if ok else None,
+            {
+                "primal_res": float(info.primal_res),
+                "dual_res": float(info.dual_res),
+                "duality_gap": float(info.duality_gap),
+            },
         )
 
 

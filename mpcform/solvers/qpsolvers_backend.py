@@ -146,4 +146,5 @@ class QPSolversBackend(StoredQP):
         if not sol.found or x is None or not np.all(np.isfinite(x)):
             return failed("not found", elapsed)
         y = rows.duals(self._lo.shape[0], sol.y, sol.z)
-        return QPSolution(np.array(x, dtype=float), y, True, "found", 0, elapsed)
+        x = np.array(x, dtype=float)
+        return QPSolution(x, y, True, "found", 0, elapsed, self.objective(x), dict(sol.extras))

@@ -71,6 +71,12 @@ class StoredQP(QPBackend):
         self._A.data = A_data.copy()
         self._q, self._lo, self._hi = q.copy(), lo.copy(), hi.copy()
 
+    def objective(self, x: Array) -> float:
+        """``0.5 x^T P x + q^T x`` of the problem set up (for solvers that do not report it)."""
+        if self._P is None:
+            raise SolverError(self.name, "objective() before setup()")
+        return float(0.5 * x @ (self._P @ x) + self._q @ x)
+
     def set_context(self, context: QPContext) -> None:
         self._context = context
 

@@ -116,7 +116,7 @@ def test_per_drone_solves_the_sparse_qp(seed: int, variant: str, n: int) -> None
 
     def keep(*args: Any) -> Any:
         out = solve(*args)
-        mine["x"] = out[0].x
+        mine["x"], mine["objective"] = out[0].x, out[0].objective
         return out
 
     per._solver.solve = keep  # type: ignore[method-assign]
@@ -129,6 +129,7 @@ def test_per_drone_solves_the_sparse_qp(seed: int, variant: str, n: int) -> None
             cost, violation = qps.cost_and_violation(mine["x"])
             ref_cost, _ = qps.cost_and_violation(qps.x)
             assert violation <= 1e-8
+            assert mine["objective"] == pytest.approx(cost, rel=1e-9, abs=1e-9)  # the sparse QP's objective
             assert cost <= ref_cost + 1e-9 * (1.0 + abs(ref_cost))
             assert per.plan is not None and sparse.plan is not None
             np.testing.assert_allclose(per.plan.inputs_mps, sparse.plan.inputs_mps, atol=PLAN_TOL, rtol=0)
