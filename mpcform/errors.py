@@ -11,8 +11,11 @@ class ValidationError(MPCFormError, ValueError):
     """Bad input: names the field, the value received and what was expected."""
 
     def __init__(self, field: str, message: str) -> None:
-        self.field = field
+        self.field, self.message = field, message
         super().__init__(f"{field}: {message}")
+
+    def __reduce__(self) -> tuple[type, tuple[str, str]]:  # pickles (a worker's error reaches its caller)
+        return type(self), (self.field, self.message)
 
 
 class ScenarioError(ValidationError):
@@ -23,5 +26,8 @@ class SolverError(MPCFormError):
     """A QP backend that is unknown, not installed, or failed outside the planning loop."""
 
     def __init__(self, solver: str, message: str) -> None:
-        self.solver = solver
+        self.solver, self.message = solver, message
         super().__init__(f"solver {solver!r}: {message}")
+
+    def __reduce__(self) -> tuple[type, tuple[str, str]]:
+        return type(self), (self.solver, self.message)

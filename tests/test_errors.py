@@ -72,13 +72,6 @@ def test_every_public_error_of_the_package_is_an_mpcform_error() -> None:
         assert issubclass(cls, MPCFormError), f"{module}.{name} is not an MPCFormError"
 
 
-@pytest.mark.xfail(
-    strict=True,
-    raises=TypeError,
-    reason="defect: ValidationError and SolverError take (field|solver, message) but pickle their one "
-    "formatted message as args, so unpickling calls __init__ with one argument; an error raised in a "
-    "worker process cannot reach the parent (see tests/run/test_parallel.py)",
-)
 @pytest.mark.parametrize("err", [ValidationError("dt", "bad"), SolverError("osqp", "bad")])
 def test_errors_survive_pickling(err: MPCFormError) -> None:
     back = pickle.loads(pickle.dumps(err))

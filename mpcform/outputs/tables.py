@@ -24,7 +24,11 @@ def markdown_table(
         value = row.get(key)
         if key in special:
             return special[key](value)
-        if value is None or value in ("", []) or (isinstance(value, float) and not np.isfinite(value)):
+        if (
+            value is None
+            or (isinstance(value, str | list) and len(value) == 0)
+            or (isinstance(value, float) and not np.isfinite(value))
+        ):
             return "-"
         return fmt.format(value).replace("|", "\\|")
 

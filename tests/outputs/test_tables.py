@@ -76,12 +76,6 @@ def test_python_numbers_from_numpy_results_format() -> None:
     assert _cells(markdown_table([{"ms": value}], COLUMNS).splitlines()[-1])[2] == "2.00"
 
 
-@pytest.mark.xfail(
-    strict=True,
-    raises=ValueError,
-    reason="defect: `value in ('', [])` compares a numpy scalar with [] (an empty array, whose truth "
-    "value is ambiguous), so any numpy scalar in a row raises instead of being formatted",
-)
 @pytest.mark.parametrize("value", [np.float64(2.0), np.int64(2), np.float64("nan")])
 def test_numpy_scalars_format_like_python_numbers(value: Any) -> None:
     line = markdown_table([{"ms": value}], COLUMNS).splitlines()[-1]

@@ -88,12 +88,6 @@ def test_leaving_the_block_early_cancels_the_queued_tasks() -> None:
     assert sum(f.cancelled() for f in futures) >= 5  # at most the running one and one queued ran
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="defect: ValidationError/SolverError do not unpickle (their __init__ takes two arguments, "
-    "pickling replays the one formatted message), so a worker raising one breaks the whole pool "
-    "with BrokenProcessPool instead of surfacing the error",
-)
 def test_a_worker_validation_error_surfaces_as_itself() -> None:
     with process_pool(1) as pool:
         with pytest.raises(ValidationError) as info:
