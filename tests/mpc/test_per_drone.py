@@ -184,20 +184,6 @@ def test_a_failed_drone_solve_falls_back(monkeypatch: pytest.MonkeyPatch) -> Non
     assert np.linalg.norm(res.commands_mps, axis=-1).max() <= 1.0 + 1e-12
 
 
-@pytest.mark.parametrize("dim", [2, 3])
-def test_rows_over_v_are_the_rows_over_positions(dim: int) -> None:
-    """A separation row ``a^T x_e`` over ``v = M u``: ``(w_e (x) a)^T v`` equals ``a^T x_e`` with
-    ``u = M^-1 v`` and ``x_e = dt sum_{j<e} u_j`` (built here from scratch)."""
-    h, dt, k = 4, 0.1, 1.3
-    settings = MPCSettings(horizon=h, gain_per_s=k, coupling="decoupled")
-    qp = PerDroneQP(dim, dt, LIMITS, settings, (), DaqpBackend())
-    rng = np.random.default_rng(dim)
-    a, end, v = rng.normal(size=(9, dim)), rng.integers(1, h + 1, 9), rng.normal(size=h * dim)
-    m = np.eye(h * dim) + k * dt * np.kron(np.tril(np.ones((h, h)), -1), np.eye(dim))
-    x = dt * np.cumsum(np.linalg.solve(m, v).reshape(h, dim), axis=0)  # x_1 .. x_H
-    np.testing.assert_allclose(qp._rows_v(a, end) @ v, np.einsum("kd,kd->k", a, x[end - 1]), atol=1e-13)
-
-
 class HardFeasibility:
     """DAQP, and at each drone's slack-free solve whether that QP is feasible (Clarabel): the
     decoupled QP is block-diagonal, so its hard version is feasible iff every drone's is."""

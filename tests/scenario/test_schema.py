@@ -4,11 +4,9 @@ from __future__ import annotations
 
 import dataclasses
 
-import pytest
-
 from mpcform import MPCSettings
 from mpcform.scenario.mpc_keys import DEPRECATED, MPC_FIELDS
-from mpcform.scenario.schema import SCHEMA, TABLES, Key, did_you_mean, listing
+from mpcform.scenario.schema import SCHEMA, TABLES
 
 
 def test_every_key_is_documented_and_every_mpc_setting_has_a_key() -> None:
@@ -27,19 +25,3 @@ def test_tables_are_found_by_name_and_selectors_are_keys() -> None:
     for table in SCHEMA:
         if table.selector is not None:
             assert table.key(table.selector).choices, table.name
-
-
-@pytest.mark.parametrize(
-    ("bound", "text", "inside", "outside"),
-    [("> 0", " > 0", 1e-9, 0.0), (">= 1", " >= 1", 1.0, 0.999), ("", "", -1e9, None)],
-)
-def test_key_bounds(bound: str, text: str, inside: float, outside: float | None) -> None:
-    key = Key("x", "float", "A number.", bound=bound)
-    assert key.bound_text == text and key.within_bound(inside)
-    assert outside is None or not key.within_bound(outside)
-
-
-def test_listing_and_did_you_mean() -> None:
-    assert listing(("a", 2)) == "'a', '2'" and listing((2, 3), "") == "2, 3"
-    assert did_you_mean("trackng", ("proportional", "tracking")) == "; did you mean 'tracking'?"
-    assert did_you_mean("zzz", ("proportional", "tracking")) == ""
