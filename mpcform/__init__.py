@@ -23,6 +23,7 @@ from mpcform.formation.kinematics import (
 from mpcform.formation.state import FormationState
 from mpcform.formation.template import Template
 from mpcform.mpc.settings import MPCSettings
+from mpcform.mpc.strategy import PerDroneSolve, SparseSolve, SplitPolicy
 from mpcform.reference.base import ConstantReference, ExponentialReference
 from mpcform.reference.keyframes import Keyframe, MissionLimits, SpeedBudget
 from mpcform.reference.mission import MissionReference
@@ -31,6 +32,7 @@ from mpcform.run.runner import run_scenario
 from mpcform.scenario.load import load_scenario
 from mpcform.sim.metrics import run_metrics
 from mpcform.sim.simulation import simulate
+from mpcform.solvers.base import SolverOptions
 from mpcform.world.limits import Limits
 from mpcform.world.obstacles import SphereObstacle
 from mpcform.world.world import World
@@ -57,10 +59,14 @@ __all__ = [
     "Network",
     "NullSpaceController",
     "NullSpaceSettings",
+    "PerDroneSolve",
     "ProportionalController",
     "ScenarioError",
+    "SolverOptions",
+    "SparseSolve",
     "SpeedBudget",
     "SphereObstacle",
+    "SplitPolicy",
     "Template",
     "TrackingController",
     "ValidationError",

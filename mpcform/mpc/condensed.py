@@ -24,8 +24,10 @@ import numpy as np
 from scipy.linalg import solve_triangular
 
 from mpcform._validate import Array
+from mpcform.mpc.drone_solves import DroneSolves
 from mpcform.mpc.loop import VelocityLoop
 from mpcform.mpc.rows import LimitRows, position_table, positions_of_inputs, row_ends
+from mpcform.mpc.sensitivity import Sensitivity, drone_sensitivity
 from mpcform.mpc.settings import MPCSettings
 from mpcform.solvers.dense import NO_BOUND
 from mpcform.world.limits import Limits
@@ -98,6 +100,15 @@ class CondensedDroneQP:
         f = np.concatenate([np.full(h, self.settings.slack_weight), f_v])
         upper, lower = np.concatenate([np.full(h, NO_BOUND), hi]), np.concatenate([np.zeros(h), lo])
         return self._hess_soft, f, np.hstack([a_s, a]), upper, lower
+
+    def sensitivity(self, solves: DroneSolves, i: int) -> Sensitivity:
+        """How drone i's optimum moves with its separation rows' lower bounds on its active set
+        (:func:`mpcform.mpc.sensitivity.drone_sensitivity`)."""
+        first, last, b = solves.offsets[i], solves.offsets[i + 1], min(i, solves.const_lo.shape[0] - 1)
+        sep = self._rows_v(solves.sep_c[first:last], solves.sep_end[first:last])
+        lam = solves.multipliers(i, everything=True)
+        lo, hi = solves.const_lo[b], solves.const_hi[b]
+        return drone_sensitivity(lam, solves.v[i], self._const_pm, sep, lo, hi, solves.sep_lo[first:last])
 
 
 def dense_bounds(families: tuple[LimitRows, ...], p0: Array, u_prev: Array) -> tuple[Array, Array]:

@@ -16,16 +16,16 @@ with a per-drone backend (:class:`~mpcform.solvers.dense.DenseQPBackend`, chosen
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, replace
+from dataclasses import replace
 
 import numpy as np
 
 from mpcform._validate import Array
 from mpcform.mpc.condensed import CondensedDroneQP, dense_bounds
+from mpcform.mpc.drone_solves import DroneSolves
 from mpcform.mpc.loop import VelocityLoop
 from mpcform.mpc.problem import ACTIVE_TOL, StepQP, StepSolver
 from mpcform.mpc.rows import LimitRows
-from mpcform.mpc.sensitivity import Sensitivity, drone_sensitivity
 from mpcform.mpc.settings import MPCSettings
 from mpcform.mpc.working_set import (
     misses,
@@ -42,45 +42,6 @@ from mpcform.solvers.dense import NO_BOUND, DenseQPBackend, DenseSolution
 from mpcform.world.limits import Limits
 
 Solved = tuple[QPSolution, int]  # a solution and its number of active rows
-
-
-@dataclass(frozen=True)
-class DroneSolves:
-    """Every drone's DAQP solve (n drones, K separation rows kept, in drone order)."""
-
-    v: Array  # (n, H d) the solutions in v = M u
-    s: Array  # (n, H) slacks (zero where the hard QP was feasible)
-    cost: Array  # (n,) objective values 0.5 ||v||^2 - c^T v (+ the slack penalty)
-    flags: Array  # (n,) the backend's exit flags
-    ok: Array  # (n,) the solves that succeeded
-    soft: Array  # (n,) the drones solved with slacks
-    lams: list[Array]  # per drone, the rows' multipliers (soft: the slacks' H bounds, then constant
-    # rows, then separation rows; a row at its lower bound has a multiplier <= 0)
-    rows: Array  # (K,) the separation rows kept, as flat ``item * R + row`` indices
-    offsets: Array  # (n + 1,) drone i's rows are ``rows[offsets[i]:offsets[i + 1]]``
-    sep_c: Array  # (K, d) their coefficients
-    sep_end: Array  # (K,) their position steps
-    sep_lo: Array  # (K,) their lower bounds
-    const_lo: Array  # (n or 1, rows) the constant rows' bounds (one row: the same for every drone)
-    const_hi: Array
-    iterations: int
-    time_s: float  # inside DAQP
-    horizon: int
-    n_const: int  # constant rows per drone
-
-    def multipliers(self, i: int, everything: bool = False) -> Array:
-        """Drone i's multipliers of its separation rows (>= 0: the derivative of its optimal cost in
-        the rows' lower bounds), or with ``everything`` of its constant rows first."""
-        lam = self.lams[i][self.horizon if self.soft[i] else 0 :]
-        return lam if everything else -lam[self.n_const :]
-
-    def separation_multipliers(self) -> list[Array]:
-        """Every drone's :meth:`multipliers` of its separation rows, negated in one pass (views of
-        one array)."""
-        hard, soft = self.n_const, self.n_const + self.horizon  # rows to skip
-        parts = [lam[soft if s else hard :] for lam, s in zip(self.lams, self.soft.tolist(), strict=True)]
-        mu, cuts = -np.concatenate(parts), self.offsets.tolist()
-        return [mu[a:b] for a, b in zip(cuts[:-1], cuts[1:], strict=True)]
 
 
 class PerDroneQP(CondensedDroneQP, StepSolver):
@@ -320,15 +281,6 @@ class PerDroneQP(CondensedDroneQP, StepSolver):
         sol = QPSolution(np.concatenate(flat), None, True, status, iters, t_s, float(cost.sum()))
         active = np.count_nonzero(np.abs(np.concatenate(lams)) > ACTIVE_TOL) if n else 0
         return sol, int(active)
-
-    def sensitivity(self, solves: DroneSolves, i: int) -> Sensitivity:
-        """How drone i's optimum moves with its separation rows' lower bounds on its active set
-        (:func:`mpcform.mpc.sensitivity.drone_sensitivity`)."""
-        first, last, b = solves.offsets[i], solves.offsets[i + 1], min(i, solves.const_lo.shape[0] - 1)
-        sep = self._rows_v(solves.sep_c[first:last], solves.sep_end[first:last])
-        lam = solves.multipliers(i, everything=True)
-        lo, hi = solves.const_lo[b], solves.const_hi[b]
-        return drone_sensitivity(lam, solves.v[i], self._const_pm, sep, lo, hi, solves.sep_lo[first:last])
 
     def _buffers(self, size: int) -> tuple[Array, Array, Array]:
         """Row and bound buffers with room for ``size`` rows (kept between calls; the constant rows

@@ -38,7 +38,8 @@ import numpy as np
 
 from mpcform._validate import Array
 from mpcform.errors import ValidationError
-from mpcform.mpc.per_drone import DroneSolves, PerDroneQP
+from mpcform.mpc.drone_solves import DroneSolves
+from mpcform.mpc.per_drone import PerDroneQP
 from mpcform.mpc.problem import StepQP, StepSolver
 from mpcform.mpc.rows import row_ends
 from mpcform.mpc.sensitivity import Sensitivity
