@@ -19,7 +19,7 @@ from mpcform.formation.template import Template
 from mpcform.mpc.limits import Limits, SphereObstacle, tightened
 from mpcform.mpc.settings import MPCSettings
 from mpcform.reference.base import Reference
-from mpcform.sim.plant_spec import PlantSpec, Robustness
+from mpcform.sim.plant_spec import IdealPlantSpec, PlantSpec, Robustness
 
 
 @dataclass(frozen=True)
@@ -72,7 +72,7 @@ class Scenario:
     graph: Graph | None = None  # [graph] of the consensus controller (None: absent)
     network: Network = dataclasses.field(default_factory=Network)
     allow_disconnected: bool = False
-    plant: PlantSpec = dataclasses.field(default_factory=PlantSpec)
+    plant: PlantSpec = dataclasses.field(default_factory=IdealPlantSpec)
 
     @property
     def n(self) -> int:
