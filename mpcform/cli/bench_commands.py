@@ -12,7 +12,6 @@ from pathlib import Path
 from typing import Any
 
 from mpcform.scenario.size import DEFAULT_MAX_MEMORY_GIB
-from mpcform.sim.quadrotor import QuadrotorSpec
 from mpcform.solvers.registry import DEFAULT_SOLVER, PERSISTENT_SOLVERS
 
 
@@ -155,7 +154,7 @@ def add_bench(sub: argparse._SubParsersAction) -> None:
     plant.set_defaults(func=_bench_plant)
     plant.add_argument("--n", type=int, default=20, help="drones")
     plant.add_argument("--duration", type=float, default=12.0, help="flight time [s]")
-    plant.add_argument("--rate", type=float, default=QuadrotorSpec.rate_hz, help="inner-loop rate [Hz]")
+    plant.add_argument("--rate", type=float, default=500.0, help="inner-loop rate [Hz]")
     plant.add_argument("--repeats", type=int, default=3, help="runs (median and max are reported)")
     plant.add_argument("--no-wind", action="store_true", help="still air (default: gusts of 0.5 m/s)")
     plant.add_argument("--json", metavar="PATH", help="also write the rows as a JSON list of records")

@@ -63,7 +63,8 @@ class PlantSpec(ABC):
     the noise on the positions the controller sees), ``margin_m`` [m] (the robust margin per drone
     the planner tightens its rows by; None computes it from the plant,
     :func:`mpcform.sim.margin.plant_margin`) and ``samples_per_step`` (the plant's samples per
-    control step). Keyword-only; build a kind's subclass, or :func:`plant_spec` by ``kind``."""
+    control step). These common fields are keyword-only (a kind's own may be positional); build a
+    kind's subclass, or :func:`plant_spec` by ``kind``."""
 
     kind: ClassVar[str]
     wind: Wind | None = None
