@@ -12,7 +12,12 @@ from mpcform.sim.wind import Wind
 
 
 def bench_plant(
-    n: int = 20, duration_s: float = 12.0, rate_hz: float = 500.0, *, dt_s: float = 0.1, wind: bool = True
+    n: int = 20,
+    duration_s: float = 12.0,
+    rate_hz: float = QuadrotorSpec.rate_hz,
+    *,
+    dt_s: float = 0.1,
+    wind: bool = True,
 ) -> dict[str, float]:
     """Fly ``n`` drones (d = 3) for ``duration_s`` at control interval ``dt_s``; wall and CPU seconds.
 

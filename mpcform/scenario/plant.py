@@ -1,4 +1,5 @@
-"""The ``[plant]`` table (and ``[plant.wind]``) -> :class:`~mpcform.sim.plant_spec.PlantSpec`."""
+"""The ``[plant]`` table (and ``[plant.wind]``) -> a :class:`~mpcform.sim.plant_spec.PlantSpec` of its
+kind, from the keys given (the others take the spec's defaults)."""
 
 from __future__ import annotations
 
@@ -12,7 +13,7 @@ import numpy as np
 from mpcform.errors import ScenarioError, ValidationError
 from mpcform.scenario.parse import as_scenario_error, parse_table
 from mpcform.scenario.spec import Scenario
-from mpcform.sim.plant_spec import PlantSpec
+from mpcform.sim.plant_spec import PLANT_SPECS, PlantSpec, QuadrotorPlantSpec, plant_spec, scenario_key
 from mpcform.sim.wind import GUST_FIELDS, Wind
 
 WIND_KEYS = ("mean", "gust_std", "gust_time", "gust_bound", "gust_field")
@@ -21,7 +22,8 @@ RATE_RTOL = 1e-9
 
 
 def parse_plant(data: Mapping[str, Any], dim: int, dt_s: float) -> PlantSpec:
-    """The scenario's plant (the ideal plant when the table is absent), checked against ``dt_s``."""
+    """The scenario's plant (the ideal plant when the table is absent), checked against ``dt_s``; only
+    the keys the table gives are passed, so the others take the spec class's defaults."""
     raw_sim = data.get("simulation")
     if isinstance(raw_sim, Mapping) and "lag" in raw_sim:
         raise ScenarioError(
@@ -30,24 +32,14 @@ def parse_plant(data: Mapping[str, Any], dim: int, dt_s: float) -> PlantSpec:
             f"{raw_sim['lag']!r} (the same time constant [s]); simulation.lag is no longer read",
         )
     p = parse_table(data, "plant", dim)
-    if p["kind"] == "quadrotor":
-        check_rate(p["rate"], dt_s)
+    given = data.get("plant") or {}
+    fields = {scenario_key(f.name): f.name for f in dataclasses.fields(PLANT_SPECS[p["kind"]])}
+    values = {fields[key]: _wind(p[key], dim) if key == "wind" else p[key] for key in given if key != "kind"}
     with as_scenario_error("plant"):
-        return PlantSpec(
-            kind=p["kind"],
-            time_constant_s=p["time_constant"] or PlantSpec.time_constant_s,
-            damping=p["damping"] or PlantSpec.damping,
-            natural_frequency_rad_s=p["natural_frequency"] or PlantSpec.natural_frequency_rad_s,
-            damping_z=p["damping_z"],
-            natural_frequency_z_rad_s=p["natural_frequency_z"],
-            platform=p["platform"] or PlantSpec.platform,
-            model=p["model"] or PlantSpec.model,
-            rate_hz=p["rate"] or PlantSpec.rate_hz,
-            altitude_m=PlantSpec.altitude_m if p["altitude"] is None else p["altitude"],
-            wind=_wind(p["wind"], dim),
-            measurement_noise_m=p["measurement_noise"],
-            margin_m=p["margin"],
-        )
+        spec = plant_spec(p["kind"], **values)
+    if isinstance(spec, QuadrotorPlantSpec):
+        check_rate(spec.rate_hz, dt_s)
+    return spec
 
 
 def check_rate(rate_hz: float, dt_s: float) -> None:
@@ -65,10 +57,10 @@ def with_plant_kind(scenario: Scenario, kind: str) -> Scenario:
     """``scenario`` flown on a plant of another ``kind`` (``mpcform run --plant``), the table's other
     keys kept (a wind on the ideal plant is an error)."""
     try:
-        plant = dataclasses.replace(scenario.plant, kind=kind)
+        plant = scenario.plant.with_kind(kind)
     except ValidationError as exc:
         raise ScenarioError("--plant", str(exc).removeprefix(f"{exc.field}: ")) from None
-    if kind == "quadrotor":
+    if isinstance(plant, QuadrotorPlantSpec):
         check_rate(plant.rate_hz, scenario.simulation.dt_s)
     return dataclasses.replace(scenario, plant=plant)
 
@@ -86,8 +78,12 @@ def _wind(raw: Any, dim: int) -> Wind | None:
     mean = raw["mean"]
     if not isinstance(mean, list) or len(mean) != dim or not all(_finite(x) for x in mean):
         raise ScenarioError("plant.wind.mean", f"expected {dim} finite numbers [m/s], got {mean!r}")
-    numbers = {}
-    for key, low in (("gust_std", 0.0), ("gust_time", None), ("gust_bound", 0.0)):
+    given: dict[str, Any] = {}  # the Wind's fields given; the others take its defaults
+    for key, low, name in (
+        ("gust_std", 0.0, "gust_std_mps"),
+        ("gust_time", None, "gust_time_s"),
+        ("gust_bound", 0.0, "gust_bound_mps"),
+    ):
         if key in raw:
             x = raw[key]
             ok = isinstance(x, int | float) and not isinstance(x, bool) and not math.isnan(x)
@@ -96,18 +92,16 @@ def _wind(raw: Any, dim: int) -> Wind | None:
                 raise ScenarioError(f"plant.wind.{key}", f"expected {want}, got {x!r}")
             if key == "gust_std" and not math.isfinite(x):
                 raise ScenarioError("plant.wind.gust_std", f"expected a finite number >= 0, got {x!r}")
-            numbers[key] = float(x)
-    field = raw.get("gust_field", "per_drone")
-    if field not in GUST_FIELDS:
-        raise ScenarioError("plant.wind.gust_field", f"expected {' or '.join(GUST_FIELDS)}, got {field!r}")
+            given[name] = float(x)
+    if "gust_field" in raw:
+        field = raw["gust_field"]
+        if field not in GUST_FIELDS:
+            raise ScenarioError(
+                "plant.wind.gust_field", f"expected {' or '.join(GUST_FIELDS)}, got {field!r}"
+            )
+        given["gust_field"] = field
     with as_scenario_error("plant"):
-        return Wind(
-            np.array(mean, dtype=float),
-            gust_std_mps=numbers.get("gust_std", 0.0),
-            gust_time_s=numbers.get("gust_time", 1.0),
-            gust_bound_mps=numbers.get("gust_bound"),
-            gust_field=field,
-        )
+        return Wind(np.array(mean, dtype=float), **given)
 
 
 def _finite(x: Any) -> bool:

@@ -18,11 +18,11 @@ from mpcform.reference.keyframes import DEFAULT_SPEED_FRACTION
 from mpcform.scenario.key_types import Key, Table, did_you_mean, listing
 from mpcform.scenario.mpc_keys import MPC_KEYS, SOLVE_TABLE
 from mpcform.sim.plant_spec import (
-    DEFAULT_ALTITUDE_M,
-    DEFAULT_DAMPING,
-    DEFAULT_NATURAL_FREQUENCY_RAD_S,
-    DEFAULT_RATE_HZ,
-    DEFAULT_TIME_CONSTANT_S,
+    IdealPlantSpec,
+    LagPlantSpec,
+    PlantSpec,
+    QuadrotorPlantSpec,
+    SecondOrderPlantSpec,
 )
 from mpcform.sim.plants import KINDS as PLANT_KINDS
 from mpcform.sim.so_rpy import MODELS, PLATFORMS
@@ -228,28 +228,28 @@ SCHEMA: tuple[Table, ...] = (
         Key("kind", "string", "`ideal` (the exact single integrator the planner assumes), `lag` "
             "(first-order velocity loop), `second_order` (damped velocity loop per axis) or "
             "`quadrotor` (a Crazyflie model of drone-models under a firmware-like PID cascade; "
-            "`pip install mpcform[flight]`).", default="ideal", choices=PLANT_KINDS),
+            "`pip install mpcform[flight]`).", default=IdealPlantSpec.kind, choices=PLANT_KINDS),
         Key("time_constant", "float", "Time constant of the velocity loop.", "s",
-            DEFAULT_TIME_CONSTANT_S, when=("lag",), bound="> 0"),
-        Key("damping", "float", "Damping ratio of the velocity loop.", "", DEFAULT_DAMPING,
+            LagPlantSpec.time_constant_s, when=("lag",), bound="> 0"),
+        Key("damping", "float", "Damping ratio of the velocity loop.", "", SecondOrderPlantSpec.damping,
             when=("second_order",), bound="> 0"),
         Key("natural_frequency", "float", "Natural frequency of the velocity loop.", "rad/s",
-            DEFAULT_NATURAL_FREQUENCY_RAD_S, when=("second_order",), bound="> 0"),
+            SecondOrderPlantSpec.natural_frequency_rad_s, when=("second_order",), bound="> 0"),
         Key("damping_z", "float", "Damping ratio of the vertical axis.", "", when=("second_order",),
             shown_default="damping", bound="> 0"),
         Key("natural_frequency_z", "float", "Natural frequency of the vertical axis.", "rad/s",
             when=("second_order",), shown_default="natural_frequency", bound="> 0"),
         Key("platform", "string", "drone-models platform (fitted Crazyflie 2.x parameters).",
-            default="cf2x_L250", when=("quadrotor",), choices=PLATFORMS),
+            default=QuadrotorPlantSpec.platform, when=("quadrotor",), choices=PLATFORMS),
         Key("model", "string", "drone-models model: the fitted attitude loop, with or without rotor "
-            "drag (wind acts through the drag).", default="so_rpy_rotor_drag", when=("quadrotor",),
+            "drag (wind acts through the drag).", default=QuadrotorPlantSpec.model, when=("quadrotor",),
             choices=MODELS),
         Key("rate", "float", "Inner-loop rate: a multiple of the control rate 1 / dt.", "Hz",
-            DEFAULT_RATE_HZ, when=("quadrotor",), bound="> 0"),
+            QuadrotorPlantSpec.rate_hz, when=("quadrotor",), bound="> 0"),
         Key("altitude", "float", "Height a planar (dim = 2) flight holds with its thrust loop.", "m",
-            DEFAULT_ALTITUDE_M, when=("quadrotor",)),
+            QuadrotorPlantSpec.altitude_m, when=("quadrotor",)),
         Key("measurement_noise", "float", "Std of seeded Gaussian noise on the positions the "
-            "controller sees.", "m", 0.0, bound=">= 0"),
+            "controller sees.", "m", PlantSpec.measurement_noise_m, bound=">= 0"),
         Key("margin", "float", "Robust margin per drone that tightens the MPC's rows (pairs by "
             "twice it).", "m", shown_default="from the plant, wind and a_max", bound=">= 0"),
         Key("wind", "table", "`[plant.wind]`: `mean` (d numbers) [m/s], `gust_std` [m/s] (0), "

@@ -18,7 +18,7 @@ from mpcform.formation.state import FormationState
 from mpcform.formation.template import Template
 from mpcform.mpc.settings import MPCSettings
 from mpcform.reference.base import Reference
-from mpcform.sim.plant_spec import PlantSpec, Robustness
+from mpcform.sim.plant_spec import IdealPlantSpec, PlantSpec, Robustness
 from mpcform.world.limits import Limits, tightened
 from mpcform.world.obstacles import SphereObstacle, resolve_clearances
 from mpcform.world.world import World
@@ -77,7 +77,7 @@ class Scenario:
     graph: Graph | None = None  # [graph] of the consensus controller (None: absent)
     network: Network = dataclasses.field(default_factory=Network)
     allow_disconnected: bool = False
-    plant: PlantSpec = dataclasses.field(default_factory=PlantSpec)
+    plant: PlantSpec = dataclasses.field(default_factory=IdealPlantSpec)
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "obstacles", resolve_clearances(tuple(self.obstacles), self.limits.d_min_m))

@@ -1,29 +1,37 @@
-"""What a scenario's ``[plant]`` table declares, and the one factory that builds the plant from it.
+"""What a scenario's ``[plant]`` table declares, one frozen dataclass per plant kind.
 
-A :class:`PlantSpec` holds the plant's kind and parameters, the wind and the measurement noise;
+:class:`PlantSpec` is the common base: the wind, the measurement noise, the robust margin and the
+plant's samples per control step. Each kind adds its own parameters with their defaults, stated
+once as dataclass field defaults (the scenario key reference reads them from there):
+:class:`IdealPlantSpec`, :class:`LagPlantSpec`, :class:`SecondOrderPlantSpec` and
+:class:`QuadrotorPlantSpec` (whose defaults are :class:`~mpcform.sim.quadrotor.QuadrotorSpec`'s).
+:data:`PLANT_SPECS` maps ``kind`` to its class. A field's scenario key is its name without the
+unit (:func:`scenario_key`: ``rate_hz`` is ``plant.rate``); errors name that key.
+
 :meth:`PlantSpec.build` makes the vectorised plant for n drones in d dimensions (see
-:mod:`mpcform.sim.plants` and :mod:`mpcform.sim.quadrotor`), and :meth:`PlantSpec.margin` the
+:mod:`mpcform.sim.plants` and :mod:`mpcform.sim.quadrotor`), and :meth:`PlantSpec.robustness` the
 robust margin the planner tightens its rows by (:mod:`mpcform.sim.margin`).
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
+from abc import ABC, abstractmethod
 from dataclasses import dataclass
+from typing import Any, ClassVar
 
 import numpy as np
 
 from mpcform._validate import positive
 from mpcform.errors import ValidationError
 from mpcform.sim.plants import KINDS, SAMPLES_PER_STEP, IdealPlant, Plant, lag_plant, second_order_plant
+from mpcform.sim.quadrotor import QuadrotorPlant, QuadrotorSpec
 from mpcform.sim.wind import Wind
 from mpcform.world.loop import LoopGroup
 
-DEFAULT_TIME_CONSTANT_S = 0.1
-DEFAULT_DAMPING = 0.7
-DEFAULT_NATURAL_FREQUENCY_RAD_S = 6.0
-DEFAULT_RATE_HZ = 500.0
-DEFAULT_ALTITUDE_M = 1.0
+UNIT_SUFFIXES = ("_rad_s", "_hz", "_s", "_m")
+"""The unit suffixes of field names that scenario keys leave out."""
 
 
 @dataclass(frozen=True)
@@ -41,55 +49,50 @@ class Robustness:
     (:mod:`mpcform.mpc.loop`; the quadrotor's hover linearisation); empty for the ideal plant."""
 
 
-@dataclass(frozen=True, eq=False)
-class PlantSpec:
-    """A plant as declared: ``kind`` and its parameters (the others are ignored), wind, noise.
+def scenario_key(name: str) -> str:
+    """The ``[plant]`` key of the field ``name``: the name without its unit (``rate_hz``: ``rate``)."""
+    for suffix in UNIT_SUFFIXES:
+        if name.endswith(suffix):
+            return name.removesuffix(suffix)
+    return name
 
-    ``margin_m``: the robust margin per drone [m] the planner tightens its rows by; None computes
-    it from the plant (:func:`mpcform.sim.margin.plant_margin`), a number overrides it.
-    """
 
-    kind: str = "ideal"
-    time_constant_s: float = DEFAULT_TIME_CONSTANT_S
-    damping: float = DEFAULT_DAMPING
-    natural_frequency_rad_s: float = DEFAULT_NATURAL_FREQUENCY_RAD_S
-    damping_z: float | None = None
-    natural_frequency_z_rad_s: float | None = None
-    platform: str = "cf2x_L250"
-    model: str = "so_rpy_rotor_drag"
-    rate_hz: float = DEFAULT_RATE_HZ
-    altitude_m: float = DEFAULT_ALTITUDE_M
+@dataclass(frozen=True, kw_only=True)
+class PlantSpec(ABC):
+    """What every plant kind declares: ``wind`` (None: calm), ``measurement_noise_m`` [m] (std of
+    the noise on the positions the controller sees), ``margin_m`` [m] (the robust margin per drone
+    the planner tightens its rows by; None computes it from the plant,
+    :func:`mpcform.sim.margin.plant_margin`) and ``samples_per_step`` (the plant's samples per
+    control step). These common fields are keyword-only (a kind's own may be positional); build a
+    kind's subclass, or :func:`plant_spec` by ``kind``."""
+
+    kind: ClassVar[str]
     wind: Wind | None = None
     measurement_noise_m: float = 0.0
     margin_m: float | None = None
     samples_per_step: int = SAMPLES_PER_STEP
 
     def __post_init__(self) -> None:
-        if self.kind not in KINDS:
-            raise ValidationError("plant.kind", f"expected one of {', '.join(KINDS)}, got {self.kind!r}")
-        positive("plant.time_constant", self.time_constant_s)
-        positive("plant.damping", self.damping)
-        positive("plant.natural_frequency", self.natural_frequency_rad_s)
-        for name in ("damping_z", "natural_frequency_z_rad_s"):
-            if getattr(self, name) is not None:
-                positive(f"plant.{name.removesuffix('_rad_s')}", getattr(self, name))
-        positive("plant.rate", self.rate_hz)
-        if not math.isfinite(self.altitude_m):
-            raise ValidationError("plant.altitude", f"expected a finite height [m], got {self.altitude_m!r}")
-        positive("plant.measurement_noise", self.measurement_noise_m, allow_zero=True)
+        self._positive("measurement_noise_m", allow_zero=True)
         if self.margin_m is not None:
-            positive("plant.margin", self.margin_m, allow_zero=True)
-        if self.kind == "ideal" and self.wind is not None:
-            raise ValidationError(
-                "plant.wind",
-                "the ideal plant is the planner's own model and takes no wind: choose "
-                "plant.kind = lag, second_order or quadrotor",
-            )
+            self._positive("margin_m", allow_zero=True)
+
+    def _positive(self, name: str, *, allow_zero: bool = False) -> None:
+        """Field ``name`` must be a finite number > 0 (>= 0 with ``allow_zero``); errors name its key."""
+        positive(f"plant.{scenario_key(name)}", getattr(self, name), allow_zero=allow_zero)
 
     @property
     def ideal(self) -> bool:
         """True for the exact single integrator without measurement noise (the planner's model)."""
         return self.kind == "ideal" and self.measurement_noise_m == 0.0
+
+    def with_kind(self, kind: str) -> PlantSpec:
+        """This plant as ``kind``: itself if of that kind, else that kind's defaults with this plant's
+        common fields (wind, noise, margin, samples per step; a wind on the ideal plant is an error)."""
+        if kind == self.kind:
+            return self
+        common = {f.name: getattr(self, f.name) for f in dataclasses.fields(PlantSpec)}
+        return plant_spec(kind, **common)
 
     def robustness(
         self, dim: int, dt_s: float, a_max_mps2: float | None, loop_modelled: bool = False
@@ -116,27 +119,115 @@ class PlantSpec:
 
     def build(self, n: int, dim: int, seed: int | np.random.SeedSequence = 0) -> Plant:
         """The plant for ``n`` drones in ``dim`` dimensions; ``seed`` feeds its wind and noise."""
-        common: dict[str, object] = {
-            "wind": self.wind,
-            "noise_std_m": self.measurement_noise_m,
-            "seed": seed,
-            "samples_per_step": self.samples_per_step,
-        }
-        if self.kind == "ideal":
-            return IdealPlant(n, dim, **common)
-        if self.kind == "lag":
-            return lag_plant(n, dim, self.time_constant_s, **common)  # type: ignore[arg-type]
-        if self.kind == "second_order":
-            return second_order_plant(
-                n,
-                dim,
-                self.damping,
-                self.natural_frequency_rad_s,
-                zeta_z=self.damping_z,
-                omega_z_rad_s=self.natural_frequency_z_rad_s,
-                **common,  # type: ignore[arg-type]
-            )
-        from mpcform.sim.quadrotor import QuadrotorPlant, QuadrotorSpec
+        return self._plant(
+            n,
+            dim,
+            wind=self.wind,
+            noise_std_m=self.measurement_noise_m,
+            seed=seed,
+            samples_per_step=self.samples_per_step,
+        )
 
+    @abstractmethod
+    def _plant(self, n: int, dim: int, **common: Any) -> Plant:
+        """The plant of this kind, with the ``common`` keywords of :class:`~mpcform.sim.plants.Plant`."""
+
+
+@dataclass(frozen=True)
+class IdealPlantSpec(PlantSpec):
+    """The exact single integrator the planner assumes; it takes no wind."""
+
+    kind: ClassVar[str] = "ideal"
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        if self.wind is not None:
+            raise ValidationError(
+                "plant.wind",
+                "the ideal plant is the planner's own model and takes no wind: choose "
+                "plant.kind = lag, second_order or quadrotor",
+            )
+
+    def _plant(self, n: int, dim: int, **common: Any) -> Plant:
+        return IdealPlant(n, dim, **common)
+
+
+@dataclass(frozen=True)
+class LagPlantSpec(PlantSpec):
+    """A first-order velocity loop of time constant ``time_constant_s`` [s]."""
+
+    kind: ClassVar[str] = "lag"
+    time_constant_s: float = 0.1
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        self._positive("time_constant_s")
+
+    def _plant(self, n: int, dim: int, **common: Any) -> Plant:
+        return lag_plant(n, dim, self.time_constant_s, **common)
+
+
+@dataclass(frozen=True)
+class SecondOrderPlantSpec(PlantSpec):
+    """A damped velocity loop per axis: ``damping`` and ``natural_frequency_rad_s`` [rad/s]; the
+    vertical axis's ``damping_z`` and ``natural_frequency_z_rad_s`` (None: the same)."""
+
+    kind: ClassVar[str] = "second_order"
+    damping: float = 0.7
+    natural_frequency_rad_s: float = 6.0
+    damping_z: float | None = None
+    natural_frequency_z_rad_s: float | None = None
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        self._positive("damping")
+        self._positive("natural_frequency_rad_s")
+        for name in ("damping_z", "natural_frequency_z_rad_s"):
+            if getattr(self, name) is not None:
+                self._positive(name)
+
+    def _plant(self, n: int, dim: int, **common: Any) -> Plant:
+        return second_order_plant(
+            n,
+            dim,
+            self.damping,
+            self.natural_frequency_rad_s,
+            zeta_z=self.damping_z,
+            omega_z_rad_s=self.natural_frequency_z_rad_s,
+            **common,
+        )
+
+
+@dataclass(frozen=True)
+class QuadrotorPlantSpec(PlantSpec):
+    """The quadrotor (:mod:`mpcform.sim.quadrotor`): drone-models ``platform`` and ``model``, the
+    inner rate ``rate_hz`` [Hz] and the height ``altitude_m`` [m] a planar flight holds."""
+
+    kind: ClassVar[str] = "quadrotor"
+    platform: str = QuadrotorSpec.platform
+    model: str = QuadrotorSpec.model
+    rate_hz: float = QuadrotorSpec.rate_hz
+    altitude_m: float = QuadrotorSpec.altitude_m
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        self._positive("rate_hz")
+        if not math.isfinite(self.altitude_m):
+            raise ValidationError("plant.altitude", f"expected a finite height [m], got {self.altitude_m!r}")
+
+    def _plant(self, n: int, dim: int, **common: Any) -> Plant:
         spec = QuadrotorSpec(self.platform, self.model, self.rate_hz, altitude_m=self.altitude_m)
         return QuadrotorPlant(n, dim, spec, **common)
+
+
+PLANT_SPECS: dict[str, type[PlantSpec]] = {
+    cls.kind: cls for cls in (IdealPlantSpec, LagPlantSpec, SecondOrderPlantSpec, QuadrotorPlantSpec)
+}
+"""The spec class of every plant kind, in the order of :data:`mpcform.sim.plants.KINDS`."""
+
+
+def plant_spec(kind: str, **fields: Any) -> PlantSpec:
+    """The spec of plant ``kind`` with ``fields`` (the others at their defaults)."""
+    if kind not in PLANT_SPECS:
+        raise ValidationError("plant.kind", f"expected one of {', '.join(KINDS)}, got {kind!r}")
+    return PLANT_SPECS[kind](**fields)

@@ -22,7 +22,7 @@ from numpy.typing import ArrayLike
 from mpcform._validate import Array, finite_array, positive
 from mpcform.control.base import Controller, StepInfo
 from mpcform.errors import MPCFormError, ValidationError
-from mpcform.sim.plant_spec import PlantSpec
+from mpcform.sim.plant_spec import IdealPlantSpec, PlantSpec
 from mpcform.sim.plants import Plant, PlantSamples, concat_samples
 from mpcform.sim.trajectory import Trajectory, TrueTrajectory
 
@@ -78,7 +78,7 @@ def simulate(
     steps = max(1, int(round(positive("simulation.duration", duration_s) / dt)))
     noise = positive("simulation.noise", noise_std_m, allow_zero=True)
     if not isinstance(plant, Plant):
-        plant = (plant or PlantSpec()).build(tpl.n, tpl.dim, plant_seed(seed))
+        plant = (plant or IdealPlantSpec()).build(tpl.n, tpl.dim, plant_seed(seed))
     rng = np.random.default_rng(seed)
     t = t0_s + dt * np.arange(steps + 1)
     pos = np.empty((steps + 1, tpl.n, tpl.dim))

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -10,6 +11,16 @@ from helpers import tiny_swap_toml
 
 from mpcform.errors import ScenarioError
 from mpcform.scenario.load import scenario_from_dict
+from mpcform.scenario.plant import with_plant_kind
+from mpcform.scenario.schema import TABLES
+from mpcform.sim.plant_spec import (
+    PLANT_SPECS,
+    IdealPlantSpec,
+    LagPlantSpec,
+    QuadrotorPlantSpec,
+    SecondOrderPlantSpec,
+    scenario_key,
+)
 
 try:
     import tomllib
@@ -26,6 +37,51 @@ def scenario(extra: str) -> dict:
 
 def test_no_table_is_the_ideal_plant() -> None:
     assert scenario_from_dict(scenario("")).plant.ideal
+    assert scenario_from_dict(scenario("")).plant == IdealPlantSpec()
+
+
+@pytest.mark.parametrize(
+    ("kind", "spec"),
+    [
+        ("ideal", IdealPlantSpec()),
+        ("lag", LagPlantSpec()),
+        ("second_order", SecondOrderPlantSpec()),
+        ("quadrotor", QuadrotorPlantSpec()),
+    ],
+)
+def test_a_minimal_table_takes_the_specs_defaults(kind: str, spec: object) -> None:
+    assert scenario_from_dict(scenario(f'[plant]\nkind = "{kind}"\n')).plant == spec
+
+
+def test_the_key_reference_states_the_specs_fields_and_defaults() -> None:
+    """Every [plant] key that applies to a kind is a field of its spec with the same default (the
+    key reference reads it there), and every field but samples_per_step (and the ideal plant's
+    wind) is a key."""
+    table = TABLES["plant"]
+    for kind, cls in PLANT_SPECS.items():
+        fields = {scenario_key(f.name): f for f in dataclasses.fields(cls)}
+        keys = {k.name: k for k in table.keys if k.name != "kind" and (not k.when or kind in k.when)}
+        not_keys = {"samples_per_step"} | ({"wind"} if kind == "ideal" else set())  # no wind: refused
+        assert set(keys) == set(fields) - not_keys, kind
+        for name, key in keys.items():
+            assert key.default == fields[name].default, (kind, name)
+    assert table.key("kind").default == IdealPlantSpec.kind
+
+
+def test_plant_override_keeps_the_table_on_its_own_kind_and_defaults_another() -> None:
+    lag = scenario_from_dict(
+        scenario('[plant]\nkind = "lag"\ntime_constant = 0.2\nmeasurement_noise = 0.01\n')
+    )
+    assert with_plant_kind(lag, "lag").plant == LagPlantSpec(0.2, measurement_noise_m=0.01)
+    assert with_plant_kind(lag, "second_order").plant == SecondOrderPlantSpec(measurement_noise_m=0.01)
+    windy = scenario_from_dict(scenario(LAG_WIND))
+    with pytest.raises(ScenarioError, match="--plant") as err:
+        with_plant_kind(windy, "ideal")
+    assert "takes no wind" in str(err.value)
+    odd = scenario('[plant]\nkind = "lag"\n')
+    odd["simulation"]["dt"] = 0.0125  # 6.25 inner steps of 500 Hz
+    with pytest.raises(ScenarioError, match="plant.rate"):
+        with_plant_kind(scenario_from_dict(odd), "quadrotor")
 
 
 def test_lag_second_order_and_quadrotor_with_wind() -> None:
@@ -58,6 +114,9 @@ def test_lag_second_order_and_quadrotor_with_wind() -> None:
         ('[plant]\nkind = "quadrotor"\nrate = 5\n', "plant.rate", "multiple"),
         ('[plant]\nkind = "quadrotor"\nrate = 505\n', "plant.rate", "multiple"),
         ('[plant]\nkind = "lag"\ndamping = 0.7\n', "plant.damping", "does not apply"),
+        ('[plant]\nkind = "second_order"\nrate = 500\n', "plant.rate", "does not apply"),
+        ('[plant]\nkind = "quadrotor"\ntime_constant = 0.1\n', "plant.time_constant", "does not apply"),
+        ("[plant]\nmargin = 0.1\ndamping = 0.7\n", "plant.damping", "does not apply"),
         ('[plant]\nkind = "lag"\n[plant.wind]\nmean = [1.0, 0.0, 0.0]\n', "plant.wind.mean", "2 finite"),
         ('[plant]\nkind = "lag"\n[plant.wind]\nmean = [1.0, nan]\n', "plant.wind.mean", "finite"),
         (f"{LAG_WIND}gust_bound = -1.0\n", "plant.wind.gust_bound", ">= 0"),

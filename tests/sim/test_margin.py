@@ -8,7 +8,7 @@ import pytest
 from mpcform.errors import ValidationError
 from mpcform.sim import so_rpy
 from mpcform.sim.margin import default_a_max, plant_margin, worst_case_commands
-from mpcform.sim.plant_spec import PlantSpec
+from mpcform.sim.plant_spec import IdealPlantSpec, QuadrotorPlantSpec, plant_spec
 from mpcform.sim.plants import DRAG_PER_S, lag_plant, second_order_plant
 from mpcform.sim.wind import Wind
 
@@ -20,6 +20,11 @@ except metadata.PackageNotFoundError:
     FLIGHT = False
 needs_flight = pytest.mark.skipif(not FLIGHT, reason="needs drone-models (pip install 'mpcform[flight]')")
 GUSTY = Wind(np.array([1.0, 0.0, 0.0]), gust_std_mps=0.5, gust_time_s=0.5)
+
+
+def lag_options(kind: str, time_constant_s: float) -> dict:
+    """``time_constant_s`` for the lag plant; nothing for the other kinds."""
+    return {"time_constant_s": time_constant_s} if kind == "lag" else {}
 
 
 def deviation(plant, commands):
@@ -73,11 +78,11 @@ def test_lag_margin_is_a_dt_tau_plus_the_wind_term(tau):
 def test_margin_grows_with_a_max():
     plants = [lag_plant(1, 3, 0.2), second_order_plant(1, 3, 0.7, 6.0, wind=GUSTY)]
     if FLIGHT:
-        plants.append(PlantSpec("quadrotor", wind=GUSTY).build(1, 3))
+        plants.append(QuadrotorPlantSpec(wind=GUSTY).build(1, 3))
     for plant in plants:
         norms = [plant_margin(plant, DT, a).norm_m for a in (0.5, 1.0, 2.0, 4.0)]
         assert all(x < y for x, y in zip(norms, norms[1:], strict=False)), plant.kind
-    assert plant_margin(PlantSpec("ideal").build(2, 3), DT, 3.0).norm_m == 0.0
+    assert plant_margin(IdealPlantSpec().build(2, 3), DT, 3.0).norm_m == 0.0
 
 
 def test_unbounded_gusts_give_an_infinite_margin():
@@ -93,7 +98,7 @@ def test_default_a_max_comes_from_the_airframe():
     g_tan = 9.81 * np.tan(np.radians(20.0))
     assert default_a_max(lag_plant(1, 2, 0.2)) == pytest.approx(0.5 * g_tan)
     if FLIGHT:
-        assert default_a_max(PlantSpec("quadrotor").build(1, 3)) == pytest.approx(0.5 * g_tan)  # tilt binds
+        assert default_a_max(QuadrotorPlantSpec().build(1, 3)) == pytest.approx(0.5 * g_tan)  # tilt binds
     with pytest.raises(ValidationError, match="margin.steps"):
         plant_margin(lag_plant(1, 2, 0.2), DT, steps=0)
     with pytest.raises(ValidationError, match="margin.a_max"):
@@ -121,7 +126,7 @@ QUAD = [("quadrotor", {}), ("quadrotor", {"wind": GUSTY})]
 @pytest.mark.parametrize(("kind", "options"), LINEAR + [pytest.param(*q, marks=needs_flight) for q in QUAD])
 def test_measured_deviation_never_exceeds_the_margin(kind, options):
     rng = np.random.default_rng(len(options) + len(kind))
-    plant = PlantSpec(kind, **options).build(8, 3, seed=5)
+    plant = plant_spec(kind, **options).build(8, 3, seed=5)
     a = default_a_max(plant)
     margin = plant_margin(plant, DT, a)
     v_max = min(2.0, margin.valid_speed_mps)
@@ -132,7 +137,7 @@ def test_measured_deviation_never_exceeds_the_margin(kind, options):
 
 @pytest.mark.parametrize(("kind", "options"), LINEAR[::2] + [pytest.param(*QUAD[0], marks=needs_flight)])
 def test_worst_case_sequence_meets_the_margin(kind, options):
-    one = PlantSpec(kind, **options).build(1, 3)
+    one = plant_spec(kind, **options).build(1, 3)
     a = default_a_max(one)
     margin = plant_margin(one, DT, a)
     levels = within_speed(worst_case_commands(one, DT, a, 40), min(3.0, margin.valid_speed_mps))
@@ -152,10 +157,9 @@ def test_chord_margin_bounds_the_bend_within_an_interval(kind: str) -> None:
     within the chord margin of the chord between its interval ends (and the bound is not loose by
     more than 3x on the bang-bang sequence)."""
     from mpcform.sim.margin import chord_margin
-    from mpcform.sim.plant_spec import PlantSpec
 
     dt, a_max = 0.1, 1.8
-    spec = PlantSpec(kind, time_constant_s=0.3, samples_per_step=50)
+    spec = plant_spec(kind, samples_per_step=50, **lag_options(kind, 0.3))
     bound = chord_margin(spec.build(1, 2), dt, a_max)
     rng = np.random.default_rng(4)
     worst = np.zeros(2)
@@ -196,7 +200,7 @@ def test_modelled_margin_covers_the_observed_loop(kind, dim, wind):
 
     if wind is not None:
         wind = Wind(wind.mean_mps[:dim], wind.gust_std_mps, wind.gust_time_s)
-    spec = PlantSpec(kind, wind=wind, samples_per_step=20, time_constant_s=0.2)
+    spec = plant_spec(kind, wind=wind, samples_per_step=20, **lag_options(kind, 0.2))
     plant = spec.build(8, dim, seed=5)
     a = default_a_max(plant)
     margin = plant_margin(plant, DT, a)

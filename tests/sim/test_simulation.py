@@ -12,7 +12,7 @@ from mpcform.errors import MPCFormError, ValidationError
 from mpcform.formation.state import FormationState
 from mpcform.formation.template import Template
 from mpcform.reference.base import ConstantReference
-from mpcform.sim.plant_spec import PlantSpec
+from mpcform.sim.plant_spec import LagPlantSpec
 from mpcform.sim.simulation import SimulationResult, simulate
 from mpcform.sim.trajectory import Trajectory
 
@@ -126,7 +126,7 @@ def test_result_keeps_one_record_per_step():
 def test_lag_is_the_exact_first_order_response():
     """From rest under a constant u: p(t) = p0 + u (t - tau (1 - e^{-t/tau}))."""
     u, tau = np.array([[1.0, -2.0], [0.5, 0.0]]), 0.3
-    run = simulate(ConstantCommand(u), np.zeros((2, 2)), 2.0, plant=PlantSpec("lag", time_constant_s=tau))
+    run = simulate(ConstantCommand(u), np.zeros((2, 2)), 2.0, plant=LagPlantSpec(time_constant_s=tau))
     t = run.t_s[:, None, None]
     np.testing.assert_allclose(run.positions_m, u * (t - tau * (1 - np.exp(-t / tau))), atol=1e-12)
     dense = run.true
@@ -137,7 +137,7 @@ def test_lag_is_the_exact_first_order_response():
 
 
 def test_go_to_goal_with_lag_stays_finite_and_converges():
-    run = go_to_goal(0.02, duration=20.0, plant=PlantSpec("lag", time_constant_s=0.1))
+    run = go_to_goal(0.02, duration=20.0, plant=LagPlantSpec(time_constant_s=0.1))
     assert np.all(np.isfinite(run.positions_m))
     assert np.linalg.norm(run.positions_m[-1, 0] - GOAL) < 1e-6
     lagless = go_to_goal(0.02, duration=20.0)

@@ -6,7 +6,7 @@ QuadrotorPlant` (drone-models' Crazyflie model flown by a PID cascade at 500 Hz)
 follows ``p(t_k) + v(t_k) (t - t_k)`` at its inner rate (the cascade has no acceleration
 feedforward). The report: the largest distance between the true and the exported positions, the
 smallest true pairwise distance, and the declared tolerance they are held to: the plant's robust
-margin (``PlantSpec("quadrotor").robustness``, one control interval of the run at the export's
+margin (``QuadrotorPlantSpec().robustness``, one control interval of the run at the export's
 acceleration limit) plus the fit tolerance. Without drone-models the check is skipped (None).
 """
 
@@ -19,7 +19,7 @@ import numpy as np
 
 from mpcform._validate import Array
 from mpcform.outputs.flight.polynomial import PiecewisePolynomial
-from mpcform.sim.plant_spec import PlantSpec
+from mpcform.sim.plant_spec import QuadrotorPlantSpec
 
 INTERVAL_S = 0.02  # 10 inner steps of the 500 Hz plant (the plant records >= 10 samples per call)
 
@@ -71,7 +71,7 @@ def fly_export(
     """Fly ``n`` drones' pieces (series drone * 4 + x, y, z, yaw) on the quadrotor plant."""
     if not drone_models_available():
         return None
-    spec = PlantSpec("quadrotor")
+    spec = QuadrotorPlantSpec()
     margin = spec.robustness(3, control_dt_s, a_max_mps2).margin_m
     plant = spec.build(n, 3)
     steps = int(np.floor(poly.duration_s / INTERVAL_S + 1e-9))  # the last < 20 ms are at rest
