@@ -130,8 +130,12 @@ def close_start(rng: np.random.Generator, index: int) -> dict[str, Any]:
 def family(seed: int, count: int) -> Iterator[dict[str, Any]]:
     """``count`` scenarios cycling through the parts (sphere draws that break the rules redrawn)."""
     rng = np.random.default_rng(seed)
-    makers = {"swap_planar": swap_planar, "swap_spatial": swap_spatial, "spheres": spheres,
-              "close_start": close_start}  # fmt: skip
+    makers = {
+        "swap_planar": swap_planar,
+        "swap_spatial": swap_spatial,
+        "spheres": spheres,
+        "close_start": close_start,
+    }
     made = 0
     while made < count:
         kind = KINDS[made % len(KINDS)]
@@ -142,23 +146,43 @@ def family(seed: int, count: int) -> Iterator[dict[str, Any]]:
 
 
 CLOSE_START_FREEZE: dict[str, Any] = {  # froze before close starts had their hard no-approach rows
-    "version": 1, "name": "close_start_freeze", "dim": 2, "seed": 13,
-    "template": {"shape": "explicit", "offsets": [
-        [-0.9868547022787612, -0.5404046729473696], [-0.3845822424615776, -1.5829725384194102],
-        [0.6385811673742307, -1.4570827785874187], [-1.441396278938159, 1.1408983667071637],
-        [-0.1381720912265597, 1.10830619552998], [1.5747326245724236, -0.490351987473142],
-        [0.737691522958403, 1.821607415190197]]},
-    "initial": {"positions": [
-        [0.5842413546223961, 1.6079380233859193], [-0.3845822424615776, -1.5829725384194102],
-        [0.6385811673742307, -1.4570827785874187], [-1.441396278938159, 1.1408983667071637],
-        [-0.1381720912265597, 1.10830619552998], [0.14957701754708363, 1.3558148428083334],
-        [0.737691522958403, 1.821607415190197]]},
-    "reference": {"kind": "constant", "centroid": [1.7625682249254604, 1.237208044722145], "rotation": 0.0,
-                  "scale": 1.0},
+    "version": 1,
+    "name": "close_start_freeze",
+    "dim": 2,
+    "seed": 13,
+    "template": {
+        "shape": "explicit",
+        "offsets": [
+            [-0.9868547022787612, -0.5404046729473696],
+            [-0.3845822424615776, -1.5829725384194102],
+            [0.6385811673742307, -1.4570827785874187],
+            [-1.441396278938159, 1.1408983667071637],
+            [-0.1381720912265597, 1.10830619552998],
+            [1.5747326245724236, -0.490351987473142],
+            [0.737691522958403, 1.821607415190197],
+        ],
+    },
+    "initial": {
+        "positions": [
+            [0.5842413546223961, 1.6079380233859193],
+            [-0.3845822424615776, -1.5829725384194102],
+            [0.6385811673742307, -1.4570827785874187],
+            [-1.441396278938159, 1.1408983667071637],
+            [-0.1381720912265597, 1.10830619552998],
+            [0.14957701754708363, 1.3558148428083334],
+            [0.737691522958403, 1.821607415190197],
+        ]
+    },
+    "reference": {
+        "kind": "constant",
+        "centroid": [1.7625682249254604, 1.237208044722145],
+        "rotation": 0.0,
+        "scale": 1.0,
+    },
     "limits": {"v_max": 1.0449597951536984, "d_min": 0.60699788707885},
     "controller": {"kind": "mpc", "gain": 2.0, "horizon": 8, "coupling": "decoupled"},
     "simulation": {"dt": 0.1, "duration": 27.666075437319197},
-}  # fmt: skip
+}
 
 
 def outcome(sc: dict[str, Any], tol_m: float = 0.1) -> dict[str, Any]:

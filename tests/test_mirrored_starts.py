@@ -25,14 +25,17 @@ def mirrored(dim: int, kind: str, seed: int) -> dict:
         "mission": {"kind": "mission", "keyframes": [{"centroid": [2.0] * dim}]},
     }[kind]
     return {
-        "version": 1, "name": f"mirrored_{dim}d_{kind}", "dim": dim, "seed": seed,
+        "version": 1,
+        "name": f"mirrored_{dim}d_{kind}",
+        "dim": dim,
+        "seed": seed,
         "template": {"shape": "explicit", "offsets": offsets.tolist()},
         "initial": {"positions": start.tolist()},
         "reference": reference,
         "limits": {"v_max": 1.5, "d_min": 0.5},
         "controller": {"kind": "mpc", "horizon": 8, "coupling": "decoupled"},
         "simulation": {"dt": 0.1, "duration": 1.0},
-    }  # fmt: skip
+    }
 
 
 @pytest.mark.parametrize("kind", ["constant", "exponential", "mission"])

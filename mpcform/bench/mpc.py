@@ -262,7 +262,7 @@ COLUMNS: list[tuple[str, str, str]] = [
     ("cvxpy_ms_median", "cvxpy QP med", "{:.1f}"), ("cvxpy_speedup_qp", "vs cvxpy (QP)", "{:.1f}x"),
     ("whole_s", "whole [s]", "{:.2f}"), ("cvxpy_whole_s", "cvxpy whole", "{:.2f}"),
     ("cvxpy_speedup_whole", "vs cvxpy (whole)", "{:.1f}x"),
-]  # fmt: skip
+]  # fmt: skip # the columns read best as a table: key, header, format
 """Columns; a time or ratio column shows ``wall / CPU`` (its key and the key with ``_cpu``)."""
 
 

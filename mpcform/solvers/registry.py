@@ -50,7 +50,7 @@ QPSOLVERS_KNOWN = (
     "clarabel", "copt", "cvxopt", "daqp", "ecos", "gurobi", "highs", "hpipm", "jaxopt_osqp",
     "kvxopt", "mosek", "nppro", "osqp", "pdhcg", "piqp", "proxqp", "pyqpmad", "qpalm", "qpax",
     "qpoases", "qpswift", "qtqp", "quadprog", "scs", "sip",
-)  # fmt: skip
+)  # fmt: skip # a list of names reads best packed, a dozen to a line
 """Solvers qpsolvers (4.13) can call, installed or not."""
 QPSOLVERS_LISTED = ("clarabel", "daqp", "highs", "osqp", "piqp", "proxqp", "quadprog", "scs")
 """qpsolvers solvers always listed by ``mpcform solvers`` (those of the ``solvers`` extra)."""

@@ -25,10 +25,17 @@ def test_growth_exponent_fits_synthetic_power_laws() -> None:
 
 def test_growth_rows_per_scenario_and_mode() -> None:
     rows = [
-        {"scenario": "crossing", "mode": "decoupled", "n": n, "steps": 10, "steps_run": 10,
-         "step_ms_median": 0.1 * n, "qp_ms_median": 0.01 * n**1.5}
+        {
+            "scenario": "crossing",
+            "mode": "decoupled",
+            "n": n,
+            "steps": 10,
+            "steps_run": 10,
+            "step_ms_median": 0.1 * n,
+            "qp_ms_median": 0.01 * n**1.5,
+        }
         for n in (100, 300, 1000)
-    ]  # fmt: skip
+    ]
     rows[-1]["steps_run"] = 4
     (g,) = growth_rows(rows)
     assert g["step_exponent_fit"] == pytest.approx(1.0) and g["step_exponent_100_1000"] == pytest.approx(1.0)

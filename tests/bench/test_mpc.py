@@ -93,8 +93,20 @@ def test_cpu_key_names_the_twin_of_every_paired_column() -> None:
 
 def test_cli_bench_mpc_writes_json(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     out = tmp_path / "rows.json"
-    argv = ["bench", "mpc", "--n", "3", "--spatial-n", "--steps", "5", "--scenarios", "--cvxpy-budget", "0",
-            "--json", str(out)]  # fmt: skip
+    argv = [
+        "bench",
+        "mpc",
+        "--n",
+        "3",
+        "--spatial-n",
+        "--steps",
+        "5",
+        "--scenarios",
+        "--cvxpy-budget",
+        "0",
+        "--json",
+        str(out),
+    ]
     assert main(argv) == 0
     records = json.loads(out.read_text())
     assert [r["n"] for r in records] == [3] and "| case |" in capsys.readouterr().out

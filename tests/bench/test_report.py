@@ -13,11 +13,20 @@ ROOT = Path(__file__).resolve().parents[2]
 
 def _row(solver: str, success: float, shgeom_ms: float) -> dict[str, object]:
     return {
-        "solver": solver, "mode": "cold", "setting": "mid", "problems": 2, "success_rate": success,
-        "shgeom_runtime_ms": shgeom_ms, "shgeom_ratio": 1.0, "median_runtime_ms": shgeom_ms,
-        "p90_runtime_ms": shgeom_ms, "primal_residual_max": 1e-9, "objective_gap_max": 1e-8, "found": 2,
+        "solver": solver,
+        "mode": "cold",
+        "setting": "mid",
+        "problems": 2,
+        "success_rate": success,
+        "shgeom_runtime_ms": shgeom_ms,
+        "shgeom_ratio": 1.0,
+        "median_runtime_ms": shgeom_ms,
+        "p90_runtime_ms": shgeom_ms,
+        "primal_residual_max": 1e-9,
+        "objective_gap_max": 1e-8,
+        "found": 2,
         "failures": {"max iter": 1} if success < 100 else {},
-    }  # fmt: skip
+    }
 
 
 def _bench() -> SolverBenchmark:

@@ -14,10 +14,19 @@ from mpcform.bench.scale_cases import LIMITS
 from mpcform.cli.main import main
 
 CASE_FIELDS = (
-    "step_ms_median", "step_ms_p90", "step_ms_max", "fast_ms_median", "fast_ms_p90", "fast_cpu_ms_median",
+    "step_ms_median",
+    "step_ms_p90",
+    "step_ms_max",
+    "fast_ms_median",
+    "fast_ms_p90",
+    "fast_cpu_ms_median",
     "rss_peak_mib",
-    "rss_delta_mib", "planning_s", "min_separation_segments", "final_tracking_error", "max_slack_m",
-)  # fmt: skip
+    "rss_delta_mib",
+    "planning_s",
+    "min_separation_segments",
+    "final_tracking_error",
+    "max_slack_m",
+)
 
 
 @pytest.mark.parametrize("scenario", ["formation", "crossing"])
@@ -43,8 +52,12 @@ def test_crossing_has_qp_steps_and_formation_flight_takes_the_fast_path() -> Non
 
 def test_run_in_process_skips_monolithic_sizes_after_the_budget() -> None:
     rows = run([6, 8], ["crossing"], "decoupled", steps=3, horizon=3, monolithic_budget_s=1e-9, isolate=False)
-    assert [(r["n"], r["mode"]) for r in rows] == [(6, "decoupled"), (6, "monolithic"), (8, "decoupled"),
-                                                   (8, "monolithic")]  # fmt: skip
+    assert [(r["n"], r["mode"]) for r in rows] == [
+        (6, "decoupled"),
+        (6, "monolithic"),
+        (8, "decoupled"),
+        (8, "monolithic"),
+    ]
     assert rows[1]["steps_run"] == 1 and "stopped after 1 of 3" in rows[1]["note"]
     assert rows[3]["steps_run"] == 0 and rows[3]["note"].startswith("skipped: n = 6")
     text, growth = report(rows, "decoupled")
@@ -55,8 +68,23 @@ def test_run_in_process_skips_monolithic_sizes_after_the_budget() -> None:
 
 def test_cli_bench_scale_writes_json(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     out = tmp_path / "scale.json"
-    argv = ["bench", "scale", "--n", "6", "--steps", "2", "--horizon", "3", "--scenario", "formation",
-            "--monolithic-budget", "0", "--in-process", "--json", str(out)]  # fmt: skip
+    argv = [
+        "bench",
+        "scale",
+        "--n",
+        "6",
+        "--steps",
+        "2",
+        "--horizon",
+        "3",
+        "--scenario",
+        "formation",
+        "--monolithic-budget",
+        "0",
+        "--in-process",
+        "--json",
+        str(out),
+    ]
     assert main(argv) == 0
     records = json.loads(out.read_text())
     assert [r["table"] for r in records] == ["cases", "growth"] and records[0]["n"] == 6

@@ -68,8 +68,11 @@ def test_tasks_replay_each_scenario_from_its_first_problem() -> None:
     paths = ["d/a/step_0001.npz", "d/a/step_0002.npz", "d/b/step_0005.npz"]
     tasks = benchmark_tasks(paths, "piqp", ["low", "default"], ["cold", "warm"], 0.5)
     assert [(t.mode, t.setting) for t in tasks[::3]] == [
-        ("cold", "low"), ("cold", "default"), ("warm", "low"), ("warm", "default")
-    ]  # fmt: skip
+        ("cold", "low"),
+        ("cold", "default"),
+        ("warm", "low"),
+        ("warm", "default"),
+    ]
     assert [t.first for t in tasks[:3]] == [True, False, True]  # b starts its own sequence
     assert [t.index for t in tasks[:3]] == [0, 1, 2] and [t.eps for t in tasks[::3]] == [1e-3, None] * 2
     assert all(t.solver == "piqp" and t.time_limit_s == 0.5 for t in tasks)

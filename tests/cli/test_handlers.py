@@ -44,8 +44,23 @@ def error_lines(capsys: pytest.CaptureFixture[str], status: int, *fragments: str
 @needs_plot
 def test_run_with_plot_animate_export(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     out = tmp_path / "out"
-    assert main(["run", short_copy(tmp_path), "--out", str(out), "--plot", "--animate", "--export",
-                 "--altitude", "1.5", "--no-flight-check"]) == 0  # fmt: skip
+    assert (
+        main(
+            [
+                "run",
+                short_copy(tmp_path),
+                "--out",
+                str(out),
+                "--plot",
+                "--animate",
+                "--export",
+                "--altitude",
+                "1.5",
+                "--no-flight-check",
+            ]
+        )
+        == 0
+    )
     captured = capsys.readouterr()
     from mpcform.outputs.animation import animation_file  # needs matplotlib
 

@@ -64,8 +64,7 @@ def test_run_default_out_dir_is_relative_to_the_working_directory(
 def test_run_mpc_with_solver(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     pytest.importorskip("mpcform.mpc.planner")
     path = short_copy(tmp_path)
-    assert main(["run", path, "--out", str(tmp_path / "o"), "--controller", "mpc",
-                 "--solver", "osqp"]) == 0  # fmt: skip
+    assert main(["run", path, "--out", str(tmp_path / "o"), "--controller", "mpc", "--solver", "osqp"]) == 0
     summary = json.loads((tmp_path / "o" / "summary.json").read_text())
     assert summary["controller"] == "mpc" and summary["solver"] == "osqp"
 
@@ -202,9 +201,13 @@ HUGE = [
 @pytest.mark.parametrize(("changes", "key", "fragment"), HUGE, ids=["duration", "horizon", "drones"])
 @pytest.mark.parametrize("command", ["run", "validate"])
 def test_a_run_too_large_is_refused_fast(
-    tmp_path: Path, capsys: pytest.CaptureFixture[str], command: str, changes: list[tuple[str, str]],
-    key: str, fragment: str,
-) -> None:  # fmt: skip
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+    command: str,
+    changes: list[tuple[str, str]],
+    key: str,
+    fragment: str,
+) -> None:
     text = Path(WORKED).read_text()
     for old, new in changes:
         text = text.replace(old, new)
@@ -276,8 +279,11 @@ def test_validate_lines_are_file_line_key_message(tmp_path: Path, capsys: pytest
 def test_run_errors_name_the_file_and_line(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     path = short_copy(tmp_path, ("gain = 2.0", "gain = 200.0"))
     line = next(k for k, row in enumerate(Path(path).read_text().splitlines(), 1) if row.startswith("gain"))
-    assert_one_line_error(capsys, main(["run", path, "--out", str(tmp_path / "o")]),
-                          f"mpcform: error: {path}:{line}: controller.gain: ")  # fmt: skip
+    assert_one_line_error(
+        capsys,
+        main(["run", path, "--out", str(tmp_path / "o")]),
+        f"mpcform: error: {path}:{line}: controller.gain: ",
+    )
 
 
 def test_a_closed_pipe_ends_quietly_with_status_141() -> None:

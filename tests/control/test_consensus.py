@@ -54,9 +54,12 @@ def test_planar_estimates_and_relative_positions_converge(law: str, kind: str) -
     goal = FormationState.from_param([3.0, -1.0], 0.6, 2.0)  # R(0.6) is the shared frame
     ref = ConstantReference(tpl, goal)
     graph = {
-        "ring": Graph.ring(8), "path": Graph.path(8), "complete": Graph.complete(8),
-        "k_nearest": Graph.k_nearest(tpl.offsets, 3), "disk": Graph.disk(tpl.offsets, 1.5),
-    }[kind]  # fmt: skip
+        "ring": Graph.ring(8),
+        "path": Graph.path(8),
+        "complete": Graph.complete(8),
+        "k_nearest": Graph.k_nearest(tpl.offsets, 3),
+        "disk": Graph.disk(tpl.offsets, 1.5),
+    }[kind]
     ctrl = ConsensusController(ref, graph, 0.05, fast(law, leaders=(0, 4)))
     start = forward_kinematics(tpl, FormationState.from_param([0.0, 0.0], 0.0, 1.0))
     sim = simulate(ctrl, start, 60.0)
@@ -211,11 +214,16 @@ def test_disconnected_graph_is_reported_or_run_with_warnings() -> None:
 
 @pytest.mark.parametrize(
     ("kwargs", "field"),
-    [({"leaders": ()}, "controller.leaders"), ({"leaders": (1, 1)}, "controller.leaders"),
-     ({"leaders": (-1,)}, "controller.leaders"), ({"law": "eq21"}, "controller.law"),
-     ({"gamma_per_s": 0.0}, "controller.gamma"), ({"leader_gain_per_s": -1.0}, "controller.leader_gain"),
-     ({"initial_scale": 0.0}, "controller.initial_scale")],
-)  # fmt: skip
+    [
+        ({"leaders": ()}, "controller.leaders"),
+        ({"leaders": (1, 1)}, "controller.leaders"),
+        ({"leaders": (-1,)}, "controller.leaders"),
+        ({"law": "eq21"}, "controller.law"),
+        ({"gamma_per_s": 0.0}, "controller.gamma"),
+        ({"leader_gain_per_s": -1.0}, "controller.leader_gain"),
+        ({"initial_scale": 0.0}, "controller.initial_scale"),
+    ],
+)
 def test_settings_validation(kwargs: dict[str, object], field: str) -> None:
     with pytest.raises(ValidationError) as err:
         ConsensusSettings(**kwargs)  # type: ignore[arg-type]
@@ -359,9 +367,13 @@ def _disagreement(factor_position: float, factor_scale: float, check: bool) -> t
     m = gamma * graph.laplacian.toarray() + np.diag(np.eye(8)[0] * leader)
     scale = factor_scale / (dt * float(np.linalg.eigvalsh(m)[-1]))
     settings = ConsensusSettings(
-        gain_per_s=factor_position / (dt * 4.0), gamma_per_s=gamma * scale, leader_gain_per_s=leader * scale,
-        leaders=(0,), law="centroid_preserving", initial_scale=1.0 if factor_position == 1.0 else 2.0,
-    )  # fmt: skip
+        gain_per_s=factor_position / (dt * 4.0),
+        gamma_per_s=gamma * scale,
+        leader_gain_per_s=leader * scale,
+        leaders=(0,),
+        law="centroid_preserving",
+        initial_scale=1.0 if factor_position == 1.0 else 2.0,
+    )
     ctrl = (ConsensusController if check else _Unchecked)(ref, graph, dt, settings)
     rng = np.random.default_rng(3)
     start = forward_kinematics(tpl, FormationState.from_param([0.0, 0.0], 0.0, 1.0))

@@ -82,9 +82,15 @@ def test_explicit_edges_are_normalised() -> None:
 
 @pytest.mark.parametrize(
     ("edges", "fragment"),
-    [([[0, 0]], "self-loop"), ([[0, 4]], "outside [0, 3]"), ([[-1, 2]], "outside"),
-     ([[0, 1.5]], "integer"), ([[0, 1, 2]], "pairs"), ([[True, 1]], "integer")],
-)  # fmt: skip
+    [
+        ([[0, 0]], "self-loop"),
+        ([[0, 4]], "outside [0, 3]"),
+        ([[-1, 2]], "outside"),
+        ([[0, 1.5]], "integer"),
+        ([[0, 1, 2]], "pairs"),
+        ([[True, 1]], "integer"),
+    ],
+)
 def test_bad_edges_name_the_field(edges: Any, fragment: str) -> None:
     with pytest.raises(ValidationError, match="graph.edges") as err:
         Graph.from_edges(4, edges)
@@ -157,14 +163,19 @@ def ring_dict(graph: dict[str, Any] | None) -> dict[str, Any]:
 
 @pytest.mark.parametrize(
     ("graph", "edges"),
-    [({"kind": "ring"}, Graph.ring(8).edges), ({"kind": "path"}, Graph.path(8).edges),
-     ({"kind": "complete"}, Graph.complete(8).edges),
-     ({"kind": "k_nearest", "k": 2}, Graph.ring(8).edges),
-     ({"kind": "disk", "radius": 0.8}, Graph.ring(8).edges),  # neighbours are 0.765 m apart
-     ({"kind": "disk", "radius": 0.8, "on": "initial"}, Graph.ring(8).edges),
-     ({"kind": "explicit", "edges": [[0, 1], [1, 2], [2, 3], [3, 4], [4, 5], [5, 6], [6, 7]]},
-      Graph.path(8).edges)],
-)  # fmt: skip
+    [
+        ({"kind": "ring"}, Graph.ring(8).edges),
+        ({"kind": "path"}, Graph.path(8).edges),
+        ({"kind": "complete"}, Graph.complete(8).edges),
+        ({"kind": "k_nearest", "k": 2}, Graph.ring(8).edges),
+        ({"kind": "disk", "radius": 0.8}, Graph.ring(8).edges),  # neighbours are 0.765 m apart
+        ({"kind": "disk", "radius": 0.8, "on": "initial"}, Graph.ring(8).edges),
+        (
+            {"kind": "explicit", "edges": [[0, 1], [1, 2], [2, 3], [3, 4], [4, 5], [5, 6], [6, 7]]},
+            Graph.path(8).edges,
+        ),
+    ],
+)
 def test_graph_table_kinds(graph: dict[str, Any], edges: np.ndarray) -> None:
     s = scenario_from_dict(ring_dict(graph))
     assert s.graph is not None
@@ -175,17 +186,19 @@ def test_graph_table_kinds(graph: dict[str, Any], edges: np.ndarray) -> None:
 
 @pytest.mark.parametrize(
     ("graph", "field", "fragment"),
-    [({"kind": "star"}, "graph.kind", "expected one of"),
-     ({"kind": "ring", "radius": 1.0}, "graph.radius", "does not apply"),
-     ({"kind": "disk"}, "graph.radius", "missing"),
-     ({"kind": "k_nearest", "k": 8}, "graph.k", "[1, n - 1 = 7]"),
-     ({"kind": "explicit", "edges": [[0, 8]]}, "graph.edges", "outside [0, 7]"),
-     ({"kind": "explicit", "edges": [0, 1]}, "graph.edges", "pairs"),
-     ({"kind": "ring", "loss_probability": 1.0}, "graph.loss_probability", "[0, 1)"),
-     ({"kind": "ring", "delay_steps": -1}, "graph.delay_steps", ">= 0"),
-     ({"kind": "ring", "relative_positions": "guessed"}, "graph.relative_positions", "one of"),
-     ({"kind": "ring", "delay": 2}, "graph.delay", "did you mean 'delay_steps'")],
-)  # fmt: skip
+    [
+        ({"kind": "star"}, "graph.kind", "expected one of"),
+        ({"kind": "ring", "radius": 1.0}, "graph.radius", "does not apply"),
+        ({"kind": "disk"}, "graph.radius", "missing"),
+        ({"kind": "k_nearest", "k": 8}, "graph.k", "[1, n - 1 = 7]"),
+        ({"kind": "explicit", "edges": [[0, 8]]}, "graph.edges", "outside [0, 7]"),
+        ({"kind": "explicit", "edges": [0, 1]}, "graph.edges", "pairs"),
+        ({"kind": "ring", "loss_probability": 1.0}, "graph.loss_probability", "[0, 1)"),
+        ({"kind": "ring", "delay_steps": -1}, "graph.delay_steps", ">= 0"),
+        ({"kind": "ring", "relative_positions": "guessed"}, "graph.relative_positions", "one of"),
+        ({"kind": "ring", "delay": 2}, "graph.delay", "did you mean 'delay_steps'"),
+    ],
+)
 def test_graph_table_errors_name_the_key(graph: dict[str, Any], field: str, fragment: str) -> None:
     with pytest.raises(ScenarioError) as err:
         scenario_from_dict(ring_dict(graph))

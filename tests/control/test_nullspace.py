@@ -54,10 +54,15 @@ def test_secondary_has_zero_formation_velocity(seed: int, n: int, dim: int) -> N
 
 @pytest.mark.parametrize(
     ("template", "rank"),
-    [(Template.line(5, 1.0, 3), 6), (Template.line(2, 1.0, 3), 6), (Template.line(4, 1.0, 2), 4),
-     (Template(np.zeros((1, 3))), 3), (Template.polygon(4, 1.0, 3), 7)],
+    [
+        (Template.line(5, 1.0, 3), 6),
+        (Template.line(2, 1.0, 3), 6),
+        (Template.line(4, 1.0, 2), 4),
+        (Template(np.zeros((1, 3))), 3),
+        (Template.polygon(4, 1.0, 3), 7),
+    ],
     ids=["collinear-3d", "two-drones-3d", "collinear-2d", "one-drone", "planar-square-in-3d"],
-)  # fmt: skip
+)
 def test_rank_deficient_jacobians(template: Template, rank: int) -> None:
     rng = np.random.default_rng(7)
     jac = formation_jacobian(template, random_state(rng, template.dim))
@@ -95,8 +100,9 @@ def spatial_case() -> tuple[Template, ExponentialReference, np.ndarray]:
 @pytest.mark.parametrize("objective", ["repulsion", "energy"])
 def test_centroid_moves_exactly_as_under_eq14(objective: str) -> None:
     tpl, ref, start = spatial_case()
-    settings = NullSpaceSettings(objective=objective, repulsion_radius_m=1.0, repulsion_gain_per_s=2.0,
-                                 energy_weight=0.5)  # fmt: skip
+    settings = NullSpaceSettings(
+        objective=objective, repulsion_radius_m=1.0, repulsion_gain_per_s=2.0, energy_weight=0.5
+    )
     ns = simulate(NullSpaceController(ref, 0.02, settings), start, 6.0)
     tracking = simulate(TrackingController(ref, 1.0, 0.02), start, 6.0)
     np.testing.assert_allclose(ns.positions_m.mean(axis=1), tracking.positions_m.mean(axis=1), atol=1e-12)
@@ -162,14 +168,16 @@ def test_no_objective_is_eq14_and_saturation_is_counted() -> None:
 
 @pytest.mark.parametrize(
     ("kwargs", "field"),
-    [({"objective": "repulsion"}, "controller.repulsion_radius"),
-     ({"objective": "comfort"}, "controller.objective"),
-     ({"energy_weight": 1.5}, "controller.energy_weight"),
-     ({"energy_weight": -0.1}, "controller.energy_weight"),
-     ({"repulsion_gain_per_s": 0.0}, "controller.repulsion_gain"),
-     ({"feedforward": "magic"}, "controller.feedforward"),
-     ({"gain_per_s": 0.0}, "controller.gain")],
-)  # fmt: skip
+    [
+        ({"objective": "repulsion"}, "controller.repulsion_radius"),
+        ({"objective": "comfort"}, "controller.objective"),
+        ({"energy_weight": 1.5}, "controller.energy_weight"),
+        ({"energy_weight": -0.1}, "controller.energy_weight"),
+        ({"repulsion_gain_per_s": 0.0}, "controller.repulsion_gain"),
+        ({"feedforward": "magic"}, "controller.feedforward"),
+        ({"gain_per_s": 0.0}, "controller.gain"),
+    ],
+)
 def test_settings_validation(kwargs: dict[str, Any], field: str) -> None:
     with pytest.raises(ValidationError) as err:
         NullSpaceSettings(**kwargs)
@@ -204,10 +212,12 @@ def test_repulsion_radius_defaults_to_one_and_a_half_d_min() -> None:
 
 @pytest.mark.parametrize(
     ("controller", "field", "fragment"),
-    [({"energy_weight": 2.0}, "controller.energy_weight", "[0, 1]"),
-     ({"objective": "energi"}, "controller.objective", "did you mean 'energy'"),
-     ({"gamma": 1.0}, "controller.gamma", "'consensus'")],
-)  # fmt: skip
+    [
+        ({"energy_weight": 2.0}, "controller.energy_weight", "[0, 1]"),
+        ({"objective": "energi"}, "controller.objective", "did you mean 'energy'"),
+        ({"gamma": 1.0}, "controller.gamma", "'consensus'"),
+    ],
+)
 def test_scenario_errors_name_the_key(controller: dict[str, Any], field: str, fragment: str) -> None:
     with pytest.raises(ScenarioError) as err:
         scenario_from_dict(spatial_dict(**controller))

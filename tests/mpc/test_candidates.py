@@ -60,8 +60,9 @@ def test_obstacle_items() -> None:
 
 
 def test_within_reach_keeps_only_the_items_on() -> None:
-    cand = Candidates(np.array([[0, 1], [1, 2]]), np.array([False, True]), np.empty((0, 2), int),
-                      np.empty(0, bool), True)  # fmt: skip
+    cand = Candidates(
+        np.array([[0, 1], [1, 2]]), np.array([False, True]), np.empty((0, 2), int), np.empty(0, bool), True
+    )
     reach = cand.within_reach()
     np.testing.assert_array_equal(reach.pairs, [[1, 2]])
     assert reach.pair_on.all() and reach.rebuilt

@@ -39,15 +39,25 @@ VARIANTS: dict[str, tuple[int, Limits, tuple[SphereObstacle, ...], dict[str, Any
     "spatial": (3, LIMITS, (), {}),
     "fence, acceleration, obstacle": (
         2,
-        Limits(v_max_mps=1.0, d_min_m=0.5, a_max_mps2=3.0,
-               geofence_min_m=np.array([-2.2, -1.0]), geofence_max_m=np.array([2.2, np.inf])),
-        (SphereObstacle(np.array([0.0, -1.2]), 0.4),), {},
+        Limits(
+            v_max_mps=1.0,
+            d_min_m=0.5,
+            a_max_mps2=3.0,
+            geofence_min_m=np.array([-2.2, -1.0]),
+            geofence_max_m=np.array([2.2, np.inf]),
+        ),
+        (SphereObstacle(np.array([0.0, -1.2]), 0.4),),
+        {},
     ),
-    "downwash, obstacle": (3, Limits(v_max_mps=1.0, d_min_m=0.5, downwash_kappa=2.0),
-                           (SphereObstacle(np.array([0.0, 0.0, -1.5]), 0.3),), {}),
+    "downwash, obstacle": (
+        3,
+        Limits(v_max_mps=1.0, d_min_m=0.5, downwash_kappa=2.0),
+        (SphereObstacle(np.array([0.0, 0.0, -1.5]), 0.3),),
+        {},
+    ),
     "box, no quadratic slack term": (3, LIMITS, (), {"velocity_set": "box", "slack_quadratic": 0.0}),
     "planar, no grouping, no fast path": (2, LIMITS, (), {"grouping": False, "fast_path": False}),
-}  # fmt: skip
+}
 
 
 def crowd(seed: int, n: int, dim: int) -> tuple[ConstantReference, np.ndarray]:
@@ -191,8 +201,15 @@ class HardFeasibility:
     def __init__(self, daqp: Any, nu: int) -> None:
         self.daqp, self.nu, self.steps = daqp, nu, []  # type: list[bool]
 
-    def solve(self, H: np.ndarray, f: np.ndarray, A: np.ndarray, upper: np.ndarray, lower: np.ndarray,
-              **options: Any) -> Any:  # fmt: skip
+    def solve(
+        self,
+        H: np.ndarray,
+        f: np.ndarray,
+        A: np.ndarray,
+        upper: np.ndarray,
+        lower: np.ndarray,
+        **options: Any,
+    ) -> Any:
         if H.shape[0] == self.nu:  # the slack-free QP (the soft one has H more variables)
             self.steps[-1] &= self.feasible(f, A, upper, lower)
         return self.daqp.solve(H, f, A, upper, lower, **options)

@@ -69,8 +69,9 @@ def test_first_input_is_eq14_when_no_row_is_active(
         ref = ExponentialReference(tpl, start, goal, 0.5)
         p = forward_kinematics(tpl, start) + rng.normal(0, 0.1, (6, dim))
         settings_ = MPCSettings(horizon=8, gain_per_s=2.0, fast_path=fast_path)
-        planner = MPCPlanner(ref, 0.05, Limits(v_max_mps=100.0, d_min_m=0.2), settings_, solver=solver,
-                             loop=model)  # fmt: skip
+        planner = MPCPlanner(
+            ref, 0.05, Limits(v_max_mps=100.0, d_min_m=0.2), settings_, solver=solver, loop=model
+        )
         planner.reset(0.0, p)
         t = float(rng.uniform(0, 3))
         if loop:  # the drones moving: the loop has a state
@@ -97,9 +98,11 @@ def test_secant_feedforward_matches_the_secant_law() -> None:
 
 @settings(max_examples=8)
 @given(
-    seed=st.integers(0, 10_000), n=st.integers(2, 16), dim=st.sampled_from([2, 3]),
+    seed=st.integers(0, 10_000),
+    n=st.integers(2, 16),
+    dim=st.sampled_from([2, 3]),
     coupling=st.sampled_from(["joint", "decoupled"]),
-)  # fmt: skip
+)
 def test_random_scenarios_hold_speed_and_separation(seed: int, n: int, dim: int, coupling: str) -> None:
     rng = np.random.default_rng(seed)
     d_min, v_max = 0.5, 1.5
@@ -111,8 +114,12 @@ def test_random_scenarios_hold_speed_and_separation(seed: int, n: int, dim: int,
     start = rng.uniform(-4, 4, (n, dim))
     while n > 1 and min_segment_distance(start, start) < d_min:  # a separated start
         start = rng.uniform(-4, 4, (n, dim))
-    planner = MPCPlanner(ConstantReference(tpl, goal), 0.1, Limits(v_max_mps=v_max, d_min_m=d_min),
-                         MPCSettings(horizon=6, coupling=coupling))  # fmt: skip
+    planner = MPCPlanner(
+        ConstantReference(tpl, goal),
+        0.1,
+        Limits(v_max_mps=v_max, d_min_m=d_min),
+        MPCSettings(horizon=6, coupling=coupling),
+    )
     check_limits(simulate(planner, start, 2.5), v_max, d_min)
 
 
@@ -288,8 +295,9 @@ def test_a_close_pair_never_approaches(coupling: str) -> None:
     tpl = Template(np.array([[-1.0, 0.0], [1.0, 0.0]]))
     ref = ConstantReference(tpl, FormationState.from_param([0.0, 0.0]))
     start = np.array([[0.05, 0.01], [-0.05, -0.01]])  # each on the other's side
-    res = simulate(MPCPlanner(ref, 0.1, Limits(v_max_mps=1.0, d_min_m=0.5), MPCSettings(coupling=coupling)),
-                   start, 8.0)  # fmt: skip
+    res = simulate(
+        MPCPlanner(ref, 0.1, Limits(v_max_mps=1.0, d_min_m=0.5), MPCSettings(coupling=coupling)), start, 8.0
+    )
     rel = res.positions_m[:, 0] - res.positions_m[:, 1]
     steps = zip(rel[:-1], rel[1:], strict=True)
     seg = [np.linalg.norm(closest_on_segments(a[None], b[None])) for a, b in steps]
@@ -319,8 +327,14 @@ class Translating(ConstantReference):
 MODES = [("joint", True), ("decoupled", True), ("decoupled", False)]  # (coupling, per_drone)
 
 
-def translating_run(tpl: Template, v: list[float], start: np.ndarray, mode: tuple[str, bool], fast_path: bool,
-                    duration_s: float = 0.5) -> np.ndarray:  # fmt: skip
+def translating_run(
+    tpl: Template,
+    v: list[float],
+    start: np.ndarray,
+    mode: tuple[str, bool],
+    fast_path: bool,
+    duration_s: float = 0.5,
+) -> np.ndarray:
     """Commands of a planner (horizon 8, v_max 20, d_min 0.3, tight tolerances) tracking ``Translating``."""
     tight = SparseSolve(options=SolverOptions(1e-8, 1e-8, 4000))
     st_ = MPCSettings(horizon=8, coupling=mode[0], solve=None if mode[1] else tight, fast_path=fast_path)
@@ -396,8 +410,13 @@ def test_with_a_loop_every_first_row_is_hard_and_braking_meets_it(coupling: str)
     tpl = Template(np.array([[-1.0, 0.0], [0.0, 0.0], [1.0, 0.0]]))
     ref = ConstantReference(tpl, FormationState.from_param([0.0, 0.0]))
     limits = Limits(v_max_mps=1.0, d_min_m=0.5, a_max_mps2=2.0)
-    planner = MPCPlanner(ref, 0.1, limits, MPCSettings(horizon=6, coupling=coupling),
-                         loop=VelocityLoop.from_groups([lag], 2, 0.1, 6))  # fmt: skip
+    planner = MPCPlanner(
+        ref,
+        0.1,
+        limits,
+        MPCSettings(horizon=6, coupling=coupling),
+        loop=VelocityLoop.from_groups([lag], 2, 0.1, 6),
+    )
     p0 = np.array([[-0.3, 0.0], [0.0, 0.02], [0.3, 0.0]])  # the middle drone squeezed, moving at both
     planner.reset(0.0, p0)
     planner._u_prev = np.array([[0.8, 0.0], [0.0, 0.0], [-0.8, 0.0]])

@@ -83,8 +83,9 @@ def test_separation_rows_with_a_velocity_loop_carry_its_forced_response() -> Non
     from mpcform.mpc.loop import VelocityLoop
 
     h, tau = 3, 0.2
-    loop = VelocityLoop.from_groups([(np.array([[-1 / tau]]), np.array([1 / tau]), np.array([1.0]), (0, 1))],
-                                    2, DT, h)  # fmt: skip
+    loop = VelocityLoop.from_groups(
+        [(np.array([[-1 / tau]]), np.array([1 / tau]), np.array([1.0]), (0, 1))], 2, DT, h
+    )
     st = MPCSettings(horizon=h)
     m = MPCQP(3, 2, DT, LIMITS, st, np.array([[0, 2]]), np.array([1]), limit_rows(2, DT, LIMITS, st), loop)
     rng = np.random.default_rng(2)

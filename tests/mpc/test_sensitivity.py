@@ -12,12 +12,19 @@ from mpcform.mpc.sensitivity import drone_sensitivity
 INF = 1e30
 
 
-def _solve(c: np.ndarray, const: np.ndarray, lo: np.ndarray, hi: np.ndarray, sep: np.ndarray,
-           sep_lo: np.ndarray) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+def _solve(
+    c: np.ndarray, const: np.ndarray, lo: np.ndarray, hi: np.ndarray, sep: np.ndarray, sep_lo: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
     """``min 0.5 ||v - c||^2`` s.t. ``lo <= const v <= hi``, ``sep v >= sep_lo`` (DAQP, tight)."""
     a = np.vstack([const, sep])
-    v, _, flag, info = daqp.solve(np.eye(c.shape[0]), -c, a, np.concatenate([hi, np.full(sep.shape[0], INF)]),
-                                  np.concatenate([lo, sep_lo]), primal_tol=1e-12)  # fmt: skip
+    v, _, flag, info = daqp.solve(
+        np.eye(c.shape[0]),
+        -c,
+        a,
+        np.concatenate([hi, np.full(sep.shape[0], INF)]),
+        np.concatenate([lo, sep_lo]),
+        primal_tol=1e-12,
+    )
     assert flag == 1
     return v, info["lam"]
 

@@ -218,8 +218,9 @@ def test_blocked_targets_are_the_pairs_within_d_min_in_the_metric() -> None:
     targets = np.array([[0, 0, 0], [0.45, 0, 0], [3, 0, 0], [3, 0, 0.8], [6, 0, 0], [5, 5, 0.0]])
     np.testing.assert_array_equal(sep.blocked_targets(targets), [True, True, True, True, False, False])
     sep = Separation(3, Limits(v_max_mps=1.0, d_min_m=0.5), MPCSettings(), ())
-    assert not sep.blocked_targets(targets + np.array([[0, 0, 0], [0.15, 0, 0], [0, 0, 0], [0, 0, 0],
-                                                       [0, 0, 0], [0, 0, 0]]))[:2].any()  # fmt: skip
+    assert not sep.blocked_targets(
+        targets + np.array([[0, 0, 0], [0.15, 0, 0], [0, 0, 0], [0, 0, 0], [0, 0, 0], [0, 0, 0]])
+    )[:2].any()
 
 
 def test_targets_within_two_tubes_of_the_tightened_distance_are_blocked() -> None:

@@ -29,8 +29,13 @@ def test_only_the_rows_that_can_be_active_are_built() -> None:
     assert ends.tolist() == [1, 2, 1, 3, 2]
     reach = np.linalg.norm(coeffs, axis=2) * ends * step_m
     lower = -reach * rng.uniform(0.5, 1.5, (s, r))
-    expect = [(i, item, row) for i in range(n) for item in range(s) for row in range(r)
-              if singles[item] == i and on[item] and lower[item, row] > -reach[item, row]]  # fmt: skip
+    expect = [
+        (i, item, row)
+        for i in range(n)
+        for item in range(s)
+        for row in range(r)
+        if singles[item] == i and on[item] and lower[item, row] > -reach[item, row]
+    ]
     c, end, lo, soft, counts, at = reachable_rows(n, singles, coeffs, lower, hard, on, ends, step_m)
     assert c.shape[0] == len(expect) and counts.tolist() == [sum(e[0] == i for e in expect) for i in range(n)]
     for got, (_, item, row) in enumerate(expect):

@@ -48,8 +48,12 @@ def test_gif_lasts_as_long_as_the_flight_at_the_chosen_speed(tmp_path: Path, spe
     run = load_run(tmp_path)
     flight_s = float(run.trajectory.t_s[-1] - run.trajectory.t_s[0])
     calls: list[tuple[int, int]] = []
-    path = animate_run(run, tmp_path / "plots" / ANIMATION_FILE, speed=speed,
-                       progress=lambda done, total: calls.append((done, total)))  # fmt: skip
+    path = animate_run(
+        run,
+        tmp_path / "plots" / ANIMATION_FILE,
+        speed=speed,
+        progress=lambda done, total: calls.append((done, total)),
+    )
     durations = gif_durations_ms(path)
     frame_ms = durations[0]
     assert len(set(durations)) == 1
@@ -111,11 +115,24 @@ def ffprobe() -> str:
 def mp4_stream(ffprobe: str, path: Path) -> dict[str, str]:
     """The container's duration [s] and the video stream's codec, frame rate and decoded frames."""
     out = subprocess.run(
-        [ffprobe, "-v", "error", "-count_frames", "-select_streams", "v:0", "-show_entries",
-         "format=format_name,duration:stream=codec_name,r_frame_rate,nb_read_frames",
-         "-of", "default=noprint_wrappers=1", str(path)],
-        capture_output=True, text=True, timeout=120, check=True,
-    )  # fmt: skip
+        [
+            ffprobe,
+            "-v",
+            "error",
+            "-count_frames",
+            "-select_streams",
+            "v:0",
+            "-show_entries",
+            "format=format_name,duration:stream=codec_name,r_frame_rate,nb_read_frames",
+            "-of",
+            "default=noprint_wrappers=1",
+            str(path),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        check=True,
+    )
     return dict(line.split("=", 1) for line in out.stdout.split())
 
 
@@ -128,8 +145,12 @@ def test_mp4_lasts_as_long_as_the_flight_at_the_chosen_speed(
     t0, t1 = float(run.trajectory.t_s[0]), float(run.trajectory.t_s[-1])
     assert animation_file() == MP4_FILE
     calls: list[tuple[int, int]] = []
-    path = animate_run(run, tmp_path / "plots" / MP4_FILE, speed=speed,
-                       progress=lambda done, total: calls.append((done, total)))  # fmt: skip
+    path = animate_run(
+        run,
+        tmp_path / "plots" / MP4_FILE,
+        speed=speed,
+        progress=lambda done, total: calls.append((done, total)),
+    )
     info = mp4_stream(ffprobe, path)
     times, fps = frame_times(t0, t1, speed)
     assert "mp4" in info["format_name"] and info["codec_name"] == "h264"

@@ -35,8 +35,14 @@ def test_planar_run_figures(tmp_path: Path) -> None:
     short_run("obstacles_planar", tmp_path, steps=30)
     paths = figures.plot_run(load_run(tmp_path), tmp_path / "plots")
     names = {p.name for p in paths}
-    assert names == {"top_view.png", "tracking_error.png", "speed.png", "separation.png", "scale.png",
-                     "clearance.png"}  # fmt: skip
+    assert names == {
+        "top_view.png",
+        "tracking_error.png",
+        "speed.png",
+        "separation.png",
+        "scale.png",
+        "clearance.png",
+    }
     assert names < set(figures.FIGURE_FILES)
     for path in paths:
         width, height = png(path)

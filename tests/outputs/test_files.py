@@ -26,14 +26,31 @@ from mpcform.scenario.load import load_scenario
 
 ROOT = Path(__file__).resolve().parents[2]
 METRIC_KEYS = {
-    "final_tracking_error", "max_tracking_error", "min_separation", "min_separation_segments",
-    "max_speed", "separation_violations", "speed_violations", "qp_solves", "fast_path_steps",
-    "solver_failures", "max_slack", "step_time_ms",
+    "final_tracking_error",
+    "max_tracking_error",
+    "min_separation",
+    "min_separation_segments",
+    "max_speed",
+    "separation_violations",
+    "speed_violations",
+    "qp_solves",
+    "fast_path_steps",
+    "solver_failures",
+    "max_slack",
+    "step_time_ms",
     # added with the plants, completion and geofence metrics (the worked example has no obstacles)
-    "min_separation_true", "separation_violations_true", "max_speed_true", "max_tracking_error_true",
-    "geofence_violations", "geofence_violations_true", "completion", "stalled_drones", "time_to_complete",
-    "stall_events", "resolutions",  # the planner's liveness events
-}  # fmt: skip
+    "min_separation_true",
+    "separation_violations_true",
+    "max_speed_true",
+    "max_tracking_error_true",
+    "geofence_violations",
+    "geofence_violations_true",
+    "completion",
+    "stalled_drones",
+    "time_to_complete",
+    "stall_events",
+    "resolutions",  # the planner's liveness events
+}
 
 
 def run_short(name: str, out_dir: Path, steps: int = 7) -> RunResult:
@@ -59,8 +76,12 @@ def test_npz_holds_exactly_the_simulation(tmp_path: Path, name: str) -> None:
         assert set(npz.files) == {"t", "p", "u", "p_ref", "t_true", "p_true", "v_true", "p_ref_true"}
         true = sim.true
         assert true is not None
-        dense = {"t_true": true.t_s, "p_true": true.positions_m, "v_true": true.velocities_mps,
-                 "p_ref_true": true.reference_m}  # fmt: skip
+        dense = {
+            "t_true": true.t_s,
+            "p_true": true.positions_m,
+            "v_true": true.velocities_mps,
+            "p_ref_true": true.reference_m,
+        }
         for key, value in dense.items():
             assert np.array_equal(npz[key], value)
         assert np.array_equal(npz["p_true"][::10], npz["p"])  # ideal plant: the samples themselves
@@ -77,8 +98,17 @@ def test_npz_adds_the_scale_estimates_of_a_consensus_run_only(tmp_path: Path) ->
     s_hat = run.simulation.scale_estimates
     assert s_hat is not None
     with np.load(tmp_path / "out" / "trajectory.npz") as npz:
-        assert set(npz.files) == {"t", "p", "u", "p_ref", "t_true", "p_true", "v_true", "p_ref_true",
-                                  SCALE_ESTIMATES}  # fmt: skip
+        assert set(npz.files) == {
+            "t",
+            "p",
+            "u",
+            "p_ref",
+            "t_true",
+            "p_true",
+            "v_true",
+            "p_ref_true",
+            SCALE_ESTIMATES,
+        }
         assert npz[SCALE_ESTIMATES].shape == (8, 8) and np.array_equal(npz[SCALE_ESTIMATES], s_hat)
 
 

@@ -102,12 +102,23 @@ def test_errors_name_the_file(tmp_path: Path) -> None:
     (tmp_path / "summary.json").write_text("{}")
     with pytest.raises(RunDirError, match=r"formation.npz: offsets \(2, 2\) or scale_ref \(6,\) do not"):
         load_run(tmp_path)
-    np.savez(tmp_path / "trajectory.npz", t=np.arange(3.0), p=np.zeros((3, 2, 2)), u=np.zeros((3, 2, 2)),
-             p_ref=np.zeros((3, 2, 2)))  # fmt: skip
+    np.savez(
+        tmp_path / "trajectory.npz",
+        t=np.arange(3.0),
+        p=np.zeros((3, 2, 2)),
+        u=np.zeros((3, 2, 2)),
+        p_ref=np.zeros((3, 2, 2)),
+    )
     with pytest.raises(RunDirError, match=r"trajectory.npz: trajectory: expected commands_mps \(T-1, n, d\)"):
         load_run(tmp_path)
-    np.savez(tmp_path / "trajectory.npz", t=np.arange(3.0), p=np.zeros((3, 2, 2)), u=np.zeros((2, 2, 2)),
-             p_ref=np.zeros((3, 2, 2)), scale_estimates=np.ones((2, 2)))  # fmt: skip
+    np.savez(
+        tmp_path / "trajectory.npz",
+        t=np.arange(3.0),
+        p=np.zeros((3, 2, 2)),
+        u=np.zeros((2, 2, 2)),
+        p_ref=np.zeros((3, 2, 2)),
+        scale_estimates=np.ones((2, 2)),
+    )
     with pytest.raises(RunDirError, match=r"trajectory.npz: trajectory: expected scale_estimates \(T, n\)"):
         load_run(tmp_path)
     np.savez(tmp_path / "trajectory.npz", t=np.arange(3.0))

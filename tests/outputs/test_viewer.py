@@ -154,14 +154,29 @@ def browser() -> str:
     return found
 
 
-def chromium(browser: str, page: Path, mode: str, profile: Path, hash_: str = "",
-             *extra: str) -> tuple[str, str]:  # fmt: skip
+def chromium(
+    browser: str, page: Path, mode: str, profile: Path, hash_: str = "", *extra: str
+) -> tuple[str, str]:
     """Run the browser headless on ``page`` with ``--screenshot=...`` or ``--dump-dom``; (stdout, log)."""
-    args = [browser, "--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
-            "--disable-background-networking", "--disable-component-update", "--disable-sync",
-            f"--user-data-dir={profile}", "--enable-logging=stderr", "--v=0", "--hide-scrollbars",
-            f"--window-size={WINDOW[0]},{WINDOW[1]}", *extra, mode,
-            page.resolve().as_uri() + hash_]  # fmt: skip
+    args = [
+        browser,
+        "--headless",
+        "--no-sandbox",
+        "--disable-gpu",
+        "--disable-quic",
+        "--no-first-run",
+        "--disable-background-networking",
+        "--disable-component-update",
+        "--disable-sync",
+        f"--user-data-dir={profile}",
+        "--enable-logging=stderr",
+        "--v=0",
+        "--hide-scrollbars",
+        f"--window-size={WINDOW[0]},{WINDOW[1]}",
+        *extra,
+        mode,
+        page.resolve().as_uri() + hash_,
+    ]
     out = subprocess.run(args, capture_output=True, text=True, timeout=180)
     assert out.returncode == 0, out.stderr[-2000:]
     return out.stdout, out.stderr
@@ -212,7 +227,8 @@ def test_browser_draws_the_20_drone_swap(browser: str, swap20: RunData, tmp_path
 def test_browser_plays_the_run(browser: str, tmp_path: Path) -> None:
     """``#speed=8&play`` starts playback: after some (virtual) time the page shows a later sample."""
     page = viewer.write_viewer_html(tmp_path / "play.html", **synthetic())
-    dom, _ = chromium(browser, page, "--dump-dom", tmp_path / "profile", "#t=0&speed=8&play",
-                      "--virtual-time-budget=3000")  # fmt: skip
+    dom, _ = chromium(
+        browser, page, "--dump-dom", tmp_path / "profile", "#t=0&speed=8&play", "--virtual-time-budget=3000"
+    )
     sample = re.search(r'<body[^>]*data-sample="(\d+)"', dom)
     assert sample is not None and int(sample.group(1)) > 0, re.findall(r"<body[^>]*>", dom)

@@ -109,14 +109,23 @@ def test_velocities_accelerations_and_jerk_respect_the_explicit_limits(dim: int)
     h = 1e-4
     pr_h = ref.profile(t + h)
     rows = {
-        "centroid": (pr.centroid_velocity_mps, pr.centroid_acceleration_mps2,
-                     pr_h.centroid_acceleration_mps2),
-        "rotation": (pr.omega_world_radps, pr.angular_acceleration_world_radps2,
-                     pr_h.angular_acceleration_world_radps2),
-        "scale": (pr.scale_rate_per_s[:, None], pr.scale_acceleration_per_s2[:, None],
-                  pr_h.scale_acceleration_per_s2[:, None]),
+        "centroid": (
+            pr.centroid_velocity_mps,
+            pr.centroid_acceleration_mps2,
+            pr_h.centroid_acceleration_mps2,
+        ),
+        "rotation": (
+            pr.omega_world_radps,
+            pr.angular_acceleration_world_radps2,
+            pr_h.angular_acceleration_world_radps2,
+        ),
+        "scale": (
+            pr.scale_rate_per_s[:, None],
+            pr.scale_acceleration_per_s2[:, None],
+            pr_h.scale_acceleration_per_s2[:, None],
+        ),
         "blend": (pr.blend_rate_per_s[:, None], None, None),
-    }  # fmt: skip
+    }
     for group, (vel, acc, acc_h) in rows.items():
         assert np.linalg.norm(vel, axis=1).max() <= LIMITS.max_velocity[group] * (1 + 1e-9), group
         if acc is None:
@@ -353,8 +362,11 @@ def worked_mission(**reference: Any) -> dict[str, Any]:
         ({"keyframes": []}, None, "reference.keyframes"),
         ({"keyframes": [{"template": {"shape": "line", "n": 4}}]}, None, "reference.keyframes[0].template"),
         ({"keyframes": [{"template": {"shape": "line"}}]}, None, "reference.keyframes[0].template.n"),
-        ({"keyframes": [{"template": {"shape": "line", "n": 3, "spacing": -1.0}}]}, None,
-         "reference.keyframes[0].template.spacing"),
+        (
+            {"keyframes": [{"template": {"shape": "line", "n": 3, "spacing": -1.0}}]},
+            None,
+            "reference.keyframes[0].template.spacing",
+        ),
         ({"rate": 1.0}, None, "reference.rate"),
         ({"scale": 2.0}, None, "reference.scale"),
         ({"speed_fraction": 1.5}, None, "reference.speed_fraction"),
@@ -363,7 +375,7 @@ def worked_mission(**reference: Any) -> dict[str, Any]:
         ({"max_velocity": 1.0}, None, "reference.max_velocity"),
         ({}, {}, "reference.max_velocity.scale"),
     ],
-)  # fmt: skip
+)
 def test_mission_scenario_errors_name_the_key(
     reference: dict[str, Any], limits: dict[str, Any] | None, field: str
 ) -> None:

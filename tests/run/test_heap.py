@@ -33,8 +33,13 @@ print(resource.getrusage(resource.RUSAGE_SELF).ru_minflt - before)
 
 def _run(code: str, *args: str, env: dict[str, str] | None = None) -> list[str]:
     clean = {k: v for k, v in os.environ.items() if k not in SETTINGS}
-    out = subprocess.run([sys.executable, "-c", code, *args], env={**clean, **(env or {})},
-                         capture_output=True, text=True, check=True)  # fmt: skip
+    out = subprocess.run(
+        [sys.executable, "-c", code, *args],
+        env={**clean, **(env or {})},
+        capture_output=True,
+        text=True,
+        check=True,
+    )
     return out.stdout.split()
 
 

@@ -100,17 +100,30 @@ def test_parallel_sweep_matches_serial_and_aggregates(tiny: Path) -> None:
 
 def test_aggregate_counts_errors_and_failed_checks() -> None:
     def rec(seed: int, ok: bool, err: float, checks: list[str]) -> dict[str, object]:
-        return {"params": {"a": 1}, "seed": seed, "success": ok, "error": None, "failed_checks": checks,
-                "final_tracking_error": err, "max_tracking_error": 2 * err,
-                "min_separation_segments": 0.5 + err,
-                "separation_violations": 0, "speed_violations": 0, "solver_failures": 1,
-                "step_ms_median": 1.0 + seed, "qp_ms_median": float("nan"), "qp_ms_p90": float("nan"),
-                "wall_s": 1.0}  # fmt: skip
+        return {
+            "params": {"a": 1},
+            "seed": seed,
+            "success": ok,
+            "error": None,
+            "failed_checks": checks,
+            "final_tracking_error": err,
+            "max_tracking_error": 2 * err,
+            "min_separation_segments": 0.5 + err,
+            "separation_violations": 0,
+            "speed_violations": 0,
+            "solver_failures": 1,
+            "step_ms_median": 1.0 + seed,
+            "qp_ms_median": float("nan"),
+            "qp_ms_p90": float("nan"),
+            "wall_s": 1.0,
+        }
 
     records = [
-        rec(0, True, 0.01, []), rec(1, False, 0.3, ["tracking"]), rec(2, True, 0.02, []),
+        rec(0, True, 0.01, []),
+        rec(1, False, 0.3, ["tracking"]),
+        rec(2, True, 0.02, []),
         {"params": {"a": 1}, "seed": 3, "success": False, "error": "MPCFormError: boom", "wall_s": 0.5},
-    ]  # fmt: skip
+    ]
     (g,) = aggregate(records)
     assert g["runs"] == 4 and g["successes"] == 2 and g["success_rate"] == 0.5 and g["errors"] == 1
     assert g["final_tracking_error_median"] == pytest.approx(0.02) and g["final_tracking_error_max"] == 0.3

@@ -97,8 +97,9 @@ duration = 6.0
 """
 
 
-@pytest.mark.parametrize(("plant", "modelled"), [("lag", True), ("second_order", True), ("quadrotor", True),
-                                                 ("ideal", False)])  # fmt: skip
+@pytest.mark.parametrize(
+    ("plant", "modelled"), [("lag", True), ("second_order", True), ("quadrotor", True), ("ideal", False)]
+)
 def test_the_planner_models_the_plants_velocity_loop(plant: str, modelled: bool, tmp_path: Path) -> None:
     """A lag, second-order or quadrotor plant (its hover linearisation) gives the planner its
     velocity loop (``plant_model = false``: none); the ideal plant gives none."""

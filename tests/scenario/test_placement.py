@@ -83,8 +83,9 @@ def test_the_check_uses_the_start_before_the_seeded_perturbation() -> None:
 
 # ---- goals -----------------------------------------------------------------------------------
 def test_a_constant_goal_inside_an_obstacle() -> None:
-    data = obstacles_doc(**{"reference.kind": "constant", "reference.rate": None,
-                            "reference.centroid": [0.0, 0.3]})  # fmt: skip
+    data = obstacles_doc(
+        **{"reference.kind": "constant", "reference.rate": None, "reference.centroid": [0.0, 0.3]}
+    )
     exc = error(data)
     assert exc.field == "reference.centroid" and "constant goal" in str(exc)
     assert "a moving reference, exponential or mission, may pass through obstacles" in str(exc)

@@ -27,14 +27,15 @@ from mpcform.scenario.size import (
 def doc(n: int = 5, radius: float = 1.5, duration: float = 10.0, **controller: Any) -> dict[str, Any]:
     """A planar polygon holding still (constant reference) under ``controller`` (default: tracking)."""
     return {
-        "version": 1, "dim": 2,
+        "version": 1,
+        "dim": 2,
         "template": {"shape": "polygon", "n": n, "radius": radius},
         "initial": {"centroid": [0.0, 0.0]},
         "reference": {"kind": "constant"},
         "limits": {"v_max": 1.0, "d_min": 0.5},
         "controller": {"kind": "tracking", **controller},
         "simulation": {"dt": 0.1, "duration": duration},
-    }  # fmt: skip
+    }
 
 
 def test_time_series_follow_steps_drones_and_axes() -> None:
@@ -60,8 +61,10 @@ def test_a_swap_counts_the_pairs_where_the_straight_ways_cross() -> None:
 
 
 def test_the_per_drone_qps_grow_with_the_square_of_the_horizon() -> None:
-    small, large = (estimate_memory(scenario_from_dict(doc(kind="mpc", horizon=h, coupling="decoupled")))
-                    for h in (50, 100))  # fmt: skip
+    small, large = (
+        estimate_memory(scenario_from_dict(doc(kind="mpc", horizon=h, coupling="decoupled")))
+        for h in (50, 100)
+    )
     assert large.horizon_bytes / small.horizon_bytes == pytest.approx(4.0, rel=0.05)
 
 

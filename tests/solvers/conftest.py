@@ -75,8 +75,14 @@ def solves_recorded(
     ``eps``, without printing. ``problems``: how many of the small swap's problems (slow backends
     take one); ``all_sizes``: also the first problem of every other scenario."""
 
-    def check(name: str, objective: float, residual: float, eps: float = 1e-7, problems: int = 3,
-              all_sizes: bool = False) -> None:  # fmt: skip
+    def check(
+        name: str,
+        objective: float,
+        residual: float,
+        eps: float = 1e-7,
+        problems: int = 3,
+        all_sizes: bool = False,
+    ) -> None:
         _require_usable(name)
         small = recorded["swap_planar_8"]
         chosen = [small[0], small[len(small) // 2], small[-1]][:problems]

@@ -18,11 +18,18 @@ def _two_drones() -> QPContext:
     """Two planar drones 0.5 m apart that must keep 1 m, drone 0 1 m from an obstacle it must keep
     1.5 m from; horizon 1: z = [u (4) | x (4) | s (2)]."""
     return QPContext(
-        n=2, dim=2, horizon=1, separation_rows=(0, 0), start_m=np.array([[0.0, 0.0], [0.5, 0.0]]),
-        pairs=np.array([[0, 1]]), pair_distance_m=1.0, metric=np.ones(2),
-        obstacle_drones=np.array([0]), obstacle_centers_m=np.array([[0.0, -1.0]]),
+        n=2,
+        dim=2,
+        horizon=1,
+        separation_rows=(0, 0),
+        start_m=np.array([[0.0, 0.0], [0.5, 0.0]]),
+        pairs=np.array([[0, 1]]),
+        pair_distance_m=1.0,
+        metric=np.ones(2),
+        obstacle_drones=np.array([0]),
+        obstacle_centers_m=np.array([[0.0, -1.0]]),
         obstacle_distance_m=np.array([1.5]),
-    )  # fmt: skip
+    )
 
 
 @pytest.mark.parametrize(
