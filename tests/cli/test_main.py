@@ -308,3 +308,37 @@ def test_run_with_a_plant_override_reports_the_true_motion(tmp_path, capsys):
 def test_unknown_plant_kind_is_a_usage_error(capsys):
     assert main(["run", str(ROOT / "scenarios" / "swap_planar_8.toml"), "--plant", "rocket"]) == 2
     assert "--plant" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(
+    ("controller", "table", "key"),
+    [
+        ('coupling = "decoupled"\neps_abs = 1e-6', "", "controller.eps_abs"),
+        ('coupling = "decoupled"', 'kind = "per_drone"\neps_abs = 1e-6', "controller.solve.eps_abs"),
+        ("", 'kind = "per_drone"', "controller.solve.kind"),
+        ("per_drone = true", "", "controller.per_drone"),
+    ],
+)
+def test_an_ignored_solve_setting_is_one_error_line_in_either_spelling(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], controller: str, table: str, key: str
+) -> None:
+    path = tmp_path / "s.toml"
+    text = Path(WORKED).read_text().replace('kind = "tracking"', f'kind = "mpc"\n{controller}')
+    path.write_text(text + (f"\n[controller.solve]\n{table}\n" if table else ""))
+    assert main(["validate", str(path)]) == 2
+    (line,) = capsys.readouterr().err.strip().splitlines()
+    assert line.startswith(f"mpcform: error: {path}:") and f": {key}: " in line
+
+
+def test_an_old_solve_key_loads_with_one_deprecation_line(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    path = tmp_path / "s.toml"
+    path.write_text(Path(WORKED).read_text().replace('kind = "tracking"', 'kind = "mpc"\nmax_iter = 100'))
+    assert main(["validate", str(path)]) == 0
+    captured = capsys.readouterr()
+    assert captured.out.startswith("OK worked_example")
+    (line,) = captured.err.strip().splitlines()
+    assert line.endswith(
+        f"{path}: controller.max_iter is deprecated: write [controller.solve] max_iter = 100"
+    )
