@@ -108,7 +108,7 @@ def _validate(args: argparse.Namespace) -> int:
 
 
 def _solvers(args: argparse.Namespace) -> int:
-    rows = solver_infos()
+    rows = solver_infos(per_drone=args.per_drone)
     width = max(len(r.name) for r in rows)
     print(f"{'solver':<{width}}  installed  usable  warm  persistent  note")
     for r in rows:
@@ -162,7 +162,7 @@ def build_parser() -> argparse.ArgumentParser:
             cmd.add_argument(
                 "--solver",
                 metavar="NAME",
-                help=solver_help("override controller.solver (mpc)"),
+                help=solver_help("override the sparse backend of [controller.solve] (mpc)"),
             )
             cmd.add_argument(
                 "--plant",
@@ -171,6 +171,12 @@ def build_parser() -> argparse.ArgumentParser:
                 help=f"override plant.kind: {', '.join(PLANT_KINDS)}",
             )
             cli_runner.add_run_options(cmd)
+        if name == "solvers":
+            cmd.add_argument(
+                "--per-drone",
+                action="store_true",
+                help='the per-drone backends instead ([controller.solve] kind = "per_drone")',
+            )
         if name == "keys":
             cmd.add_argument(
                 "--json-schema",

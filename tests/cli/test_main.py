@@ -342,3 +342,10 @@ def test_an_old_solve_key_loads_with_one_deprecation_line(
     assert line.endswith(
         f"{path}: controller.max_iter is deprecated: write [controller.solve] max_iter = 100"
     )
+
+
+def test_solvers_lists_the_per_drone_backends(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["solvers", "--per-drone"]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    names = {line.split()[0]: line.split()[2] for line in lines[1:]}
+    assert names["daqp"] == "yes" and "qpsolvers:quadprog" in names and "osqp" not in names
