@@ -16,6 +16,8 @@ and the drones that see the commanded scale; absent otherwise).
 from __future__ import annotations
 
 import json
+import zipfile
+import zlib
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -205,7 +207,7 @@ def _npz(path: Path, keys: tuple[str, ...], optional: tuple[str, ...] = ()) -> d
         raise
     except FileNotFoundError:
         raise RunDirError(str(path), "missing (write it with `mpcform run --out DIR`)") from None
-    except (OSError, ValueError) as exc:
+    except (OSError, ValueError, EOFError, zipfile.BadZipFile, zlib.error) as exc:  # truncated, corrupt
         raise RunDirError(str(path), f"cannot read it as a numpy .npz archive: {exc}") from None
 
 

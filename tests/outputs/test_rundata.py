@@ -149,3 +149,24 @@ def test_consensus_graph_and_leaders_round_trip(tmp_path: Path) -> None:
     assert load_run(tmp_path / "mpc").trajectory.scale_estimates is None
     with np.load(tmp_path / "mpc" / FORMATION_NPZ) as npz:
         assert sorted(npz.files) == ["obstacles", "offsets", "scale_ref"]  # unchanged without a graph
+
+
+@pytest.mark.parametrize("cut", ["head", "middle"])
+def test_a_truncated_or_corrupt_archive_is_one_error_naming_it(tmp_path: Path, cut: str) -> None:
+    """``head -c 5000`` of the archive (no zip directory) and a zeroed second half (corrupt members)."""
+    short_run("swap_planar_8", tmp_path, steps=10)
+    path = tmp_path / "trajectory.npz"
+    data = path.read_bytes()
+    path.write_bytes(
+        data[:5000] if cut == "head" else data[: len(data) // 2] + bytes(len(data) - len(data) // 2)
+    )
+    with pytest.raises(RunDirError, match=r"trajectory.npz: cannot read it as a numpy .npz archive"):
+        load_run(tmp_path)
+    from mpcform.cli.main import main
+
+    for command in (
+        ["view", str(tmp_path)],
+        ["export", str(tmp_path), "--no-flight-check"],
+        ["compare", str(tmp_path)],
+    ):
+        assert main(command) == 2, command
