@@ -39,6 +39,7 @@ from mpcform.sim.plants import KINDS as PLANT_KINDS
 from mpcform.solvers.registry import solver_infos
 
 EXIT_USAGE = 2
+EXIT_INTERRUPTED = 128 + 2  # what a shell reports for a program stopped by SIGINT (Ctrl-C)
 EXIT_BROKEN_PIPE = 128 + 13  # what a shell reports for a program killed by SIGPIPE
 
 
@@ -203,6 +204,9 @@ def main(argv: list[str] | None = None) -> int:
     except BrokenPipeError:
         _discard_stdout()
         return EXIT_BROKEN_PIPE
+    except KeyboardInterrupt:  # Ctrl-C: one line, the shell's status for SIGINT
+        print("mpcform: interrupted", file=sys.stderr)
+        return EXIT_INTERRUPTED
     except (_UsageError, MPCFormError, OSError) as exc:  # OSError: e.g. an unwritable --out
         message = " ".join(str(exc).split())
         print(f"mpcform: error: {message}", file=sys.stderr)

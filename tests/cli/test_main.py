@@ -349,3 +349,19 @@ def test_solvers_lists_the_per_drone_backends(capsys: pytest.CaptureFixture[str]
     lines = capsys.readouterr().out.splitlines()
     names = {line.split()[0]: line.split()[2] for line in lines[1:]}
     assert names["daqp"] == "yes" and "qpsolvers:quadprog" in names and "osqp" not in names
+
+
+def test_ctrl_c_during_a_run_is_one_line_and_status_130(tmp_path: Path) -> None:
+    """SIGINT while the planner runs: no traceback, one line, the shell's status for Ctrl-C."""
+    import signal
+
+    swap, out = str(ROOT / "scenarios" / "swap_spatial_20.toml"), str(tmp_path)
+    code = (
+        f"import sys; from mpcform.cli.main import main; sys.exit(main(['run', {swap!r}, '--out', {out!r}]))"
+    )
+    proc = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    assert proc.stdout is not None
+    assert proc.stdout.readline().startswith(b"scenario")  # running: the header is printed first
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 130 and err.decode().strip().splitlines() == ["mpcform: interrupted"]
