@@ -99,6 +99,8 @@ class ExportOptions:
         positive("rate", self.rate_hz)
         if self.altitude_m is not None:
             positive("altitude", self.altitude_m)
+        if not np.isfinite(self.floor_m):
+            raise ValidationError("floor", f"expected a finite height [m], got {self.floor_m}")
         if len(self.offset_m) != 3 or not np.all(np.isfinite(self.offset_m)):
             raise ValidationError("offset", f"expected three finite numbers X,Y,Z, got {self.offset_m!r}")
         if self.yaw not in YAW_MODES:

@@ -219,3 +219,10 @@ def test_a_colliding_plan_is_flagged(tmp_path: Path) -> None:
     run_scenario(scenario, tmp_path, controller="tracking")  # no separation rows: they meet at the centre
     result = export_run(load_run(tmp_path), tmp_path / "export", fly=False)
     assert any("closer than d_min = 0.5 m" in w and "do not fly it" in w for w in result.warnings)
+
+
+@pytest.mark.parametrize("floor", [float("nan"), float("inf"), -float("inf")])
+def test_a_floor_that_is_not_a_height_is_refused(floor: float) -> None:
+    """``--floor nan`` used to pass every check and write a fly.py with a NaN takeoff height."""
+    with pytest.raises(ValidationError, match="floor: expected a finite height"):
+        ExportOptions(floor_m=floor)
