@@ -31,7 +31,7 @@ from typing import Any
 
 import numpy as np
 
-from mpcform.errors import ValidationError
+from mpcform.errors import SolverError, ValidationError
 from mpcform.outputs import tables
 from mpcform.run.parallel import process_pool, single_threaded_env
 from mpcform.run.runner import run_scenario
@@ -39,6 +39,7 @@ from mpcform.scenario.load import load_scenario, scenario_from_dict, scenario_te
 from mpcform.scenario.size import check_memory
 from mpcform.scenario.spec import Scenario
 from mpcform.sim.metrics import REL_TOL
+from mpcform.solvers.registry import check_solver_name
 
 EXECUTORS = ("process", "dask")
 DEFAULT_TOLERANCE_M = 0.1
@@ -124,6 +125,11 @@ def build_jobs(
     """The Cartesian product of the ``--set`` lists and the seeds (None: the file's seed)."""
     if not 0.0 <= tolerance_m < float("inf"):
         raise ValidationError("--tol", f"expected a final tracking error >= 0 [m], got {tolerance_m!r}")
+    if solver is not None:  # a bad name is one error now, not a failed row per job
+        try:
+            check_solver_name(solver)
+        except SolverError as exc:
+            raise ValidationError("--solver", str(exc)) from None
     keys = [key for key, _ in sets]
     if len(set(keys)) != len(keys):
         raise ValidationError("--set", f"a key is given twice: {keys}")

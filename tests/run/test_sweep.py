@@ -192,3 +192,8 @@ def test_a_byte_order_mark_is_accepted(tmp_path: Path) -> None:
     path = tmp_path / "bom.toml"
     path.write_bytes(b"\xef\xbb\xbf" + TINY.encode())
     assert load_job(SweepJob(str(path), (("controller.horizon", 3),), 2)).controller.mpc.horizon == 3
+
+
+def test_an_unknown_solver_is_refused_before_any_job() -> None:
+    with pytest.raises(ValidationError, match="--solver: solver 'bogus': unknown solver"):
+        build_jobs("scenarios/swap_planar_8.toml", [0], [], solver="bogus")
