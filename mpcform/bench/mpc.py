@@ -308,7 +308,14 @@ def run(
     progress: Callable[[str], None] | None = None,
 ) -> list[dict[str, Any]]:
     """The generated swaps, then the scenario files; cvxpy in every case that fits
-    ``cvxpy_budget_s`` (0: none)."""
+    ``cvxpy_budget_s`` (0: none). Bad sizes, steps or no case at all fail before any case runs."""
+    if steps < 1 or any(n < 2 for n in (*planar_n, *spatial_n)):
+        got = f"--n {list(planar_n)}, --spatial-n {list(spatial_n)}, --steps {steps}"
+        raise ValidationError(
+            "--n/--spatial-n/--steps", f"expected swaps of >= 2 drones and >= 1 step, got {got}"
+        )
+    if not (planar_n or spatial_n or scenarios):
+        raise ValidationError("--n", "no case to run: give --n, --spatial-n or --scenarios")
     cases = [
         generated_case(n, dim, steps, coupling)
         for dim, sizes in ((2, planar_n), (3, spatial_n))

@@ -16,6 +16,7 @@ from mpcform.bench.mpc import (
     cpu_key,
     generated_case,
     markdown_table,
+    run,
     scenario_case,
     swap_case,
 )
@@ -116,3 +117,16 @@ def test_cli_bench_mpc_writes_json(tmp_path: Path, capsys: pytest.CaptureFixture
 def test_cli_bench_mpc_refuses_a_negative_budget(capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["bench", "mpc", "--cvxpy-budget", "-1"]) == 2
     assert "expected a number of seconds >= 0" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(
+    ("planar", "spatial", "steps", "scenarios", "match"),
+    [
+        ([0], [], 60, [], "swaps of >= 2 drones"),  # was a ZeroDivisionError
+        ([8], [20], 0, [], ">= 1 step"),
+        ([], [], 60, [], "no case to run"),
+    ],
+)
+def test_bad_sizes_fail_before_any_case(planar, spatial, steps, scenarios, match) -> None:  # noqa: ANN001
+    with pytest.raises(ValidationError, match=match):
+        run(planar, spatial, steps, "piqp", "joint", 0.0, scenarios)
