@@ -41,6 +41,9 @@ from mpcform.scenario.spec import ControllerSpec, Scenario, SimulationSpec
 from mpcform.world.limits import Limits
 from mpcform.world.obstacles import SphereObstacle, resolve_clearances
 
+MAX_STEPS = 1e8
+"""The most control steps a file may ask for (``duration / dt``): beyond, no run ends in a day."""
+
 
 def load_scenario(path: str | Path) -> Scenario:
     """Read and validate a scenario TOML file; raises :class:`ScenarioError` on any problem."""
@@ -99,6 +102,11 @@ def scenario_from_dict(
     plant = parse_plant(data, dim, sim.dt_s)
     controller = _controller(parse_table(data, "controller", dim), sim.dt_s)
     controller = _decentralised_settings(controller, parse_table(data, "controller", dim), limits)
+    if sim.duration_s / sim.dt_s > MAX_STEPS:
+        raise ScenarioError(
+            "simulation.duration",
+            f"expected at most {MAX_STEPS:g} steps of dt = {sim.dt_s:g} s, got {sim.duration_s:g} s",
+        )
     if sim.duration_s < sim.dt_s:
         raise ScenarioError(
             "simulation.duration",

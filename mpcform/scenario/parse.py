@@ -20,6 +20,10 @@ from mpcform._validate import Array
 from mpcform.errors import ScenarioError, ValidationError
 from mpcform.scenario.schema import SCHEMA, TABLES, Key, Table, did_you_mean, listing
 
+MAX_MAGNITUDE = 1e6
+"""The largest magnitude of a vector or point component (1000 km, 1000 km/s): beyond it a
+distance squared loses all precision, then overflows."""
+
 
 def parse_top_level(data: Mapping[str, Any]) -> dict[str, Any]:
     """The top-level keys (``version``, ``name``, ``dim``, ``seed``); unknown names and tables
@@ -178,6 +182,9 @@ def _array(
     if np.isnan(arr).any() or (not allow_inf and np.isinf(arr).any()):
         finite = "numbers (inf allowed)" if allow_inf else "finite numbers"
         raise ScenarioError(field, f"expected {finite}, got {value!r}")
+    if np.any(np.abs(arr[np.isfinite(arr)]) > MAX_MAGNITUDE):  # squared distances must not overflow
+        big = float(np.abs(arr[np.isfinite(arr)]).max())
+        raise ScenarioError(field, f"expected numbers of magnitude at most {MAX_MAGNITUDE:g}, got {big:g}")
     return arr
 
 

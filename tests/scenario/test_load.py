@@ -206,6 +206,13 @@ BAD_INPUTS: list[tuple[str, dict[str, Any], str, str]] = [
         "controller.max_iter",
         "not beside",
     ),
+    ("more steps than a day", {"simulation.duration": 1e308}, "simulation.duration", "at most 1e+08 steps"),
+    (
+        "astronomical centroid",
+        {"initial.centroid": [1e300, 0.0]},
+        "initial.centroid",
+        "magnitude at most 1e+06",
+    ),
     ("shorter than a step", {"simulation.duration": 0.01}, "simulation.duration", "one step"),
     ("path in name", {"name": "../x"}, "name", "directory"),
 ]
