@@ -41,8 +41,9 @@ from mpcform.scenario.spec import ControllerSpec, Scenario, SimulationSpec
 from mpcform.world.limits import Limits
 from mpcform.world.obstacles import SphereObstacle, resolve_clearances
 
-MAX_STEPS = 1e8
-"""The most control steps a file may ask for (``duration / dt``): beyond, no run ends in a day."""
+MAX_STEPS = 1e12
+"""The most control steps a file may ask for (``duration / dt``); the memory estimate refuses far
+fewer, but it needs the count as an integer (``duration = 1e308`` overflowed)."""
 
 
 def load_scenario(path: str | Path) -> Scenario:
