@@ -62,7 +62,7 @@ def run_scenario(
         seed=scenario.seed,
         scenario_file=scenario.source,
         scenario_sha256=scenario.source_sha256,
-        metrics=run_metrics(result, scenario.world),
+        metrics=run_metrics(result, scenario.world, goal_m=scenario.goal_after_end()),
         steps=result.commands_mps.shape[0],
         plant=plant_record(scenario, result.wind_clip_fraction),
     )

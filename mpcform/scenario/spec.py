@@ -104,9 +104,23 @@ class Scenario:
         """The plant's warnings for a run with ``controller`` (None: the file's): the spacing and
         the speed warnings; first the deprecated keys of the file."""
         old = list(self.controller.deprecations)
+        if self.goal_after_end() is not None:
+            end = self.reference.duration_s  # type: ignore[attr-defined]
+            old.append(
+                f"simulation.duration: the run ends at {self.simulation.duration_s:g} s, before the "
+                f"reference's end at {end:g} s; completion counts the reference's final targets"
+            )
         if (controller or self.controller.kind) != "mpc":
             return old
         return old + [w for w in (self.spacing_warning(controller), self.speed_warning()) if w is not None]
+
+    def goal_after_end(self) -> Array | None:
+        """The reference's final targets (n, d) when it ends after the run (a mission longer than
+        ``simulation.duration``), else None."""
+        end = getattr(self.reference, "duration_s", None)
+        if end is None or end <= self.simulation.duration_s:
+            return None
+        return self.reference.targets(np.array([end]))[0][0]
 
     def speed_warning(self) -> str | None:
         """A line when ``limits.v_max`` exceeds the speed below which the quadrotor's margin holds

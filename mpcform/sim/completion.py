@@ -12,18 +12,23 @@ from typing import Any
 
 import numpy as np
 
+from mpcform._validate import Array
 from mpcform.sim.trajectory import Trajectory
 
 COMPLETION_TOL_M = 0.1
 STALL_WINDOW_S = 2.0
 
 
-def completion_metrics(trajectory: Trajectory, tol_m: float = COMPLETION_TOL_M) -> dict[str, Any]:
+def completion_metrics(
+    trajectory: Trajectory, tol_m: float = COMPLETION_TOL_M, goal_m: Array | None = None
+) -> dict[str, Any]:
     """``completion`` (fraction of drones within ``tol_m`` of their final target at the end),
     ``stalled_drones`` and ``time_to_complete`` [s] (from when on every drone stays within
-    ``tol_m``; None if the run ends incomplete)."""
+    ``tol_m``; None if the run ends incomplete). ``goal_m`` (n, d): the final targets when the
+    reference ends after the run (a mission cut short), else the reference at the run's end."""
     p, t = trajectory.positions_m, trajectory.t_s
-    done = np.linalg.norm(p - trajectory.reference_m[-1], axis=-1) <= tol_m  # (T, n)
+    goal = trajectory.reference_m[-1] if goal_m is None else goal_m
+    done = np.linalg.norm(p - goal, axis=-1) <= tol_m  # (T, n)
     window = t >= t[-1] - STALL_WINDOW_S
     moved = np.linalg.norm(p[window] - p[-1], axis=-1).max(axis=0)  # (n,)
     every = done.all(axis=1)

@@ -73,7 +73,11 @@ def tracking_cost_m2s(trajectory: Trajectory) -> float:
 
 # ---- the summary's metrics ---------------------------------------------------------------
 def run_metrics(
-    result: SimulationResult, world: World | None = None, *, completion_tol_m: float = COMPLETION_TOL_M
+    result: SimulationResult,
+    world: World | None = None,
+    *,
+    completion_tol_m: float = COMPLETION_TOL_M,
+    goal_m: Array | None = None,
 ) -> dict[str, Any]:
     """Tracking, separation, speed, solver, timing and completion metrics of one run (JSON-ready);
     with a ``world`` (:class:`~mpcform.world.world.World`: its limits' ``v_max`` and ``d_min``, its
@@ -113,7 +117,7 @@ def run_metrics(
         },
         **_path_metrics(result.positions_m, "", limits, obstacles),
         **({} if result.true is None else _true_metrics(result.true, limits, obstacles)),
-        **completion_metrics(result, completion_tol_m),
+        **completion_metrics(result, completion_tol_m, goal_m),
     }
 
 

@@ -95,3 +95,16 @@ def test_speed_warning_when_v_max_exceeds_the_quadrotors_valid_speed() -> None:
     data["limits"]["v_max"] = 1.0
     del data["plant"]["wind"]
     assert scenario_from_dict(data).speed_warning() is None
+
+
+def test_a_mission_cut_short_is_said_and_its_final_targets_counted() -> None:
+    full = load_scenario(SCENARIOS / "mission_spatial.toml")
+    assert full.goal_after_end() is None and not any("duration" in w for w in full.warnings())
+    short = dataclasses.replace(full, simulation=dataclasses.replace(full.simulation, duration_s=3.0))
+    goal = short.goal_after_end()
+    end = full.reference.duration_s  # type: ignore[attr-defined]
+    assert goal is not None and np.array_equal(goal, full.reference.targets(np.array([end]))[0][0])
+    assert any(
+        w.startswith("simulation.duration: the run ends at 3 s, before the reference's end")
+        for w in short.warnings()
+    )

@@ -34,3 +34,15 @@ def test_short_drone_is_incomplete_and_stalled_only_if_it_stopped() -> None:
     p[-int(STALL_WINDOW_S) - 1 :, 1] = p[-1, 1]  # held still over the last window
     stuck = completion_metrics(Trajectory(run.t_s, p, run.commands_mps, run.reference_m))
     assert stuck == {"completion": 0.5, "stalled_drones": 1, "time_to_complete": None}
+
+
+def test_a_goal_after_the_run_is_what_completion_counts() -> None:
+    """A mission cut short by ``duration``: the drones at the reference's value at the run's end
+    are not at its final targets."""
+    t = np.linspace(0.0, 1.0, 11)
+    p = np.zeros((11, 2, 2))
+    traj = Trajectory(t, p, np.zeros((10, 2, 2)), p.copy())
+    assert completion_metrics(traj)["completion"] == 1.0
+    goal = np.array([[5.0, 0.0], [0.0, 0.05]])
+    got = completion_metrics(traj, goal_m=goal)
+    assert got["completion"] == 0.5 and got["time_to_complete"] is None
