@@ -52,29 +52,29 @@ def _old_key(name: str, type_: str, **kw: Any) -> Key:
 
 
 MPC_KEYS: tuple[Key, ...] = (
-        _mpc_key("horizon", "int", "Plan length H in steps.", bound=">= 1"),
-        _mpc_key("velocity_set", "string", "Speed constraint set inscribed in the ball.",
-                 choices=VELOCITY_SETS),
-        _mpc_key("facets", "int", "Half-spaces of the velocity polytope (auto: 16 planar, "
-                 "32 spatial).", bound=">= 4", shown_default="auto"),
-        _mpc_key("slack_weight", "float", "Exact L1 penalty on separation slack.", "1/m",
-                 bound="> 0"),
-        _mpc_key("slack_quadratic", "float", "Quadratic slack penalty (conditioning).", "1/m^2",
-                 bound=">= 0"),
-        _mpc_key("margin", "float", "Tightening of separation and obstacle rows.", "m",
-                 bound=">= 0"),
-        _mpc_key("tie_break", "float", "Right turn of conflicted drones' desired velocities, "
-                 "so symmetric swaps circulate; grows while a drone stays stalled (0: off).", "rad",
-                 bound=">= 0"),
-        _mpc_key("coupling", "string", "`joint` pair rows, or `decoupled` per-drone rows about "
-                 "the pair midpoint (block-diagonal QP, for large swarms).", choices=COUPLINGS),
-        _mpc_key("grouping", "bool", "Solve only the groups of drones that hold a conflict; the others "
-                 "take their eq. 14 rollout (exact)."),
-        _mpc_key("fast_path", "bool", "Skip the solver when the eq. 14 rollout meets every row."),
-        _mpc_key("plant_model", "bool", "With a `lag`, `second_order` or `quadrotor` plant (its hover "
-                 "linearisation): separation rows on where its velocity loop really takes the drones "
-                 "(a braking drone overshoots its commands), with the last interval's velocity offset "
-                 "(wind) estimated; cost and eq. 14 unchanged."),
+    _mpc_key("horizon", "int", "Plan length H in steps.", bound=">= 1"),
+    _mpc_key("velocity_set", "string", "Speed constraint set inscribed in the ball.",
+             choices=VELOCITY_SETS),
+    _mpc_key("facets", "int", "Half-spaces of the velocity polytope (auto: 16 planar, "
+             "32 spatial).", bound=">= 4", shown_default="auto"),
+    _mpc_key("slack_weight", "float", "Exact L1 penalty on separation slack.", "1/m",
+             bound="> 0"),
+    _mpc_key("slack_quadratic", "float", "Quadratic slack penalty (conditioning).", "1/m^2",
+             bound=">= 0"),
+    _mpc_key("margin", "float", "Tightening of separation and obstacle rows.", "m",
+             bound=">= 0"),
+    _mpc_key("tie_break", "float", "Right turn of conflicted drones' desired velocities, "
+             "so symmetric swaps circulate; grows while a drone stays stalled (0: off).", "rad",
+             bound=">= 0"),
+    _mpc_key("coupling", "string", "`joint` pair rows, or `decoupled` per-drone rows about "
+             "the pair midpoint (block-diagonal QP, for large swarms).", choices=COUPLINGS),
+    _mpc_key("grouping", "bool", "Solve only the groups of drones that hold a conflict; the others "
+             "take their eq. 14 rollout (exact)."),
+    _mpc_key("fast_path", "bool", "Skip the solver when the eq. 14 rollout meets every row."),
+    _mpc_key("plant_model", "bool", "With a `lag`, `second_order` or `quadrotor` plant (its hover "
+             "linearisation): separation rows on where its velocity loop really takes the drones "
+             "(a braking drone overshoots its commands), with the last interval's velocity offset "
+             "(wind) estimated; cost and eq. 14 unchanged."),
     Key("solve", "table", "`[controller.solve]`: how the QP is solved (below).", when=_MPC),
     _old_key("solver", "string"),
     _old_key("per_drone", "bool"),
