@@ -109,6 +109,7 @@ def run_metrics(
         "qp_solves": int(sum(i.mode in ("qp", "fallback") for i in result.infos)),
         "fast_path_steps": int((modes == "fast_path").sum()),
         "solver_failures": int((modes == "fallback").sum()),
+        # the planner's records (mpc.step_info.MPCStepInfo) carry these; other controllers' steps count 0
         "max_slack": float(max((getattr(i, "max_slack_m", 0.0) for i in result.infos), default=0.0)),
         "stall_events": int(sum(getattr(i, "stalled", 0) for i in result.infos)),
         "resolutions": int(sum(getattr(i, "resolved", 0) for i in result.infos)),
