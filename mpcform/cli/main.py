@@ -48,9 +48,8 @@ class _UsageError(Exception):
 
 
 class _Parser(argparse.ArgumentParser):
-    def error(self, message: str) -> NoReturn:
-        self.print_usage(sys.stderr)
-        raise _UsageError(message)
+    def error(self, message: str) -> NoReturn:  # one line, as every other error (no usage block)
+        raise _UsageError(f"{message} (see `{self.prog} --help`)")
 
 
 def _run(args: argparse.Namespace) -> int:
