@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import shutil
 from pathlib import Path
 
 from mpcform.errors import ValidationError
@@ -40,6 +41,8 @@ def check_output_dir(flag: str, path: str | Path) -> None:
             flag, f"{str(path)!r} is an existing file; expected a directory (created when missing)"
         )
     _writable_ancestor(flag, path)
+    if not path.exists():
+        _try_create(flag, path)
 
 
 def check_output_file(flag: str, path: str | Path) -> None:
@@ -65,6 +68,19 @@ def _writable_ancestor(flag: str, path: Path) -> None:
         raise ValidationError(flag, f"cannot create {str(path)!r}: {str(ancestor)!r} is a file")
     if not os.access(ancestor, os.W_OK | os.X_OK):
         raise ValidationError(flag, f"cannot write into {str(path)!r}: {str(ancestor)!r} is not writable")
+
+
+def _try_create(flag: str, path: Path) -> None:
+    """Create the missing ``path`` and remove what was created: a writable-looking ancestor may still
+    refuse it (``/proc``, a read-only mount), and nothing is left on disk before the work starts."""
+    first = path
+    while not first.parent.exists():
+        first = first.parent
+    try:
+        path.mkdir(parents=True)
+    except OSError as exc:
+        raise ValidationError(flag, f"cannot create {str(path)!r}: {exc.strerror or exc}") from None
+    shutil.rmtree(first)
 
 
 def _flag(dest: str) -> str:

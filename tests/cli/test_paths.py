@@ -45,3 +45,11 @@ def test_every_output_option_of_a_namespace_is_checked(tmp_path: Path) -> None:
         with pytest.raises(ValidationError, match=f"^{flag}: "):
             check_output_paths(argparse.Namespace(**{dest: str(bad)}))
     check_output_paths(argparse.Namespace(figure=str(tmp_path), no_figure=True))  # no figure drawn
+
+
+def test_a_directory_the_system_refuses_is_named_and_nothing_is_left(tmp_path: Path) -> None:
+    """``/proc`` looks writable to root but refuses a new directory: the error names the option."""
+    with pytest.raises(ValidationError, match=r"--out: cannot (create|write into) '/proc/nope'"):
+        check_output_dir("--out", "/proc/nope")
+    check_output_dir("--out", tmp_path / "a" / "b" / "c")  # creatable: checked, then removed
+    assert list(tmp_path.iterdir()) == []
