@@ -117,7 +117,7 @@ def scenario_from_dict(
         rng = np.random.default_rng([seed, 1])  # independent of the simulation noise (seed)
         positions = positions + rng.normal(0.0, init["perturbation"], positions.shape)
     positions.setflags(write=False)
-    return Scenario(
+    scenario = Scenario(
         name=top["name"] if top["name"] is not None else default_name,
         dim=dim,
         seed=seed,
@@ -134,6 +134,13 @@ def scenario_from_dict(
         source=source,
         source_sha256=source_sha256,
     )
+    if controller.kind == "mpc" and not np.isfinite(scenario.robustness.margin_m):
+        raise ScenarioError(  # only an unclipped gust makes it infinite
+            "plant.wind.gust_bound",
+            "an unclipped gust (inf) leaves the MPC no finite robust margin: give a bound "
+            "(the default is 3 gust_std) or set plant.margin",
+        )
+    return scenario
 
 
 def _template(t: dict[str, Any], dim: int) -> Template:

@@ -88,7 +88,9 @@ def _wind(raw: Any, dim: int) -> Wind | None:
             x = raw[key]
             ok = isinstance(x, int | float) and not isinstance(x, bool) and not math.isnan(x)
             if not ok or (low is None and not (x > 0 and math.isfinite(x))) or (low is not None and x < low):
-                want = "a finite number > 0" if low is None else "a number >= 0 (inf allowed)"
+                want = {"gust_time": "a finite number > 0", "gust_std": "a finite number >= 0"}.get(
+                    key, "a number >= 0 (inf allowed)"
+                )
                 raise ScenarioError(f"plant.wind.{key}", f"expected {want}, got {x!r}")
             if key == "gust_std" and not math.isfinite(x):
                 raise ScenarioError("plant.wind.gust_std", f"expected a finite number >= 0, got {x!r}")

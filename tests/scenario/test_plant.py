@@ -8,6 +8,7 @@ import math
 import numpy as np
 import pytest
 from helpers import tiny_swap_toml
+from saved_runs import SCENARIOS
 
 from mpcform.errors import ScenarioError
 from mpcform.scenario.load import scenario_from_dict
@@ -100,6 +101,7 @@ def test_lag_second_order_and_quadrotor_with_wind() -> None:
     np.testing.assert_array_equal(quad.wind.gust_bound_mps, [1.5, 1.5])  # 3 gust_std
     unclipped = scenario('[plant]\nkind = "lag"\n[plant.wind]\nmean = [0.0, 0.0]\ngust_std = 0.5\n')
     unclipped["plant"]["wind"]["gust_bound"] = math.inf
+    unclipped["plant"]["margin"] = 0.1  # the MPC needs a finite one: no gust bound gives none
     assert np.all(np.isinf(scenario_from_dict(unclipped).plant.wind.gust_bound_mps))
 
 
@@ -136,3 +138,19 @@ def _with_sim_lag() -> dict:
     data = scenario("")
     data["simulation"]["lag"] = 0.1
     return data
+
+
+def test_an_unclipped_gust_names_its_key_not_the_margin(tmp_path) -> None:  # noqa: ANN001
+    """``gust_bound = inf`` is documented, but the MPC then has no finite margin: the error names
+    ``plant.wind.gust_bound`` (it named ``plant.margin``, a key the user never wrote)."""
+    from mpcform.errors import ScenarioError
+    from mpcform.scenario.load import load_scenario
+
+    path = tmp_path / "w.toml"
+    text = (SCENARIOS / "swap_spatial_12_quadrotor_wind.toml").read_text()
+    path.write_text(text.rstrip() + "\ngust_bound = inf\n")
+    with pytest.raises(ScenarioError, match=r"plant.wind.gust_bound: an unclipped gust"):
+        load_scenario(path)
+    path.write_text(text.replace("gust_std = 0.5", "gust_std = -1"))
+    with pytest.raises(ScenarioError, match=r"gust_std: expected a finite number >= 0, got -1$"):
+        load_scenario(path)
