@@ -40,7 +40,6 @@ class SparseSolve:
 
     backend: str = DEFAULT_SOLVER
     options: SolverOptions = field(default_factory=lambda: SolverOptions(1e-4, 1e-4, 4000, 0.0))
-    kind = "sparse"
 
     def __post_init__(self) -> None:
         o = self.options
@@ -77,7 +76,6 @@ class PerDroneSolve:
     backend: str = DEFAULT_PER_DRONE_SOLVER
     max_iter: int = 4000
     split: SplitPolicy = field(default_factory=SplitPolicy)
-    kind = "per_drone"
 
     def __post_init__(self) -> None:
         _count("controller.solve.max_iter", self.max_iter, 1)

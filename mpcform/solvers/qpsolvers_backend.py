@@ -75,6 +75,16 @@ def qpsolvers_form(
     return qpsolvers.Problem(P, q, G, h, A_eq, lo[eq]), RowSplit(eq, upper, lower)
 
 
+def installed_qpsolvers(solver: str) -> Any:
+    """The qpsolvers module, once ``solver`` is installed for it (else a :class:`SolverError` with
+    the install hint)."""
+    import qpsolvers
+
+    if solver not in qpsolvers.available_solvers:
+        raise SolverError(f"qpsolvers:{solver}", f'not installed: pip install "qpsolvers[{solver}]"')
+    return qpsolvers
+
+
 def qpsolvers_settings(solver: str, options: SolverOptions) -> dict[str, Any]:
     """``options`` in the parameter names of qpsolvers' ``solver`` (None values left out)."""
     a, r, it = options.eps_abs, options.eps_rel, options.max_iter
@@ -113,14 +123,10 @@ class QPSolversBackend(StoredQP):
 
     def __init__(self, solver: str, options: SolverOptions) -> None:
         super().__init__(options)
-        import qpsolvers
-
-        if solver not in qpsolvers.available_solvers:
-            raise SolverError(f"qpsolvers:{solver}", f'not installed: pip install "qpsolvers[{solver}]"')
-        self._qpsolvers, self.solver = qpsolvers, solver
+        self._qpsolvers, self.solver = installed_qpsolvers(solver), solver
         self.name = f"qpsolvers:{solver}"
         self.warm_starts = solver in QPSOLVERS_WARM
-        self._dense = solver not in qpsolvers.sparse_solvers
+        self._dense = solver not in self._qpsolvers.sparse_solvers
         self._settings = qpsolvers_settings(solver, options)
         self._quiet = solver in PRINTS_FROM_C
 
