@@ -44,7 +44,6 @@ class QPSolversDenseBackend(DenseQPBackend):
         n, m = f.shape[0], upper.shape[0]
         a = np.vstack([np.eye(m - rows.shape[0], n), rows])  # the simple bounds as rows first
         lo, hi = np.where(lower > -NO_BOUND, lower, -np.inf), np.where(upper < NO_BOUND, upper, np.inf)
-        failed = DenseSolution(np.full(n, np.nan), np.inf, False, -1, np.zeros(m), 0)
         try:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
@@ -53,9 +52,14 @@ class QPSolversDenseBackend(DenseQPBackend):
                     problem, solver=self.solver, initvals=x0 if self.warm_starts else None, **self._settings
                 )
         except Exception:  # noqa: BLE001 - a solver's own failure is an unsuccessful solve
-            return failed
+            return _failed(n, m)
         x = sol.x
         lam = split.duals(m, np.zeros(0) if sol.y is None else sol.y, sol.z)  # DAQP's signs
         if not sol.found or x is None or lam is None or not np.isfinite(x).all():
-            return failed
+            return _failed(n, m)
         return DenseSolution(x, float(0.5 * x @ hessian @ x + f @ x), True, 1, lam, 0)
+
+
+def _failed(n: int, m: int) -> DenseSolution:
+    """An unsuccessful solve of ``n`` variables and ``m`` bounds (built only when one fails)."""
+    return DenseSolution(np.full(n, np.nan), np.inf, False, -1, np.zeros(m), 0)
