@@ -23,9 +23,9 @@ import numpy as np
 from mpcform._validate import Array
 from mpcform.mpc.condensed import CondensedDroneQP, dense_bounds
 from mpcform.mpc.drone_solves import DroneSolves
+from mpcform.mpc.limit_families import LimitRows
 from mpcform.mpc.loop import VelocityLoop
 from mpcform.mpc.problem import ACTIVE_TOL, StepQP, StepSolver
-from mpcform.mpc.rows import LimitRows
 from mpcform.mpc.settings import MPCSettings
 from mpcform.mpc.working_set import (
     misses,
@@ -128,7 +128,7 @@ class PerDroneQP(CondensedDroneQP, StepSolver):
         f_v = -c_v  # 0.5 ||v - c||^2
         v_warm = warm_u.transpose(1, 0, 2).reshape(n, nu) @ self._m.T
         sep_c, sep_end, sep_lo, sep_soft, counts, at = reachable_rows(
-            n, singles, coeffs, lower, hard, on, self._ends, self._step_m
+            n, singles, coeffs, lower, hard, on, self._ends, self._step_m, self._reach_steps
         )
         a, lo, hi = self._buffers(n_const + int(counts.max(initial=0)))
         b_lo, b_hi = self._fixed if self._fixed is not None else dense_bounds(self.families, p0, u_prev)
@@ -136,7 +136,7 @@ class PerDroneQP(CondensedDroneQP, StepSolver):
         v_out, s_out, lams = [np.empty(0)] * n, np.zeros((n, h)), [np.empty(0)] * n
         flags, ok = [0] * n, [True] * n
         const_c, owner = c_v @ self._const_v.T, np.repeat(np.arange(n), counts)
-        at_x = owner * h + sep_end - 1  # each row's position x_e among the drones'
+        at_x = owner * self._steps + sep_end - 1  # each row's position x_e among the drones'
         cost, free, sep_c_at = np.zeros(n), within_bounds(const_c, b_lo, b_hi), None
         if free.any():  # the wish v = c meets the constant rows: and the separation rows?
             sep_c_at = row_values(self._x_of_v, c_v, sep_c, at_x)

@@ -37,13 +37,14 @@ from mpcform._validate import Array, positive
 from mpcform.control.base import Controller, ControlStep, feedforward_targets
 from mpcform.control.laws import check_gain_dt
 from mpcform.errors import ValidationError
+from mpcform.mpc.braking import Braking
 from mpcform.mpc.candidates import Candidates, CandidateSelector, qp_drones
 from mpcform.mpc.certify import Certifier
+from mpcform.mpc.limit_families import limit_rows, violators
 from mpcform.mpc.liveness import TieBreak
 from mpcform.mpc.loop import VelocityLoop
 from mpcform.mpc.plan import Plan, guess, rollout, warm_start
 from mpcform.mpc.problem import StepQP
-from mpcform.mpc.rows import limit_rows, row_ends, violators
 from mpcform.mpc.separation import Separation, SeparationRows
 from mpcform.mpc.settings import MPCSettings
 from mpcform.mpc.split import SplitQP
@@ -90,10 +91,12 @@ class MPCPlanner(Controller):
         _check_limits(self.dim, limits, self.obstacles)
         self.loop = _check_loop(loop, self.dim, settings)
         self._families = limit_rows(self.dim, dt_s, limits, settings)
-        self._separation = sep = Separation(self.dim, limits, settings, self.obstacles)
+        self.braking = braking = Braking.of(dt_s, limits)  # the plans' terminal condition
+        self._separation = sep = Separation(self.dim, limits, settings, self.obstacles, braking)
         gain = 1.0 if self.loop is None else self.loop.speed_gain
-        self._candidates = CandidateSelector(self.n, dt_s, limits, settings, self.obstacles, gain)
-        self._certifier = Certifier(dt_s, limits.v_max_mps, sep, limits.a_max_mps2)
+        tail_s = 0.0 if braking is None else braking.kappa_s * gain + (self.loop.lag_s if self.loop else 0.0)
+        self._candidates = CandidateSelector(self.n, dt_s, limits, settings, self.obstacles, gain, tail_s)
+        self._certifier = Certifier(dt_s, limits.v_max_mps, sep, limits.a_max_mps2, braking)
         self._loop_state: Array  # the velocity loop's state (n, d, s), set by reset
         if self.loop is not None:  # certify where the loop takes the drones in the interval
             loop = self.loop
@@ -151,7 +154,7 @@ class MPCPlanner(Controller):
         u_nom, x_nom = rollout(c, k, dt)
         x_true = self._true(u_nom, x_nom)  # where the rollout takes the drones
         nominal = Plan.from_relative(p0, u_nom, x_nom)  # the fast path's plan
-        true_path = nominal.positions_m if self.loop is None else np.concatenate([p0[None], p0 + x_true])
+        true_path = np.concatenate([p0[None], p0 + x_true])
         about = self._guess(p0)
         off_limits = violators(self._families, p0, self._u_prev, u_nom, x_nom)
         if st.fast_path and not off_limits.any() and sep.clear(about, true_path):
@@ -174,10 +177,22 @@ class MPCPlanner(Controller):
             return self._fast_path(nominal)
         blocked = sep.blocked_targets(targets[0]) if conflicted.any() else None
         turned = conflicted
-        if self.loop is not None and conflicted.any():  # the single integrator's conflicts: encounters
-            plain = sep.rows(p0, guess(self._plan, p0, horizon), cand)
-            turned = conflicted & sep.conflicted(x_nom, plain)
-        c = self._tie_break.turn(c, turned, p0, targets[0] - p0, self._plan is not None, blocked)
+        if (self.loop is not None or self.braking is not None) and conflicted.any():
+            # encounters: the single integrator's conflicts within the horizon (a stop point's
+            # conflict is the QP's to brake for, not one to turn away from)
+            plain = (
+                rows
+                if self.loop is None
+                else sep.rows(p0, guess(self._plan, p0, horizon, self.braking), cand)
+            )
+            x_enc = x_nom if self.braking is None else np.concatenate([x_nom, x_nom[-1:]])
+            turned = conflicted & sep.conflicted(x_enc, plain)
+        speed, step = None, 0.0  # with a_max: how fast the drones fly, how much that changes per step
+        if self.limits.a_max_mps2 is not None:
+            speed = np.sqrt(np.einsum("nd,nd->n", self._u_prev, self._u_prev))
+            step = self.limits.a_max_mps2 * dt * np.sqrt(self.dim)
+        to_target = targets[0] - p0
+        c = self._tie_break.turn(c, turned, p0, to_target, self._plan is not None, blocked, speed, step)
         bad = off_limits | conflicted
         linked = rows.pairs[rows.pair_on]
         solver = self._solver
@@ -188,40 +203,54 @@ class MPCPlanner(Controller):
         drones = qp_drones(bad, linked) if grouped else np.arange(self.n)
         qp_rows, relaxed = self._hard_first_rows(rows)
         sub = qp_rows.subset(drones, self.n, on_only=grouped)  # grouped: the pattern follows the groups
-        warm = warm_start(self._plan, p0, u_nom, x_nom)[:, :, drones] if self._solver.warm_starts else None
+        warm = None
+        if self._solver.warm_starts:
+            warm = warm_start(self._plan, p0, u_nom, x_nom, self.braking)[:, :, drones]
         qp = StepQP(self.n, drones, p0[drones], c[:, drones], self._u_prev[drones], sub, cand.rebuilt, warm)
         sol, active = solver.solve(qp)
         status, solved = sol.status, None
         inside_m, inside = sep.start_shortfall(p0, rows)  # items that start too close
         if sol.success and sol.x is not None:
             u, x = self._merge(drones, sol.x, u_nom, x_nom)
-            u0 = self._certifier.certify(p0, u[0], cand)
+            u0 = self._certifier.certify(p0, u[0], cand, self._u_prev)
             if u0 is not None:
                 self._accept(p0, u, x)
+                self._u_prev = u0.copy()  # the command sent (the solver's tolerance off)
                 x_true = self._true(u, x)
                 info = self._qp_info(sol, sol.x, active, drones, x_true, rows, inside_m, inside, relaxed)
                 return ControlStep(u0, info)
             status, solved = status + "; command failed certification", u[0]
         u, x, note = self._certifier.fallback(self._plan, p0, cand, horizon, solved, self._u_prev)
         self._accept(p0, u, x)
-        info = solve_info("fallback", sol, f"{status}; {note}", 0, 0, inside_m, inside, self._tie_break)
+        info = solve_info(
+            "fallback", sol, f"{status}; {note}", 0, 0, inside_m, inside, self._tie_break, relaxed
+        )
         return ControlStep(u[0].copy(), info)
 
-    def _true(self, u: Array, x: Array) -> Array:
+    def _true(self, u: Array, x: Array, loop: bool = True) -> Array:
         """Relative positions (H, n, d) the drones reach with the inputs ``u``: the single
-        integrator's ``x``, plus the velocity loop's offsets with a loop (:mod:`mpcform.mpc.loop`)."""
-        if self.loop is None:
-            return x
-        return x + self.loop.offsets(self._loop_state, u)[1:]
+        integrator's ``x``, plus the velocity loop's offsets with a loop (:mod:`mpcform.mpc.loop`;
+        not with ``loop`` False); with braking, then the stop point (:mod:`mpcform.mpc.braking`)."""
+        with_loop = loop and self.loop is not None
+        y = x + self.loop.offsets(self._loop_state, u)[1:] if with_loop else x  # type: ignore[union-attr]
+        if self.braking is None:
+            return y
+        stop = self.braking.stop(x[-1], u[-1])
+        if with_loop:  # where the loop comes to rest
+            stop = self.loop.dc_gain * stop + self.loop.at_rest(self._loop_state)  # type: ignore[union-attr]
+        return np.concatenate([y, stop[None]])
 
     def _guess(self, p0: Array) -> Array:
         """The guess (H + 1, n, d) the rows are linearised about (:func:`mpcform.mpc.plan.guess`);
         with a loop, where the previous plan shifted takes the drones from ``p0`` (it meets its own
         rows, as the single integrator's guess does)."""
         if self.loop is None:
-            return guess(self._plan, p0, self.settings.horizon)
+            return guess(self._plan, p0, self.settings.horizon, self.braking)
         h = self.settings.horizon
-        u = np.zeros((h, self.n, self.dim)) if self._plan is None else self._plan.shifted_inputs()
+        u = np.zeros((h, self.n, self.dim))
+        if self._plan is not None:
+            plan = self._plan
+            u = plan.shifted_inputs() if self.braking is None else self.braking.shifted(plan.inputs_mps)
         return np.concatenate([p0[None], p0 + self._true(u, self.dt_s * np.cumsum(u, axis=0))])
 
     def _rows(self, p0: Array, about: Array, cand: Candidates) -> SeparationRows:
@@ -231,8 +260,10 @@ class MPCPlanner(Controller):
         rows = self._separation.rows(p0, about, cand)
         if self.loop is None:
             return rows
-        ends = row_ends(self.settings.horizon)
-        free = self.loop.free(self._loop_state)[ends].transpose(1, 0, 2)  # (n, R, d)
+        free = self.loop.free(self._loop_state)
+        if self.braking is not None:  # the stop point's: where the loop comes to rest
+            free = np.concatenate([free, self.loop.at_rest(self._loop_state)[None]])
+        free = free[self._separation.ends].transpose(1, 0, 2)  # (n, R, d)
         shift_p = np.einsum("prd,prd->pr", rows.pair_coeffs, free[rows.pairs[:, 0]] - free[rows.pairs[:, 1]])
         shift_s = np.einsum("srd,srd->sr", rows.single_coeffs, free[rows.singles])
         shift_p[rows.pair_hard, 0] = 0.0
@@ -287,8 +318,9 @@ class MPCPlanner(Controller):
         if relaxed or slack.max(initial=0.0) > SLACK_REPORT_M / 2:
             planned, missed = self._separation.shortfall(x, rows, SLACK_REPORT_M)
             shortfall, missed = max(shortfall, planned), np.concatenate([inside, missed])
+        shortfall = max(shortfall, 0.0)
         return solve_info(
-            "qp", sol, sol.status, active, drones.shape[0], max(shortfall, 0.0), missed, self._tie_break
+            "qp", sol, sol.status, active, drones.shape[0], shortfall, missed, self._tie_break, relaxed
         )
 
     def _accept(self, p0: Array, u: Array, x: Array) -> None:

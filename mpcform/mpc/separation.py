@@ -29,6 +29,7 @@ import numpy as np
 
 from mpcform._validate import Array
 from mpcform.formation.geometry import drone_spreads, pairs_within, vector_norms
+from mpcform.mpc.braking import Braking, separation_steps
 from mpcform.mpc.candidates import Candidates
 from mpcform.mpc.rows import row_ends, row_segments
 from mpcform.mpc.separation_units import BLOCK, ObstacleSeparation, PairSeparation, Test, inside
@@ -89,16 +90,23 @@ class Separation:
     """The pair and obstacle units together: the rows of a candidate set, and the tests on them."""
 
     def __init__(
-        self, dim: int, limits: Limits, settings: MPCSettings, obstacles: tuple[SphereObstacle, ...]
+        self,
+        dim: int,
+        limits: Limits,
+        settings: MPCSettings,
+        obstacles: tuple[SphereObstacle, ...],
+        braking: Braking | None = None,
     ) -> None:
-        self.dim, self.margin_m = dim, settings.margin_m
+        self.dim, self.margin_m, self.braking = dim, settings.margin_m, braking
+        steps = separation_steps(settings.horizon, braking)  # with braking, the tail to the stop point
         self.d_min_m, self.tube_m = limits.d_min_m, limits.tube_m
         self.metric = np.ones(dim)  # W's diagonal
         if limits.downwash_kappa is not None:
             self.metric[2] = 1.0 / limits.downwash_kappa
-        self.pairs = None if limits.d_min_m is None else PairSeparation(limits.d_min_m, self.metric, settings)
-        self.obstacles = ObstacleSeparation(obstacles, settings) if obstacles else None
-        self.ends, self.n_rows = row_ends(settings.horizon), row_segments(settings.horizon).shape[0]
+        d_min = limits.d_min_m
+        self.pairs = None if d_min is None else PairSeparation(d_min, self.metric, settings, steps)
+        self.obstacles = ObstacleSeparation(obstacles, settings, steps) if obstacles else None
+        self.ends, self.n_rows = row_ends(steps), row_segments(steps).shape[0]
 
     def rows(self, p0: Array, guess: Array, cand: Candidates) -> SeparationRows:
         """Closest-point rows about ``guess`` (H + 1, n, d) for every candidate item."""

@@ -34,11 +34,14 @@ def segment_normals(rel: Array, segs: Array | None = None) -> Array:
 class PairSeparation:
     """``d_min`` [m] between drone pairs in the metric ``W = diag(metric)``, joint or decoupled."""
 
-    def __init__(self, d_min_m: float, metric: Array, settings: MPCSettings) -> None:
+    def __init__(
+        self, d_min_m: float, metric: Array, settings: MPCSettings, steps: int | None = None
+    ) -> None:
         self.d_min_m, self.metric, self.margin_m = d_min_m, metric, settings.margin_m
         self.unit_metric = bool(np.all(metric == 1.0))  # W = I: no scaling
         self.joint = settings.coupling == "joint"
-        self.segs, self.ends = row_segments(settings.horizon), row_ends(settings.horizon)
+        steps = settings.horizon if steps is None else steps  # segments (the braking tail's too)
+        self.segs, self.ends = row_segments(steps), row_ends(steps)
         self.near = NearPairs()  # the clear test's neighbour list, kept between steps
 
     def relative(self, points: Array, i: Array, k: Array) -> Array:
@@ -118,9 +121,12 @@ class ObstacleSeparation:
     """Drones keep ``required_m`` (m,) [m] from the obstacles' centres ``center_m`` (m, d): the
     radius plus each obstacle's resolved clearance (:func:`mpcform.world.obstacles.resolve_clearances`)."""
 
-    def __init__(self, obstacles: tuple[SphereObstacle, ...], settings: MPCSettings) -> None:
+    def __init__(
+        self, obstacles: tuple[SphereObstacle, ...], settings: MPCSettings, steps: int | None = None
+    ) -> None:
         self.center_m, self.required_m = obstacle_arrays(obstacles)
-        self.margin_m, self.segs = settings.margin_m, row_segments(settings.horizon)
+        steps = settings.horizon if steps is None else steps  # segments (the braking tail's too)
+        self.margin_m, self.segs = settings.margin_m, row_segments(steps)
 
     def rows(self, p0: Array, path: Array, items: Array, on: Array) -> RowPart:
         """One-drone rows of the ``(drone, obstacle)`` items (O, 2) about the guess ``path``
