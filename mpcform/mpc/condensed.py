@@ -125,11 +125,14 @@ class CondensedDroneQP:
         return drone_sensitivity(lam, solves.v[i], self._const_pm, sep, lo, hi, solves.sep_lo[first:last])
 
 
-def dense_bounds(families: tuple[LimitRows, ...], p0: Array, u_prev: Array) -> tuple[Array, Array]:
+def dense_bounds(
+    families: tuple[LimitRows, ...], p0: Array, u_prev: Array, free_m: Array | None = None
+) -> tuple[Array, Array]:
     """Lower and upper bounds (n, rows) of the constant rows of ``families`` for each drone (starts
-    ``p0``, last commands ``u_prev`` (n, d)); :data:`~mpcform.solvers.dense.NO_BOUND` where a row has none."""
+    ``p0``, last commands ``u_prev`` (n, d), with a loop its free response ``free_m`` (S, n, d));
+    :data:`~mpcform.solvers.dense.NO_BOUND` where a row has none."""
     n = p0.shape[0]
     if not families:
         return np.zeros((n, 0)), np.zeros((n, 0))
-    lo, hi = zip(*(family.dense_bounds(p0, u_prev, NO_BOUND) for family in families), strict=True)
+    lo, hi = zip(*(family.dense_bounds(p0, u_prev, NO_BOUND, free_m) for family in families), strict=True)
     return np.hstack(lo), np.hstack(hi)

@@ -16,6 +16,7 @@ from scipy.spatial import HalfspaceIntersection
 from mpcform._validate import Array
 from mpcform.formation.geometry import squared_norms
 from mpcform.mpc.braking import Braking
+from mpcform.mpc.loop import VelocityLoop
 from mpcform.mpc.rows import INF, Layout, RowBlock, positions_of_inputs
 from mpcform.mpc.settings import MPCSettings
 from mpcform.world.limits import Limits
@@ -32,16 +33,21 @@ class LimitRows(ABC):
     def sparse(self, lay: Layout) -> RowBlock:
         """Rows of the sparse QP, with the bounds that stay the same from step to step."""
 
-    def set_bounds(self, lower: Array, upper: Array, p0: Array, u_prev: Array) -> None:  # noqa: B027
+    def set_bounds(  # noqa: B027
+        self, lower: Array, upper: Array, p0: Array, u_prev: Array, free_m: Array | None = None
+    ) -> None:
         """Write this step's bounds into the family's part of the sparse QP's bounds (in place);
-        ``p0`` (n, d) starts [m], ``u_prev`` (n, d) last commands [m/s]."""
+        ``p0`` (n, d) starts [m], ``u_prev`` (n, d) last commands [m/s], ``free_m`` (S, n, d) with a
+        velocity loop its free response at each bounded position (:mod:`mpcform.mpc.loop`)."""
 
     @abstractmethod
     def dense(self) -> Array:
         """Rows (m, H d) over one drone's inputs u_0 .. u_{H-1} (the per-drone QP)."""
 
     @abstractmethod
-    def dense_bounds(self, p0: Array, u_prev: Array, inf: float) -> tuple[Array, Array]:
+    def dense_bounds(
+        self, p0: Array, u_prev: Array, inf: float, free_m: Array | None = None
+    ) -> tuple[Array, Array]:
         """Bounds (n, m) of the dense rows for each drone; ``inf`` stands for no bound."""
 
     @abstractmethod
@@ -68,7 +74,9 @@ class VelocityRows(LimitRows):
     def dense(self) -> Array:
         return np.kron(np.eye(self.horizon), self.normals)
 
-    def dense_bounds(self, p0: Array, u_prev: Array, inf: float) -> tuple[Array, Array]:
+    def dense_bounds(
+        self, p0: Array, u_prev: Array, inf: float, free_m: Array | None = None
+    ) -> tuple[Array, Array]:
         shape = (p0.shape[0], self.horizon * self.normals.shape[0])
         return np.full(shape, -inf), np.full(shape, self.h_mps)
 
@@ -96,7 +104,9 @@ class AccelerationRows(LimitRows):
         vv = np.concatenate([np.ones(nud), -np.ones(nud - n * dim)])
         return RowBlock(rr, cc, vv, np.full(nud, -self.step_mps), np.full(nud, self.step_mps))
 
-    def set_bounds(self, lower: Array, upper: Array, p0: Array, u_prev: Array) -> None:
+    def set_bounds(
+        self, lower: Array, upper: Array, p0: Array, u_prev: Array, free_m: Array | None = None
+    ) -> None:
         first = slice(0, p0.size)  # the rows of u_0 - u_{-1}
         lower[first] += u_prev.ravel()
         upper[first] += u_prev.ravel()
@@ -105,7 +115,9 @@ class AccelerationRows(LimitRows):
         h = self.horizon
         return np.kron(np.eye(h) - np.eye(h, k=-1), np.eye(self.dim))
 
-    def dense_bounds(self, p0: Array, u_prev: Array, inf: float) -> tuple[Array, Array]:
+    def dense_bounds(
+        self, p0: Array, u_prev: Array, inf: float, free_m: Array | None = None
+    ) -> tuple[Array, Array]:
         n, shape = p0.shape[0], (p0.shape[0], self.horizon, self.dim)
         da = np.full(shape, self.step_mps)
         shift = np.zeros(shape)
@@ -120,7 +132,9 @@ class AccelerationRows(LimitRows):
 class GeofenceRows(LimitRows):
     """``lo <= p0 + x_j <= hi``: the box tightened by the margin; a drone outside it may stay or
     move inwards, never further out. With braking (``kappa_s``, :mod:`mpcform.mpc.braking`) the
-    stop point ``x_H + kappa u_{H-1}`` too (the box is convex: the whole tail stays in it)."""
+    stop point ``x_H + kappa u_{H-1}`` too (the box is convex: the whole tail stays in it). With a
+    velocity ``loop`` the rows are on where it takes the drones, ``y_e``: its forced response in
+    the rows, its free response in the bounds (see :meth:`_boxes`)."""
 
     def __init__(
         self,
@@ -131,57 +145,86 @@ class GeofenceRows(LimitRows):
         max_m: Array,
         margin_m: float,
         kappa_s: float | None = None,
+        loop: VelocityLoop | None = None,
     ) -> None:
         self.dim, self.horizon, self.dt_s, self.margin_m = dim, horizon, dt_s, margin_m
         self.min_m, self.max_m = min_m, max_m  # the fence (d,) [m]
-        self.kappa_s = kappa_s
+        self.kappa_s, self.loop = kappa_s, loop
         self.steps = horizon + (kappa_s is not None)  # positions bounded: x_1 .. x_H (and the stop)
 
     def box(self, p0: Array) -> tuple[Array, Array]:
-        """Bounds (n, d) on each drone's relative positions x."""
+        """Bounds (..., n, d) on each drone's relative positions x (``p0`` (..., n, d): with a loop,
+        the starts moved by the free response)."""
         lo = np.minimum(self.min_m + self.margin_m - p0, 0.0)
         hi = np.maximum(self.max_m - self.margin_m - p0, 0.0)
         return lo, hi
 
+    def _boxes(self, p0: Array, free_m: Array | None) -> tuple[Array, Array]:
+        """Bounds (S, n, d) at each bounded position. With a loop, on the forced response: the box
+        less the free response; only at the first step (which a command barely moves) may the
+        free response carry a drone out, later the plan must bring it back."""
+        if free_m is None:
+            shape = (self.steps,) + p0.shape
+            return tuple(np.broadcast_to(b, shape) for b in self.box(p0))  # type: ignore[return-value]
+        lo, hi = (b - free_m for b in self.box(p0))
+        lo[0], hi[0] = self.box(p0 + free_m[0])
+        return lo, hi
+
     def sparse(self, lay: Layout) -> RowBlock:
         nud, nd = lay.nud, lay.n * lay.dim
-        rows, cols, vals = np.arange(nud), lay.x_cols().ravel(), np.ones(nud)
-        if self.kappa_s is not None:  # the stop points: x_H + kappa u_{H-1}
+        at = lay.y_cols() if lay.true_positions else lay.x_cols()
+        rows, cols, vals = np.arange(nud), at.ravel(), np.ones(nud)
+        if self.kappa_s is not None:  # the stop points: g (x_H + kappa u_{H-1}), g the loop's DC gain
+            gain = np.ones(nd) if self.loop is None else np.tile(self.loop.dc_gain, lay.n)
             stop = nud + np.arange(nd)
             rows = np.concatenate([rows, stop, stop])
             cols = np.concatenate([cols, lay.x_cols()[-1].ravel(), lay.u_cols()[-1].ravel()])
-            vals = np.concatenate([vals, np.ones(nd), np.full(nd, self.kappa_s)])
+            vals = np.concatenate([vals, gain, self.kappa_s * gain])
         m = self.steps * nd
         return RowBlock(rows, cols, vals, np.zeros(m), np.zeros(m))
 
-    def set_bounds(self, lower: Array, upper: Array, p0: Array, u_prev: Array) -> None:
-        lo, hi = self.box(p0)
-        shape = (self.steps,) + p0.shape
-        lower[:] = np.broadcast_to(lo, shape).ravel()
-        upper[:] = np.broadcast_to(hi, shape).ravel()
+    def set_bounds(
+        self, lower: Array, upper: Array, p0: Array, u_prev: Array, free_m: Array | None = None
+    ) -> None:
+        lo, hi = self._boxes(p0, free_m)
+        lower[:], upper[:] = lo.ravel(), hi.ravel()
 
     def dense(self) -> Array:
-        x = positions_of_inputs(self.horizon, self.dim, self.dt_s)
+        h, d = self.horizon, self.dim
+        x = positions_of_inputs(h, d, self.dt_s)
+        if self.loop is not None:  # + sum_j G_{e,j} u_j per axis
+            forced = self.loop.forced[1:]  # (H, H, d)
+            x = x + np.einsum("ejd,dc->edjc", forced, np.eye(d)).reshape(h * d, h * d)
         if self.kappa_s is None:
             return x
-        last = np.zeros((self.dim, x.shape[1]))
-        last[:, -self.dim :] = self.kappa_s * np.eye(self.dim)
-        return np.vstack([x, x[-self.dim :] + last])
+        last = np.zeros((d, h * d))
+        last[:, -d:] = self.kappa_s * np.eye(d)
+        stop = positions_of_inputs(h, d, self.dt_s)[-d:] + last
+        if self.loop is not None:
+            stop = stop * self.loop.dc_gain[:, None]
+        return np.vstack([x, stop])
 
-    def dense_bounds(self, p0: Array, u_prev: Array, inf: float) -> tuple[Array, Array]:
-        n, h = p0.shape[0], self.steps
-        lo_h, hi_h = (np.repeat(b[:, None], h, axis=1).reshape(n, -1) for b in self.box(p0))
-        return lo_h, hi_h
+    def dense_bounds(
+        self, p0: Array, u_prev: Array, inf: float, free_m: Array | None = None
+    ) -> tuple[Array, Array]:
+        n = p0.shape[0]
+        lo, hi = self._boxes(p0, free_m)
+        return lo.transpose(1, 0, 2).reshape(n, -1), hi.transpose(1, 0, 2).reshape(n, -1)
 
     def violators(self, p0: Array, u_prev: Array, u: Array, x: Array) -> Array:
+        """``x`` (H, n, d), or (H + 1, n, d) with the stop point already in it (and with a loop
+        the true positions, :meth:`mpcform.mpc.planner.MPCPlanner._true`)."""
         lo, hi = self.box(p0)
-        if self.kappa_s is not None:
+        if self.kappa_s is not None and x.shape[0] == self.horizon:
             x = np.concatenate([x, x[-1:] + self.kappa_s * u[-1:]])
         return np.asarray(((x < lo) | (x > hi)).any(axis=(0, 2)))
 
 
-def limit_rows(dim: int, dt_s: float, limits: Limits, settings: MPCSettings) -> tuple[LimitRows, ...]:
-    """The families the limits ask for, in the QP's row order: velocity, acceleration, geofence."""
+def limit_rows(
+    dim: int, dt_s: float, limits: Limits, settings: MPCSettings, loop: VelocityLoop | None = None
+) -> tuple[LimitRows, ...]:
+    """The families the limits ask for, in the QP's row order: velocity, acceleration, geofence
+    (on the ``loop``'s positions with one)."""
     h = settings.horizon
     families: list[LimitRows] = []
     if limits.v_max_mps is not None:
@@ -192,7 +235,7 @@ def limit_rows(dim: int, dt_s: float, limits: Limits, settings: MPCSettings) -> 
         fence = limits.geofence_min_m, limits.geofence_max_m
         braking = Braking.of(dt_s, limits)
         kappa = None if braking is None else braking.kappa_s
-        families.append(GeofenceRows(dim, h, dt_s, *fence, settings.margin_m, kappa))
+        families.append(GeofenceRows(dim, h, dt_s, *fence, settings.margin_m, kappa, loop))
     return tuple(families)
 
 

@@ -78,6 +78,7 @@ class PerDroneQP(CondensedDroneQP, StepSolver):
             warm_u,
             rows.single_hard,
             rows.single_on,
+            qp.free_m,
         )
 
     def solve_drones(
@@ -91,6 +92,7 @@ class PerDroneQP(CondensedDroneQP, StepSolver):
         warm_u: Array,
         hard: Array | None = None,
         on: Array | None = None,
+        free_m: Array | None = None,
     ) -> tuple[QPSolution, int]:
         """Solve every drone's QP.
 
@@ -98,11 +100,12 @@ class PerDroneQP(CondensedDroneQP, StepSolver):
         items ``singles`` (S,) drone index, ``coeffs`` (S, R, d), ``lower`` (S, R); ``warm_u``
         (H, n, d) inputs whose nearly active rows start DAQP's active set; ``hard`` (S,) the items
         whose first row is a hard no-approach row (no slack); ``on`` (S,) the items within reach
-        (the others are left out; all by default).
+        (the others are left out; all by default); ``free_m`` (S, n, d) with a velocity loop its
+        free response at each bounded position (the geofence's bounds).
         Returns the solution in the sparse QP's layout ``[u | x | s]`` over these n drones (its
         ``solve_time_s`` is the time spent inside DAQP), and the number of active rows.
         """
-        got = self.solve_each(p0, c, u_prev, singles, coeffs, lower, warm_u, hard, on)
+        got = self.solve_each(p0, c, u_prev, singles, coeffs, lower, warm_u, hard, on, free_m)
         return self.solution(got.v, got.s, got.ok, got.flags, got.lams, got.iterations, got.time_s, got.cost)
 
     def solve_each(
@@ -116,6 +119,7 @@ class PerDroneQP(CondensedDroneQP, StepSolver):
         warm_u: Array,
         hard: Array | None = None,
         on: Array | None = None,
+        free_m: Array | None = None,
     ) -> DroneSolves:
         """Every drone's solve as DAQP returns it (arguments as :meth:`solve_drones`).
 
@@ -131,7 +135,9 @@ class PerDroneQP(CondensedDroneQP, StepSolver):
             n, singles, coeffs, lower, hard, on, self._ends, self._step_m, self._reach_steps
         )
         a, lo, hi = self._buffers(n_const + int(counts.max(initial=0)))
-        b_lo, b_hi = self._fixed if self._fixed is not None else dense_bounds(self.families, p0, u_prev)
+        b_lo, b_hi = (
+            self._fixed if self._fixed is not None else dense_bounds(self.families, p0, u_prev, free_m)
+        )
         offsets = [0, *np.cumsum(counts).tolist()]
         v_out, s_out, lams = [np.empty(0)] * n, np.zeros((n, h)), [np.empty(0)] * n
         flags, ok = [0] * n, [True] * n

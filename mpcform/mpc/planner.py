@@ -44,6 +44,7 @@ from mpcform.mpc.limit_families import limit_rows, violators
 from mpcform.mpc.liveness import TieBreak
 from mpcform.mpc.loop import VelocityLoop
 from mpcform.mpc.plan import Plan, guess, rollout, warm_start
+from mpcform.mpc.prediction import Prediction
 from mpcform.mpc.problem import StepQP
 from mpcform.mpc.separation import Separation, SeparationRows
 from mpcform.mpc.settings import MPCSettings
@@ -57,6 +58,7 @@ from mpcform.world.limits import Limits
 from mpcform.world.obstacles import SphereObstacle, resolve_clearances
 
 SLACK_REPORT_M = 1e-6  # slack above this is reported
+LOWERED_TOL_M = 1e-9  # a first row lowered by more than this is reported
 
 
 class MPCPlanner(Controller):
@@ -90,11 +92,12 @@ class MPCPlanner(Controller):
         self.obstacles = resolve_clearances(tuple(obstacles), limits.d_min_m)  # unset: d_min / 2
         _check_limits(self.dim, limits, self.obstacles)
         self.loop = _check_loop(loop, self.dim, settings)
-        self._families = limit_rows(self.dim, dt_s, limits, settings)
+        self._families = limit_rows(self.dim, dt_s, limits, settings, self.loop)
         self.braking = braking = Braking.of(dt_s, limits)  # the plans' terminal condition
         self._separation = sep = Separation(self.dim, limits, settings, self.obstacles, braking)
         gain = 1.0 if self.loop is None else self.loop.speed_gain
         tail_s = 0.0 if braking is None else braking.kappa_s * gain + (self.loop.lag_s if self.loop else 0.0)
+        self._predict = Prediction(dt_s, settings.horizon, self.loop, braking)
         self._candidates = CandidateSelector(self.n, dt_s, limits, settings, self.obstacles, gain, tail_s)
         self._certifier = Certifier(dt_s, limits.v_max_mps, sep, limits.a_max_mps2, braking)
         self._loop_state: Array  # the velocity loop's state (n, d, s), set by reset
@@ -152,11 +155,11 @@ class MPCPlanner(Controller):
         targets, ff = feedforward_targets(self.reference, t_s, dt, horizon, st.feedforward)
         c = ff + k * (targets[:-1] - p0)  # u_j = c_j - k x_j is the eq. 14 rollout
         u_nom, x_nom = rollout(c, k, dt)
-        x_true = self._true(u_nom, x_nom)  # where the rollout takes the drones
+        x_true = self._predict.points(self._loop_state, u_nom, x_nom)  # where the rollout takes the drones
         nominal = Plan.from_relative(p0, u_nom, x_nom)  # the fast path's plan
         true_path = np.concatenate([p0[None], p0 + x_true])
-        about = self._guess(p0)
-        off_limits = violators(self._families, p0, self._u_prev, u_nom, x_nom)
+        about = self._predict.guess(self._plan, p0, self._loop_state)
+        off_limits = violators(self._families, p0, self._u_prev, u_nom, x_true)
         if st.fast_path and not off_limits.any() and sep.clear(about, true_path):
             return self._fast_path(nominal)
         cand = self._candidates.select(p0)
@@ -206,7 +209,12 @@ class MPCPlanner(Controller):
         warm = None
         if self._solver.warm_starts:
             warm = warm_start(self._plan, p0, u_nom, x_nom, self.braking)[:, :, drones]
-        qp = StepQP(self.n, drones, p0[drones], c[:, drones], self._u_prev[drones], sub, cand.rebuilt, warm)
+        free = (
+            None if self.loop is None else self._predict.free(self._loop_state)[1:, drones]
+        )  # the geofence's bounds
+        qp = StepQP(
+            self.n, drones, p0[drones], c[:, drones], self._u_prev[drones], sub, cand.rebuilt, warm, free
+        )
         sol, active = solver.solve(qp)
         status, solved = sol.status, None
         inside_m, inside = sep.start_shortfall(p0, rows)  # items that start too close
@@ -216,7 +224,7 @@ class MPCPlanner(Controller):
             if u0 is not None:
                 self._accept(p0, u, x)
                 self._u_prev = u0.copy()  # the command sent (the solver's tolerance off)
-                x_true = self._true(u, x)
+                x_true = self._predict.points(self._loop_state, u, x)
                 info = self._qp_info(sol, sol.x, active, drones, x_true, rows, inside_m, inside, relaxed)
                 return ControlStep(u0, info)
             status, solved = status + "; command failed certification", u[0]
@@ -227,32 +235,6 @@ class MPCPlanner(Controller):
         )
         return ControlStep(u[0].copy(), info)
 
-    def _true(self, u: Array, x: Array, loop: bool = True) -> Array:
-        """Relative positions (H, n, d) the drones reach with the inputs ``u``: the single
-        integrator's ``x``, plus the velocity loop's offsets with a loop (:mod:`mpcform.mpc.loop`;
-        not with ``loop`` False); with braking, then the stop point (:mod:`mpcform.mpc.braking`)."""
-        with_loop = loop and self.loop is not None
-        y = x + self.loop.offsets(self._loop_state, u)[1:] if with_loop else x  # type: ignore[union-attr]
-        if self.braking is None:
-            return y
-        stop = self.braking.stop(x[-1], u[-1])
-        if with_loop:  # where the loop comes to rest
-            stop = self.loop.dc_gain * stop + self.loop.at_rest(self._loop_state)  # type: ignore[union-attr]
-        return np.concatenate([y, stop[None]])
-
-    def _guess(self, p0: Array) -> Array:
-        """The guess (H + 1, n, d) the rows are linearised about (:func:`mpcform.mpc.plan.guess`);
-        with a loop, where the previous plan shifted takes the drones from ``p0`` (it meets its own
-        rows, as the single integrator's guess does)."""
-        if self.loop is None:
-            return guess(self._plan, p0, self.settings.horizon, self.braking)
-        h = self.settings.horizon
-        u = np.zeros((h, self.n, self.dim))
-        if self._plan is not None:
-            plan = self._plan
-            u = plan.shifted_inputs() if self.braking is None else self.braking.shifted(plan.inputs_mps)
-        return np.concatenate([p0[None], p0 + self._true(u, self.dt_s * np.cumsum(u, axis=0))])
-
     def _rows(self, p0: Array, about: Array, cand: Candidates) -> SeparationRows:
         """The separation rows about ``about``; with a loop, on the true positions: the QP's rows
         carry the forced response, the bounds here the free one (not in the hard no-approach rows:
@@ -260,10 +242,7 @@ class MPCPlanner(Controller):
         rows = self._separation.rows(p0, about, cand)
         if self.loop is None:
             return rows
-        free = self.loop.free(self._loop_state)
-        if self.braking is not None:  # the stop point's: where the loop comes to rest
-            free = np.concatenate([free, self.loop.at_rest(self._loop_state)[None]])
-        free = free[self._separation.ends].transpose(1, 0, 2)  # (n, R, d)
+        free = self._predict.free(self._loop_state)[self._separation.ends].transpose(1, 0, 2)  # (n, R, d)
         shift_p = np.einsum("prd,prd->pr", rows.pair_coeffs, free[rows.pairs[:, 0]] - free[rows.pairs[:, 1]])
         shift_s = np.einsum("srd,srd->sr", rows.single_coeffs, free[rows.singles])
         shift_p[rows.pair_hard, 0] = 0.0
@@ -272,12 +251,16 @@ class MPCPlanner(Controller):
 
     def _hard_first_rows(self, rows: SeparationRows) -> tuple[SeparationRows, bool]:
         """With a loop, the QP's rows with every first row hard, lowered at most to where braking
-        (the last command moved towards zero by ``a_max dt``, or zero) takes the drones
-        (:func:`hard_first_rows`); also whether a bound was lowered. Without a loop: ``rows``."""
+        (the last command moved towards zero by ``a_max dt``, or zero) or, with the braking tail,
+        the previous plan's next input takes the drones (whichever meets more: the plan's does
+        when the drones followed it, :mod:`mpcform.mpc.braking`) (:func:`hard_first_rows`); also
+        whether a bound was lowered. Without a loop: ``rows``."""
         if self.loop is None:
             return rows, False
-        brake = self._certifier.within_limits(np.zeros_like(self._u_prev), self._u_prev)  # its "decelerate"
-        return hard_first_rows(rows, (self.dt_s + self.loop.forced[1, 0]) * brake)
+        first = [self._certifier.within_limits(np.zeros_like(self._u_prev), self._u_prev)]  # "decelerate"
+        if self.braking is not None and self._plan is not None:
+            first.append(self._certifier.tail(self._plan)[0])
+        return hard_first_rows(rows, (self.dt_s + self.loop.forced[1, 0]) * np.stack(first))
 
     def _fast_path(self, nominal: Plan) -> ControlStep:
         """Accept the rollout's plan: its first input is the command."""
@@ -365,22 +348,25 @@ def _check_limits(
 
 def hard_first_rows(rows: SeparationRows, first_m: Array) -> tuple[SeparationRows, bool]:
     """``rows`` with every item's first row hard (no slack), its bound lowered to the row's value
-    at ``first_m`` (n, d) where that is lower, and whether a bound was (of an item within reach).
+    at the best of ``first_m`` (k, n, d) (or (n, d)) where that is lower, and whether a bound was
+    (of an item within reach).
 
     With a loop the first interval is mostly the free response: a slack there (one per drone and
     step) would let a drone approach one partner as far as another forces it to, and fail the
-    certification. ``first_m`` is where braking takes the drones (``x_1 + G_10 u_0``), so braking
-    meets every first row and they stay feasible.
+    certification. ``first_m`` are where feasible first commands take the drones (``x_1 + G_10
+    u_0``: braking, the previous plan's next input), so the best of them meets every first row
+    and the rows stay feasible.
     """
+    first_m = first_m.reshape((-1,) + first_m.shape[-2:])
     i, k = rows.pairs.T
-    at_p = np.einsum("pd,pd->p", rows.pair_coeffs[:, 0], first_m[i] - first_m[k])
-    at_s = np.einsum("sd,sd->s", rows.single_coeffs[:, 0], first_m[rows.singles])
+    at_p = np.einsum("pd,kpd->kp", rows.pair_coeffs[:, 0], first_m[:, i] - first_m[:, k]).max(axis=0)
+    at_s = np.einsum("sd,ksd->ks", rows.single_coeffs[:, 0], first_m[:, rows.singles]).max(axis=0)
     lower_p, lower_s = rows.pair_lower.copy(), rows.single_lower.copy()
     np.minimum(lower_p[:, 0], at_p, out=lower_p[:, 0])
     np.minimum(lower_s[:, 0], at_s, out=lower_s[:, 0])
-    relaxed = bool(
-        np.any((lower_p[:, 0] < rows.pair_lower[:, 0]) & rows.pair_on)
-        or np.any((lower_s[:, 0] < rows.single_lower[:, 0]) & rows.single_on)
+    relaxed = bool(  # (by more than rounding)
+        np.any((lower_p[:, 0] < rows.pair_lower[:, 0] - LOWERED_TOL_M) & rows.pair_on)
+        or np.any((lower_s[:, 0] < rows.single_lower[:, 0] - LOWERED_TOL_M) & rows.single_on)
     )
     hard = replace(
         rows,

@@ -109,12 +109,15 @@ class MPCQP:
         q[lay.slack_slice().stop :] = 0.0
         return q
 
-    def bounds(self, p0: Array, u_prev: Array, sep_lower: Array, sep_active: Array) -> tuple[Array, Array]:
+    def bounds(
+        self, p0: Array, u_prev: Array, sep_lower: Array, sep_active: Array, free_m: Array | None = None
+    ) -> tuple[Array, Array]:
         """Row bounds for start positions p0 (n, d), last command u_prev, separation lower bounds
-        (items, R) and the mask of items whose rows are on (items,)."""
+        (items, R), the mask of items whose rows are on (items,) and, with a velocity loop, its
+        free response ``free_m`` (S, n, d) at the positions the geofence bounds."""
         lo, hi = self.l0.copy(), self.u0.copy()
         for family, rows in self._families:
-            family.set_bounds(lo[rows], hi[rows], p0, u_prev)
+            family.set_bounds(lo[rows], hi[rows], p0, u_prev, free_m)
         sep = np.where(sep_active[:, None], sep_lower, self._off_lower)
         lo[self.sep_rows] = sep.ravel()
         return lo, hi

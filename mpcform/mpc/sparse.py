@@ -75,7 +75,7 @@ class SparseSolver(StepSolver):
         q = mpc_qp.cost_vector(qp.targets_mps)
         lower = np.concatenate([rows.pair_lower, rows.single_lower])
         on = np.concatenate([rows.pair_on, rows.single_on])
-        lo, hi = mpc_qp.bounds(qp.start_m, qp.u_prev_mps, lower, on)
+        lo, hi = mpc_qp.bounds(qp.start_m, qp.u_prev_mps, lower, on, qp.free_m)
         hard = rows.pair_hard, rows.single_hard
         a_data = mpc_qp.separation_values(rows.pair_coeffs, rows.single_coeffs, *hard)
         if self._backend_qp is not mpc_qp:
