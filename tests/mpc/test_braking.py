@@ -77,3 +77,26 @@ def test_head_on_with_braking_longer_than_the_horizon_keeps_d_min(plant: dict[st
     assert gap.min() >= 0.5 and m["max_slack"] == 0.0 and m["solver_failures"] == 0
     assert m["completion"] == 1.0
     assert np.abs(np.diff(res.commands_mps, axis=0)).max() <= 0.5 * DT + 1e-9
+
+
+@pytest.mark.slow
+def test_adversarial_family_keeps_every_limit_on_the_true_path() -> None:
+    """200 seeded runs (tests/families.py ``adversarial``): every run is refused at load with the
+    broken assumption named (at most 20 %), or keeps 0 true separation, obstacle and geofence
+    violations along the dense true path and 0 command changes beyond ``a_max dt``."""
+    from concurrent.futures import ProcessPoolExecutor
+
+    from families import adversarial_outcome
+
+    with ProcessPoolExecutor(2) as pool:
+        runs = list(pool.map(adversarial_outcome, range(200)))
+    refused = [r for r in runs if r["refused"]]
+    assert len(refused) <= 40, refused
+    breaches = [
+        r
+        for r in runs
+        if not r["refused"] and (r["separation"] or r["obstacle"] or r["geofence"] or r["jumps"])
+    ]
+    assert not breaches, breaches
+    slack = sum(r["slack_steps"] > 0 for r in runs if not r["refused"])
+    print(f"adversarial: {len(runs)} runs, {len(refused)} refused, 0 breaches, {slack} with slack")
