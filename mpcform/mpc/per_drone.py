@@ -65,10 +65,12 @@ class PerDroneQP(CondensedDroneQP, StepSolver):
         self._a, self._lo, self._hi = np.zeros((0, self._nu)), np.zeros(0), np.zeros(0)  # _buffers
 
     def solve(self, qp: StepQP) -> tuple[QPSolution, int]:
-        """Solve every drone's QP (the one-drone separation rows within reach of ``qp.rows``)."""
+        """Solve every drone's QP (the one-drone separation rows within reach of ``qp.rows``): the
+        solution in the sparse QP's layout ``[u | x | s]`` over these drones (its ``solve_time_s``
+        is the time spent inside DAQP), and the number of active rows."""
         rows = qp.rows
         warm_u = np.zeros_like(qp.targets_mps) if qp.warm is None else qp.warm[0]  # inputs only
-        return self.solve_drones(
+        got = self.solve_each(
             qp.start_m,
             qp.targets_mps,
             qp.u_prev_mps,
@@ -80,32 +82,6 @@ class PerDroneQP(CondensedDroneQP, StepSolver):
             rows.single_on,
             qp.free_m,
         )
-
-    def solve_drones(
-        self,
-        p0: Array,
-        c: Array,
-        u_prev: Array,
-        singles: Array,
-        coeffs: Array,
-        lower: Array,
-        warm_u: Array,
-        hard: Array | None = None,
-        on: Array | None = None,
-        free_m: Array | None = None,
-    ) -> tuple[QPSolution, int]:
-        """Solve every drone's QP.
-
-        ``p0`` (n, d) starts, ``c`` (H, n, d) targets, ``u_prev`` (n, d) last commands; separation
-        items ``singles`` (S,) drone index, ``coeffs`` (S, R, d), ``lower`` (S, R); ``warm_u``
-        (H, n, d) inputs whose nearly active rows start DAQP's active set; ``hard`` (S,) the items
-        whose first row is a hard no-approach row (no slack); ``on`` (S,) the items within reach
-        (the others are left out; all by default); ``free_m`` (S, n, d) with a velocity loop its
-        free response at each bounded position (the geofence's bounds).
-        Returns the solution in the sparse QP's layout ``[u | x | s]`` over these n drones (its
-        ``solve_time_s`` is the time spent inside DAQP), and the number of active rows.
-        """
-        got = self.solve_each(p0, c, u_prev, singles, coeffs, lower, warm_u, hard, on, free_m)
         return self.solution(got.v, got.s, got.ok, got.flags, got.lams, got.iterations, got.time_s, got.cost)
 
     def solve_each(
@@ -121,7 +97,14 @@ class PerDroneQP(CondensedDroneQP, StepSolver):
         on: Array | None = None,
         free_m: Array | None = None,
     ) -> DroneSolves:
-        """Every drone's solve as DAQP returns it (arguments as :meth:`solve_drones`).
+        """Every drone's solve as DAQP returns it.
+
+        ``p0`` (n, d) starts, ``c`` (H, n, d) targets, ``u_prev`` (n, d) last commands; separation
+        items ``singles`` (S,) drone index, ``coeffs`` (S, R, d), ``lower`` (S, R); ``warm_u``
+        (H, n, d) inputs whose nearly active rows start DAQP's active set; ``hard`` (S,) the items
+        whose first row is a hard no-approach row (no slack); ``on`` (S,) the items within reach
+        (the others are left out; all by default); ``free_m`` (S, n, d) with a velocity loop its
+        free response at each bounded position (the geofence's bounds).
 
         With working sets (:func:`mpcform.mpc.working_set.working_sets`), each drone first gives DAQP
         only its rows near their bound; a solve that misses any other row, or fails, is solved again
@@ -274,7 +257,7 @@ class PerDroneQP(CondensedDroneQP, StepSolver):
     ) -> Solved:
         """The drones' solves (``v`` (n, H d), slacks ``s`` (n, H), which succeeded, the backend's
         exit flags and multipliers; ``t_s`` the time in the backend; their costs) as one solution
-        ``[u | x | s]`` (as :meth:`solve_drones` returns it). Its objective is the drones' costs
+        ``[u | x | s]`` (as :meth:`solve` returns it). Its objective is the drones' costs
         summed: the sparse QP's objective at the same point (its block-diagonal cost in ``v``)."""
         h, n = self.settings.horizon, v.shape[0]
         bad = np.flatnonzero(~ok | ~np.isfinite(v).all(axis=1))

@@ -23,8 +23,13 @@ certification (the interval's true chord). The cost, and so eq. 14, stay on the 
 integrator; the tie-break turns only drones whose single-integrator rollout conflicts (an
 encounter), not a drone whose own overshoot does (the QP brakes it). The loop state is run on
 the commands sent, from rest, plus the last interval's velocity offset. Every item's first row is
-then hard, lowered at most to what braking reaches: the first interval is mostly the loop's free
-response, and a slack there would let a drone approach one partner while another forces it.
+then hard, lowered at most to what braking or the previous plan reaches: the first interval is
+mostly the loop's free response, and a slack there would let a drone approach one partner while
+another forces it.
+
+With ``a_max`` every plan ends in its braking tail (:mod:`mpcform.mpc.braking`): the separation
+and geofence rows also hold at the stop point, so the previous plan's tail stays a feasible,
+certified fallback (:mod:`mpcform.mpc.prediction` gives the positions the rows are written on).
 """
 
 from __future__ import annotations
@@ -166,7 +171,8 @@ class MPCPlanner(Controller):
         grouped = st.fast_path and st.grouping
         if grouped or st.solves_per_drone:  # no fixed pattern: rows only within reach
             cand = cand.within_reach()
-        rows = self._rows(p0, about, cand)
+        stops = true_path[-1] if self.braking is not None and st.coupling == "decoupled" else None
+        rows = self._rows(p0, about, cand, stops)
         values: Array | None = sep.single_values(x_true, rows)  # the rows at the rollout
         if st.coupling == "decoupled" and not off_limits.any() and sep.meets_joint(x_true, rows, values):
             # the rollout meets the limits and the joint rows: the decoupled rows are split about
@@ -174,7 +180,7 @@ class MPCPlanner(Controller):
             if st.fast_path:
                 return self._fast_path(nominal)
             about = true_path
-            rows, values = self._rows(p0, about, cand), None
+            rows, values = self._rows(p0, about, cand, stops), None
         conflicted = sep.conflicted(x_true, rows, values)
         if st.fast_path and not (off_limits | conflicted).any():
             return self._fast_path(nominal)
@@ -235,11 +241,11 @@ class MPCPlanner(Controller):
         )
         return ControlStep(u[0].copy(), info)
 
-    def _rows(self, p0: Array, about: Array, cand: Candidates) -> SeparationRows:
+    def _rows(self, p0: Array, about: Array, cand: Candidates, stops: Array | None = None) -> SeparationRows:
         """The separation rows about ``about``; with a loop, on the true positions: the QP's rows
         carry the forced response, the bounds here the free one (not in the hard no-approach rows:
         a drone cannot undo the velocity it has)."""
-        rows = self._separation.rows(p0, about, cand)
+        rows = self._separation.rows(p0, about, cand, stops)
         if self.loop is None:
             return rows
         free = self._predict.free(self._loop_state)[self._separation.ends].transpose(1, 0, 2)  # (n, R, d)

@@ -6,7 +6,9 @@ The exact separation is non-convex: ``||W (p_i - p_k)|| >= d_min`` for a pair (`
 obstacle o. The guess is the previous plan shifted one step. For segment j of an item's relative
 guess path, ``c`` is the unit vector towards the segment's point closest to the origin; the row
 ``c^T rel >= required + margin`` (a half-space that excludes the forbidden ball) is placed at both
-segment ends (position steps of :func:`mpcform.mpc.rows.row_ends`), with a slack:
+segment ends (position steps of :func:`mpcform.mpc.rows.row_ends`; with braking one more segment,
+from ``x_H`` to the stop point, :mod:`mpcform.mpc.braking`: the plans, guesses and positions
+given here then have that point last), with a slack:
 
 - joint pair: ``c^T W (x_{e,i} - x_{e,k}) + s_{e,i} + s_{e,k} >= d_min + margin - c^T W (p0_i - p0_k)``;
 - decoupled pair: two one-drone rows about the guess's midpoint ``m_e``, each asking for half,
@@ -108,13 +110,15 @@ class Separation:
         self.obstacles = ObstacleSeparation(obstacles, settings, steps) if obstacles else None
         self.ends, self.n_rows = row_ends(steps), row_segments(steps).shape[0]
 
-    def rows(self, p0: Array, guess: Array, cand: Candidates) -> SeparationRows:
-        """Closest-point rows about ``guess`` (H + 1, n, d) for every candidate item."""
+    def rows(self, p0: Array, guess: Array, cand: Candidates, stops: Array | None = None) -> SeparationRows:
+        """Closest-point rows about ``guess`` (H + 1, n, d) for every candidate item; ``stops`` (n, d):
+        decoupled with braking, the eq. 14 rollout's stop points (a pair whose rollout keeps its
+        stop row splits that row about their midpoint: a common speed-up moves both sides)."""
         r, no, singles = self.n_rows, np.empty(0, dtype=bool), []
         joint = empty = (np.empty((0, 2), np.intp), np.empty((0, r, self.dim)), np.empty((0, r)), no, no)
         path = np.ascontiguousarray(guess.transpose(1, 0, 2))  # (n, H + 1, d): items gather rows
         if cand.pairs.shape[0] and self.pairs is not None:
-            two, one = self.pairs.rows(p0, path, cand.pairs, cand.pair_on)
+            two, one = self.pairs.rows(p0, path, cand.pairs, cand.pair_on, stops)
             joint, singles = joint if two is None else two, [] if one is None else [one]
         if cand.obstacles.shape[0] and self.obstacles is not None:
             singles.append(self.obstacles.rows(p0, path, cand.obstacles, cand.obstacle_on))

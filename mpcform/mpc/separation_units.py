@@ -52,11 +52,14 @@ class PairSeparation:
         """``W v`` for vectors (..., d) (``v`` itself when ``W = I``)."""
         return v if self.unit_metric else v * self.metric
 
-    def rows(self, p0: Array, path: Array, pairs: Array, on: Array) -> tuple[RowPart | None, RowPart | None]:
+    def rows(
+        self, p0: Array, path: Array, pairs: Array, on: Array, stops: Array | None = None
+    ) -> tuple[RowPart | None, RowPart | None]:
         """The joint rows, or the decoupled one-drone rows (side i of every pair, then side k), of
-        ``pairs`` (P, 2) about the guess ``path`` (n, H + 1, d) (drone-major)."""
+        ``pairs`` (P, 2) about the guess ``path`` (n, H + 1, d) (drone-major); ``stops``: see
+        :meth:`mpcform.mpc.separation.Separation.rows`."""
         if not self.joint:
-            return None, self._sides(p0, path, pairs, on)
+            return None, self._sides(p0, path, pairs, on, stops)
         i, k = pairs[:, 0], pairs[:, 1]
         rel = self.scaled(path[i] - path[k])  # (P, H + 1, d), metric space
         coeffs = self.scaled(segment_normals(rel, self.segs))  # (P, R, d), world coordinates
@@ -66,10 +69,13 @@ class PairSeparation:
         lower[hard, 0] = 0.0
         return (pairs, coeffs, lower, on, hard), None
 
-    def _sides(self, p0: Array, path: Array, pairs: Array, on: Array) -> RowPart:
+    def _sides(self, p0: Array, path: Array, pairs: Array, on: Array, stops: Array | None = None) -> RowPart:
         """The decoupled rows: two per-drone rows about the guess's midpoint ``m_e`` at each row's
         position step, ``+-c^T (p0_side - m_e) >= (d_min + margin) / 2``, side i (+c) of every
-        pair, then side k (-c); built :data:`BLOCK` pairs at a time (the temporaries stay small)."""
+        pair, then side k (-c); built :data:`BLOCK` pairs at a time (the temporaries stay small).
+        With ``stops`` (n, d), the last row (the braking stop point) of a pair whose ``stops`` meet
+        it jointly is split about their midpoint instead (any common split point is safe: the two
+        sides add up to the joint row)."""
         p, r, d = pairs.shape[0], self.segs.shape[0], path.shape[2]
         coeffs, lower, hard = np.empty((2 * p, r, d)), np.empty((2 * p, r)), np.empty(p, dtype=bool)
         half = 0.5 * (self.d_min_m + self.margin_m)
@@ -86,6 +92,10 @@ class PairSeparation:
             mid = np.add(g_i, g_k, out=g_i)  # the midpoints (B, H + 1, d), in place
             mid *= 0.5
             mid = np.take(mid, self.ends, axis=1)  # at each row's position step (B, R, d)
+            if stops is not None:
+                c = coeffs[a:b, -2]  # the stop row (R - 2), W n: c^T (s_i - s_k) = n^T W (s_i - s_k)
+                keep = np.einsum("pd,pd->p", c, stops[i] - stops[k]) >= 2.0 * half
+                mid[keep, -2] = 0.5 * (stops[i[keep]] + stops[k[keep]])
             for side, out, fix in ((i, lower[a:b], np.subtract), (k, lower[p + a : p + b], np.add)):
                 gap = p0[side][:, None] - mid  # -(-c)^T gap = +c^T gap on side k
                 fix(half, np.einsum("prd,prd->pr", coeffs[a:b], gap), out=out)
