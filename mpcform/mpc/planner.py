@@ -210,7 +210,7 @@ class MPCPlanner(Controller):
         if solver is not self._solver or self._splits:  # a pair's split moves both its drones
             linked = rows.labels[(rows.labels[:, 1] >= 0) & rows.single_on]
         drones = qp_drones(bad, linked) if grouped else np.arange(self.n)
-        qp_rows, relaxed = self._hard_first_rows(rows)
+        qp_rows, relaxed = self._hard_first_rows(self._on_forced(rows))
         sub = qp_rows.subset(drones, self.n, on_only=grouped)  # grouped: the pattern follows the groups
         warm = None
         if self._solver.warm_starts:
@@ -242,10 +242,13 @@ class MPCPlanner(Controller):
         return ControlStep(u[0].copy(), info)
 
     def _rows(self, p0: Array, about: Array, cand: Candidates, stops: Array | None = None) -> SeparationRows:
-        """The separation rows about ``about``; with a loop, on the true positions: the QP's rows
-        carry the forced response, the bounds here the free one (not in the hard no-approach rows:
-        a drone cannot undo the velocity it has)."""
-        rows = self._separation.rows(p0, about, cand, stops)
+        """The separation rows about ``about`` (with a loop, on the true positions: the tests take
+        the true positions, :meth:`_on_forced` gives the QP's)."""
+        return self._separation.rows(p0, about, cand, stops)
+
+    def _on_forced(self, rows: SeparationRows) -> SeparationRows:
+        """With a loop, the QP's rows: they carry the forced response, their bounds the free one
+        (not in the hard no-approach rows: a drone cannot undo the velocity it has)."""
         if self.loop is None:
             return rows
         free = self._predict.free(self._loop_state)[self._separation.ends].transpose(1, 0, 2)  # (n, R, d)

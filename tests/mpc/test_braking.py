@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -100,3 +102,27 @@ def test_adversarial_family_keeps_every_limit_on_the_true_path() -> None:
     assert not breaches, breaches
     slack = sum(r["slack_steps"] > 0 for r in runs if not r["refused"])
     print(f"adversarial: {len(runs)} runs, {len(refused)} refused, 0 breaches, {slack} with slack")
+
+
+def test_a_corridor_under_a_lag_holds_on_the_true_path() -> None:
+    """|y| <= 0.3 m flown head-on under a 0.3 s lag: the fence rows are on the loop's positions.
+    Before, the true path reached |y| = 0.463 m and the QP went infeasible at 3.5 s."""
+    sc = headon({"kind": "lag", "time_constant": 0.3})
+    sc["limits"] = {"v_max": 3.0, "d_min": 0.5, "geofence_min": [-20.0, -0.3], "geofence_max": [20.0, 0.3]}
+    sc["simulation"]["duration"] = 8.0
+    m = run_scenario(scenario_from_dict(sc)).summary["metrics"]
+    assert m["geofence_violations_true"] == 0 and m["separation_violations_true"] == 0
+    assert m["solver_failures"] == 0 and m["slack_steps"] == 0
+
+
+FZ_S9191_125 = Path(__file__).parent / "fz_s9191_125.toml"
+
+
+@pytest.mark.slow
+def test_a_21_drone_ring_with_a_short_horizon_keeps_d_min_under_a_lag() -> None:
+    """A held-out random run (horizon 6 at dt 0.05: 0.3 s of look-ahead against 1.1 s of braking)
+    that came to 0.446 m (d_min 0.595) with 484 true violations."""
+    from mpcform.scenario.load import load_scenario
+
+    m = run_scenario(load_scenario(FZ_S9191_125)).summary["metrics"]
+    assert m["separation_violations_true"] == 0 and m["min_separation_true"] >= 0.5951389406813115

@@ -147,3 +147,21 @@ def test_fallback_keeps_within_a_max() -> None:
     u, _, note = cert.fallback(None, far, items([[0, 1]]), 4, None, u_prev)
     assert note == "decelerate"
     np.testing.assert_allclose(u[0], [[0.0, 0.3], [0.0, 0.3]])
+
+
+def test_the_free_response_exception_is_only_for_items_inside_their_distance() -> None:
+    """1.0 m apart (d_min 0.5) under a 0.2 s lag, drone 1 still flying at 12 m/s towards drone 0:
+    its free response alone ends the interval 0.056 m away. The pair starts outside its distance,
+    so no command certifies (the free-response allowance once applied to every pair: the hold
+    certified)."""
+    from mpcform.mpc.loop import VelocityLoop
+
+    lag = (np.array([[-5.0]]), np.array([5.0]), np.array([1.0]), (0, 1))
+    loop = VelocityLoop.from_groups([lag], 2, DT, 3)
+    state = loop.rest(2)
+    state[1, 0, 0] = -12.0
+    cert = certifier()
+    cert.drift = lambda u0: loop.first(state, u0)
+    p0 = np.array([[0.0, 0.0], [1.0, 0.0]])
+    assert np.linalg.norm(np.diff(p0 + loop.first(state, np.zeros((2, 2))), axis=0)) < 0.06
+    assert cert.certify(p0, np.zeros((2, 2)), items([[0, 1]])) is None
