@@ -43,7 +43,7 @@ from mpcform.control.base import Controller, ControlStep, feedforward_targets
 from mpcform.control.laws import check_gain_dt
 from mpcform.errors import ValidationError
 from mpcform.mpc.braking import Braking
-from mpcform.mpc.candidates import Candidates, CandidateSelector, qp_drones
+from mpcform.mpc.candidates import CandidateSelector, qp_drones
 from mpcform.mpc.certify import Certifier
 from mpcform.mpc.limit_families import limit_rows, violators
 from mpcform.mpc.liveness import TieBreak
@@ -172,7 +172,7 @@ class MPCPlanner(Controller):
         if grouped or st.solves_per_drone:  # no fixed pattern: rows only within reach
             cand = cand.within_reach()
         stops = true_path[-1] if self.braking is not None and st.coupling == "decoupled" else None
-        rows = self._rows(p0, about, cand, stops)
+        rows = sep.rows(p0, about, cand, stops)  # on the true positions (the QP's: on_forced)
         values: Array | None = sep.single_values(x_true, rows)  # the rows at the rollout
         if st.coupling == "decoupled" and not off_limits.any() and sep.meets_joint(x_true, rows, values):
             # the rollout meets the limits and the joint rows: the decoupled rows are split about
@@ -180,7 +180,7 @@ class MPCPlanner(Controller):
             if st.fast_path:
                 return self._fast_path(nominal)
             about = true_path
-            rows, values = self._rows(p0, about, cand, stops), None
+            rows, values = sep.rows(p0, about, cand, stops), None
         conflicted = sep.conflicted(x_true, rows, values)
         if st.fast_path and not (off_limits | conflicted).any():
             return self._fast_path(nominal)
@@ -210,7 +210,7 @@ class MPCPlanner(Controller):
         if solver is not self._solver or self._splits:  # a pair's split moves both its drones
             linked = rows.labels[(rows.labels[:, 1] >= 0) & rows.single_on]
         drones = qp_drones(bad, linked) if grouped else np.arange(self.n)
-        qp_rows, relaxed = self._hard_first_rows(self._on_forced(rows))
+        qp_rows, relaxed = self._hard_first_rows(self._predict.on_forced(rows, self._loop_state, sep.ends))
         sub = qp_rows.subset(drones, self.n, on_only=grouped)  # grouped: the pattern follows the groups
         warm = None
         if self._solver.warm_starts:
@@ -240,23 +240,6 @@ class MPCPlanner(Controller):
             "fallback", sol, f"{status}; {note}", 0, 0, inside_m, inside, self._tie_break, relaxed
         )
         return ControlStep(u[0].copy(), info)
-
-    def _rows(self, p0: Array, about: Array, cand: Candidates, stops: Array | None = None) -> SeparationRows:
-        """The separation rows about ``about`` (with a loop, on the true positions: the tests take
-        the true positions, :meth:`_on_forced` gives the QP's)."""
-        return self._separation.rows(p0, about, cand, stops)
-
-    def _on_forced(self, rows: SeparationRows) -> SeparationRows:
-        """With a loop, the QP's rows: they carry the forced response, their bounds the free one
-        (not in the hard no-approach rows: a drone cannot undo the velocity it has)."""
-        if self.loop is None:
-            return rows
-        free = self._predict.free(self._loop_state)[self._separation.ends].transpose(1, 0, 2)  # (n, R, d)
-        shift_p = np.einsum("prd,prd->pr", rows.pair_coeffs, free[rows.pairs[:, 0]] - free[rows.pairs[:, 1]])
-        shift_s = np.einsum("srd,srd->sr", rows.single_coeffs, free[rows.singles])
-        shift_p[rows.pair_hard, 0] = 0.0
-        shift_s[rows.single_hard, 0] = 0.0
-        return replace(rows, pair_lower=rows.pair_lower - shift_p, single_lower=rows.single_lower - shift_s)
 
     def _hard_first_rows(self, rows: SeparationRows) -> tuple[SeparationRows, bool]:
         """With a loop, the QP's rows with every first row hard, lowered at most to where braking

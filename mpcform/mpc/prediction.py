@@ -3,12 +3,15 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
 from mpcform._validate import Array
 from mpcform.mpc.braking import Braking
 from mpcform.mpc.loop import VelocityLoop
 from mpcform.mpc.plan import Plan, guess
+from mpcform.mpc.separation import SeparationRows
 
 
 class Prediction:
@@ -48,3 +51,16 @@ class Prediction:
         if plan is not None:
             u = plan.shifted_inputs() if self.braking is None else self.braking.shifted(plan.inputs_mps)
         return np.concatenate([p0[None], p0 + self.points(state, u, self.dt_s * np.cumsum(u, axis=0))])
+
+    def on_forced(self, rows: SeparationRows, state: Array, ends: Array) -> SeparationRows:
+        """With a loop, the QP's rows from ``rows`` on the true positions (at position steps
+        ``ends``): the QP's rows carry the forced response, so the free one moves into their bounds
+        (not in the hard no-approach rows: a drone cannot undo the velocity it has)."""
+        if self.loop is None:
+            return rows
+        free = self.free(state)[ends].transpose(1, 0, 2)  # (n, R, d)
+        shift_p = np.einsum("prd,prd->pr", rows.pair_coeffs, free[rows.pairs[:, 0]] - free[rows.pairs[:, 1]])
+        shift_s = np.einsum("srd,srd->sr", rows.single_coeffs, free[rows.singles])
+        shift_p[rows.pair_hard, 0] = 0.0
+        shift_s[rows.single_hard, 0] = 0.0
+        return replace(rows, pair_lower=rows.pair_lower - shift_p, single_lower=rows.single_lower - shift_s)

@@ -427,9 +427,9 @@ def test_with_a_loop_every_first_row_is_hard_and_braking_meets_it(coupling: str)
     planner._u_prev = np.array([[0.8, 0.0], [0.0, 0.0], [-0.8, 0.0]])
     planner._loop_state[..., 0] = planner._u_prev  # the lag's velocity
     cand = planner._candidates.select(p0)
-    rows = planner._on_forced(
-        planner._rows(p0, planner._predict.guess(planner._plan, p0, planner._loop_state), cand)
-    )
+    state = planner._loop_state
+    rows = planner._separation.rows(p0, planner._predict.guess(planner._plan, p0, state), cand)
+    rows = planner._predict.on_forced(rows, state, planner._separation.ends)
     hard, relaxed = planner._hard_first_rows(rows)
     assert hard.pair_hard.all() and hard.single_hard.all() and relaxed
     assert np.all(hard.pair_lower <= rows.pair_lower) and np.all(hard.single_lower <= rows.single_lower)
