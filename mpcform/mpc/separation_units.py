@@ -92,16 +92,30 @@ class PairSeparation:
             mid = np.add(g_i, g_k, out=g_i)  # the midpoints (B, H + 1, d), in place
             mid *= 0.5
             mid = np.take(mid, self.ends, axis=1)  # at each row's position step (B, R, d)
-            if stops is not None:
-                c = coeffs[a:b, -2]  # the stop row (R - 2), W n: c^T (s_i - s_k) = n^T W (s_i - s_k)
-                keep = np.einsum("pd,pd->p", c, stops[i] - stops[k]) >= 2.0 * half
-                mid[keep, -2] = 0.5 * (stops[i[keep]] + stops[k[keep]])
+            if stops is not None:  # the stop row (R - 2): its split towards the rollout's
+                g_stop = path[i, -1], path[k, -1]  # (g_i holds the midpoints now)
+                mid[:, -2] = self._stop_split(coeffs[a:b, -2], *g_stop, mid[:, -2], stops[i], stops[k])
             for side, out, fix in ((i, lower[a:b], np.subtract), (k, lower[p + a : p + b], np.add)):
                 gap = p0[side][:, None] - mid  # -(-c)^T gap = +c^T gap on side k
                 fix(half, np.einsum("prd,prd->pr", coeffs[a:b], gap), out=out)
         hard2 = np.concatenate([hard, hard])
         lower[hard2, 0] = 0.0
         return np.concatenate([pairs, pairs[:, ::-1]]), coeffs, lower, np.concatenate([on, on]), hard2
+
+    def _stop_split(self, c: Array, g_i: Array, g_k: Array, m_g: Array, s_i: Array, s_k: Array) -> Array:
+        """Split points (B, d) of the stop rows ``c`` (B, d): from the guess's midpoint ``m_g`` as
+        far towards the rollout's stop points' ``(s_i + s_k) / 2`` as the guess's stop points
+        ``g_i``, ``g_k`` still meet both sides (so the shifted plan stays feasible: a formation
+        speeding up together moves both sides of a split, and the guess's midpoint would throttle
+        it). Any common split point is safe: the two sides add up to the joint row."""
+        half = 0.5 * (self.d_min_m + self.margin_m)
+        step = 0.5 * (s_i + s_k) - m_g
+        along, at = np.einsum("pd,pd->p", c, step), np.einsum("pd,pd->p", c, m_g)
+        room = np.where(
+            along > 0, np.einsum("pd,pd->p", c, g_i) - half - at, np.einsum("pd,pd->p", c, g_k) + half - at
+        )
+        t = np.clip(np.divide(room, along, out=np.ones_like(along), where=along != 0), 0.0, 1.0)
+        return m_g + t[:, None] * step
 
     def doubtful(self, p0: Array, spread: Array) -> tuple[Array, Array, Array]:
         """The pairs ``(i, k)`` (of the neighbour list) the spread bound of :meth:`Separation.clear`
@@ -149,6 +163,21 @@ class ObstacleSeparation:
         lower = required[:, None] + self.margin_m - np.einsum("ord,od->or", coeffs, p0[drone] - center)
         lower[hard, 0] = 0.0
         return np.column_stack([drone, -1 - ob]), coeffs, lower, on, hard
+
+    def _stop_split(self, c: Array, g_i: Array, g_k: Array, m_g: Array, s_i: Array, s_k: Array) -> Array:
+        """Split points (B, d) of the stop rows ``c`` (B, d): from the guess's midpoint ``m_g`` as
+        far towards the rollout's stop points' ``(s_i + s_k) / 2`` as the guess's stop points
+        ``g_i``, ``g_k`` still meet both sides (so the shifted plan stays feasible: a formation
+        speeding up together moves both sides of a split, and the guess's midpoint would throttle
+        it). Any common split point is safe: the two sides add up to the joint row."""
+        half = 0.5 * (self.d_min_m + self.margin_m)
+        step = 0.5 * (s_i + s_k) - m_g
+        along, at = np.einsum("pd,pd->p", c, step), np.einsum("pd,pd->p", c, m_g)
+        room = np.where(
+            along > 0, np.einsum("pd,pd->p", c, g_i) - half - at, np.einsum("pd,pd->p", c, g_k) + half - at
+        )
+        t = np.clip(np.divide(room, along, out=np.ones_like(along), where=along != 0), 0.0, 1.0)
+        return m_g + t[:, None] * step
 
     def doubtful(self, p0: Array, spread: Array) -> tuple[Array, Array, Array]:
         """The ``(drone, obstacle)`` items that the per-drone spread bound (see
