@@ -58,10 +58,11 @@ class Braking:
     kappa_s: float
 
     @classmethod
-    def of(cls, dt_s: float, limits: Limits) -> Braking | None:
-        """The braking of ``limits`` (None without a finite ``a_max`` and ``v_max``)."""
+    def of(cls, dt_s: float, limits: Limits, enabled: bool = True) -> Braking | None:
+        """The braking of ``limits`` (None without a finite ``a_max`` and ``v_max``, or when
+        ``enabled`` is False: :attr:`mpcform.mpc.settings.MPCSettings.braking`)."""
         a_max, v_max = limits.a_max_mps2, limits.v_max_mps
-        if a_max is None or v_max is None or not np.isfinite(a_max):
+        if not enabled or a_max is None or v_max is None or not np.isfinite(a_max):
             return None
         rho = max(0.0, 1.0 - a_max * dt_s / v_max)
         return cls(dt_s, rho, dt_s * rho / (1.0 - rho))

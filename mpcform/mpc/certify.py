@@ -55,6 +55,9 @@ class Certifier:
         self.a_step_mps = None if a_max_mps2 is None else a_max_mps2 * dt_s  # largest change per step
         self.drift: Callable[[Array], Array] | None = None
         """With a velocity loop: where a command takes the drones beyond ``dt u`` in the interval."""
+        self.floor_command: Array | None = None
+        """With a velocity loop: the braking command (n, d) whose chord sets the floor (the one the
+        QP's first rows are lowered to, :func:`mpcform.mpc.planner.hard_first_rows`; None: the hold)."""
 
     def certify(self, p0: Array, u: Array, cand: Candidates, u_prev: Array | None = None) -> Array | None:
         """The command ``u`` (n, d) scaled into the ball (with ``u_prev`` and ``a_max``, first moved
@@ -65,18 +68,17 @@ class Certifier:
 
     def safe(self, p0: Array, u0: Array, cand: Candidates) -> bool:
         """Along ``p0 -> p0 + dt u0`` (with a loop, its true chord) no item within reach gets
-        closer than required; an item already inside its distance no closer than it was, or (with
-        a loop) than the hold's chord takes it (up to :data:`CERTIFY_TOL_M`)."""
+        closer than required, or than it already was, or (with a loop) than the braking command's
+        chord takes it (:attr:`floor_command`) (up to :data:`CERTIFY_TOL_M`)."""
         p1, free = p0 + self.dt_s * u0, None
         if self.drift is not None:
             p1 = p1 + self.drift(u0)
-            free = self.separation.first_segment(p0, p0 + self.drift(np.zeros_like(u0)), cand)
+            brake = np.zeros_like(u0) if self.floor_command is None else self.floor_command
+            free = self.separation.first_segment(p0, p0 + self.dt_s * brake + self.drift(brake), cand)
         for j, (a, b, required) in enumerate(self.separation.first_segment(p0, p1, cand)):
-            start = vector_norms(a)
-            floor = np.minimum(required, start)
-            if free is not None:  # an item inside its distance: as close as the free response takes it
-                held = np.minimum(floor, vector_norms(closest_on_segments(a, free[j][1])))
-                floor = np.where(start < required, held, floor)
+            floor = np.minimum(required, vector_norms(a))
+            if free is not None:  # as close as the free response takes it
+                floor = np.minimum(floor, vector_norms(closest_on_segments(a, free[j][1])))
             if np.any(vector_norms(closest_on_segments(a, b)) < floor - CERTIFY_TOL_M):
                 return False
         return True

@@ -60,7 +60,7 @@ class CondensedDroneQP:
         rows = [family.dense() for family in families]  # constant rows over u; bounds per drone from _bounds
         self._const_v = (np.vstack(rows) if rows else np.zeros((0, nu))) @ self._m_inv
         self._const_pm = np.vstack([self._const_v, -self._const_v])  # one-sided: lower, then upper
-        self.braking = braking = Braking.of(dt_s, limits)
+        self.braking = braking = Braking.of(dt_s, limits, settings.braking)
         self._steps = steps = separation_steps(h, braking)  # the rows' positions: x_1..x_H (and the stop)
         self._ends = row_ends(steps)
         table = position_table(self._m_inv, h, dim, dt_s, loop).reshape(h, h, dim)  # x_e per axis

@@ -233,7 +233,7 @@ def limit_rows(
         families.append(AccelerationRows(dim, h, dt_s, limits.a_max_mps2))
     if limits.geofence_min_m is not None and limits.geofence_max_m is not None:
         fence = limits.geofence_min_m, limits.geofence_max_m
-        braking = Braking.of(dt_s, limits)
+        braking = Braking.of(dt_s, limits, settings.braking)
         kappa = None if braking is None else braking.kappa_s
         families.append(GeofenceRows(dim, h, dt_s, *fence, settings.margin_m, kappa, loop))
     return tuple(families)

@@ -98,7 +98,7 @@ class MPCPlanner(Controller):
         _check_limits(self.dim, limits, self.obstacles)
         self.loop = _check_loop(loop, self.dim, settings)
         self._families = limit_rows(self.dim, dt_s, limits, settings, self.loop)
-        self.braking = braking = Braking.of(dt_s, limits)  # the plans' terminal condition
+        self.braking = braking = Braking.of(dt_s, limits, settings.braking)  # the plans' terminal condition
         self._separation = sep = Separation(self.dim, limits, settings, self.obstacles, braking)
         gain = 1.0 if self.loop is None else self.loop.speed_gain
         tail_s = 0.0 if braking is None else braking.kappa_s * gain + (self.loop.lag_s if self.loop else 0.0)
@@ -244,15 +244,17 @@ class MPCPlanner(Controller):
     def _hard_first_rows(self, rows: SeparationRows) -> tuple[SeparationRows, bool]:
         """With a loop, the QP's rows with every first row hard, lowered at most to where braking
         (the last command moved towards zero by ``a_max dt``, or zero) or, with the braking tail,
-        the previous plan's next input takes the drones (whichever meets more: the plan's does
+        the previous plan's next input takes the drones (whichever needs less lowering: the plan's
         when the drones followed it, :mod:`mpcform.mpc.braking`) (:func:`hard_first_rows`); also
         whether a bound was lowered. Without a loop: ``rows``."""
         if self.loop is None:
             return rows, False
         first = [self._certifier.within_limits(np.zeros_like(self._u_prev), self._u_prev)]  # "decelerate"
         if self.braking is not None and self._plan is not None:
-            first.append(self._certifier.tail(self._plan)[0])
-        return hard_first_rows(rows, (self.dt_s + self.loop.forced[1, 0]) * np.stack(first))
+            first.append(self._certifier.within_limits(self._certifier.tail(self._plan)[0], self._u_prev))
+        hard, relaxed, best = hard_first_rows(rows, (self.dt_s + self.loop.forced[1, 0]) * np.stack(first))
+        self._certifier.floor_command = first[best]  # the rows allow its chord, so must the certifier
+        return hard, relaxed
 
     def _fast_path(self, nominal: Plan) -> ControlStep:
         """Accept the rollout's plan: its first input is the command."""
@@ -338,24 +340,28 @@ def _check_limits(
         )
 
 
-def hard_first_rows(rows: SeparationRows, first_m: Array) -> tuple[SeparationRows, bool]:
+def hard_first_rows(rows: SeparationRows, first_m: Array) -> tuple[SeparationRows, bool, int]:
     """``rows`` with every item's first row hard (no slack), its bound lowered to the row's value
-    at the best of ``first_m`` (k, n, d) (or (n, d)) where that is lower, and whether a bound was
-    (of an item within reach).
+    at the best of ``first_m`` (k, n, d) (or (n, d)) where that is lower, whether a bound was
+    (of an item within reach), and the best's index.
 
     With a loop the first interval is mostly the free response: a slack there (one per drone and
     step) would let a drone approach one partner as far as another forces it to, and fail the
     certification. ``first_m`` are where feasible first commands take the drones (``x_1 + G_10
-    u_0``: braking, the previous plan's next input), so the best of them meets every first row
-    and the rows stay feasible.
+    u_0``: braking, the previous plan's next input); the best is the one that needs the least
+    lowering, and every row is lowered to that same one, so it meets them all and the rows stay
+    feasible (a row-wise best of several would not be met by any one of them).
     """
     first_m = first_m.reshape((-1,) + first_m.shape[-2:])
     i, k = rows.pairs.T
-    at_p = np.einsum("pd,kpd->kp", rows.pair_coeffs[:, 0], first_m[:, i] - first_m[:, k]).max(axis=0)
-    at_s = np.einsum("sd,ksd->ks", rows.single_coeffs[:, 0], first_m[:, rows.singles]).max(axis=0)
+    at_p = np.einsum("pd,kpd->kp", rows.pair_coeffs[:, 0], first_m[:, i] - first_m[:, k])
+    at_s = np.einsum("sd,ksd->ks", rows.single_coeffs[:, 0], first_m[:, rows.singles])
+    short = np.maximum(rows.pair_lower[:, 0] - at_p, 0.0).sum(axis=1)
+    short += np.maximum(rows.single_lower[:, 0] - at_s, 0.0).sum(axis=1)
+    best = int(np.argmin(short))
     lower_p, lower_s = rows.pair_lower.copy(), rows.single_lower.copy()
-    np.minimum(lower_p[:, 0], at_p, out=lower_p[:, 0])
-    np.minimum(lower_s[:, 0], at_s, out=lower_s[:, 0])
+    np.minimum(lower_p[:, 0], at_p[best], out=lower_p[:, 0])
+    np.minimum(lower_s[:, 0], at_s[best], out=lower_s[:, 0])
     relaxed = bool(  # (by more than rounding)
         np.any((lower_p[:, 0] < rows.pair_lower[:, 0] - LOWERED_TOL_M) & rows.pair_on)
         or np.any((lower_s[:, 0] < rows.single_lower[:, 0] - LOWERED_TOL_M) & rows.single_on)
@@ -367,4 +373,4 @@ def hard_first_rows(rows: SeparationRows, first_m: Array) -> tuple[SeparationRow
         pair_hard=np.ones_like(rows.pair_hard),
         single_hard=np.ones_like(rows.single_hard),
     )
-    return hard, relaxed
+    return hard, relaxed, best

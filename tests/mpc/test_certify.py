@@ -149,11 +149,11 @@ def test_fallback_keeps_within_a_max() -> None:
     np.testing.assert_allclose(u[0], [[0.0, 0.3], [0.0, 0.3]])
 
 
-def test_the_free_response_exception_is_only_for_items_inside_their_distance() -> None:
+def test_the_floor_is_the_braking_commands_chord() -> None:
     """1.0 m apart (d_min 0.5) under a 0.2 s lag, drone 1 still flying at 12 m/s towards drone 0:
-    its free response alone ends the interval 0.056 m away. The pair starts outside its distance,
-    so no command certifies (the free-response allowance once applied to every pair: the hold
-    certified)."""
+    no command keeps the pair apart in this interval. The floor is where the braking command the
+    QP's first rows are lowered to (``floor_command``) takes the pair: that command certifies, one
+    that closes the pair beyond it does not, and a floor command that brakes less lowers the floor."""
     from mpcform.mpc.loop import VelocityLoop
 
     lag = (np.array([[-5.0]]), np.array([5.0]), np.array([1.0]), (0, 1))
@@ -163,5 +163,9 @@ def test_the_free_response_exception_is_only_for_items_inside_their_distance() -
     cert = certifier()
     cert.drift = lambda u0: loop.first(state, u0)
     p0 = np.array([[0.0, 0.0], [1.0, 0.0]])
-    assert np.linalg.norm(np.diff(p0 + loop.first(state, np.zeros((2, 2))), axis=0)) < 0.06
-    assert cert.certify(p0, np.zeros((2, 2)), items([[0, 1]])) is None
+    brake = np.array([[0.0, 0.0], [-1.0, 0.0]])
+    cert.floor_command = brake
+    assert cert.certify(p0, brake, items([[0, 1]])) is not None
+    assert cert.certify(p0, brake + [[0.5, 0.0], [0.0, 0.0]], items([[0, 1]])) is None
+    cert.floor_command = brake + [[0.5, 0.0], [0.0, 0.0]]
+    assert cert.certify(p0, brake + [[0.5, 0.0], [0.0, 0.0]], items([[0, 1]])) is not None
