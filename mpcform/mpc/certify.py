@@ -121,6 +121,17 @@ class Certifier:
         hold = np.zeros((horizon,) + p0.shape)
         return hold, hold, "hold"
 
+    def braking_plans(self, plan: Plan | None, u_prev: Array, horizon: int) -> list[Array]:
+        """Plans (H, n, d) that need no solve, from the last command ``u_prev``: decelerating by
+        ``a_max dt`` per step to a hold, then with braking the previous ``plan``'s tail (its first
+        input moved within ``a_max dt`` of ``u_prev``)."""
+        plans = [self.hold_after(self.within_limits(np.zeros_like(u_prev), u_prev), horizon, "")[0]]
+        if self.braking is not None and plan is not None:
+            tail = self.tail(plan)
+            tail[0] = self.within_limits(tail[0], u_prev)
+            plans.append(tail)
+        return plans
+
     def tail(self, plan: Plan) -> Array:
         """The previous plan's inputs shifted one step, its last braking (:mod:`mpcform.mpc.braking`;
         without braking, slowing by ``a_max dt`` or, without ``a_max``, holding)."""

@@ -276,3 +276,19 @@ def velocity_set(dim: int, settings: MPCSettings, v_max_mps: float) -> tuple[Arr
         return np.vstack([np.eye(dim), -np.eye(dim)]), v_max_mps / np.sqrt(dim)
     normals, h_rel = velocity_polytope(dim, settings.facets)
     return normals, h_rel * v_max_mps
+
+
+def admitted(families: tuple[LimitRows, ...], p0: Array, free_m: Array, path_m: Array) -> Array:
+    """The free response ``free_m`` (S, n, d) the geofence's bounds are written with, moved so that
+    from the second position on they admit ``path_m`` (S, n, d), where a plan that needs no solve
+    takes the drones (:meth:`mpcform.mpc.certify.Certifier.braking_plans`): wind the loop did not
+    foresee can leave no plan inside the fence, and the QP stays feasible (as the first rows, whose
+    bounds are lowered to the same plan). Without a geofence: ``free_m``."""
+    fence = next((f for f in families if isinstance(f, GeofenceRows)), None)
+    if fence is None:
+        return free_m
+    lo, hi = fence.box(p0)
+    out = free_m.copy()
+    forced = path_m[1:] - free_m[1:]
+    out[1:] = np.clip(free_m[1:], lo - forced, hi - forced)
+    return out

@@ -45,7 +45,7 @@ from mpcform.errors import ValidationError
 from mpcform.mpc.braking import Braking
 from mpcform.mpc.candidates import CandidateSelector, qp_drones
 from mpcform.mpc.certify import Certifier
-from mpcform.mpc.limit_families import limit_rows, violators
+from mpcform.mpc.limit_families import admitted, limit_rows, violators
 from mpcform.mpc.liveness import TieBreak
 from mpcform.mpc.loop import VelocityLoop
 from mpcform.mpc.plan import Plan, guess, rollout, warm_start
@@ -195,7 +195,7 @@ class MPCPlanner(Controller):
                 else sep.rows(p0, guess(self._plan, p0, horizon, self.braking), cand)
             )
             x_enc = x_nom if self.braking is None else np.concatenate([x_nom, x_nom[-1:]])
-            turned = conflicted & sep.conflicted(x_enc, plain)
+            turned = conflicted & sep.conflicted(x_enc, plain, tail=False)
         speed, step = None, 0.0  # with a_max: how fast the drones fly, how much that changes per step
         if self.limits.a_max_mps2 is not None:
             speed = np.sqrt(np.einsum("nd,nd->n", self._u_prev, self._u_prev))
@@ -210,18 +210,23 @@ class MPCPlanner(Controller):
         if solver is not self._solver or self._splits:  # a pair's split moves both its drones
             linked = rows.labels[(rows.labels[:, 1] >= 0) & rows.single_on]
         drones = qp_drones(bad, linked) if grouped else np.arange(self.n)
-        qp_rows, relaxed = self._hard_first_rows(self._predict.on_forced(rows, self._loop_state, sep.ends))
+        qp_rows, relaxed, brake = self._hard_first_rows(
+            self._predict.on_forced(rows, self._loop_state, sep.ends)
+        )
         sub = qp_rows.subset(drones, self.n, on_only=grouped)  # grouped: the pattern follows the groups
         warm = None
         if self._solver.warm_starts:
             warm = warm_start(self._plan, p0, u_nom, x_nom, self.braking)[:, :, drones]
-        free = (
-            None if self.loop is None else self._predict.free(self._loop_state)[1:, drones]
-        )  # the geofence's bounds
-        qp = StepQP(
-            self.n, drones, p0[drones], c[:, drones], self._u_prev[drones], sub, cand.rebuilt, warm, free
-        )
+        free = None if self.loop is None else self._predict.free(self._loop_state)[1:]  # the geofence's
+        qp = StepQP(self.n, drones, p0[drones], c[:, drones], self._u_prev[drones], sub, cand.rebuilt, warm)
+        if free is not None:
+            qp = replace(qp, free_m=free[:, drones])
         sol, active = solver.solve(qp)
+        if not sol.success and brake is not None:  # wind left no plan in the fence: admit the braking one
+            path = self._predict.points(self._loop_state, brake, dt * np.cumsum(brake, axis=0))
+            wider = admitted(self._families, p0, free, path)
+            if not np.array_equal(wider, free):
+                sol, active = solver.solve(replace(qp, free_m=wider[:, drones]))
         status, solved = sol.status, None
         inside_m, inside = sep.start_shortfall(p0, rows)  # items that start too close
         if sol.success and sol.x is not None:
@@ -241,20 +246,19 @@ class MPCPlanner(Controller):
         )
         return ControlStep(u[0].copy(), info)
 
-    def _hard_first_rows(self, rows: SeparationRows) -> tuple[SeparationRows, bool]:
+    def _hard_first_rows(self, rows: SeparationRows) -> tuple[SeparationRows, bool, Array | None]:
         """With a loop, the QP's rows with every first row hard, lowered at most to where braking
         (the last command moved towards zero by ``a_max dt``, or zero) or, with the braking tail,
         the previous plan's next input takes the drones (whichever needs less lowering: the plan's
         when the drones followed it, :mod:`mpcform.mpc.braking`) (:func:`hard_first_rows`); also
-        whether a bound was lowered. Without a loop: ``rows``."""
+        whether a bound was lowered, and that braking plan (H, n, d). Without a loop: ``rows``."""
         if self.loop is None:
-            return rows, False
-        first = [self._certifier.within_limits(np.zeros_like(self._u_prev), self._u_prev)]  # "decelerate"
-        if self.braking is not None and self._plan is not None:
-            first.append(self._certifier.within_limits(self._certifier.tail(self._plan)[0], self._u_prev))
-        hard, relaxed, best = hard_first_rows(rows, (self.dt_s + self.loop.forced[1, 0]) * np.stack(first))
+            return rows, False, None
+        plans = self._certifier.braking_plans(self._plan, self._u_prev, self.settings.horizon)
+        first = np.stack([u[0] for u in plans])
+        hard, relaxed, best = hard_first_rows(rows, (self.dt_s + self.loop.forced[1, 0]) * first)
         self._certifier.floor_command = first[best]  # the rows allow its chord, so must the certifier
-        return hard, relaxed
+        return hard, relaxed, plans[best]
 
     def _fast_path(self, nominal: Plan) -> ControlStep:
         """Accept the rollout's plan: its first input is the command."""

@@ -190,25 +190,31 @@ class Separation:
         joint = value[first] + value[pair & ~first]  # both sides in the candidates' pair order
         return bool(joint.min(initial=np.inf) >= 0.0 and value[~pair].min(initial=np.inf) >= 0.0)
 
-    def conflicted(self, x: Array, rows: SeparationRows, values: Array | None = None) -> Array:
+    def conflicted(
+        self, x: Array, rows: SeparationRows, values: Array | None = None, tail: bool = True
+    ) -> Array:
         """Drones (n,) of the items whose rows positions ``x`` (H, n, d) miss (an obstacle item
-        names only its drone); ``values``: :meth:`single_values` when known."""
-        least, labels = self._least(x, rows, values)
+        names only its drone); ``values``: :meth:`single_values` when known; ``tail`` False: not
+        counting the braking tail's rows (its last two), only the horizon's."""
+        least, labels = self._least(x, rows, values, None if tail or self.braking is None else -2)
         labels = labels[least < 0.0]
         conflicted = np.zeros(x.shape[1], dtype=bool)
         conflicted[labels[labels >= 0]] = True
         return conflicted
 
-    def _least(self, x: Array, rows: SeparationRows, values: Array | None) -> tuple[Array, Array]:
-        """Each item's least row value ``c^T x_e - b`` (inf out of reach), joint pairs then
-        one-drone items, and their labels."""
-        single = (self.single_values(x, rows) if values is None else values).min(axis=1, initial=np.inf)
+    def _least(
+        self, x: Array, rows: SeparationRows, values: Array | None, last: int | None = None
+    ) -> tuple[Array, Array]:
+        """Each item's least row value ``c^T x_e - b`` (inf out of reach) over its rows up to
+        ``last`` (exclusive; None: all), joint pairs then one-drone items, and their labels."""
+        single_values = self.single_values(x, rows) if values is None else values
+        single = single_values[:, :last].min(axis=1, initial=np.inf)
         pair = np.full(rows.pairs.shape[0], np.inf)
         if rows.pair_on.any():
             xe = x[self.ends - 1]  # (R, n, d)
             rel = xe[:, rows.pairs[:, 0]] - xe[:, rows.pairs[:, 1]]
             value = np.einsum("mrd,rmd->mr", rows.pair_coeffs, rel) - rows.pair_lower
-            pair[rows.pair_on] = value[rows.pair_on].min(axis=1)
+            pair[rows.pair_on] = value[rows.pair_on, :last].min(axis=1)
         return np.concatenate([pair, single]), np.concatenate([rows.pairs, rows.labels])
 
     def blocked_targets(self, targets: Array) -> Array:
