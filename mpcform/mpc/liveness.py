@@ -9,7 +9,10 @@ Stall detection: a conflicted drone is *stalled* at a step when it is away from 
 (farther than :data:`ARRIVED_M`) and its last step moved it towards its target by less than
 :data:`STALL_FRACTION` of its wish's step (``|c_0| dt``; with ``a_max``, of the step it can reach,
 ``min(|c_0|, |u_prev| + sqrt(d) a_max dt) dt``: a drone speeding up from rest is not stalled):
-whether its reference stands still or runs away from it, it is not following.
+whether its reference stands still or runs away from it, it is not following. With ``a_max``
+a drone whose step was at least :data:`MOVING_FRACTION` of its wish's is not stalled either: it
+is being deflected, not stuck (a ring circulating before its centre, slowed by its braking
+tails, counted its sideways flight as stalls, and the escalated turns flew it outwards).
 
 Resolution (the right-hand rule escalated, with hysteresis): each stalled step raises the drone's
 turn by :data:`STALL_GROWTH` of the base angle (with ``a_max``, by no more than the drone can turn
@@ -49,6 +52,7 @@ from mpcform._validate import Array
 
 STALL_FRACTION = 0.02  # progress per step below this fraction of the wish's step counts as stalled
 STALL_GROWTH = 0.2  # the tie-break angle grows by this fraction of itself per stalled step
+MOVING_FRACTION = 0.25  # with a_max, a drone whose step is this fraction of its wish's is moving
 ARRIVED_M = 1e-2  # a drone this close to its target is not stalled [m]
 FULL_TURN_RAD = 2.0 * np.pi
 BACKOFF_M = 1.0  # how much farther from its target than at its first stall a drone may back off [m]
@@ -118,7 +122,8 @@ class TieBreak:
             wish = np.minimum(wish, speed_mps + step_mps)
             turn_rad = STALL_GROWTH * self.angle_rad * speed_mps  # velocity change of a growth step
             np.divide(step_mps, turn_rad, out=growth, where=turn_rad > step_mps)
-        angles = self.angles(conflicted, wish, p0, to_target, started, growth)
+        moving = 0.0 if speed_mps is None else MOVING_FRACTION
+        angles = self.angles(conflicted, wish, p0, to_target, started, growth, moving)
         return np.where(conflicted[:, None], turn_about_z(c, -self.sense * angles), c)
 
     def angles(
@@ -129,9 +134,11 @@ class TieBreak:
         to_target: Array,
         started: bool,
         growth: Array | float = 1.0,
+        moving: float = 0.0,
     ) -> Array:
         """Turn angle per drone [rad] (``wish`` (n,): the speed [m/s] a step is measured against,
-        ``growth`` (n,): how much of a growth step a stalled step counts): the base angle, grown
+        ``growth`` (n,): how much of a growth step a stalled step counts; ``moving``: a drone whose
+        step was at least this fraction of its wish's is not stalled): the base angle, grown
         by ``STALL_GROWTH`` of it for every stalled step in the drone's current conflict, modulo a
         full turn (a base angle of a quarter turn or more is kept as it is); a drone past its
         back-off budget starts afresh. Counts this step (see the module docstring)."""
@@ -142,6 +149,8 @@ class TieBreak:
             towards = np.divide(to_target, distance[:, None], out=np.zeros_like(p0), where=far)
             progress = np.einsum("nd,nd->n", p0 - self.last_m, towards)
             stalled &= progress < STALL_FRACTION * wish * self.dt_s
+            if moving > 0.0:  # a drone deflected at speed is not stuck
+                stalled &= norms(p0 - self.last_m) < moving * wish * self.dt_s
         else:
             stalled[:] = False  # no step made yet: nothing has stalled
         self.last_m = p0.copy()

@@ -195,7 +195,8 @@ class Separation:
     ) -> Array:
         """Drones (n,) of the items whose rows positions ``x`` (H, n, d) miss (an obstacle item
         names only its drone); ``values``: :meth:`single_values` when known; ``tail`` False: not
-        counting the braking tail's rows (its last two), only the horizon's."""
+        counting the braking tail's rows (its last two) of drone pairs, only the horizon's (an
+        obstacle's tail still counts: a drone turns early for a sphere it would have to brake for)."""
         least, labels = self._least(x, rows, values, None if tail or self.braking is None else -2)
         labels = labels[least < 0.0]
         conflicted = np.zeros(x.shape[1], dtype=bool)
@@ -205,10 +206,14 @@ class Separation:
     def _least(
         self, x: Array, rows: SeparationRows, values: Array | None, last: int | None = None
     ) -> tuple[Array, Array]:
-        """Each item's least row value ``c^T x_e - b`` (inf out of reach) over its rows up to
-        ``last`` (exclusive; None: all), joint pairs then one-drone items, and their labels."""
+        """Each item's least row value ``c^T x_e - b`` (inf out of reach) over its rows (a drone
+        pair's up to ``last``, exclusive; None: all), joint pairs then one-drone items, and their
+        labels."""
         single_values = self.single_values(x, rows) if values is None else values
-        single = single_values[:, :last].min(axis=1, initial=np.inf)
+        single = single_values.min(axis=1, initial=np.inf)
+        if last is not None:  # split pairs' rows up to last; obstacles' all
+            split = rows.labels[:, 1] >= 0
+            single[split] = single_values[split, :last].min(axis=1, initial=np.inf)
         pair = np.full(rows.pairs.shape[0], np.inf)
         if rows.pair_on.any():
             xe = x[self.ends - 1]  # (R, n, d)

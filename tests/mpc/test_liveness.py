@@ -8,6 +8,7 @@ import pytest
 
 from mpcform.mpc.liveness import (
     BACKOFF_M,
+    MOVING_FRACTION,
     STALL_FRACTION,
     STALL_GROWTH,
     TieBreak,
@@ -94,6 +95,20 @@ def test_with_a_max_the_turn_grows_no_faster_than_the_drone_can_follow_it() -> N
         )
         p = p + [[0.004, 0.0]]
     assert tb.stalled[0] == 0
+
+
+def test_with_a_max_a_drone_deflected_at_speed_is_not_stalled() -> None:
+    """Flying across the way to its target at its speed (no progress) is not a stall under a_max
+    (a circulating ring is not stuck); a step below MOVING_FRACTION of the wish's is, and without
+    a_max any step without progress is."""
+    c, conflicted, to_target = np.tile([1.0, 0.0], (3, 1, 1)), np.array([True]), np.array([[10.0, 0.0]])
+    for side_m, a_max, stalled in ((0.1, True, 0.0), (0.05 * MOVING_FRACTION, True, 4.0), (0.1, False, 4.0)):
+        tb, p = TieBreak(1, 0.5, dt_s=0.1), np.zeros((1, 2))
+        for _ in range(5):
+            speed = {"speed_mps": np.ones(1), "step_mps": 1.0} if a_max else {}
+            tb.turn(c, conflicted, p, to_target - p, True, **speed)
+            p = p + [[0.0, side_m]]
+        assert tb.stalled[0] == stalled, (side_m, a_max)
 
 
 def test_a_stuck_drone_sweeps_the_full_circle_and_backing_off_starts_afresh() -> None:
