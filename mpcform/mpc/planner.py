@@ -222,7 +222,7 @@ class MPCPlanner(Controller):
         if free is not None:
             qp = replace(qp, free_m=free[:, drones])
         sol, active = solver.solve(qp)
-        if not sol.success and brake is not None:  # wind left no plan in the fence: admit the braking one
+        if not sol.success and brake is not None and free is not None:  # wind left no plan in the fence
             path = self._predict.points(self._loop_state, brake, dt * np.cumsum(brake, axis=0))
             wider = admitted(self._families, p0, free, path)
             if not np.array_equal(wider, free):

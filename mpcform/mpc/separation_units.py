@@ -164,21 +164,6 @@ class ObstacleSeparation:
         lower[hard, 0] = 0.0
         return np.column_stack([drone, -1 - ob]), coeffs, lower, on, hard
 
-    def _stop_split(self, c: Array, g_i: Array, g_k: Array, m_g: Array, s_i: Array, s_k: Array) -> Array:
-        """Split points (B, d) of the stop rows ``c`` (B, d): from the guess's midpoint ``m_g`` as
-        far towards the rollout's stop points' ``(s_i + s_k) / 2`` as the guess's stop points
-        ``g_i``, ``g_k`` still meet both sides (so the shifted plan stays feasible: a formation
-        speeding up together moves both sides of a split, and the guess's midpoint would throttle
-        it). Any common split point is safe: the two sides add up to the joint row."""
-        half = 0.5 * (self.d_min_m + self.margin_m)
-        step = 0.5 * (s_i + s_k) - m_g
-        along, at = np.einsum("pd,pd->p", c, step), np.einsum("pd,pd->p", c, m_g)
-        room = np.where(
-            along > 0, np.einsum("pd,pd->p", c, g_i) - half - at, np.einsum("pd,pd->p", c, g_k) + half - at
-        )
-        t = np.clip(np.divide(room, along, out=np.ones_like(along), where=along != 0), 0.0, 1.0)
-        return m_g + t[:, None] * step
-
     def doubtful(self, p0: Array, spread: Array) -> tuple[Array, Array, Array]:
         """The ``(drone, obstacle)`` items that the per-drone spread bound (see
         :meth:`Separation.clear`) leaves in doubt, and by how much they clear it (negative)."""

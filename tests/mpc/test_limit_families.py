@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-import scipy.sparse as sp
+from helpers import dense_matrix, z_of
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.spatial import HalfspaceIntersection
@@ -19,22 +19,11 @@ from mpcform.mpc.limit_families import (
     velocity_set,
     violators,
 )
-from mpcform.mpc.rows import Layout, RowBlock, positions_of_inputs
+from mpcform.mpc.rows import Layout, positions_of_inputs
 from mpcform.mpc.settings import MPCSettings
 from mpcform.world.limits import Limits
 
 DT = 0.1
-
-
-def dense_matrix(block: RowBlock, lay: Layout) -> np.ndarray:
-    """The block's rows as a dense matrix over all of z (duplicate entries summed, as in CSC)."""
-    m = block.lower.shape[0]
-    vals = np.broadcast_to(block.vals, block.rows.shape).ravel()
-    return sp.coo_matrix((vals, (block.rows.ravel(), block.cols.ravel())), shape=(m, lay.n_var)).toarray()
-
-
-def z_of(lay: Layout, u: np.ndarray, x: np.ndarray, s: np.ndarray) -> np.ndarray:
-    return np.concatenate([u.ravel(), x.ravel(), s.ravel()])
 
 
 def _families() -> tuple[LimitRows, ...]:

@@ -4,11 +4,10 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-import scipy.sparse as sp
+from helpers import dense_matrix, z_of
 
 from mpcform.mpc.rows import (
     Layout,
-    RowBlock,
     dynamics_rows,
     positions_of_inputs,
     row_ends,
@@ -19,17 +18,6 @@ from mpcform.mpc.rows import (
 )
 
 DT = 0.1
-
-
-def dense_matrix(block: RowBlock, lay: Layout) -> np.ndarray:
-    """The block's rows as a dense matrix over all of z (duplicate entries summed, as in CSC)."""
-    m = block.lower.shape[0]
-    vals = np.broadcast_to(block.vals, block.rows.shape).ravel()
-    return sp.coo_matrix((vals, (block.rows.ravel(), block.cols.ravel())), shape=(m, lay.n_var)).toarray()
-
-
-def z_of(lay: Layout, u: np.ndarray, x: np.ndarray, s: np.ndarray) -> np.ndarray:
-    return np.concatenate([u.ravel(), x.ravel(), s.ravel()])
 
 
 def test_layout_columns() -> None:
