@@ -15,8 +15,8 @@ import pytest
 from families import swap_planar, swap_spatial
 
 from mpcform.run.runner import run_scenario
-from mpcform.sim.completion import completion_metrics
 from mpcform.scenario.load import scenario_from_dict
+from mpcform.sim.completion import completion_metrics
 
 pytestmark = pytest.mark.slow
 SCENARIOS = Path(__file__).resolve().parents[1] / "scenarios"
