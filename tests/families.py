@@ -221,3 +221,104 @@ def outcome(sc: dict[str, Any], tol_m: float = 0.1) -> dict[str, Any]:
         gaps = [np.linalg.norm(closest_on_segments(a - c, b - c), axis=1) for a, b in steps]
         out["obstacle_violations"] += int((np.array(gaps) < req - tol).sum())
     return out
+
+
+def adversarial(rng: np.random.Generator, index: int) -> dict[str, Any]:
+    """2-4 drones head-on or crossing, planar or spatial, with hard limits: ``a_max`` 0.2-2 m/s^2,
+    ``v_max`` 0.5-8 m/s (a quadrotor's 0.3-1.5, below its valid speed), horizon 5-30 at dt
+    0.05-0.1, a lag up to 0.3 s, a second-order loop or the quadrotor in gusts at their bound, and a
+    corridor (geofence) or a sphere in the way. The braking terminal condition's family
+    (:mod:`mpcform.mpc.braking`)."""
+    dim, n = int(rng.choice([2, 3])), int(rng.integers(2, 5))
+    d_min, dt = float(rng.uniform(0.3, 0.6)), float(rng.choice([0.05, 0.1]))
+    plant_kind = str(rng.choice(["lag", "lag", "second_order", "quadrotor"]))
+    v_max = float(
+        rng.uniform(0.3, 1.5) if plant_kind == "quadrotor" else np.exp(rng.uniform(np.log(0.5), np.log(8.0)))
+    )
+    radius = max(2.0, 1.5 * v_max)
+    angle = 2 * np.pi * np.arange(n) / n + rng.uniform(0, 2 * np.pi)
+    start = np.zeros((n, dim))
+    start[:, 0], start[:, 1] = radius * np.cos(angle), radius * np.sin(angle)
+    crossing = rng.random() < 0.5  # else head-on: every drone to its antipode
+    goal = np.roll(start, 1, axis=0) if crossing else -start
+    if dim == 3:
+        start[:, 2], goal[:, 2] = 1.5, 1.5 + rng.uniform(-0.5, 0.5)
+    sc: dict[str, Any] = {
+        "version": 1,
+        "name": f"adversarial_{index}",
+        "dim": dim,
+        "seed": int(rng.integers(1000)),
+        "template": {"shape": "explicit", "offsets": (goal - goal.mean(axis=0)).tolist()},
+        "reference": {
+            "kind": "constant",
+            "centroid": goal.mean(axis=0).tolist(),
+            "rotation": 0.0 if dim == 2 else [0.0, 0.0, 0.0],
+            "scale": 1.0,
+        },
+        "limits": {"v_max": v_max, "d_min": d_min, "a_max": float(rng.uniform(0.2, 2.0))},
+        "controller": {
+            "kind": "mpc",
+            "gain": float(rng.uniform(1.0, 3.0)),
+            "horizon": int(rng.integers(5, 31)),
+            "coupling": str(rng.choice(["joint", "decoupled"])),
+        },
+        "simulation": {"dt": dt},
+    }
+    if plant_kind == "lag":
+        sc["plant"] = {"kind": "lag", "time_constant": float(rng.uniform(0.05, 0.3))}
+    elif plant_kind == "second_order":
+        sc["plant"] = {"kind": "second_order", "damping": float(rng.uniform(0.6, 1.0))}
+    else:
+        wind = np.zeros(dim)
+        wind[0] = rng.uniform(0.0, 0.5)
+        std = float(rng.uniform(0.05, 0.2))
+        sc["plant"] = {
+            "kind": "quadrotor",
+            "wind": {"mean": wind.tolist(), "gust_std": std, "gust_bound": std},
+        }
+    extra = rng.random()
+    if extra < 0.3:  # a corridor around the swap: the drones must pass inside it
+        half = radius + 1.0
+        lo, hi = [-half] * dim, [half] * dim
+        lo[1], hi[1] = -radius - 0.3, radius + 0.3
+        if dim == 3:
+            lo[2], hi[2] = 0.5, 3.0
+        sc["limits"] |= {"geofence_min": lo, "geofence_max": hi}
+    elif extra < 0.6:  # a sphere off the centre, in the way of some of the paths
+        c = np.zeros(dim)
+        c[:2] = rng.uniform(-0.3, 0.3, 2) * radius
+        if dim == 3:
+            c[2] = 1.5
+        sc["obstacles"] = [{"center": c.tolist(), "radius": float(rng.uniform(0.2, 0.5))}]
+    return _finish(sc, start, goal)
+
+
+ADVERSARIAL_SEED = 20261203
+
+
+def adversarial_outcome(index: int) -> dict[str, Any]:
+    """Run adversarial scenario ``index``: ``refused`` (the error's text) or its breaches along the
+    dense true path (pairs closer than d_min, drones inside an obstacle's clearance or outside the
+    fence, commands changing by more than ``a_max dt + 1e-9``), with its slack and lowered steps."""
+    from mpcform.errors import MPCFormError
+    from mpcform.run.runner import run_scenario
+    from mpcform.scenario.load import scenario_from_dict
+
+    sc = adversarial(np.random.default_rng([ADVERSARIAL_SEED, index]), index)
+    try:
+        scenario = scenario_from_dict(sc)
+    except MPCFormError as exc:
+        return {"index": index, "refused": str(exc)}
+    run = run_scenario(scenario)
+    m, u = run.summary["metrics"], run.simulation.commands_mps
+    steps = np.abs(np.diff(np.concatenate([np.zeros((1,) + u.shape[1:]), u]), axis=0))
+    return {
+        "index": index,
+        "refused": None,
+        "separation": m["separation_violations_true"],
+        "obstacle": m.get("obstacle_violations_true") or 0,
+        "geofence": m["geofence_violations_true"],
+        "jumps": int((steps > sc["limits"]["a_max"] * sc["simulation"]["dt"] + 1e-9).sum()),
+        "slack_steps": m["slack_steps"],
+        "lowered": m["lowered_first_rows"],
+    }

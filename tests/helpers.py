@@ -1,12 +1,15 @@
-"""Random templates and formation states shared by the test modules (seeded numpy)."""
+"""Random templates and formation states, and QP row blocks as dense matrices, shared by the test
+modules (seeded numpy)."""
 
 from __future__ import annotations
 
 import numpy as np
+import scipy.sparse as sp
 from scipy.spatial.transform import Rotation
 
 from mpcform.formation.state import FormationState
 from mpcform.formation.template import Template
+from mpcform.mpc.rows import Layout, RowBlock
 from mpcform.reference.base import ConstantReference
 
 
@@ -63,3 +66,14 @@ def crowd_and_swap(dim: int = 2) -> list[tuple[ConstantReference, np.ndarray]]:
     ring = Template.polygon(4, 1.5)
     swap = ConstantReference(ring, FormationState.from_param([0.0, 0.0]))
     return [(crowd, crowd_start + rng.normal(0, 0.01, (6, 2))), (swap, -ring.offsets.copy())]
+
+
+def dense_matrix(block: RowBlock, lay: Layout) -> np.ndarray:
+    """The block's rows as a dense matrix over all of z (duplicate entries summed, as in CSC)."""
+    m = block.lower.shape[0]
+    vals = np.broadcast_to(block.vals, block.rows.shape).ravel()
+    return sp.coo_matrix((vals, (block.rows.ravel(), block.cols.ravel())), shape=(m, lay.n_var)).toarray()
+
+
+def z_of(lay: Layout, u: np.ndarray, x: np.ndarray, s: np.ndarray) -> np.ndarray:
+    return np.concatenate([u.ravel(), x.ravel(), s.ravel()])

@@ -16,6 +16,7 @@ from families import swap_planar, swap_spatial
 
 from mpcform.run.runner import run_scenario
 from mpcform.scenario.load import scenario_from_dict
+from mpcform.sim.completion import completion_metrics
 
 pytestmark = pytest.mark.slow
 SCENARIOS = Path(__file__).resolve().parents[1] / "scenarios"
@@ -33,6 +34,12 @@ try:
     FLIGHT = True
 except metadata.PackageNotFoundError:
     FLIGHT = False
+
+
+GUST_TOL_M = 0.25
+"""Completion's tolerance in the gusts (0.1 m in calm air): they push an arrived formation around
+its goal; formation_flight_100's 100 drones, all within 0.1 m at 21 s, had 49-100 % within 0.1 m
+over its last 4 s (up to 0.18 m off), whatever the tie-break did."""
 
 
 def with_plant(data: dict, plant: dict) -> dict:
@@ -53,17 +60,17 @@ def check(data: dict, open_reason: str | None = None) -> dict:
     assert m["geofence_violations_true"] == 0
     assert m["speed_violations"] == 0  # the certified command; the true speed may exceed v_max
     assert m["max_speed_true"] is not None
+    completion = m["completion"]
+    if "wind" in data["plant"]:  # arrived to within the gusts' push (see GUST_TOL_M)
+        completion = completion_metrics(run.simulation, GUST_TOL_M)["completion"]
     if open_reason is None:
-        assert m["completion"] == 1.0, (m["completion"], m["stalled_drones"])
+        assert completion == 1.0, (m["completion"], completion, m["stalled_drones"])
     else:
-        assert m["completion"] < 1.0, f"completes now: remove it from the open list ({open_reason})"
+        assert completion < 1.0, f"completes now: remove it from the open list ({open_reason})"
     return m
 
 
-OPEN_RANDOM = {  # safe, but not every drone arrives within the generator's duration
-    9: "quadrotor in gusts: completion 0.65 at 29.7 s (20 planar drones, joint): the ring's tie-break "
-    "takes until 34 s in the gusts (16 s in calm air); safe (0.583 m)",
-}
+OPEN_RANDOM: dict[int, str] = {}  # safe, but not every drone arrives within the duration (none now)
 
 
 @pytest.mark.parametrize(("name", "plant"), [(n, p) for n in MPC for p in sorted(PLANTS)])

@@ -45,7 +45,8 @@ class CandidateSelector:
     Reach over the horizon: a pair within ``d_min kappa + margin + 2 v_max H dt`` (both drones
     fly towards each other), a drone within ``margin + v_max H dt`` of its required distance from
     an obstacle's centre; ``v_max`` times ``speed_gain`` for a velocity loop that overshoots
-    (:attr:`mpcform.mpc.loop.VelocityLoop.speed_gain`). The obstacles' clearances are resolved
+    (:attr:`mpcform.mpc.loop.VelocityLoop.speed_gain`); plus ``v_max tail_s`` past the horizon (the
+    braking tail to the stop point, :mod:`mpcform.mpc.braking`). The obstacles' clearances are resolved
     (:func:`mpcform.world.obstacles.resolve_clearances`).
     """
 
@@ -57,9 +58,11 @@ class CandidateSelector:
         settings: MPCSettings,
         obstacles: tuple[SphereObstacle, ...],
         speed_gain: float = 1.0,
+        tail_s: float = 0.0,
     ) -> None:
         self.n, self.limits, self.settings = n, limits, settings
-        self.travel_m = (limits.v_max_mps or 0.0) * speed_gain * settings.horizon * dt_s  # farthest [m]
+        look_ahead_s = speed_gain * settings.horizon * dt_s + tail_s
+        self.travel_m = (limits.v_max_mps or 0.0) * look_ahead_s  # farthest [m]
         self.ob_center_m, self.ob_required_m = obstacle_arrays(obstacles)
         self.reset()
 

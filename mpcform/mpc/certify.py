@@ -10,13 +10,16 @@ the interval no command undoes the velocity a drone already has (the QP's no-app
 out that free response too).
 
 The fallback, when a solve fails or does not certify, is the first of these
-that certifies: the previous plan's next input; the solved command scaled back (1, 1/2, 1/4,
-1/8: certification is monotone in the scale, the scaled segment being part of the full one); a
-separating command (each drone inside a required distance flies away from its close partners and
-obstacles, scaled back the same way); with ``a_max``, a step that decelerates within
-``a_max dt``; a hold (which never brings two drones closer). With ``a_max`` every candidate is
-first moved into the box ``|u - u_prev| <= a_max dt`` (a plant margin assumes command changes
-within it). So the planning loop never raises or returns NaN for a solver's failure, and a pair
+that certifies: the previous plan's next input (with braking, the plan's braking tail,
+:mod:`mpcform.mpc.braking`, which the theorem there certifies when the drones followed the plan);
+the solved command scaled back (1, 1/2, 1/4, 1/8: certification is monotone in the scale, the
+scaled segment being part of the full one); a separating command (each drone inside a required
+distance flies away from its close partners and obstacles, scaled back the same way); with
+``a_max``, a step that decelerates within ``a_max dt``; a hold (which never brings two drones
+closer). With ``a_max`` every candidate is first moved into the box ``|u - u_prev| <= a_max dt``
+(a plant margin assumes command changes within it), and when none certifies the last resort is
+the plan's tail (or a decelerating step), reported uncertified, never a jump to a hold. So the
+planning loop never raises or returns NaN for a solver's failure, and a pair
 that starts too close separates even when the QP fails.
 """
 
@@ -29,6 +32,7 @@ import numpy as np
 from mpcform._validate import Array
 from mpcform.control.laws import saturate
 from mpcform.formation.geometry import closest_on_segments, vector_norms
+from mpcform.mpc.braking import Braking
 from mpcform.mpc.candidates import Candidates
 from mpcform.mpc.plan import Plan
 from mpcform.mpc.separation import Separation
@@ -40,26 +44,37 @@ class Certifier:
     """Certifies first inputs against the ball of radius ``v_max_mps`` and the ``separation`` items."""
 
     def __init__(
-        self, dt_s: float, v_max_mps: float | None, separation: Separation, a_max_mps2: float | None = None
+        self,
+        dt_s: float,
+        v_max_mps: float | None,
+        separation: Separation,
+        a_max_mps2: float | None = None,
+        braking: Braking | None = None,
     ) -> None:
-        self.dt_s, self.v_max_mps, self.separation = dt_s, v_max_mps, separation
+        self.dt_s, self.v_max_mps, self.separation, self.braking = dt_s, v_max_mps, separation, braking
         self.a_step_mps = None if a_max_mps2 is None else a_max_mps2 * dt_s  # largest change per step
         self.drift: Callable[[Array], Array] | None = None
         """With a velocity loop: where a command takes the drones beyond ``dt u`` in the interval."""
+        self.floor_command: Array | None = None
+        """With a velocity loop: the braking command (n, d) whose chord sets the floor (the one the
+        QP's first rows are lowered to, :func:`mpcform.mpc.planner.hard_first_rows`; None: the hold)."""
 
-    def certify(self, p0: Array, u: Array, cand: Candidates) -> Array | None:
-        """The command ``u`` (n, d) scaled into the ball, if it is safe from ``p0`` (n, d), else None."""
-        u0 = saturate(u, self.v_max_mps)
+    def certify(self, p0: Array, u: Array, cand: Candidates, u_prev: Array | None = None) -> Array | None:
+        """The command ``u`` (n, d) scaled into the ball (with ``u_prev`` and ``a_max``, first moved
+        into the box ``|u - u_prev| <= a_max dt``: the solver's tolerance off), if it is safe from
+        ``p0`` (n, d), else None."""
+        u0 = saturate(u, self.v_max_mps) if u_prev is None else self.within_limits(u, u_prev)
         return u0 if self.safe(p0, u0, cand) else None
 
     def safe(self, p0: Array, u0: Array, cand: Candidates) -> bool:
         """Along ``p0 -> p0 + dt u0`` (with a loop, its true chord) no item within reach gets
-        closer than required, or than it already was, or (with a loop) than the hold's chord takes
-        it (up to :data:`CERTIFY_TOL_M`)."""
+        closer than required, or than it already was, or (with a loop) than the braking command's
+        chord takes it (:attr:`floor_command`) (up to :data:`CERTIFY_TOL_M`)."""
         p1, free = p0 + self.dt_s * u0, None
         if self.drift is not None:
             p1 = p1 + self.drift(u0)
-            free = self.separation.first_segment(p0, p0 + self.drift(np.zeros_like(u0)), cand)
+            brake = np.zeros_like(u0) if self.floor_command is None else self.floor_command
+            free = self.separation.first_segment(p0, p0 + self.dt_s * brake + self.drift(brake), cand)
         for j, (a, b, required) in enumerate(self.separation.first_segment(p0, p1, cand)):
             floor = np.minimum(required, vector_norms(a))
             if free is not None:  # as close as the free response takes it
@@ -82,7 +97,7 @@ class Certifier:
         back, a decelerating step (with ``a_max``), else a hold. ``u_prev`` (n, d): the last command."""
         prev = np.zeros_like(p0) if u_prev is None else u_prev
         if plan is not None:
-            u_plan = plan.shifted_inputs(self.a_step_mps)
+            u_plan = self.tail(plan)
             u_plan[0] = self.within_limits(u_plan[0], prev)
             if u_plan[0].any() and self.safe(p0, u_plan[0], cand):  # (a hold comes last)
                 return u_plan, self.dt_s * np.cumsum(u_plan, axis=0), "previous plan"
@@ -99,8 +114,30 @@ class Certifier:
             u0 = self.within_limits(np.zeros_like(prev), prev)
             if self.safe(p0, u0, cand):
                 return self.hold_after(u0, horizon, "decelerate")
+            if plan is not None:  # no jump the drones cannot follow: the plan's braking tail
+                u_plan = self.tail(plan)
+                return u_plan, self.dt_s * np.cumsum(u_plan, axis=0), "previous plan (uncertified)"
+            return self.hold_after(u0, horizon, "decelerate (uncertified)")
         hold = np.zeros((horizon,) + p0.shape)
         return hold, hold, "hold"
+
+    def braking_plans(self, plan: Plan | None, u_prev: Array, horizon: int) -> list[Array]:
+        """Plans (H, n, d) that need no solve, from the last command ``u_prev``: decelerating by
+        ``a_max dt`` per step to a hold, then with braking the previous ``plan``'s tail (its first
+        input moved within ``a_max dt`` of ``u_prev``)."""
+        plans = [self.hold_after(self.within_limits(np.zeros_like(u_prev), u_prev), horizon, "")[0]]
+        if self.braking is not None and plan is not None:
+            tail = self.tail(plan)
+            tail[0] = self.within_limits(tail[0], u_prev)
+            plans.append(tail)
+        return plans
+
+    def tail(self, plan: Plan) -> Array:
+        """The previous plan's inputs shifted one step, its last braking (:mod:`mpcform.mpc.braking`;
+        without braking, slowing by ``a_max dt`` or, without ``a_max``, holding)."""
+        if self.braking is not None:
+            return self.braking.shifted(plan.inputs_mps)
+        return plan.shifted_inputs(self.a_step_mps)
 
     def within_limits(self, u: Array, u_prev: Array) -> Array:
         """``u`` (n, d) moved into the box ``|u - u_prev| <= a_max dt`` (with ``a_max``), then

@@ -24,9 +24,11 @@ import numpy as np
 from scipy.linalg import solve_triangular
 
 from mpcform._validate import Array
+from mpcform.mpc.braking import Braking, separation_steps
 from mpcform.mpc.drone_solves import DroneSolves
+from mpcform.mpc.limit_families import LimitRows
 from mpcform.mpc.loop import VelocityLoop
-from mpcform.mpc.rows import LimitRows, position_table, positions_of_inputs, row_ends
+from mpcform.mpc.rows import position_table, positions_of_inputs, row_ends
 from mpcform.mpc.sensitivity import Sensitivity, drone_sensitivity
 from mpcform.mpc.settings import MPCSettings
 from mpcform.solvers.dense import NO_BOUND
@@ -58,10 +60,22 @@ class CondensedDroneQP:
         rows = [family.dense() for family in families]  # constant rows over u; bounds per drone from _bounds
         self._const_v = (np.vstack(rows) if rows else np.zeros((0, nu))) @ self._m_inv
         self._const_pm = np.vstack([self._const_v, -self._const_v])  # one-sided: lower, then upper
-        self._ends = row_ends(h)
-        self._table = position_table(self._m_inv, h, dim, dt_s, loop).reshape(h, h, dim)  # x_e per axis
-        self._x_of_v = (self._table[:, None] * np.eye(dim)[:, None, :]).reshape(nu, nu)  # x_1..x_H from v
+        self.braking = braking = Braking.of(dt_s, limits, settings.braking)
+        self._steps = steps = separation_steps(h, braking)  # the rows' positions: x_1..x_H (and the stop)
+        self._ends = row_ends(steps)
+        table = position_table(self._m_inv, h, dim, dt_s, loop).reshape(h, h, dim)  # x_e per axis
         reach = 1.0 if loop is None else loop.reach_factor  # the longest step, with a loop's response
+        self._reach_steps = self._ends.astype(float)  # how many longest steps each row's position is away
+        if braking is not None:  # the stop point g (x_H + kappa u_{H-1}) (:mod:`mpcform.mpc.braking`)
+            plain = position_table(self._m_inv, h, dim, dt_s, None).reshape(h, h, dim)
+            u_last = self._m_inv.reshape(h, dim, h, dim)[-1, 0, :, 0]  # u_{H-1} per axis, over v
+            gain = np.ones(dim) if loop is None else loop.dc_gain
+            stop = (plain[-1] + braking.kappa_s * u_last[:, None]) * gain
+            table = np.concatenate([table, stop[None]])
+            self._reach_steps[self._ends == steps] = h + braking.kappa_s * float(gain.max()) / dt_s
+        self._table = table
+        # positions x_1..x_H (and the stop) from v, drone by drone ((S d, H d))
+        self._x_of_v = (table[:, None] * np.eye(dim)[:, None, :]).reshape(steps * dim, nu)
         self._step_m = None if limits.v_max_mps is None else limits.v_max_mps * dt_s * reach
         self._eye = np.eye(nu)
         w2 = max(settings.slack_quadratic, MIN_SLACK_QUADRATIC)
@@ -96,7 +110,7 @@ class CondensedDroneQP:
         row tolerance up with it (measured: 3.5e-8 misses at ``w2 = 0``)."""
         h, n_const = self.settings.horizon, a.shape[0] - end.shape[0]
         a_s = np.zeros((a.shape[0], h))
-        a_s[n_const + np.arange(end.shape[0]), end - 1] = soft
+        a_s[n_const + np.arange(end.shape[0]), np.minimum(end, h) - 1] = soft  # the stop: step H's slack
         f = np.concatenate([np.full(h, self.settings.slack_weight), f_v])
         upper, lower = np.concatenate([np.full(h, NO_BOUND), hi]), np.concatenate([np.zeros(h), lo])
         return self._hess_soft, f, np.hstack([a_s, a]), upper, lower
@@ -111,11 +125,14 @@ class CondensedDroneQP:
         return drone_sensitivity(lam, solves.v[i], self._const_pm, sep, lo, hi, solves.sep_lo[first:last])
 
 
-def dense_bounds(families: tuple[LimitRows, ...], p0: Array, u_prev: Array) -> tuple[Array, Array]:
+def dense_bounds(
+    families: tuple[LimitRows, ...], p0: Array, u_prev: Array, free_m: Array | None = None
+) -> tuple[Array, Array]:
     """Lower and upper bounds (n, rows) of the constant rows of ``families`` for each drone (starts
-    ``p0``, last commands ``u_prev`` (n, d)); :data:`~mpcform.solvers.dense.NO_BOUND` where a row has none."""
+    ``p0``, last commands ``u_prev`` (n, d), with a loop its free response ``free_m`` (S, n, d));
+    :data:`~mpcform.solvers.dense.NO_BOUND` where a row has none."""
     n = p0.shape[0]
     if not families:
         return np.zeros((n, 0)), np.zeros((n, 0))
-    lo, hi = zip(*(family.dense_bounds(p0, u_prev, NO_BOUND) for family in families), strict=True)
+    lo, hi = zip(*(family.dense_bounds(p0, u_prev, NO_BOUND, free_m) for family in families), strict=True)
     return np.hstack(lo), np.hstack(hi)

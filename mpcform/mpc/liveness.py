@@ -7,11 +7,17 @@ turns in balance, and a drone pressed against a sphere has its turned wish pushe
 
 Stall detection: a conflicted drone is *stalled* at a step when it is away from its target
 (farther than :data:`ARRIVED_M`) and its last step moved it towards its target by less than
-:data:`STALL_FRACTION` of its wish's step (``|c_0| dt``): whether its reference stands still or
-runs away from it, it is not following.
+:data:`STALL_FRACTION` of its wish's step (``|c_0| dt``; with ``a_max``, of the step it can reach,
+``min(|c_0|, |u_prev| + sqrt(d) a_max dt) dt``: a drone speeding up from rest is not stalled):
+whether its reference stands still or runs away from it, it is not following. With ``a_max``
+a drone whose step was at least :data:`MOVING_FRACTION` of its wish's is not stalled either: it
+is being deflected, not stuck (a ring circulating before its centre, slowed by its braking
+tails, counted its sideways flight as stalls, and the escalated turns flew it outwards).
 
 Resolution (the right-hand rule escalated, with hysteresis): each stalled step raises the drone's
-turn by :data:`STALL_GROWTH` of the base angle; the raised turn is *kept* while the drone stays
+turn by :data:`STALL_GROWTH` of the base angle (with ``a_max``, by no more than the drone can turn
+its velocity ``|u_prev|`` in a step, ``sqrt(d) a_max dt / |u_prev|``: a turn that outruns the drone
+would sweep its wish backwards while it is still braking); the raised turn is *kept* while the drone stays
 in conflict, even when it moves again, so a ring that starts to circulate keeps circulating
 instead of falling back to the base angle and jamming again. It ends (a *resolution*) only
 when the drone leaves conflict. While the drone stays stuck the turn sweeps on past a quarter
@@ -46,6 +52,7 @@ from mpcform._validate import Array
 
 STALL_FRACTION = 0.02  # progress per step below this fraction of the wish's step counts as stalled
 STALL_GROWTH = 0.2  # the tie-break angle grows by this fraction of itself per stalled step
+MOVING_FRACTION = 0.25  # with a_max, a drone whose step is this fraction of its wish's is moving
 ARRIVED_M = 1e-2  # a drone this close to its target is not stalled [m]
 FULL_TURN_RAD = 2.0 * np.pi
 BACKOFF_M = 1.0  # how much farther from its target than at its first stall a drone may back off [m]
@@ -61,7 +68,7 @@ class TieBreak:
     def __init__(self, n: int, angle_rad: float, dt_s: float = 1.0) -> None:
         self.angle_rad = angle_rad  # base angle (0 disables)
         self.dt_s = dt_s
-        self.stalled = np.zeros(n, dtype=int)  # stalled steps in the current conflict, per drone
+        self.stalled = np.zeros(n)  # stalled steps in the current conflict, per drone (in growth steps)
         self.last_m: Array | None = None  # positions (n, d) at the last step
         self.stall_distance_m = np.full(n, np.inf)  # distance to the target at the first stall
         self.sense = np.ones(n)  # +1: turn to the right, -1: to the left (after a back-off)
@@ -97,36 +104,59 @@ class TieBreak:
         to_target: Array,
         started: bool,
         blocked: Array | None = None,
+        speed_mps: Array | None = None,
+        step_mps: float = 0.0,
     ) -> Array:
         """Targets ``c`` (H, n, d) with the ``conflicted`` (n,) drones' turned to the right;
         ``p0`` (n, d) the positions, ``to_target`` (n, d) the way to the targets ``p* - p0``,
         ``started``: whether any command was given; ``blocked`` (n,): drones whose target no
-        plan can reach (module doc), never turned."""
+        plan can reach (module doc), never turned; with ``a_max``, ``speed_mps`` (n,) the drones'
+        last commands' speeds and ``step_mps`` the most a command's speed changes in a step
+        (``sqrt(d) a_max dt``): what the stall test and the escalation measure against."""
         if self.angle_rad <= 0:
             return c
         if blocked is not None and blocked.any():
             conflicted = conflicted & ~blocked
-        angles = self.angles(conflicted, c[0], p0, to_target, started)
+        wish, growth = norms(c[0]), np.ones(c.shape[1])
+        if speed_mps is not None:
+            wish = np.minimum(wish, speed_mps + step_mps)
+            turn_rad = STALL_GROWTH * self.angle_rad * speed_mps  # velocity change of a growth step
+            np.divide(step_mps, turn_rad, out=growth, where=turn_rad > step_mps)
+        moving = 0.0 if speed_mps is None else MOVING_FRACTION
+        angles = self.angles(conflicted, wish, p0, to_target, started, growth, moving)
         return np.where(conflicted[:, None], turn_about_z(c, -self.sense * angles), c)
 
-    def angles(self, conflicted: Array, wish: Array, p0: Array, to_target: Array, started: bool) -> Array:
-        """Turn angle per drone [rad]: the base angle, grown by ``STALL_GROWTH`` of it for every
-        stalled step in the drone's current conflict, modulo a full turn (a base angle of a quarter
-        turn or more is kept as it is); a drone past its back-off budget starts afresh. Counts this
-        step (see the module docstring)."""
+    def angles(
+        self,
+        conflicted: Array,
+        wish: Array,
+        p0: Array,
+        to_target: Array,
+        started: bool,
+        growth: Array | float = 1.0,
+        moving: float = 0.0,
+    ) -> Array:
+        """Turn angle per drone [rad] (``wish`` (n,): the speed [m/s] a step is measured against,
+        ``growth`` (n,): how much of a growth step a stalled step counts; ``moving``: a drone whose
+        step was at least this fraction of its wish's is not stalled): the base angle, grown
+        by ``STALL_GROWTH`` of it for every stalled step in the drone's current conflict, modulo a
+        full turn (a base angle of a quarter turn or more is kept as it is); a drone past its
+        back-off budget starts afresh. Counts this step (see the module docstring)."""
         distance = norms(to_target)
         stalled = conflicted & (distance > ARRIVED_M)
         if self.last_m is not None and started:
             far = distance[:, None] > 0
             towards = np.divide(to_target, distance[:, None], out=np.zeros_like(p0), where=far)
             progress = np.einsum("nd,nd->n", p0 - self.last_m, towards)
-            stalled &= progress < STALL_FRACTION * norms(wish) * self.dt_s
+            stalled &= progress < STALL_FRACTION * wish * self.dt_s
+            if moving > 0.0:  # a drone deflected at speed is not stuck
+                stalled &= norms(p0 - self.last_m) < moving * wish * self.dt_s
         else:
             stalled[:] = False  # no step made yet: nothing has stalled
         self.last_m = p0.copy()
         self.new_stalls = int(np.count_nonzero(stalled & (self.stalled == 0)))
         self.resolved = int(np.count_nonzero(~conflicted & (self.stalled > 0)))
-        self.stalled = np.where(conflicted, self.stalled + stalled, 0)
+        self.stalled = np.where(conflicted, self.stalled + stalled * growth, 0.0)
         first = np.where(self.stalled > 0, np.minimum(self.stall_distance_m, distance), np.inf)
         kept = np.where(self.stalled > 0, self.stall_distance_m, np.inf)
         self.stall_distance_m = np.where(stalled, first, kept)

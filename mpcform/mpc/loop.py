@@ -46,7 +46,13 @@ class VelocityLoop:
     ``step_state`` (d, s, s) and ``step_input`` (d, s): one interval of the loop state, whose last
     component is the velocity offset ``delta`` (module docstring);
     ``speed_gain``: the L1 norm of the velocity's impulse response (the total variation of its step
-    response), so ``|v| <= speed_gain v_max`` for commands within ``v_max`` (1 for a lag).
+    response), so ``|v| <= speed_gain v_max`` for commands within ``v_max`` (1 for a lag);
+    ``rest_m`` (d, s): ``F_rest``, the free response once the loop has come to rest (the lag's
+    ``tau v_0``; the offset ``delta`` moves it ``dt``); ``dc_gain`` (d,): how far the loop carries a
+    drone per metre of commanded travel once at rest (1 for every loop here, whose velocity
+    settles on the command), so a plan braking to rest ends at ``dc_gain x_stop + F_rest xi_0``
+    (:mod:`mpcform.mpc.braking`); ``lag_s``: how far behind its commands the loop comes to rest
+    from a steady command, per m/s (``tau`` for a lag).
     """
 
     dt_s: float
@@ -55,6 +61,9 @@ class VelocityLoop:
     step_state: Array
     step_input: Array
     speed_gain: float
+    rest_m: Array
+    dc_gain: Array
+    lag_s: float
 
     @classmethod
     def from_groups(cls, groups: list[LoopGroup], dim: int, dt_s: float, horizon: int) -> VelocityLoop:
@@ -63,6 +72,7 @@ class VelocityLoop:
         free, forced = np.zeros((horizon + 1, dim, s)), np.zeros((horizon + 1, horizon, dim))
         step_state, step_input = np.zeros((dim, s, s)), np.zeros((dim, s))
         covered, gain = np.zeros(dim, dtype=bool), 1.0
+        rest, dc, lag = np.zeros((dim, s)), np.ones(dim), 0.0
         for a, b, c, axes in groups:
             k = a.shape[0]
             m = np.zeros((k + 2, k + 2))  # (p, xi, u): p' = c^T xi, xi' = A xi + B u, u' = 0
@@ -80,13 +90,16 @@ class VelocityLoop:
                 for e in range(1, horizon + 1):
                     forced[e, :e, ax] = g_m[e - 1 :: -1][:e]
                 step_state[ax, :k, :k], step_input[ax, :k] = phi[1:, 1:], gam[1:]
+                rest[ax, :k] = -np.linalg.solve(a.T, c)  # c^T (-A)^-1: the integral of c^T e^{At}
+                dc[ax] = rest[ax, :k] @ b
+                lag = max(lag, abs(float(rest[ax, :k] @ np.linalg.solve(a, -b))))  # from the steady state
             gain = max(gain, _step_variation(a, b, c))
-        free[1:, :, -1] = dt_s  # delta moves the drone dt delta in the first interval
+        free[1:, :, -1] = rest[:, -1] = dt_s  # delta moves the drone dt delta in the first interval
         step_state[:, -1, -1] = 1.0
         if not covered.all():
             axes_given = np.flatnonzero(covered).tolist()
             raise ValidationError("plant", f"the loop covers axes {axes_given}, expected 0..{dim - 1}")
-        return cls(dt_s, free, forced, step_state, step_input, gain)
+        return cls(dt_s, free, forced, step_state, step_input, gain, rest, dc, lag)
 
     @property
     def reach_factor(self) -> float:
@@ -116,6 +129,10 @@ class VelocityLoop:
     def free(self, state: Array) -> Array:
         """The free response ``F_e xi_0`` (H + 1, n, d) [m] of drones in loop ``state`` (n, d, s)."""
         return np.einsum("eds,nds->end", self.free_m, state)
+
+    def at_rest(self, state: Array) -> Array:
+        """The free response ``F_rest xi_0`` (n, d) [m] once the loop has come to rest."""
+        return np.einsum("ds,nds->nd", self.rest_m, state)
 
     def first(self, state: Array, u0: Array) -> Array:
         """The offset (n, d) [m] at the end of the first interval for the commands ``u0`` (n, d)."""

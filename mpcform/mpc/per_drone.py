@@ -23,9 +23,9 @@ import numpy as np
 from mpcform._validate import Array
 from mpcform.mpc.condensed import CondensedDroneQP, dense_bounds
 from mpcform.mpc.drone_solves import DroneSolves
+from mpcform.mpc.limit_families import LimitRows
 from mpcform.mpc.loop import VelocityLoop
 from mpcform.mpc.problem import ACTIVE_TOL, StepQP, StepSolver
-from mpcform.mpc.rows import LimitRows
 from mpcform.mpc.settings import MPCSettings
 from mpcform.mpc.working_set import (
     misses,
@@ -65,10 +65,12 @@ class PerDroneQP(CondensedDroneQP, StepSolver):
         self._a, self._lo, self._hi = np.zeros((0, self._nu)), np.zeros(0), np.zeros(0)  # _buffers
 
     def solve(self, qp: StepQP) -> tuple[QPSolution, int]:
-        """Solve every drone's QP (the one-drone separation rows within reach of ``qp.rows``)."""
+        """Solve every drone's QP (the one-drone separation rows within reach of ``qp.rows``): the
+        solution in the sparse QP's layout ``[u | x | s]`` over these drones (its ``solve_time_s``
+        is the time spent inside DAQP), and the number of active rows."""
         rows = qp.rows
         warm_u = np.zeros_like(qp.targets_mps) if qp.warm is None else qp.warm[0]  # inputs only
-        return self.solve_drones(
+        got = self.solve_each(
             qp.start_m,
             qp.targets_mps,
             qp.u_prev_mps,
@@ -78,31 +80,8 @@ class PerDroneQP(CondensedDroneQP, StepSolver):
             warm_u,
             rows.single_hard,
             rows.single_on,
+            qp.free_m,
         )
-
-    def solve_drones(
-        self,
-        p0: Array,
-        c: Array,
-        u_prev: Array,
-        singles: Array,
-        coeffs: Array,
-        lower: Array,
-        warm_u: Array,
-        hard: Array | None = None,
-        on: Array | None = None,
-    ) -> tuple[QPSolution, int]:
-        """Solve every drone's QP.
-
-        ``p0`` (n, d) starts, ``c`` (H, n, d) targets, ``u_prev`` (n, d) last commands; separation
-        items ``singles`` (S,) drone index, ``coeffs`` (S, R, d), ``lower`` (S, R); ``warm_u``
-        (H, n, d) inputs whose nearly active rows start DAQP's active set; ``hard`` (S,) the items
-        whose first row is a hard no-approach row (no slack); ``on`` (S,) the items within reach
-        (the others are left out; all by default).
-        Returns the solution in the sparse QP's layout ``[u | x | s]`` over these n drones (its
-        ``solve_time_s`` is the time spent inside DAQP), and the number of active rows.
-        """
-        got = self.solve_each(p0, c, u_prev, singles, coeffs, lower, warm_u, hard, on)
         return self.solution(got.v, got.s, got.ok, got.flags, got.lams, got.iterations, got.time_s, got.cost)
 
     def solve_each(
@@ -116,8 +95,16 @@ class PerDroneQP(CondensedDroneQP, StepSolver):
         warm_u: Array,
         hard: Array | None = None,
         on: Array | None = None,
+        free_m: Array | None = None,
     ) -> DroneSolves:
-        """Every drone's solve as DAQP returns it (arguments as :meth:`solve_drones`).
+        """Every drone's solve as DAQP returns it.
+
+        ``p0`` (n, d) starts, ``c`` (H, n, d) targets, ``u_prev`` (n, d) last commands; separation
+        items ``singles`` (S,) drone index, ``coeffs`` (S, R, d), ``lower`` (S, R); ``warm_u``
+        (H, n, d) inputs whose nearly active rows start DAQP's active set; ``hard`` (S,) the items
+        whose first row is a hard no-approach row (no slack); ``on`` (S,) the items within reach
+        (the others are left out; all by default); ``free_m`` (S, n, d) with a velocity loop its
+        free response at each bounded position (the geofence's bounds).
 
         With working sets (:func:`mpcform.mpc.working_set.working_sets`), each drone first gives DAQP
         only its rows near their bound; a solve that misses any other row, or fails, is solved again
@@ -128,15 +115,17 @@ class PerDroneQP(CondensedDroneQP, StepSolver):
         f_v = -c_v  # 0.5 ||v - c||^2
         v_warm = warm_u.transpose(1, 0, 2).reshape(n, nu) @ self._m.T
         sep_c, sep_end, sep_lo, sep_soft, counts, at = reachable_rows(
-            n, singles, coeffs, lower, hard, on, self._ends, self._step_m
+            n, singles, coeffs, lower, hard, on, self._ends, self._step_m, self._reach_steps
         )
         a, lo, hi = self._buffers(n_const + int(counts.max(initial=0)))
-        b_lo, b_hi = self._fixed if self._fixed is not None else dense_bounds(self.families, p0, u_prev)
+        b_lo, b_hi = (
+            self._fixed if self._fixed is not None else dense_bounds(self.families, p0, u_prev, free_m)
+        )
         offsets = [0, *np.cumsum(counts).tolist()]
         v_out, s_out, lams = [np.empty(0)] * n, np.zeros((n, h)), [np.empty(0)] * n
         flags, ok = [0] * n, [True] * n
         const_c, owner = c_v @ self._const_v.T, np.repeat(np.arange(n), counts)
-        at_x = owner * h + sep_end - 1  # each row's position x_e among the drones'
+        at_x = owner * self._steps + sep_end - 1  # each row's position x_e among the drones'
         cost, free, sep_c_at = np.zeros(n), within_bounds(const_c, b_lo, b_hi), None
         if free.any():  # the wish v = c meets the constant rows: and the separation rows?
             sep_c_at = row_values(self._x_of_v, c_v, sep_c, at_x)
@@ -268,7 +257,7 @@ class PerDroneQP(CondensedDroneQP, StepSolver):
     ) -> Solved:
         """The drones' solves (``v`` (n, H d), slacks ``s`` (n, H), which succeeded, the backend's
         exit flags and multipliers; ``t_s`` the time in the backend; their costs) as one solution
-        ``[u | x | s]`` (as :meth:`solve_drones` returns it). Its objective is the drones' costs
+        ``[u | x | s]`` (as :meth:`solve` returns it). Its objective is the drones' costs
         summed: the sparse QP's objective at the same point (its block-diagonal cost in ``v``)."""
         h, n = self.settings.horizon, v.shape[0]
         bad = np.flatnonzero(~ok | ~np.isfinite(v).all(axis=1))

@@ -11,6 +11,7 @@ from functools import lru_cache
 import numpy as np
 
 from mpcform._validate import Array
+from mpcform.mpc.braking import Braking
 
 
 @dataclass(frozen=True)
@@ -59,19 +60,33 @@ def _decay(h: int, k: float, dt: float) -> Array:
     return out
 
 
-def guess(plan: Plan | None, p0: Array, horizon: int) -> Array:
+def guess(plan: Plan | None, p0: Array, horizon: int, braking: Braking | None = None) -> Array:
     """Absolute guess positions (H + 1, n, d) about which the separation rows are linearised: the
-    previous plan shifted one step, ending in a hold (at the first step every drone holding)."""
+    previous plan shifted one step, ending in a hold (at the first step every drone holding).
+    With ``braking`` (:mod:`mpcform.mpc.braking`) the shifted plan brakes at its last step and the
+    guess ends in its stop point (H + 2 positions), the previous plan's own."""
+    steps = horizon + 1 + (braking is not None)
     if plan is None:
-        return np.broadcast_to(p0, (horizon + 1,) + p0.shape)
+        return np.broadcast_to(p0, (steps,) + p0.shape)
     prev = plan.positions_m
-    return np.concatenate([p0[None], prev[2:], prev[-1:]])
+    if braking is None:
+        return np.concatenate([p0[None], prev[2:], prev[-1:]])
+    u_last = plan.inputs_mps[-1]
+    last = prev[-1] + braking.dt_s * braking.rho * u_last
+    return np.concatenate([p0[None], prev[2:], last[None], braking.stop(prev[-1], u_last)[None]])
 
 
-def warm_start(plan: Plan | None, p0: Array, u_nom: Array, x_nom: Array) -> Array:
+def warm_start(
+    plan: Plan | None, p0: Array, u_nom: Array, x_nom: Array, braking: Braking | None = None
+) -> Array:
     """Primal warm start (2, H, n, d): inputs and relative positions of the previous plan shifted
-    one step (or of the rollout ``u_nom``, ``x_nom`` at the first step)."""
+    one step (or of the rollout ``u_nom``, ``x_nom`` at the first step); with ``braking`` its last
+    step brakes (:meth:`mpcform.mpc.braking.Braking.shifted`)."""
     if plan is None:
         return np.stack([u_nom, x_nom])
-    x = np.concatenate([plan.positions_m[2:], plan.positions_m[-1:]]) - p0
-    return np.stack([plan.shifted_inputs(), x])
+    if braking is None:
+        x = np.concatenate([plan.positions_m[2:], plan.positions_m[-1:]]) - p0
+        return np.stack([plan.shifted_inputs(), x])
+    u = braking.shifted(plan.inputs_mps)
+    x = np.concatenate([plan.positions_m[2:], plan.positions_m[-1:] + braking.dt_s * u[-1:]]) - p0
+    return np.stack([u, x])

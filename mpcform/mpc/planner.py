@@ -23,8 +23,13 @@ certification (the interval's true chord). The cost, and so eq. 14, stay on the 
 integrator; the tie-break turns only drones whose single-integrator rollout conflicts (an
 encounter), not a drone whose own overshoot does (the QP brakes it). The loop state is run on
 the commands sent, from rest, plus the last interval's velocity offset. Every item's first row is
-then hard, lowered at most to what braking reaches: the first interval is mostly the loop's free
-response, and a slack there would let a drone approach one partner while another forces it.
+then hard, lowered at most to what braking or the previous plan reaches: the first interval is
+mostly the loop's free response, and a slack there would let a drone approach one partner while
+another forces it.
+
+With ``a_max`` every plan ends in its braking tail (:mod:`mpcform.mpc.braking`): the separation
+and geofence rows also hold at the stop point, so the previous plan's tail stays a feasible,
+certified fallback (:mod:`mpcform.mpc.prediction` gives the positions the rows are written on).
 """
 
 from __future__ import annotations
@@ -37,13 +42,15 @@ from mpcform._validate import Array, positive
 from mpcform.control.base import Controller, ControlStep, feedforward_targets
 from mpcform.control.laws import check_gain_dt
 from mpcform.errors import ValidationError
-from mpcform.mpc.candidates import Candidates, CandidateSelector, qp_drones
+from mpcform.mpc.braking import Braking
+from mpcform.mpc.candidates import CandidateSelector, qp_drones
 from mpcform.mpc.certify import Certifier
+from mpcform.mpc.limit_families import admitted, limit_rows, violators
 from mpcform.mpc.liveness import TieBreak
 from mpcform.mpc.loop import VelocityLoop
 from mpcform.mpc.plan import Plan, guess, rollout, warm_start
+from mpcform.mpc.prediction import Prediction
 from mpcform.mpc.problem import StepQP
-from mpcform.mpc.rows import limit_rows, row_ends, violators
 from mpcform.mpc.separation import Separation, SeparationRows
 from mpcform.mpc.settings import MPCSettings
 from mpcform.mpc.split import SplitQP
@@ -56,6 +63,7 @@ from mpcform.world.limits import Limits
 from mpcform.world.obstacles import SphereObstacle, resolve_clearances
 
 SLACK_REPORT_M = 1e-6  # slack above this is reported
+LOWERED_TOL_M = 1e-9  # a first row lowered by more than this is reported
 
 
 class MPCPlanner(Controller):
@@ -89,11 +97,14 @@ class MPCPlanner(Controller):
         self.obstacles = resolve_clearances(tuple(obstacles), limits.d_min_m)  # unset: d_min / 2
         _check_limits(self.dim, limits, self.obstacles)
         self.loop = _check_loop(loop, self.dim, settings)
-        self._families = limit_rows(self.dim, dt_s, limits, settings)
-        self._separation = sep = Separation(self.dim, limits, settings, self.obstacles)
+        self._families = limit_rows(self.dim, dt_s, limits, settings, self.loop)
+        self.braking = braking = Braking.of(dt_s, limits, settings.braking)  # the plans' terminal condition
+        self._separation = sep = Separation(self.dim, limits, settings, self.obstacles, braking)
         gain = 1.0 if self.loop is None else self.loop.speed_gain
-        self._candidates = CandidateSelector(self.n, dt_s, limits, settings, self.obstacles, gain)
-        self._certifier = Certifier(dt_s, limits.v_max_mps, sep, limits.a_max_mps2)
+        tail_s = 0.0 if braking is None else braking.kappa_s * gain + (self.loop.lag_s if self.loop else 0.0)
+        self._predict = Prediction(dt_s, settings.horizon, self.loop, braking)
+        self._candidates = CandidateSelector(self.n, dt_s, limits, settings, self.obstacles, gain, tail_s)
+        self._certifier = Certifier(dt_s, limits.v_max_mps, sep, limits.a_max_mps2, braking)
         self._loop_state: Array  # the velocity loop's state (n, d, s), set by reset
         if self.loop is not None:  # certify where the loop takes the drones in the interval
             loop = self.loop
@@ -149,18 +160,19 @@ class MPCPlanner(Controller):
         targets, ff = feedforward_targets(self.reference, t_s, dt, horizon, st.feedforward)
         c = ff + k * (targets[:-1] - p0)  # u_j = c_j - k x_j is the eq. 14 rollout
         u_nom, x_nom = rollout(c, k, dt)
-        x_true = self._true(u_nom, x_nom)  # where the rollout takes the drones
+        x_true = self._predict.points(self._loop_state, u_nom, x_nom)  # where the rollout takes the drones
         nominal = Plan.from_relative(p0, u_nom, x_nom)  # the fast path's plan
-        true_path = nominal.positions_m if self.loop is None else np.concatenate([p0[None], p0 + x_true])
-        about = self._guess(p0)
-        off_limits = violators(self._families, p0, self._u_prev, u_nom, x_nom)
+        true_path = np.concatenate([p0[None], p0 + x_true])
+        about = self._predict.guess(self._plan, p0, self._loop_state)
+        off_limits = violators(self._families, p0, self._u_prev, u_nom, x_true)
         if st.fast_path and not off_limits.any() and sep.clear(about, true_path):
             return self._fast_path(nominal)
         cand = self._candidates.select(p0)
         grouped = st.fast_path and st.grouping
         if grouped or st.solves_per_drone:  # no fixed pattern: rows only within reach
             cand = cand.within_reach()
-        rows = self._rows(p0, about, cand)
+        stops = true_path[-1] if self.braking is not None and st.coupling == "decoupled" else None
+        rows = sep.rows(p0, about, cand, stops)  # on the true positions (the QP's: on_forced)
         values: Array | None = sep.single_values(x_true, rows)  # the rows at the rollout
         if st.coupling == "decoupled" and not off_limits.any() and sep.meets_joint(x_true, rows, values):
             # the rollout meets the limits and the joint rows: the decoupled rows are split about
@@ -168,16 +180,28 @@ class MPCPlanner(Controller):
             if st.fast_path:
                 return self._fast_path(nominal)
             about = true_path
-            rows, values = self._rows(p0, about, cand), None
+            rows, values = sep.rows(p0, about, cand, stops), None
         conflicted = sep.conflicted(x_true, rows, values)
         if st.fast_path and not (off_limits | conflicted).any():
             return self._fast_path(nominal)
         blocked = sep.blocked_targets(targets[0]) if conflicted.any() else None
         turned = conflicted
-        if self.loop is not None and conflicted.any():  # the single integrator's conflicts: encounters
-            plain = sep.rows(p0, guess(self._plan, p0, horizon), cand)
-            turned = conflicted & sep.conflicted(x_nom, plain)
-        c = self._tie_break.turn(c, turned, p0, targets[0] - p0, self._plan is not None, blocked)
+        if (self.loop is not None or self.braking is not None) and conflicted.any():
+            # encounters: the single integrator's conflicts within the horizon (a stop point's
+            # conflict is the QP's to brake for, not one to turn away from)
+            plain = (
+                rows
+                if self.loop is None
+                else sep.rows(p0, guess(self._plan, p0, horizon, self.braking), cand)
+            )
+            x_enc = x_nom if self.braking is None else np.concatenate([x_nom, x_nom[-1:]])
+            turned = conflicted & sep.conflicted(x_enc, plain, tail=False)
+        speed, step = None, 0.0  # with a_max: how fast the drones fly, how much that changes per step
+        if self.limits.a_max_mps2 is not None:
+            speed = np.sqrt(np.einsum("nd,nd->n", self._u_prev, self._u_prev))
+            step = self.limits.a_max_mps2 * dt * np.sqrt(self.dim)
+        to_target = targets[0] - p0
+        c = self._tie_break.turn(c, turned, p0, to_target, self._plan is not None, blocked, speed, step)
         bad = off_limits | conflicted
         linked = rows.pairs[rows.pair_on]
         solver = self._solver
@@ -186,67 +210,55 @@ class MPCPlanner(Controller):
         if solver is not self._solver or self._splits:  # a pair's split moves both its drones
             linked = rows.labels[(rows.labels[:, 1] >= 0) & rows.single_on]
         drones = qp_drones(bad, linked) if grouped else np.arange(self.n)
-        qp_rows, relaxed = self._hard_first_rows(rows)
+        qp_rows, relaxed, brake = self._hard_first_rows(
+            self._predict.on_forced(rows, self._loop_state, sep.ends)
+        )
         sub = qp_rows.subset(drones, self.n, on_only=grouped)  # grouped: the pattern follows the groups
-        warm = warm_start(self._plan, p0, u_nom, x_nom)[:, :, drones] if self._solver.warm_starts else None
+        warm = None
+        if self._solver.warm_starts:
+            warm = warm_start(self._plan, p0, u_nom, x_nom, self.braking)[:, :, drones]
+        free = None if self.loop is None else self._predict.free(self._loop_state)[1:]  # the geofence's
         qp = StepQP(self.n, drones, p0[drones], c[:, drones], self._u_prev[drones], sub, cand.rebuilt, warm)
+        if free is not None:
+            qp = replace(qp, free_m=free[:, drones])
         sol, active = solver.solve(qp)
+        if not sol.success and brake is not None and free is not None:  # wind left no plan in the fence
+            path = self._predict.points(self._loop_state, brake, dt * np.cumsum(brake, axis=0))
+            wider = admitted(self._families, p0, free, path)
+            if not np.array_equal(wider, free):
+                sol, active = solver.solve(replace(qp, free_m=wider[:, drones]))
         status, solved = sol.status, None
         inside_m, inside = sep.start_shortfall(p0, rows)  # items that start too close
         if sol.success and sol.x is not None:
             u, x = self._merge(drones, sol.x, u_nom, x_nom)
-            u0 = self._certifier.certify(p0, u[0], cand)
+            u0 = self._certifier.certify(p0, u[0], cand, self._u_prev)
             if u0 is not None:
                 self._accept(p0, u, x)
-                x_true = self._true(u, x)
+                self._u_prev = u0.copy()  # the command sent (the solver's tolerance off)
+                x_true = self._predict.points(self._loop_state, u, x)
                 info = self._qp_info(sol, sol.x, active, drones, x_true, rows, inside_m, inside, relaxed)
                 return ControlStep(u0, info)
             status, solved = status + "; command failed certification", u[0]
         u, x, note = self._certifier.fallback(self._plan, p0, cand, horizon, solved, self._u_prev)
         self._accept(p0, u, x)
-        info = solve_info("fallback", sol, f"{status}; {note}", 0, 0, inside_m, inside, self._tie_break)
+        info = solve_info(
+            "fallback", sol, f"{status}; {note}", 0, 0, inside_m, inside, self._tie_break, relaxed
+        )
         return ControlStep(u[0].copy(), info)
 
-    def _true(self, u: Array, x: Array) -> Array:
-        """Relative positions (H, n, d) the drones reach with the inputs ``u``: the single
-        integrator's ``x``, plus the velocity loop's offsets with a loop (:mod:`mpcform.mpc.loop`)."""
-        if self.loop is None:
-            return x
-        return x + self.loop.offsets(self._loop_state, u)[1:]
-
-    def _guess(self, p0: Array) -> Array:
-        """The guess (H + 1, n, d) the rows are linearised about (:func:`mpcform.mpc.plan.guess`);
-        with a loop, where the previous plan shifted takes the drones from ``p0`` (it meets its own
-        rows, as the single integrator's guess does)."""
-        if self.loop is None:
-            return guess(self._plan, p0, self.settings.horizon)
-        h = self.settings.horizon
-        u = np.zeros((h, self.n, self.dim)) if self._plan is None else self._plan.shifted_inputs()
-        return np.concatenate([p0[None], p0 + self._true(u, self.dt_s * np.cumsum(u, axis=0))])
-
-    def _rows(self, p0: Array, about: Array, cand: Candidates) -> SeparationRows:
-        """The separation rows about ``about``; with a loop, on the true positions: the QP's rows
-        carry the forced response, the bounds here the free one (not in the hard no-approach rows:
-        a drone cannot undo the velocity it has)."""
-        rows = self._separation.rows(p0, about, cand)
-        if self.loop is None:
-            return rows
-        ends = row_ends(self.settings.horizon)
-        free = self.loop.free(self._loop_state)[ends].transpose(1, 0, 2)  # (n, R, d)
-        shift_p = np.einsum("prd,prd->pr", rows.pair_coeffs, free[rows.pairs[:, 0]] - free[rows.pairs[:, 1]])
-        shift_s = np.einsum("srd,srd->sr", rows.single_coeffs, free[rows.singles])
-        shift_p[rows.pair_hard, 0] = 0.0
-        shift_s[rows.single_hard, 0] = 0.0
-        return replace(rows, pair_lower=rows.pair_lower - shift_p, single_lower=rows.single_lower - shift_s)
-
-    def _hard_first_rows(self, rows: SeparationRows) -> tuple[SeparationRows, bool]:
+    def _hard_first_rows(self, rows: SeparationRows) -> tuple[SeparationRows, bool, Array | None]:
         """With a loop, the QP's rows with every first row hard, lowered at most to where braking
-        (the last command moved towards zero by ``a_max dt``, or zero) takes the drones
-        (:func:`hard_first_rows`); also whether a bound was lowered. Without a loop: ``rows``."""
+        (the last command moved towards zero by ``a_max dt``, or zero) or, with the braking tail,
+        the previous plan's next input takes the drones (whichever needs less lowering: the plan's
+        when the drones followed it, :mod:`mpcform.mpc.braking`) (:func:`hard_first_rows`); also
+        whether a bound was lowered, and that braking plan (H, n, d). Without a loop: ``rows``."""
         if self.loop is None:
-            return rows, False
-        brake = self._certifier.within_limits(np.zeros_like(self._u_prev), self._u_prev)  # its "decelerate"
-        return hard_first_rows(rows, (self.dt_s + self.loop.forced[1, 0]) * brake)
+            return rows, False, None
+        plans = self._certifier.braking_plans(self._plan, self._u_prev, self.settings.horizon)
+        first = np.stack([u[0] for u in plans])
+        hard, relaxed, best = hard_first_rows(rows, (self.dt_s + self.loop.forced[1, 0]) * first)
+        self._certifier.floor_command = first[best]  # the rows allow its chord, so must the certifier
+        return hard, relaxed, plans[best]
 
     def _fast_path(self, nominal: Plan) -> ControlStep:
         """Accept the rollout's plan: its first input is the command."""
@@ -287,8 +299,9 @@ class MPCPlanner(Controller):
         if relaxed or slack.max(initial=0.0) > SLACK_REPORT_M / 2:
             planned, missed = self._separation.shortfall(x, rows, SLACK_REPORT_M)
             shortfall, missed = max(shortfall, planned), np.concatenate([inside, missed])
+        shortfall = max(shortfall, 0.0)
         return solve_info(
-            "qp", sol, sol.status, active, drones.shape[0], max(shortfall, 0.0), missed, self._tie_break
+            "qp", sol, sol.status, active, drones.shape[0], shortfall, missed, self._tie_break, relaxed
         )
 
     def _accept(self, p0: Array, u: Array, x: Array) -> None:
@@ -331,24 +344,31 @@ def _check_limits(
         )
 
 
-def hard_first_rows(rows: SeparationRows, first_m: Array) -> tuple[SeparationRows, bool]:
+def hard_first_rows(rows: SeparationRows, first_m: Array) -> tuple[SeparationRows, bool, int]:
     """``rows`` with every item's first row hard (no slack), its bound lowered to the row's value
-    at ``first_m`` (n, d) where that is lower, and whether a bound was (of an item within reach).
+    at the best of ``first_m`` (k, n, d) (or (n, d)) where that is lower, whether a bound was
+    (of an item within reach), and the best's index.
 
     With a loop the first interval is mostly the free response: a slack there (one per drone and
     step) would let a drone approach one partner as far as another forces it to, and fail the
-    certification. ``first_m`` is where braking takes the drones (``x_1 + G_10 u_0``), so braking
-    meets every first row and they stay feasible.
+    certification. ``first_m`` are where feasible first commands take the drones (``x_1 + G_10
+    u_0``: braking, the previous plan's next input); the best is the one that needs the least
+    lowering, and every row is lowered to that same one, so it meets them all and the rows stay
+    feasible (a row-wise best of several would not be met by any one of them).
     """
+    first_m = first_m.reshape((-1,) + first_m.shape[-2:])
     i, k = rows.pairs.T
-    at_p = np.einsum("pd,pd->p", rows.pair_coeffs[:, 0], first_m[i] - first_m[k])
-    at_s = np.einsum("sd,sd->s", rows.single_coeffs[:, 0], first_m[rows.singles])
+    at_p = np.einsum("pd,kpd->kp", rows.pair_coeffs[:, 0], first_m[:, i] - first_m[:, k])
+    at_s = np.einsum("sd,ksd->ks", rows.single_coeffs[:, 0], first_m[:, rows.singles])
+    short = np.maximum(rows.pair_lower[:, 0] - at_p, 0.0).sum(axis=1)
+    short += np.maximum(rows.single_lower[:, 0] - at_s, 0.0).sum(axis=1)
+    best = int(np.argmin(short))
     lower_p, lower_s = rows.pair_lower.copy(), rows.single_lower.copy()
-    np.minimum(lower_p[:, 0], at_p, out=lower_p[:, 0])
-    np.minimum(lower_s[:, 0], at_s, out=lower_s[:, 0])
-    relaxed = bool(
-        np.any((lower_p[:, 0] < rows.pair_lower[:, 0]) & rows.pair_on)
-        or np.any((lower_s[:, 0] < rows.single_lower[:, 0]) & rows.single_on)
+    np.minimum(lower_p[:, 0], at_p[best], out=lower_p[:, 0])
+    np.minimum(lower_s[:, 0], at_s[best], out=lower_s[:, 0])
+    relaxed = bool(  # (by more than rounding)
+        np.any((lower_p[:, 0] < rows.pair_lower[:, 0] - LOWERED_TOL_M) & rows.pair_on)
+        or np.any((lower_s[:, 0] < rows.single_lower[:, 0] - LOWERED_TOL_M) & rows.single_on)
     )
     hard = replace(
         rows,
@@ -357,4 +377,4 @@ def hard_first_rows(rows: SeparationRows, first_m: Array) -> tuple[SeparationRow
         pair_hard=np.ones_like(rows.pair_hard),
         single_hard=np.ones_like(rows.single_hard),
     )
-    return hard, relaxed
+    return hard, relaxed, best

@@ -25,7 +25,9 @@ class StepQP:
     ``start_m`` (m, d) their positions p0, ``targets_mps`` (H, m, d) the cost's ``c_j``,
     ``u_prev_mps`` (m, d) their last commands, ``rows`` the separation rows over them (drones
     renumbered 0..m-1), ``rebuilt`` whether the candidate set changed this step, ``warm`` (2, H, m, d)
-    the primal warm start (inputs, relative positions), None for a solver that takes none.
+    the primal warm start (inputs, relative positions), None for a solver that takes none;
+    ``free_m`` (S, m, d): with a velocity loop, its free response at each position the geofence
+    bounds (steps 1..H, then the braking stop point), else None.
     """
 
     n: int
@@ -36,6 +38,7 @@ class StepQP:
     rows: SeparationRows
     rebuilt: bool
     warm: Array | None
+    free_m: Array | None = None
 
 
 class StepSolver(ABC):

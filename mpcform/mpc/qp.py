@@ -30,14 +30,16 @@ import numpy as np
 import scipy.sparse as sp
 
 from mpcform._validate import Array
+from mpcform.mpc.braking import Braking, separation_steps
+from mpcform.mpc.limit_families import LimitRows
 from mpcform.mpc.loop import VelocityLoop
 from mpcform.mpc.rows import (
     Layout,
-    LimitRows,
     RowBlock,
     dynamics_rows,
     separation_pattern,
     slack_rows,
+    stop_row,
     true_position_rows,
 )
 from mpcform.mpc.settings import MPCSettings
@@ -64,14 +66,18 @@ class MPCQP:
         singles: Array,
         families: tuple[LimitRows, ...],
         loop: VelocityLoop | None = None,
+        braking: Braking | None = None,
     ) -> None:
         h = settings.horizon
         self.layout = lay = Layout(n, dim, h, loop is not None)
-        self.settings = settings
+        self.settings, self.braking = settings, braking
+        # the stop rows' scale per axis: the loop's DC gain on x_H, times kappa on u_{H-1}
+        self._stop_gain = np.ones(dim) if loop is None else loop.dc_gain
+        self._stop = stop_row(separation_steps(h, braking))
         blocks = [dynamics_rows(lay, dt_s), *(f.sparse(lay) for f in families)]
         if loop is not None:
             blocks.append(true_position_rows(lay, loop.forced))
-        blocks += [separation_pattern(lay, pairs, singles), slack_rows(lay)]
+        blocks += [separation_pattern(lay, pairs, singles, braking is not None), slack_rows(lay)]
         rows_all, cols_all, vals, row_slices, entry_slices = _stack(blocks)
         self._families = tuple(zip(families, row_slices[1 : 1 + len(families)], strict=True))
         self.sep_rows, self._sep_entries = row_slices[-2], entry_slices[-2]
@@ -87,8 +93,9 @@ class MPCQP:
         self.u0 = np.concatenate([b.upper for b in blocks])
         self.P = _cost_hessian(lay, settings)
         # rows of inactive items stay in the pattern with a bound no plan can reach (finite, so
-        # interior-point backends do not drop them): |c^T (x_i - x_k)| <= 2 v_max H dt
-        self._off_lower = -(2.0 * (limits.v_max_mps or 0.0) * h * dt_s + 1.0)
+        # interior-point backends do not drop them): |c^T (x_i - x_k)| <= 2 v_max (H dt + kappa)
+        look_ahead_s = h * dt_s + (0.0 if braking is None else braking.kappa_s * float(self._stop_gain.max()))
+        self._off_lower = -(2.0 * (limits.v_max_mps or 0.0) * look_ahead_s + 1.0)
 
     def cost_vector(self, c: Array, slack_weight: float | None = None) -> Array:
         """Linear cost term for targets ``c_j = ff_j + k (p*_j - p0)`` (H, n, d) (slack weight: the
@@ -102,12 +109,15 @@ class MPCQP:
         q[lay.slack_slice().stop :] = 0.0
         return q
 
-    def bounds(self, p0: Array, u_prev: Array, sep_lower: Array, sep_active: Array) -> tuple[Array, Array]:
+    def bounds(
+        self, p0: Array, u_prev: Array, sep_lower: Array, sep_active: Array, free_m: Array | None = None
+    ) -> tuple[Array, Array]:
         """Row bounds for start positions p0 (n, d), last command u_prev, separation lower bounds
-        (items, R) and the mask of items whose rows are on (items,)."""
+        (items, R), the mask of items whose rows are on (items,) and, with a velocity loop, its
+        free response ``free_m`` (S, n, d) at the positions the geofence bounds."""
         lo, hi = self.l0.copy(), self.u0.copy()
         for family, rows in self._families:
-            family.set_bounds(lo[rows], hi[rows], p0, u_prev)
+            family.set_bounds(lo[rows], hi[rows], p0, u_prev, free_m)
         sep = np.where(sep_active[:, None], sep_lower, self._off_lower)
         lo[self.sep_rows] = sep.ravel()
         return lo, hi
@@ -122,20 +132,36 @@ class MPCQP:
         """CSC data of A for row coefficients (P, R, d) of the pairs and (S, R, d) of the singles;
         the items marked ``hard_*`` have no slack in their first row (a hard no-approach row)."""
         vals = self._coo_vals.copy()
-        parts = []
+        parts, extra = [], []
         if coeffs_pairs.shape[0]:
             ones = np.ones(coeffs_pairs.shape[:2] + (2,))
             if hard_pairs is not None:
                 ones[hard_pairs, 0] = 0.0
-            parts.append(np.concatenate([coeffs_pairs, -coeffs_pairs, ones], axis=2).ravel())
+            main, stop = self._stop_values(coeffs_pairs)
+            parts.append(np.concatenate([main, -main, ones], axis=2).ravel())
+            extra.append(np.concatenate([stop, -stop], axis=1).ravel())
         if coeffs_singles.shape[0]:
             ones = np.ones(coeffs_singles.shape[:2] + (1,))
             if hard_singles is not None:
                 ones[hard_singles, 0] = 0.0
-            parts.append(np.concatenate([coeffs_singles, ones], axis=2).ravel())
+            main, stop = self._stop_values(coeffs_singles)
+            parts.append(np.concatenate([main, ones], axis=2).ravel())
+            extra.append(stop.ravel())
+        if self.braking is not None:
+            parts += extra
         if parts:
             vals[self._sep_entries] = np.concatenate(parts)
         return vals[self._perm]
+
+    def _stop_values(self, coeffs: Array) -> tuple[Array, Array]:
+        """Coefficients (items, R, d) on the rows' positions, and (items, d) of the stop rows on
+        ``u_{H-1}`` (:mod:`mpcform.mpc.braking`): ``g c`` on ``x_H`` and ``kappa g c`` on ``u_{H-1}``."""
+        if self.braking is None:
+            return coeffs, coeffs[:, 0, :0]
+        at_stop = coeffs[:, self._stop] * self._stop_gain
+        main = coeffs.copy()
+        main[:, self._stop] = at_stop
+        return main, self.braking.kappa_s * at_stop
 
 
 def _stack(blocks: list[RowBlock]) -> tuple[Array, Array, Array, list[slice], list[slice]]:

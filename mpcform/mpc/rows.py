@@ -1,4 +1,4 @@
-"""The QP's rows, one unit per family: dynamics, velocity set, acceleration, geofence, separation, slack.
+"""The QP's variables and its structural rows: dynamics, the loop's positions, separation pattern, slack.
 
 Variables, all drones stacked (n drones, d dims, horizon H), positions relative to the start
 ``p0`` (``x_j = p_j - p0``, ``x_0 = 0``)::
@@ -8,29 +8,21 @@ Variables, all drones stacked (n drones, d dims, horizon H), positions relative 
 With a velocity loop (:mod:`mpcform.mpc.loop`) ``y_e = x_e + sum_j G_{e,j} u_j`` are where the loop
 takes the drones (less its free response, which is in the bounds); the separation rows are on y.
 
-A limit's family (:class:`LimitRows`) builds its rows for the sparse QP of all drones
-(:mod:`mpcform.mpc.qp`) and for one drone's dense QP over its inputs (:mod:`mpcform.mpc.per_drone`),
-their bounds at each step, and the drones whose plan breaks them (the fast path's test). The
-separation rows' pattern is built here; their coefficients come from the linearisation about the
-guess (:mod:`mpcform.mpc.separation`).
+The limits' rows are one unit per limit (:mod:`mpcform.mpc.limit_families`). The separation rows'
+pattern is built here; their coefficients come from the linearisation about the guess
+(:mod:`mpcform.mpc.separation`).
 """
 
 from __future__ import annotations
 
-from abc import ABC, abstractmethod
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.spatial import HalfspaceIntersection
 
 from mpcform._validate import Array
-from mpcform.formation.geometry import squared_norms
 from mpcform.mpc.loop import VelocityLoop
-from mpcform.mpc.settings import MPCSettings
-from mpcform.world.limits import Limits
 
 INF = np.inf
-INSCRIBED = 1.0 - 1e-9  # ||u||^2 below this times h^2: inside the velocity set, rounding included
 
 
 @dataclass(frozen=True)
@@ -128,18 +120,26 @@ def slack_rows(lay: Layout) -> RowBlock:
     return RowBlock(np.arange(ns), 2 * lay.nud + np.arange(ns), np.ones(ns), np.zeros(ns), np.full(ns, INF))
 
 
-def separation_pattern(lay: Layout, pairs: Array, singles: Array) -> RowBlock:
+def separation_pattern(lay: Layout, pairs: Array, singles: Array, tail: bool = False) -> RowBlock:
     """Pattern of the separation rows (values zero; they change every step), R rows per item.
 
     Pairs ``(i, k)`` (P, 2) first: ``c^T (x_{e,i} - x_{e,k}) + s_{e,i} + s_{e,k} >= b``; then the
     one-drone items ``singles`` (S,) (decoupled pair sides, obstacles): ``c^T x_{e,i} + s_{e,i} >= b``;
     at the position steps e of :func:`row_ends` (on y instead of x with ``lay.true_positions``).
+    With the braking ``tail`` (:mod:`mpcform.mpc.braking`) step H + 1 is the stop point
+    ``x_H + kappa u_{H-1}`` (with its step-H slack): its rows' entries on ``u_{H-1}`` come after
+    all the others, pairs then singles.
     """
-    e = row_ends(lay.horizon)  # (R,) position index 1..H of each row (x_e)
+    steps = lay.horizon + tail
+    e = row_ends(steps)  # (R,) position index 1..H (H + 1: the stop point) of each row
     nr = e.shape[0]
     x_col, s_col = lay.y_cols() if lay.true_positions else lay.x_cols(), lay.s_cols()
+    if tail:
+        x_col = np.concatenate([x_col, lay.x_cols()[-1:]])
+        s_col = np.concatenate([s_col, s_col[-1:]])
     rows: list[Array] = [np.empty(0, dtype=np.intp)]
     cols: list[Array] = [np.empty(0, dtype=np.intp)]
+    extra_rows, extra_cols = [], []
     count = 0
     for drones in ([pairs[:, 0], pairs[:, 1]], [singles]):
         m = drones[0].shape[0]
@@ -148,12 +148,22 @@ def separation_pattern(lay: Layout, pairs: Array, singles: Array) -> RowBlock:
         xs = [x_col[e - 1][:, i].transpose(1, 0, 2) for i in drones]  # (items, R, d) each
         ss = [s_col[e - 1][:, i].T[:, :, None] for i in drones]  # (items, R, 1) each
         cc = np.concatenate(xs + ss, axis=2)
-        rows.append(np.broadcast_to(count + np.arange(m * nr).reshape(m, nr, 1), cc.shape).ravel())
+        row_ids = count + np.arange(m * nr).reshape(m, nr, 1)
+        rows.append(np.broadcast_to(row_ids, cc.shape).ravel())
         cols.append(cc.ravel())
+        if tail:  # the stop rows' u_{H-1} entries (items, d per drone)
+            uu = np.concatenate([lay.u_cols()[-1][i] for i in drones], axis=1)
+            extra_rows.append(np.broadcast_to(row_ids[:, stop_row(steps)], uu.shape).ravel())
+            extra_cols.append(uu.ravel())
         count += m * nr
-    entries = np.concatenate(rows)
+    entries = np.concatenate(rows + extra_rows)
     zeros = np.zeros(entries.shape)  # values: set each step
-    return RowBlock(entries, np.concatenate(cols), zeros, np.zeros(count), np.full(count, INF))
+    return RowBlock(entries, np.concatenate(cols + extra_cols), zeros, np.zeros(count), np.full(count, INF))
+
+
+def stop_row(steps: int) -> int:
+    """Index among an item's rows of the braking tail's end (the stop point, step ``steps``)."""
+    return 2 * steps - 3 if steps > 1 else 0
 
 
 def row_ends(horizon: int) -> Array:
@@ -179,192 +189,6 @@ def row_segments(horizon: int) -> Array:
 def positions_of_inputs(horizon: int, dim: int, dt_s: float) -> Array:
     """One drone's positions x_1 .. x_H from its inputs (H d, H d): ``x_e = dt sum_{j<e} u_j``."""
     return dt_s * np.kron(np.tril(np.ones((horizon, horizon))), np.eye(dim))
-
-
-class LimitRows(ABC):
-    """One limit's rows on every drone at every step, for the sparse and the per-drone QP."""
-
-    fixed_bounds = False  # whether the dense rows' bounds are the same for every drone and step
-
-    @abstractmethod
-    def sparse(self, lay: Layout) -> RowBlock:
-        """Rows of the sparse QP, with the bounds that stay the same from step to step."""
-
-    def set_bounds(self, lower: Array, upper: Array, p0: Array, u_prev: Array) -> None:  # noqa: B027
-        """Write this step's bounds into the family's part of the sparse QP's bounds (in place);
-        ``p0`` (n, d) starts [m], ``u_prev`` (n, d) last commands [m/s]."""
-
-    @abstractmethod
-    def dense(self) -> Array:
-        """Rows (m, H d) over one drone's inputs u_0 .. u_{H-1} (the per-drone QP)."""
-
-    @abstractmethod
-    def dense_bounds(self, p0: Array, u_prev: Array, inf: float) -> tuple[Array, Array]:
-        """Bounds (n, m) of the dense rows for each drone; ``inf`` stands for no bound."""
-
-    @abstractmethod
-    def violators(self, p0: Array, u_prev: Array, u: Array, x: Array) -> Array:
-        """Drones (n,) whose inputs ``u`` and relative positions ``x`` (H, n, d) break a row."""
-
-
-class VelocityRows(LimitRows):
-    """Velocity set ``D u_{j,i} <= h`` [m/s] inside the ball ``||u|| <= v_max`` (:func:`velocity_set`)."""
-
-    fixed_bounds = True
-
-    def __init__(self, dim: int, horizon: int, settings: MPCSettings, v_max_mps: float) -> None:
-        self.horizon = horizon
-        self.normals, self.h_mps = velocity_set(dim, settings, v_max_mps)
-
-    def sparse(self, lay: Layout) -> RowBlock:
-        h, n, dim, m = lay.horizon, lay.n, lay.dim, self.normals.shape[0]
-        rr = np.arange(h * n * m).reshape(h, n, m, 1).repeat(dim, axis=3)
-        cc = np.broadcast_to(lay.u_cols()[:, :, None, :], (h, n, m, dim))
-        vv = np.broadcast_to(self.normals, (h, n, m, dim))
-        return RowBlock(rr, cc, vv, np.full(h * n * m, -INF), np.full(h * n * m, self.h_mps))
-
-    def dense(self) -> Array:
-        return np.kron(np.eye(self.horizon), self.normals)
-
-    def dense_bounds(self, p0: Array, u_prev: Array, inf: float) -> tuple[Array, Array]:
-        shape = (p0.shape[0], self.horizon * self.normals.shape[0])
-        return np.full(shape, -inf), np.full(shape, self.h_mps)
-
-    def violators(self, p0: Array, u_prev: Array, u: Array, x: Array) -> Array:
-        """Tested on the drones with an input outside the inscribed ball ``||u|| <= h`` (inside it,
-        every ``D_i^T u <= ||u|| <= h``, rounding included with the factor's margin)."""
-        out = squared_norms(u).max(axis=0, initial=0.0) > INSCRIBED * self.h_mps**2
-        if out.any():
-            out[out] = (u[:, out] @ self.normals.T > self.h_mps).any(axis=(0, 2))
-        return out
-
-
-class AccelerationRows(LimitRows):
-    """``|u_j - u_{j-1}| <= a_max dt`` per component, ``u_{-1}`` the last applied command."""
-
-    def __init__(self, dim: int, horizon: int, dt_s: float, a_max_mps2: float) -> None:
-        self.dim, self.horizon = dim, horizon
-        self.step_mps = a_max_mps2 * dt_s  # largest change per step [m/s]
-
-    def sparse(self, lay: Layout) -> RowBlock:
-        nud, n, dim = lay.nud, lay.n, lay.dim
-        r, u_col = np.arange(nud).reshape(lay.horizon, n, dim), lay.u_cols()
-        rr = np.concatenate([r.ravel(), r[1:].ravel()])
-        cc = np.concatenate([u_col.ravel(), u_col[:-1].ravel()])
-        vv = np.concatenate([np.ones(nud), -np.ones(nud - n * dim)])
-        return RowBlock(rr, cc, vv, np.full(nud, -self.step_mps), np.full(nud, self.step_mps))
-
-    def set_bounds(self, lower: Array, upper: Array, p0: Array, u_prev: Array) -> None:
-        first = slice(0, p0.size)  # the rows of u_0 - u_{-1}
-        lower[first] += u_prev.ravel()
-        upper[first] += u_prev.ravel()
-
-    def dense(self) -> Array:
-        h = self.horizon
-        return np.kron(np.eye(h) - np.eye(h, k=-1), np.eye(self.dim))
-
-    def dense_bounds(self, p0: Array, u_prev: Array, inf: float) -> tuple[Array, Array]:
-        n, shape = p0.shape[0], (p0.shape[0], self.horizon, self.dim)
-        da = np.full(shape, self.step_mps)
-        shift = np.zeros(shape)
-        shift[:, 0] = u_prev
-        return (shift - da).reshape(n, -1), (shift + da).reshape(n, -1)
-
-    def violators(self, p0: Array, u_prev: Array, u: Array, x: Array) -> Array:
-        du = np.diff(np.concatenate([u_prev[None], u]), axis=0)
-        return np.asarray((np.abs(du) > self.step_mps).any(axis=(0, 2)))
-
-
-class GeofenceRows(LimitRows):
-    """``lo <= p0 + x_j <= hi``: the box tightened by the margin; a drone outside it may stay or
-    move inwards, never further out."""
-
-    def __init__(
-        self, dim: int, horizon: int, dt_s: float, min_m: Array, max_m: Array, margin_m: float
-    ) -> None:
-        self.dim, self.horizon, self.dt_s, self.margin_m = dim, horizon, dt_s, margin_m
-        self.min_m, self.max_m = min_m, max_m  # the fence (d,) [m]
-
-    def box(self, p0: Array) -> tuple[Array, Array]:
-        """Bounds (n, d) on each drone's relative positions x."""
-        lo = np.minimum(self.min_m + self.margin_m - p0, 0.0)
-        hi = np.maximum(self.max_m - self.margin_m - p0, 0.0)
-        return lo, hi
-
-    def sparse(self, lay: Layout) -> RowBlock:
-        nud = lay.nud
-        return RowBlock(np.arange(nud), lay.x_cols(), np.ones(nud), np.zeros(nud), np.zeros(nud))
-
-    def set_bounds(self, lower: Array, upper: Array, p0: Array, u_prev: Array) -> None:
-        lo, hi = self.box(p0)
-        shape = (self.horizon,) + p0.shape
-        lower[:] = np.broadcast_to(lo, shape).ravel()
-        upper[:] = np.broadcast_to(hi, shape).ravel()
-
-    def dense(self) -> Array:
-        return positions_of_inputs(self.horizon, self.dim, self.dt_s)
-
-    def dense_bounds(self, p0: Array, u_prev: Array, inf: float) -> tuple[Array, Array]:
-        n, h = p0.shape[0], self.horizon
-        lo_h, hi_h = (np.repeat(b[:, None], h, axis=1).reshape(n, -1) for b in self.box(p0))
-        return lo_h, hi_h
-
-    def violators(self, p0: Array, u_prev: Array, u: Array, x: Array) -> Array:
-        lo, hi = self.box(p0)
-        return np.asarray(((x < lo) | (x > hi)).any(axis=(0, 2)))
-
-
-def limit_rows(dim: int, dt_s: float, limits: Limits, settings: MPCSettings) -> tuple[LimitRows, ...]:
-    """The families the limits ask for, in the QP's row order: velocity, acceleration, geofence."""
-    h = settings.horizon
-    families: list[LimitRows] = []
-    if limits.v_max_mps is not None:
-        families.append(VelocityRows(dim, h, settings, limits.v_max_mps))
-    if limits.a_max_mps2 is not None:
-        families.append(AccelerationRows(dim, h, dt_s, limits.a_max_mps2))
-    if limits.geofence_min_m is not None and limits.geofence_max_m is not None:
-        fence = limits.geofence_min_m, limits.geofence_max_m
-        families.append(GeofenceRows(dim, h, dt_s, *fence, settings.margin_m))
-    return tuple(families)
-
-
-def violators(families: tuple[LimitRows, ...], p0: Array, u_prev: Array, u: Array, x: Array) -> Array:
-    """Drones (n,) whose ``(u, x)`` miss a velocity, acceleration or geofence row."""
-    if len(families) == 1:
-        return families[0].violators(p0, u_prev, u, x)
-    bad = np.zeros(p0.shape[0], dtype=bool)
-    for family in families:
-        bad |= family.violators(p0, u_prev, u, x)
-    return bad
-
-
-def velocity_polytope(dim: int, facets: int | None) -> tuple[Array, float]:
-    """Unit normals D (M, d) and h <= 1 with ``{D u <= h}`` inscribed in the unit ball.
-
-    Planar: a regular M-gon, ``h = cos(pi / M)``. Spatial: M directions on a Fibonacci sphere;
-    h is 1 / (largest vertex radius of ``{D u <= 1}``), so every vertex lies in the ball.
-    """
-    if dim == 2:
-        m = facets or 16
-        ang = 2.0 * np.pi * (np.arange(m) + 0.5) / m
-        return np.column_stack([np.cos(ang), np.sin(ang)]), float(np.cos(np.pi / m))
-    m = facets or 32
-    i = np.arange(m) + 0.5
-    z = 1.0 - 2.0 * i / m
-    phi = np.pi * (1.0 + 5**0.5) * i
-    rho = np.sqrt(1.0 - z * z)
-    normals = np.column_stack([rho * np.cos(phi), rho * np.sin(phi), z])
-    verts = HalfspaceIntersection(np.column_stack([normals, -np.ones(m)]), np.zeros(3)).intersections
-    return normals, float(1.0 / np.linalg.norm(verts, axis=1).max())
-
-
-def velocity_set(dim: int, settings: MPCSettings, v_max_mps: float) -> tuple[Array, float]:
-    """Rows ``D u <= h`` [m/s] of the velocity set: the inscribed polytope, or for ``box`` the
-    cube ``|u_a| <= v_max / sqrt(d)`` (rows ``+-e_a``)."""
-    if settings.velocity_set == "box":
-        return np.vstack([np.eye(dim), -np.eye(dim)]), v_max_mps / np.sqrt(dim)
-    normals, h_rel = velocity_polytope(dim, settings.facets)
-    return normals, h_rel * v_max_mps
 
 
 def position_table(m_inv: Array, h: int, dim: int, dt_s: float, loop: VelocityLoop | None) -> Array:

@@ -6,7 +6,9 @@ The exact separation is non-convex: ``||W (p_i - p_k)|| >= d_min`` for a pair (`
 obstacle o. The guess is the previous plan shifted one step. For segment j of an item's relative
 guess path, ``c`` is the unit vector towards the segment's point closest to the origin; the row
 ``c^T rel >= required + margin`` (a half-space that excludes the forbidden ball) is placed at both
-segment ends (position steps of :func:`mpcform.mpc.rows.row_ends`), with a slack:
+segment ends (position steps of :func:`mpcform.mpc.rows.row_ends`; with braking one more segment,
+from ``x_H`` to the stop point, :mod:`mpcform.mpc.braking`: the plans, guesses and positions
+given here then have that point last), with a slack:
 
 - joint pair: ``c^T W (x_{e,i} - x_{e,k}) + s_{e,i} + s_{e,k} >= d_min + margin - c^T W (p0_i - p0_k)``;
 - decoupled pair: two one-drone rows about the guess's midpoint ``m_e``, each asking for half,
@@ -29,6 +31,7 @@ import numpy as np
 
 from mpcform._validate import Array
 from mpcform.formation.geometry import drone_spreads, pairs_within, vector_norms
+from mpcform.mpc.braking import Braking, separation_steps
 from mpcform.mpc.candidates import Candidates
 from mpcform.mpc.rows import row_ends, row_segments
 from mpcform.mpc.separation_units import BLOCK, ObstacleSeparation, PairSeparation, Test, inside
@@ -89,24 +92,33 @@ class Separation:
     """The pair and obstacle units together: the rows of a candidate set, and the tests on them."""
 
     def __init__(
-        self, dim: int, limits: Limits, settings: MPCSettings, obstacles: tuple[SphereObstacle, ...]
+        self,
+        dim: int,
+        limits: Limits,
+        settings: MPCSettings,
+        obstacles: tuple[SphereObstacle, ...],
+        braking: Braking | None = None,
     ) -> None:
-        self.dim, self.margin_m = dim, settings.margin_m
+        self.dim, self.margin_m, self.braking = dim, settings.margin_m, braking
+        steps = separation_steps(settings.horizon, braking)  # with braking, the tail to the stop point
         self.d_min_m, self.tube_m = limits.d_min_m, limits.tube_m
         self.metric = np.ones(dim)  # W's diagonal
         if limits.downwash_kappa is not None:
             self.metric[2] = 1.0 / limits.downwash_kappa
-        self.pairs = None if limits.d_min_m is None else PairSeparation(limits.d_min_m, self.metric, settings)
-        self.obstacles = ObstacleSeparation(obstacles, settings) if obstacles else None
-        self.ends, self.n_rows = row_ends(settings.horizon), row_segments(settings.horizon).shape[0]
+        d_min = limits.d_min_m
+        self.pairs = None if d_min is None else PairSeparation(d_min, self.metric, settings, steps)
+        self.obstacles = ObstacleSeparation(obstacles, settings, steps) if obstacles else None
+        self.ends, self.n_rows = row_ends(steps), row_segments(steps).shape[0]
 
-    def rows(self, p0: Array, guess: Array, cand: Candidates) -> SeparationRows:
-        """Closest-point rows about ``guess`` (H + 1, n, d) for every candidate item."""
+    def rows(self, p0: Array, guess: Array, cand: Candidates, stops: Array | None = None) -> SeparationRows:
+        """Closest-point rows about ``guess`` (H + 1, n, d) for every candidate item; ``stops`` (n, d):
+        decoupled with braking, the eq. 14 rollout's stop points (a pair whose rollout keeps its
+        stop row splits that row about their midpoint: a common speed-up moves both sides)."""
         r, no, singles = self.n_rows, np.empty(0, dtype=bool), []
         joint = empty = (np.empty((0, 2), np.intp), np.empty((0, r, self.dim)), np.empty((0, r)), no, no)
         path = np.ascontiguousarray(guess.transpose(1, 0, 2))  # (n, H + 1, d): items gather rows
         if cand.pairs.shape[0] and self.pairs is not None:
-            two, one = self.pairs.rows(p0, path, cand.pairs, cand.pair_on)
+            two, one = self.pairs.rows(p0, path, cand.pairs, cand.pair_on, stops)
             joint, singles = joint if two is None else two, [] if one is None else [one]
         if cand.obstacles.shape[0] and self.obstacles is not None:
             singles.append(self.obstacles.rows(p0, path, cand.obstacles, cand.obstacle_on))
@@ -178,25 +190,36 @@ class Separation:
         joint = value[first] + value[pair & ~first]  # both sides in the candidates' pair order
         return bool(joint.min(initial=np.inf) >= 0.0 and value[~pair].min(initial=np.inf) >= 0.0)
 
-    def conflicted(self, x: Array, rows: SeparationRows, values: Array | None = None) -> Array:
+    def conflicted(
+        self, x: Array, rows: SeparationRows, values: Array | None = None, tail: bool = True
+    ) -> Array:
         """Drones (n,) of the items whose rows positions ``x`` (H, n, d) miss (an obstacle item
-        names only its drone); ``values``: :meth:`single_values` when known."""
-        least, labels = self._least(x, rows, values)
+        names only its drone); ``values``: :meth:`single_values` when known; ``tail`` False: not
+        counting the braking tail's rows (its last two) of drone pairs, only the horizon's (an
+        obstacle's tail still counts: a drone turns early for a sphere it would have to brake for)."""
+        least, labels = self._least(x, rows, values, None if tail or self.braking is None else -2)
         labels = labels[least < 0.0]
         conflicted = np.zeros(x.shape[1], dtype=bool)
         conflicted[labels[labels >= 0]] = True
         return conflicted
 
-    def _least(self, x: Array, rows: SeparationRows, values: Array | None) -> tuple[Array, Array]:
-        """Each item's least row value ``c^T x_e - b`` (inf out of reach), joint pairs then
-        one-drone items, and their labels."""
-        single = (self.single_values(x, rows) if values is None else values).min(axis=1, initial=np.inf)
+    def _least(
+        self, x: Array, rows: SeparationRows, values: Array | None, last: int | None = None
+    ) -> tuple[Array, Array]:
+        """Each item's least row value ``c^T x_e - b`` (inf out of reach) over its rows (a drone
+        pair's up to ``last``, exclusive; None: all), joint pairs then one-drone items, and their
+        labels."""
+        single_values = self.single_values(x, rows) if values is None else values
+        single = single_values.min(axis=1, initial=np.inf)
+        if last is not None:  # split pairs' rows up to last; obstacles' all
+            split = rows.labels[:, 1] >= 0
+            single[split] = single_values[split, :last].min(axis=1, initial=np.inf)
         pair = np.full(rows.pairs.shape[0], np.inf)
         if rows.pair_on.any():
             xe = x[self.ends - 1]  # (R, n, d)
             rel = xe[:, rows.pairs[:, 0]] - xe[:, rows.pairs[:, 1]]
             value = np.einsum("mrd,rmd->mr", rows.pair_coeffs, rel) - rows.pair_lower
-            pair[rows.pair_on] = value[rows.pair_on].min(axis=1)
+            pair[rows.pair_on] = value[rows.pair_on, :last].min(axis=1)
         return np.concatenate([pair, single]), np.concatenate([rows.pairs, rows.labels])
 
     def blocked_targets(self, targets: Array) -> Array:

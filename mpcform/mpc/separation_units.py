@@ -34,11 +34,14 @@ def segment_normals(rel: Array, segs: Array | None = None) -> Array:
 class PairSeparation:
     """``d_min`` [m] between drone pairs in the metric ``W = diag(metric)``, joint or decoupled."""
 
-    def __init__(self, d_min_m: float, metric: Array, settings: MPCSettings) -> None:
+    def __init__(
+        self, d_min_m: float, metric: Array, settings: MPCSettings, steps: int | None = None
+    ) -> None:
         self.d_min_m, self.metric, self.margin_m = d_min_m, metric, settings.margin_m
         self.unit_metric = bool(np.all(metric == 1.0))  # W = I: no scaling
         self.joint = settings.coupling == "joint"
-        self.segs, self.ends = row_segments(settings.horizon), row_ends(settings.horizon)
+        steps = settings.horizon if steps is None else steps  # segments (the braking tail's too)
+        self.segs, self.ends = row_segments(steps), row_ends(steps)
         self.near = NearPairs()  # the clear test's neighbour list, kept between steps
 
     def relative(self, points: Array, i: Array, k: Array) -> Array:
@@ -49,11 +52,14 @@ class PairSeparation:
         """``W v`` for vectors (..., d) (``v`` itself when ``W = I``)."""
         return v if self.unit_metric else v * self.metric
 
-    def rows(self, p0: Array, path: Array, pairs: Array, on: Array) -> tuple[RowPart | None, RowPart | None]:
+    def rows(
+        self, p0: Array, path: Array, pairs: Array, on: Array, stops: Array | None = None
+    ) -> tuple[RowPart | None, RowPart | None]:
         """The joint rows, or the decoupled one-drone rows (side i of every pair, then side k), of
-        ``pairs`` (P, 2) about the guess ``path`` (n, H + 1, d) (drone-major)."""
+        ``pairs`` (P, 2) about the guess ``path`` (n, H + 1, d) (drone-major); ``stops``: see
+        :meth:`mpcform.mpc.separation.Separation.rows`."""
         if not self.joint:
-            return None, self._sides(p0, path, pairs, on)
+            return None, self._sides(p0, path, pairs, on, stops)
         i, k = pairs[:, 0], pairs[:, 1]
         rel = self.scaled(path[i] - path[k])  # (P, H + 1, d), metric space
         coeffs = self.scaled(segment_normals(rel, self.segs))  # (P, R, d), world coordinates
@@ -63,10 +69,13 @@ class PairSeparation:
         lower[hard, 0] = 0.0
         return (pairs, coeffs, lower, on, hard), None
 
-    def _sides(self, p0: Array, path: Array, pairs: Array, on: Array) -> RowPart:
+    def _sides(self, p0: Array, path: Array, pairs: Array, on: Array, stops: Array | None = None) -> RowPart:
         """The decoupled rows: two per-drone rows about the guess's midpoint ``m_e`` at each row's
         position step, ``+-c^T (p0_side - m_e) >= (d_min + margin) / 2``, side i (+c) of every
-        pair, then side k (-c); built :data:`BLOCK` pairs at a time (the temporaries stay small)."""
+        pair, then side k (-c); built :data:`BLOCK` pairs at a time (the temporaries stay small).
+        With ``stops`` (n, d), the last row (the braking stop point) of a pair whose ``stops`` meet
+        it jointly is split about their midpoint instead (any common split point is safe: the two
+        sides add up to the joint row)."""
         p, r, d = pairs.shape[0], self.segs.shape[0], path.shape[2]
         coeffs, lower, hard = np.empty((2 * p, r, d)), np.empty((2 * p, r)), np.empty(p, dtype=bool)
         half = 0.5 * (self.d_min_m + self.margin_m)
@@ -83,12 +92,30 @@ class PairSeparation:
             mid = np.add(g_i, g_k, out=g_i)  # the midpoints (B, H + 1, d), in place
             mid *= 0.5
             mid = np.take(mid, self.ends, axis=1)  # at each row's position step (B, R, d)
+            if stops is not None:  # the stop row (R - 2): its split towards the rollout's
+                g_stop = path[i, -1], path[k, -1]  # (g_i holds the midpoints now)
+                mid[:, -2] = self._stop_split(coeffs[a:b, -2], *g_stop, mid[:, -2], stops[i], stops[k])
             for side, out, fix in ((i, lower[a:b], np.subtract), (k, lower[p + a : p + b], np.add)):
                 gap = p0[side][:, None] - mid  # -(-c)^T gap = +c^T gap on side k
                 fix(half, np.einsum("prd,prd->pr", coeffs[a:b], gap), out=out)
         hard2 = np.concatenate([hard, hard])
         lower[hard2, 0] = 0.0
         return np.concatenate([pairs, pairs[:, ::-1]]), coeffs, lower, np.concatenate([on, on]), hard2
+
+    def _stop_split(self, c: Array, g_i: Array, g_k: Array, m_g: Array, s_i: Array, s_k: Array) -> Array:
+        """Split points (B, d) of the stop rows ``c`` (B, d): from the guess's midpoint ``m_g`` as
+        far towards the rollout's stop points' ``(s_i + s_k) / 2`` as the guess's stop points
+        ``g_i``, ``g_k`` still meet both sides (so the shifted plan stays feasible: a formation
+        speeding up together moves both sides of a split, and the guess's midpoint would throttle
+        it). Any common split point is safe: the two sides add up to the joint row."""
+        half = 0.5 * (self.d_min_m + self.margin_m)
+        step = 0.5 * (s_i + s_k) - m_g
+        along, at = np.einsum("pd,pd->p", c, step), np.einsum("pd,pd->p", c, m_g)
+        room = np.where(
+            along > 0, np.einsum("pd,pd->p", c, g_i) - half - at, np.einsum("pd,pd->p", c, g_k) + half - at
+        )
+        t = np.clip(np.divide(room, along, out=np.ones_like(along), where=along != 0), 0.0, 1.0)
+        return m_g + t[:, None] * step
 
     def doubtful(self, p0: Array, spread: Array) -> tuple[Array, Array, Array]:
         """The pairs ``(i, k)`` (of the neighbour list) the spread bound of :meth:`Separation.clear`
@@ -118,9 +145,12 @@ class ObstacleSeparation:
     """Drones keep ``required_m`` (m,) [m] from the obstacles' centres ``center_m`` (m, d): the
     radius plus each obstacle's resolved clearance (:func:`mpcform.world.obstacles.resolve_clearances`)."""
 
-    def __init__(self, obstacles: tuple[SphereObstacle, ...], settings: MPCSettings) -> None:
+    def __init__(
+        self, obstacles: tuple[SphereObstacle, ...], settings: MPCSettings, steps: int | None = None
+    ) -> None:
         self.center_m, self.required_m = obstacle_arrays(obstacles)
-        self.margin_m, self.segs = settings.margin_m, row_segments(settings.horizon)
+        steps = settings.horizon if steps is None else steps  # segments (the braking tail's too)
+        self.margin_m, self.segs = settings.margin_m, row_segments(steps)
 
     def rows(self, p0: Array, path: Array, items: Array, on: Array) -> RowPart:
         """One-drone rows of the ``(drone, obstacle)`` items (O, 2) about the guess ``path``

@@ -49,6 +49,8 @@ class MPCSettings:
       linearisation), write the separation rows on where its velocity loop really takes the drones,
       with the last interval's velocity offset estimated (:mod:`mpcform.mpc.loop`); the cost and
       eq. 14 are unchanged. No effect on the ideal plant.
+    - ``braking``: with a finite ``a_max``, end every plan where the drones can still stop
+      (:mod:`mpcform.mpc.braking`).
     """
 
     horizon: int = 10
@@ -65,6 +67,7 @@ class MPCSettings:
     grouping: bool = True
     fast_path: bool = True
     plant_model: bool = True
+    braking: bool = True
 
     @property
     def strategy(self) -> SolveStrategy:
@@ -102,6 +105,8 @@ class MPCSettings:
         positive("controller.slack_quadratic", self.slack_quadratic, allow_zero=True)
         positive("controller.margin", self.margin_m, allow_zero=True)
         positive("controller.tie_break", self.tie_break_rad, allow_zero=True)
+        if not isinstance(self.braking, bool):
+            raise ValidationError("controller.braking", f"expected true or false, got {self.braking!r}")
         check_strategy(self.coupling, self.strategy)
 
 

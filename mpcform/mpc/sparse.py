@@ -21,10 +21,10 @@ import numpy as np
 
 from mpcform._validate import Array
 from mpcform.errors import ValidationError
+from mpcform.mpc.limit_families import LimitRows
 from mpcform.mpc.loop import VelocityLoop
 from mpcform.mpc.problem import ACTIVE_TOL, StepQP, StepSolver
 from mpcform.mpc.qp import MPCQP
-from mpcform.mpc.rows import LimitRows
 from mpcform.mpc.separation import Separation, SeparationRows
 from mpcform.mpc.settings import MPCSettings
 from mpcform.solvers.base import QPBackend, QPContext, QPSolution
@@ -75,7 +75,7 @@ class SparseSolver(StepSolver):
         q = mpc_qp.cost_vector(qp.targets_mps)
         lower = np.concatenate([rows.pair_lower, rows.single_lower])
         on = np.concatenate([rows.pair_on, rows.single_on])
-        lo, hi = mpc_qp.bounds(qp.start_m, qp.u_prev_mps, lower, on)
+        lo, hi = mpc_qp.bounds(qp.start_m, qp.u_prev_mps, lower, on, qp.free_m)
         hard = rows.pair_hard, rows.single_hard
         a_data = mpc_qp.separation_values(rows.pair_coeffs, rows.single_coeffs, *hard)
         if self._backend_qp is not mpc_qp:
@@ -137,6 +137,12 @@ class SparseSolver(StepSolver):
             return False
         at = lay.y_cols() if lay.true_positions else lay.x_cols()  # the rows' positions
         x = z[at.ravel()].reshape(lay.horizon, lay.n, lay.dim)
+        braking = self.separation.braking
+        if braking is not None:  # and the stop point (:mod:`mpcform.mpc.braking`)
+            gain = 1.0 if self.loop is None else self.loop.dc_gain
+            ends = (lay.x_cols()[-1], lay.u_cols()[-1])
+            x_last, u_last = (z[c.ravel()].reshape(lay.n, lay.dim) for c in ends)
+            x = np.concatenate([x, gain * braking.stop(x_last, u_last)[None]])
         return self.separation.shortfall(x, qp.rows, SLACK_TOL_M)[0] > SLACK_TOL_M
 
     def _sub_qp(self, drones: Array, rows: SeparationRows, rebuilt: bool) -> MPCQP:
@@ -153,6 +159,7 @@ class SparseSolver(StepSolver):
                 rows.singles,
                 self.families,
                 self.loop,
+                self.separation.braking,
             )
             self._qp_key = key
         return self._qp

@@ -212,6 +212,7 @@ class SplitStep:
             warm_u[:, drones],
             rows.single_hard[sel],
             rows.single_on[sel],
+            None if qp.free_m is None else qp.free_m[:, drones],
         )
         self.iterations, self.time_s = self.iterations + got.iterations, self.time_s + got.time_s
         it = self._copy(base, shift, drones)

@@ -18,7 +18,9 @@ class MPCStepInfo(StepInfo):
     whose separation rows needed slack, and ``qp_drones``, how many drones the QP was solved for
     (the others' groups took the fast path). Liveness (:mod:`mpcform.mpc.liveness`): ``stalled``
     drones that started to stall at this step, ``resolving`` drones whose tie-break is escalated,
-    ``resolved`` escalations that ended at this step (the drone left conflict)."""
+    ``resolved`` escalations that ended at this step (the drone left conflict). ``lowered``: with a
+    velocity loop, whether a first separation row within reach was lowered to what braking reaches
+    (:func:`mpcform.mpc.planner.hard_first_rows`)."""
 
     iterations: int = 0
     solve_time_s: float = 0.0
@@ -29,6 +31,7 @@ class MPCStepInfo(StepInfo):
     stalled: int = 0
     resolving: int = 0
     resolved: int = 0
+    lowered: bool = False
 
 
 FAST_PATH = MPCStepInfo("fast_path")
@@ -49,6 +52,7 @@ def solve_info(
     slack_m: float,
     slack_items: Array,
     tie_break: TieBreak,
+    lowered: bool = False,
 ) -> MPCStepInfo:
     """The record of a step that called the solver (``mode`` ``qp`` or ``fallback``): the solve's
     figures, the slack ``slack_m`` [m] its items ``slack_items`` (m, 2) needed, and the tie-break's
@@ -65,4 +69,5 @@ def solve_info(
         stalled=tie_break.new_stalls,
         resolving=tie_break.resolving,
         resolved=tie_break.resolved,
+        lowered=lowered,
     )

@@ -2,10 +2,10 @@
 
 from __future__ import annotations
 
+from mpcform.mpc.limit_families import LimitRows
 from mpcform.mpc.loop import VelocityLoop
 from mpcform.mpc.per_drone import PerDroneQP
 from mpcform.mpc.problem import StepSolver
-from mpcform.mpc.rows import LimitRows
 from mpcform.mpc.separation import Separation
 from mpcform.mpc.settings import MPCSettings
 from mpcform.mpc.sparse import SparseSolver

@@ -36,12 +36,14 @@ def reachable_rows(
     on: Array | None,
     ends: Array,
     step_m: float | None,
+    reach_steps: Array | None = None,
 ) -> tuple[Array, Array, Array, Array, Array, Array]:
     """The separation rows that can be active, sorted by drone (item order kept within a drone):
     their coefficients ``a`` (K, d), position steps, lower bounds and whether they have a slack
     (not an item's hard first row); the number of rows per drone; and which they are (K,), as
     flat ``item * R + row`` indices (items ``singles`` (S,), ``coeffs`` (S, R, d), ``lower`` (S, R),
-    rows at position steps ``ends`` (R,)).
+    rows at position steps ``ends`` (R,), ``reach_steps`` (R,) longest steps away: ``ends`` by default;
+    the braking stop point is farther, :mod:`mpcform.mpc.braking`).
 
     A row ``a^T x_e + s_e >= b`` that every reachable ``x_e`` meets (``b <= -|a| e step_m``, the
     longest step ``step_m`` = v_max dt, since the velocity set lies in the ball; None: no limit) is
@@ -52,7 +54,7 @@ def reachable_rows(
     if on is not None:
         keep &= on[:, None]
     if step_m is not None:
-        keep &= lower > -(vector_norms(coeffs) * (ends * step_m))
+        keep &= lower > -(vector_norms(coeffs) * ((ends if reach_steps is None else reach_steps) * step_m))
     order = np.argsort(singles, kind="stable")
     rows = ends.shape[0]
     at = (order[:, None] * rows + np.arange(rows))[keep[order]]  # flat (item, row) indices
@@ -67,7 +69,8 @@ def reachable_rows(
 
 def row_values(x_of_v: Array, v: Array, sep_c: Array, at_x: Array) -> Array:
     """The separation rows' values ``a^T x_e`` (K,) at the drones' ``v`` (n, H d) (positions
-    ``x = x_of_v v``, (n H, d) drone by drone; row k on ``x[at_x[k]]``, i.e. ``drone H + e - 1``)."""
+    ``x = x_of_v v``, (n S, d) drone by drone, S positions each; row k on ``x[at_x[k]]``, i.e.
+    ``drone S + e - 1``)."""
     x = (v @ x_of_v.T).reshape(-1, sep_c.shape[1])
     return np.einsum("kd,kd->k", sep_c, np.take(x, at_x, axis=0))
 

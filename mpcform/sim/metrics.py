@@ -7,6 +7,9 @@
 drone), ``max_speed`` (largest ``||u_i||`` [m/s]), ``separation_violations`` (count of
 (sample, pair) closer than d_min) and ``speed_violations`` (count of (step, drone) faster than
 v_max), ``qp_solves``, ``fast_path_steps``, ``solver_failures``, ``max_slack`` [m],
+``slack_steps`` (steps whose plan needed slack, or that start inside a required distance) and
+``lowered_first_rows`` (steps whose first separation rows were lowered to what braking reaches,
+:func:`mpcform.mpc.planner.hard_first_rows`),
 ``stall_events`` and ``resolutions`` (drones that started to stall, and escalated tie-breaks
 that ended, :mod:`mpcform.mpc.liveness`), and
 ``step_time_ms`` (median, p90 and max of the controller's wall-clock time per step mode). The
@@ -111,6 +114,8 @@ def run_metrics(
         "solver_failures": int((modes == "fallback").sum()),
         # the planner's records (mpc.step_info.MPCStepInfo) carry these; other controllers' steps count 0
         "max_slack": float(max((getattr(i, "max_slack_m", 0.0) for i in result.infos), default=0.0)),
+        "slack_steps": int(sum(getattr(i, "max_slack_m", 0.0) > 0.0 for i in result.infos)),
+        "lowered_first_rows": int(sum(getattr(i, "lowered", False) for i in result.infos)),
         "stall_events": int(sum(getattr(i, "stalled", 0) for i in result.infos)),
         "resolutions": int(sum(getattr(i, "resolved", 0) for i in result.infos)),
         "step_time_ms": {

@@ -357,6 +357,7 @@ def test_ctrl_c_during_a_run_is_one_line_and_status_130(tmp_path: Path) -> None:
     swap, out = str(ROOT / "scenarios" / "swap_spatial_20.toml"), str(tmp_path)
     run = f"sys.exit(main(['run', {swap!r}, '--out', {out!r}]))"
     code = f"import sys; from mpcform.cli.main import main; print('ready', flush=True); {run}"
+    code = f"import signal; signal.signal(signal.SIGINT, signal.default_int_handler); {code}"  # not ignored
     proc = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, stderr=subprocess.PIPE)
     assert proc.stdout is not None and proc.stdout.readline() == b"ready\n"  # imported
     time.sleep(1.0)  # inside the run (it plans for a minute)

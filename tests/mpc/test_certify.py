@@ -147,3 +147,25 @@ def test_fallback_keeps_within_a_max() -> None:
     u, _, note = cert.fallback(None, far, items([[0, 1]]), 4, None, u_prev)
     assert note == "decelerate"
     np.testing.assert_allclose(u[0], [[0.0, 0.3], [0.0, 0.3]])
+
+
+def test_the_floor_is_the_braking_commands_chord() -> None:
+    """1.0 m apart (d_min 0.5) under a 0.2 s lag, drone 1 still flying at 12 m/s towards drone 0:
+    no command keeps the pair apart in this interval. The floor is where the braking command the
+    QP's first rows are lowered to (``floor_command``) takes the pair: that command certifies, one
+    that closes the pair beyond it does not, and a floor command that brakes less lowers the floor."""
+    from mpcform.mpc.loop import VelocityLoop
+
+    lag = (np.array([[-5.0]]), np.array([5.0]), np.array([1.0]), (0, 1))
+    loop = VelocityLoop.from_groups([lag], 2, DT, 3)
+    state = loop.rest(2)
+    state[1, 0, 0] = -12.0
+    cert = certifier()
+    cert.drift = lambda u0: loop.first(state, u0)
+    p0 = np.array([[0.0, 0.0], [1.0, 0.0]])
+    brake = np.array([[0.0, 0.0], [-1.0, 0.0]])
+    cert.floor_command = brake
+    assert cert.certify(p0, brake, items([[0, 1]])) is not None
+    assert cert.certify(p0, brake + [[0.5, 0.0], [0.0, 0.0]], items([[0, 1]])) is None
+    cert.floor_command = brake + [[0.5, 0.0], [0.0, 0.0]]
+    assert cert.certify(p0, brake + [[0.5, 0.0], [0.0, 0.0]], items([[0, 1]])) is not None

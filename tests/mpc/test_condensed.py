@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from mpcform.mpc.condensed import CondensedDroneQP, dense_bounds
-from mpcform.mpc.rows import limit_rows
+from mpcform.mpc.limit_families import limit_rows
 from mpcform.mpc.settings import MPCSettings
 from mpcform.solvers.dense import NO_BOUND
 from mpcform.world.limits import Limits

@@ -8,6 +8,7 @@ import pytest
 
 from mpcform.mpc.liveness import (
     BACKOFF_M,
+    MOVING_FRACTION,
     STALL_FRACTION,
     STALL_GROWTH,
     TieBreak,
@@ -49,7 +50,7 @@ def test_a_drone_with_a_blocked_target_is_not_turned_nor_escalated() -> None:
 def stalls(tb: TieBreak, conflicted: list[bool], moves: list[list[float]], steps: int) -> list[np.ndarray]:
     """Turn angles over ``steps`` steps of drones that start at the origin, head for (10, 0) with a
     wish of 1 m/s, and move by ``moves`` (n, 2) per step."""
-    p, wish, out = np.zeros((len(moves), 2)), np.tile([1.0, 0.0], (len(moves), 1)), []
+    p, wish, out = np.zeros((len(moves), 2)), np.ones(len(moves)), []
     for _ in range(steps):
         out.append(tb.angles(np.array(conflicted), wish, p, np.array([10.0, 0.0]) - p, started=True))
         p = p + np.array(moves)
@@ -65,15 +66,49 @@ def test_angle_grows_while_stalled_and_is_kept_while_in_conflict() -> None:
     assert tb.new_stalls == 0 and tb.resolving == 1
     # moving again while still in conflict: the raised angle is kept (no fall back into the jam)
     p = np.array([[0.0, 0.0], [0.0, 0.0]])
-    again = tb.angles(np.array([True, True]), np.ones((2, 2)), p + 0.05, np.array([10.0, 0.0]) - p, True)
+    again = tb.angles(np.array([True, True]), np.full(2, 2**0.5), p + 0.05, np.array([10.0, 0.0]) - p, True)
     assert again[0] == pytest.approx(0.5 * (1 + STALL_GROWTH * 3))
-    tb.angles(np.array([False, True]), np.ones((2, 2)), p, np.ones((2, 2)), True)  # out of conflict
+    tb.angles(np.array([False, True]), np.full(2, 2**0.5), p, np.ones((2, 2)), True)  # out of conflict
     assert tb.stalled[0] == 0 and tb.resolved == 1
     tb.stalled[:] = 4
     tb.clear()
     assert not tb.stalled.any() and tb.resolved == 2 and tb.last_m is None
     tb.clear()  # cleared again without a turn between: nothing more has resolved
     assert tb.resolved == tb.new_stalls == 0 and not tb.stalled.any() and np.isinf(tb.stall_distance_m).all()
+
+
+def test_with_a_max_the_turn_grows_no_faster_than_the_drone_can_follow_it() -> None:
+    # a drone flying 1 m/s whose command changes by at most 0.05 m/s per step, moving away: stalled
+    # at every step, but each step raises the turn by 0.05 / (0.2 * 0.5 * 1) = half a growth step
+    tb, c, p = TieBreak(1, 0.5, dt_s=0.1), np.tile([1.0, 0.0], (3, 1, 1)), np.zeros((1, 2))
+    for _ in range(5):
+        tb.turn(
+            c, np.array([True]), p, np.array([[10.0, 0.0]]) - p, True, speed_mps=np.ones(1), step_mps=0.05
+        )
+        p = p - [[0.01, 0.0]]
+    assert tb.stalled[0] == pytest.approx(4 * 0.5)  # the first step has no progress to measure
+    # speeding up from rest (0.05 m/s reachable): 0.004 m of progress per step is not a stall
+    tb, p = TieBreak(1, 0.5, dt_s=0.1), np.zeros((1, 2))
+    for _ in range(5):
+        tb.turn(
+            c, np.array([True]), p, np.array([[10.0, 0.0]]) - p, True, speed_mps=np.zeros(1), step_mps=0.05
+        )
+        p = p + [[0.004, 0.0]]
+    assert tb.stalled[0] == 0
+
+
+def test_with_a_max_a_drone_deflected_at_speed_is_not_stalled() -> None:
+    """Flying across the way to its target at its speed (no progress) is not a stall under a_max
+    (a circulating ring is not stuck); a step below MOVING_FRACTION of the wish's is, and without
+    a_max any step without progress is."""
+    c, conflicted, to_target = np.tile([1.0, 0.0], (3, 1, 1)), np.array([True]), np.array([[10.0, 0.0]])
+    for side_m, a_max, stalled in ((0.1, True, 0.0), (0.05 * MOVING_FRACTION, True, 4.0), (0.1, False, 4.0)):
+        tb, p = TieBreak(1, 0.5, dt_s=0.1), np.zeros((1, 2))
+        for _ in range(5):
+            speed = {"speed_mps": np.ones(1), "step_mps": 1.0} if a_max else {}
+            tb.turn(c, conflicted, p, to_target - p, True, **speed)
+            p = p + [[0.0, side_m]]
+        assert tb.stalled[0] == stalled, (side_m, a_max)
 
 
 def test_a_stuck_drone_sweeps_the_full_circle_and_backing_off_starts_afresh() -> None:
@@ -90,8 +125,8 @@ def test_a_stuck_drone_sweeps_the_full_circle_and_backing_off_starts_afresh() ->
 def test_arrived_or_first_steps_do_not_stall_and_zero_disables() -> None:
     tb = TieBreak(1, 0.5)
     p = np.zeros((1, 2))
-    assert tb.angles(np.array([True]), np.ones((1, 2)), p, np.ones((1, 2)), started=False)[0] == 0.5
-    assert tb.angles(np.array([True]), np.ones((1, 2)), p, np.full((1, 2), 1e-3), started=True)[0] == 0.5
+    assert tb.angles(np.array([True]), np.full(1, 2**0.5), p, np.ones((1, 2)), started=False)[0] == 0.5
+    assert tb.angles(np.array([True]), np.full(1, 2**0.5), p, np.full((1, 2), 1e-3), started=True)[0] == 0.5
     assert tb.stalled[0] == 0
     c = np.ones((2, 1, 2))
     assert TieBreak(1, 0.0).turn(c, np.array([True]), p, np.ones((1, 2)), started=True) is c

@@ -264,7 +264,7 @@ def test_rows_with_a_velocity_loop_are_on_the_true_positions() -> None:
     lag = (np.array([[-1 / tau]]), np.array([1 / tau]), np.array([1.0]), (0, 1, 2))
     loop = VelocityLoop.from_groups([lag], dim, 0.1, h)
     st = MPCSettings(horizon=h, coupling="decoupled")
-    from mpcform.mpc.rows import limit_rows
+    from mpcform.mpc.limit_families import limit_rows
 
     per = PerDroneQP(dim, 0.1, LIMITS, st, limit_rows(dim, 0.1, LIMITS, st), DaqpBackend(), loop)
     rng = np.random.default_rng(5)

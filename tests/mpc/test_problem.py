@@ -6,10 +6,10 @@ import numpy as np
 import pytest
 
 from mpcform.mpc.candidates import Candidates
+from mpcform.mpc.limit_families import limit_rows
 from mpcform.mpc.per_drone import PerDroneQP
 from mpcform.mpc.plan import rollout
 from mpcform.mpc.problem import StepQP, StepSolver
-from mpcform.mpc.rows import limit_rows
 from mpcform.mpc.separation import Separation
 from mpcform.mpc.settings import MPCSettings
 from mpcform.mpc.sparse import SparseSolver

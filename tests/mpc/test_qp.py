@@ -5,9 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from mpcform.mpc.limit_families import limit_rows
 from mpcform.mpc.plan import rollout
 from mpcform.mpc.qp import MPCQP
-from mpcform.mpc.rows import limit_rows, row_ends
+from mpcform.mpc.rows import row_ends
 from mpcform.mpc.settings import MPCSettings
 from mpcform.world.limits import Limits
 
@@ -72,9 +73,10 @@ def test_limit_bounds_follow_the_start_and_the_last_command() -> None:
     lo_a, hi_a = m.bounds(np.zeros((1, 2)), np.zeros((1, 2)), *none)
     lo_b, hi_b = m.bounds(np.array([[1.0, -1.0]]), np.array([[0.5, -0.25]]), *none)
     changed = np.flatnonzero((lo_a != lo_b) | (hi_a != hi_b))
-    assert changed.size == 2 + 4  # u_0 - u_{-1} (2 components), the fence rows of x_1 and x_2 (2 each)
-    np.testing.assert_allclose(lo_b[changed], [-4.5, -5.25, -10.0, -8.0, -10.0, -8.0])
-    np.testing.assert_allclose(hi_b[changed], [5.5, 4.75, 8.0, 10.0, 8.0, 10.0])
+    # u_0 - u_{-1} (2 components), the fence rows of x_1, x_2 and the stop point (2 each: braking)
+    assert changed.size == 2 + 6
+    np.testing.assert_allclose(lo_b[changed], [-4.5, -5.25, -10.0, -8.0, -10.0, -8.0, -10.0, -8.0])
+    np.testing.assert_allclose(hi_b[changed], [5.5, 4.75, 8.0, 10.0, 8.0, 10.0, 8.0, 10.0])
 
 
 def test_separation_rows_with_a_velocity_loop_carry_its_forced_response() -> None:

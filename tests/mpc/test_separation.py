@@ -7,6 +7,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from mpcform.mpc.braking import Braking
 from mpcform.mpc.candidates import Candidates
 from mpcform.mpc.separation import Separation
 from mpcform.mpc.separation_units import PairSeparation, segment_normals
@@ -302,3 +303,18 @@ def test_the_clear_test_answers_the_same_with_its_neighbour_list_kept_between_st
         fresh = Separation(2, limits, st_h, ())
         assert kept.clear(guess, planned(p0, x)) == fresh.clear(guess, planned(p0, x))
         p0 = p0 + 0.1 + rng.uniform(-0.03, 0.03, (n, 2))
+
+
+def test_without_the_tail_only_an_obstacles_braking_tail_conflicts() -> None:
+    """Horizon 1 with braking: drone 0's stop point lies inside a sphere's clearance, drones 1 and 2
+    stop 0.4 m apart (d_min 0.5); every row of the horizon holds. With the tail all three are
+    conflicted; without it (the tie-break's encounter test) only drone 0: it turns early for the
+    sphere, while a pair's stop rows are left to the QP's braking."""
+    lim = Limits(v_max_mps=1.0, d_min_m=0.5, a_max_mps2=0.5)
+    ob = SphereObstacle(np.array([3.0, 0.0]), 1.0, clearance_m=0.5)
+    sep = Separation(2, lim, MPCSettings(horizon=1), (ob,), Braking.of(0.1, lim))
+    p0 = np.array([[0.0, 0.0], [0.0, 10.0], [3.0, 10.0]])
+    x = np.array([[[0.5, 0.0], [0.5, 0.0], [-0.5, 0.0]], [[1.8, 0.0], [1.3, 0.0], [-1.3, 0.0]]])
+    rows = sep.rows(p0, planned(p0, x), cand([[1, 2]], [[0, 0]]))
+    np.testing.assert_array_equal(sep.conflicted(x, rows), [True, True, True])
+    np.testing.assert_array_equal(sep.conflicted(x, rows, tail=False), [True, False, False])

@@ -10,8 +10,8 @@ import scipy.sparse as sp
 from helpers import crowd_and_swap
 
 from mpcform.mpc.candidates import Candidates
+from mpcform.mpc.limit_families import limit_rows
 from mpcform.mpc.problem import StepQP
-from mpcform.mpc.rows import limit_rows
 from mpcform.mpc.separation import Separation, SeparationRows
 from mpcform.mpc.settings import MPCSettings
 from mpcform.mpc.sparse import SparseSolver

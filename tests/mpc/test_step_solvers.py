@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import pytest
 
+from mpcform.mpc.limit_families import limit_rows
 from mpcform.mpc.per_drone import PerDroneQP
-from mpcform.mpc.rows import limit_rows
 from mpcform.mpc.separation import Separation
 from mpcform.mpc.settings import MPCSettings
 from mpcform.mpc.sparse import SparseSolver
