@@ -363,3 +363,12 @@ def test_ctrl_c_during_a_run_is_one_line_and_status_130(tmp_path: Path) -> None:
     proc.send_signal(signal.SIGINT)
     _, err = proc.communicate(timeout=60)
     assert proc.returncode == 130 and err.decode().strip().splitlines() == ["mpcform: interrupted"]
+
+
+def test_an_empty_out_is_refused_before_the_run(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    monkeypatch.chdir(tmp_path)
+    status = main(["run", WORKED, "--out", ""])
+    assert_one_line_error(capsys, status, "--out: expected a path, got ''")
+    assert list(tmp_path.iterdir()) == []  # nothing written into the current directory
