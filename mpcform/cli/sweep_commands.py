@@ -8,7 +8,7 @@ import argparse
 import tomllib
 from typing import Any
 
-from mpcform.cli.options import add_max_memory, print_bench, progress, solver_help
+from mpcform.cli.options import add_max_memory, add_max_work, print_bench, progress, solver_help
 from mpcform.errors import ValidationError
 
 SWEEP_HELP = "run a scenario over seeds and parameter values in parallel"
@@ -33,7 +33,13 @@ def _sweep(args: argparse.Namespace) -> int:
         progress(f"sweep: {done}/{total} runs")
 
     records = sweep.run_sweep(
-        jobs, args.jobs, args.executor, args.scheduler, progress=report, max_memory_gib=args.max_memory
+        jobs,
+        args.jobs,
+        args.executor,
+        args.scheduler,
+        progress=report,
+        max_memory_gib=args.max_memory,
+        max_work=args.max_work,
     )
     groups = sweep.aggregate(records)
     failed = sweep.failures_text(records)
@@ -137,3 +143,4 @@ def add_sweep(sub: argparse._SubParsersAction) -> None:
     cmd.add_argument("--scheduler", metavar="ADDRESS", help="dask scheduler (default: a local cluster)")
     cmd.add_argument("--json", metavar="PATH", help="also write groups and runs as a JSON list of records")
     add_max_memory(cmd, "run (each run of the sweep)")
+    add_max_work(cmd, "run (each run of the sweep)")

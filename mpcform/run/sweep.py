@@ -38,7 +38,7 @@ from mpcform.outputs import tables
 from mpcform.run.parallel import process_pool, single_threaded_env
 from mpcform.run.runner import run_scenario
 from mpcform.scenario.load import load_scenario, scenario_from_dict, scenario_text
-from mpcform.scenario.size import check_memory
+from mpcform.scenario.size import check_memory, check_work
 from mpcform.scenario.spec import Scenario
 from mpcform.sim.metrics import REL_TOL
 from mpcform.solvers.registry import check_solver_name
@@ -97,13 +97,20 @@ def build_jobs(
     ]
 
 
-def load_job(job: SweepJob) -> Scenario:
-    """The job's scenario: the file with its overrides and seed, validated."""
-    base = load_scenario(job.path)  # readable, valid TOML (errors name the file)
+def load_job(job: SweepJob, max_memory_gib: float | None = None) -> Scenario:
+    """The job's scenario: the file with its overrides and seed, validated (``max_memory_gib``:
+    see :func:`~mpcform.scenario.load.scenario_from_dict`)."""
+    base = load_scenario(
+        job.path, max_memory_gib=max_memory_gib
+    )  # readable, valid TOML (errors name the file)
     data = tomllib.loads(scenario_text(Path(job.path).read_bytes()))
     data = apply_overrides(data, job.overrides + ((("seed", job.seed),) if job.seed is not None else ()))
     return scenario_from_dict(
-        data, source=base.source, source_sha256=base.source_sha256, default_name=Path(job.path).stem
+        data,
+        source=base.source,
+        source_sha256=base.source_sha256,
+        default_name=Path(job.path).stem,
+        max_memory_gib=max_memory_gib,
     )
 
 
@@ -203,22 +210,25 @@ def run_sweep(
     scheduler: str | None = None,
     progress: Callable[[int, int], None] | None = None,
     max_memory_gib: float | None = None,
+    max_work: float | None = None,
 ) -> list[dict[str, Any]]:
     """Run every job and return the records in job order.
 
     ``workers == 1`` with the process executor runs in this process (no pool). Every distinct
     parameter combination is validated here first, so a bad ``--set`` fails before any run, and
-    so does a run estimated to need more than ``max_memory_gib`` GiB (None: no limit; see
-    :func:`mpcform.scenario.size.check_memory`).
+    so does a run estimated to need more than ``max_memory_gib`` GiB or a plant's work above
+    ``max_work`` (None: no limit; see :mod:`mpcform.scenario.size`).
     """
     if executor not in EXECUTORS:
         raise ValidationError("--executor", f"expected one of {EXECUTORS}, got {executor!r}")
     if workers < 1:
         raise ValidationError("--jobs", f"expected an integer >= 1, got {workers}")
     for overrides in {repr(j.overrides): j.overrides for j in jobs}.values():  # list values: unhashable
-        scenario = load_job(SweepJob(jobs[0].path, overrides, jobs[0].seed))
+        scenario = load_job(SweepJob(jobs[0].path, overrides, jobs[0].seed), max_memory_gib)
         if max_memory_gib is not None:
             check_memory(scenario, max_memory_gib, files=False)
+        if max_work is not None:
+            check_work(scenario, max_work)
     results: list[dict[str, Any] | None] = [None] * len(jobs)
     done = 0
     for index, record in _execute(jobs, workers, executor, scheduler):

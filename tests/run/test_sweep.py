@@ -186,3 +186,10 @@ def test_a_sweep_over_the_run_limit_is_refused_naming_its_largest_list(tiny: Pat
         build_jobs(tiny, list(range(1001)), [("seed", list(range(100)))])
     with pytest.raises(ValidationError, match=r"^--set: .* 200,000 runs \(2 x 100,000\), above the limit"):
         build_jobs(tiny, [0, 1], [("controller.horizon", list(range(100_000)))])
+
+
+def test_a_plant_rate_too_high_fails_before_any_run() -> None:
+    quad = str(Path(__file__).resolve().parents[2] / "scenarios" / "swap_spatial_12_quadrotor_wind.toml")
+    jobs = build_jobs(quad, None, [("plant.rate", [1e6])])
+    with pytest.raises(ScenarioError, match=r"^plant.rate: the plant would take 1.2e\+08 inner steps"):
+        run_sweep(jobs, max_work=5e7)
