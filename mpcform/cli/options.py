@@ -7,9 +7,12 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
+from mpcform.errors import ValidationError
 from mpcform.scenario.size import DEFAULT_MAX_MEMORY_GIB, DEFAULT_MAX_WORK
 from mpcform.solvers.registry import DEFAULT_SOLVER, PERSISTENT_SOLVERS
 
@@ -80,6 +83,18 @@ def add_max_work(cmd: argparse.ArgumentParser, per: str = "run") -> None:
         help=f"refuse a {per} whose plant takes more inner steps x drones than this "
         f"(the quadrotor's rate x duration x n; default {DEFAULT_MAX_WORK:g})",
     )
+
+
+@contextmanager
+def option_errors(*fields: str) -> Iterator[None]:
+    """Re-raise a :class:`ValidationError` of one of the library's ``fields`` (``max_speed``)
+    naming the option the user wrote (``--max-speed``)."""
+    try:
+        yield
+    except ValidationError as exc:
+        if exc.field not in fields:
+            raise
+        raise ValidationError("--" + exc.field.replace("_", "-"), exc.message) from None
 
 
 def print_bench(table: str, rows: list[dict[str, Any]], json_path: str | None) -> None:
