@@ -6,11 +6,16 @@ The benchmark modules are imported only when a benchmark runs (or its options ar
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 from pathlib import Path
 
 from mpcform.cli.options import print_bench, progress, seconds, solver_help
+from mpcform.errors import ValidationError
+from mpcform.scenario.size import DEFAULT_MAX_WORK
 from mpcform.solvers.registry import DEFAULT_SOLVER, PERSISTENT_SOLVERS
+
+PLANT_DT_S = 0.1  # bench plant's control interval: its shortest flight
 
 
 # ---- bench ----------------------------------------------------------------------------------
@@ -115,9 +120,31 @@ def _bench_split(args: argparse.Namespace) -> int:
 def _bench_plant(args: argparse.Namespace) -> int:
     from mpcform.bench import plant as bench_plant
 
+    check_plant_options(args)
     rows = bench_plant.run(args.n, args.duration, args.rate, args.repeats, wind=not args.no_wind)
     print_bench(bench_plant.markdown_table(rows), rows, args.json)
     return 0
+
+
+def check_plant_options(args: argparse.Namespace) -> None:
+    """``bench plant``'s sizes, before anything is allocated: one error naming the option (its
+    inner steps x drones within the run's default ``--max-work``)."""
+    if args.n < 1 or args.repeats < 1:
+        flag, value = ("--n", args.n) if args.n < 1 else ("--repeats", args.repeats)
+        raise ValidationError(flag, f"expected an integer >= 1, got {value}")
+    if not PLANT_DT_S <= args.duration < math.inf:
+        what = f"a flight time >= {PLANT_DT_S:g} s (one control interval)"
+        raise ValidationError("--duration", f"expected {what}, got {args.duration:g}")
+    if not 0.0 < args.rate < math.inf:
+        raise ValidationError("--rate", f"expected a finite inner-loop rate > 0 [Hz], got {args.rate:g}")
+    work = args.rate * args.duration * args.n
+    if work > DEFAULT_MAX_WORK:
+        ratios = {"--duration": args.duration / 12.0, "--rate": args.rate / 500.0, "--n": args.n / 20.0}
+        raise ValidationError(
+            max(ratios, key=lambda k: ratios[k]),
+            f"the plant would take {work:.3g} inner steps x drones ({args.rate:g} Hz x {args.duration:g} s x "
+            f"{args.n:,} drones), above the limit of {DEFAULT_MAX_WORK:.3g}: lower --duration, --rate or --n",
+        )
 
 
 def _bench_solvers(args: argparse.Namespace) -> int:

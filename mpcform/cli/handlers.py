@@ -17,6 +17,7 @@ from importlib.util import find_spec
 from pathlib import Path
 from typing import Any
 
+from mpcform.cli.options import option_errors
 from mpcform.cli.progress import ProgressBar
 from mpcform.errors import MPCFormError, ValidationError
 from mpcform.outputs.flight.export import (
@@ -37,6 +38,8 @@ PLOTS_DIR = "plots"
 EXPORT_DIR = "export"
 VIEWER_FILE = "viewer.html"
 PLOT_HINT = "plotting needs matplotlib: pip install 'mpcform[plot]'"
+EXPORT_FIELDS = "altitude offset floor tolerance rate max_speed max_acc max_jerk max_body_rate".split()
+"""The library's names of the export options: their errors name the flag (``--max-speed``)."""
 
 
 class PlotUnavailable(MPCFormError):
@@ -72,6 +75,8 @@ def check_run_options(args: argparse.Namespace, scenario: Scenario) -> None:
     if args.plot or args.animate:
         require_plotting(gif=args.animate)
     check_speed(args)
+    with option_errors(*EXPORT_FIELDS):
+        export_options(args)  # non-finite numbers, before the run
     if args.altitude is not None and not args.export:
         raise ValidationError("--altitude", "applies only with --export")
     if args.altitude is not None and scenario.dim == 3:
@@ -93,7 +98,8 @@ def finish_run(args: argparse.Namespace, scenario: Scenario, run: RunResult) -> 
         fence = None if lim.geofence_min_m is None else (lim.geofence_min_m, lim.geofence_max_m)
         print(f"wrote {write_view(data, run.out_dir / VIEWER_FILE, fence)}")
     if args.export:
-        _report_export(export_run(data, run.out_dir / EXPORT_DIR, export_options(args)))
+        with option_errors(*EXPORT_FIELDS):
+            _report_export(export_run(data, run.out_dir / EXPORT_DIR, export_options(args)))
 
 
 # ---- plot, compare, export ----------------------------------------------------------------
@@ -156,7 +162,8 @@ def _compare(args: argparse.Namespace) -> int:
 def _export(args: argparse.Namespace) -> int:
     data = load_run(args.dir)
     out = Path(args.dir) / EXPORT_DIR if args.out is None else Path(args.out)
-    _report_export(export_run(data, out, export_options(args)))
+    with option_errors(*EXPORT_FIELDS):
+        _report_export(export_run(data, out, export_options(args)))
     return 0
 
 

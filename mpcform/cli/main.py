@@ -22,7 +22,7 @@ from typing import NoReturn
 
 from mpcform.cli import bench_commands, sweep_commands
 from mpcform.cli import handlers as cli_runner
-from mpcform.cli.options import add_max_memory, solver_help
+from mpcform.cli.options import add_max_memory, add_max_work, solver_help
 from mpcform.cli.paths import check_output_dir, check_output_paths
 from mpcform.errors import MPCFormError, ScenarioError, ValidationError
 from mpcform.outputs.files import OUTPUT_FILES, format_summary
@@ -34,7 +34,7 @@ from mpcform.scenario.keys import key_reference_markdown
 from mpcform.scenario.load import load_scenario
 from mpcform.scenario.plant import with_plant_kind
 from mpcform.scenario.schema import CONTROLLER_KINDS, did_you_mean, listing
-from mpcform.scenario.size import check_memory
+from mpcform.scenario.size import check_memory, check_work
 from mpcform.sim.plants import KINDS as PLANT_KINDS
 from mpcform.solvers.registry import solver_infos
 
@@ -54,11 +54,12 @@ class _Parser(argparse.ArgumentParser):
 
 def _run(args: argparse.Namespace) -> int:
     try:
-        scenario = load_scenario(args.scenario)
+        scenario = load_scenario(args.scenario, max_memory_gib=args.max_memory)
         if args.plant is not None:
             scenario = with_plant_kind(scenario, args.plant)
         _check_overrides(args)
         check_memory(scenario, args.max_memory, args.controller)  # before anything large is allocated
+        check_work(scenario, args.max_work)
         cli_runner.check_run_options(args, scenario)  # e.g. --plot without matplotlib: fail before running
         out_dir = Path("results") / scenario.name if args.out is None else Path(args.out)
         check_output_dir("--out", out_dir)
@@ -94,7 +95,7 @@ def _check_overrides(args: argparse.Namespace) -> None:
 
 
 def _validate(args: argparse.Namespace) -> int:
-    result = check_scenario_file(args.scenario, args.max_memory)
+    result = check_scenario_file(args.scenario, args.max_memory, max_work=args.max_work)
     if result.scenario is not None:
         print(f"OK {describe(result.scenario)}")
         for warning in result.scenario.warnings():
@@ -152,6 +153,7 @@ def build_parser() -> argparse.ArgumentParser:
         if name in ("run", "validate"):
             cmd.add_argument("scenario", metavar="SCENARIO", help="scenario TOML file")
             add_max_memory(cmd)
+            add_max_work(cmd)
         if name == "run":
             cmd.add_argument("--out", metavar="DIR", help="output dir (default: results/<name>/)")
             cmd.add_argument(

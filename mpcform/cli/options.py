@@ -1,16 +1,19 @@
-"""What the subcommands' wiring shares: option types (``--max-memory``, a time budget), the solvers'
-help text, and how the table commands print (markdown on stdout, ``--json`` records, progress lines
-on a terminal's stderr)."""
+"""What the subcommands' wiring shares: option types (``--max-memory``, ``--max-work``, a time
+budget), the solvers' help text, and how the table commands print (markdown on stdout, ``--json``
+records, progress lines on a terminal's stderr)."""
 
 from __future__ import annotations
 
 import argparse
 import json
 import sys
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
-from mpcform.scenario.size import DEFAULT_MAX_MEMORY_GIB
+from mpcform.errors import ValidationError
+from mpcform.scenario.size import DEFAULT_MAX_MEMORY_GIB, DEFAULT_MAX_WORK
 from mpcform.solvers.registry import DEFAULT_SOLVER, PERSISTENT_SOLVERS
 
 
@@ -36,6 +39,17 @@ def max_memory_gib(text: str) -> float:
     return value
 
 
+def max_work(text: str) -> float:
+    """The ``--max-work`` value: a number of plant inner steps x drones > 0."""
+    try:
+        value = float(text)
+    except ValueError:
+        value = float("nan")
+    if not 0 < value < float("inf"):
+        raise argparse.ArgumentTypeError(f"expected a number of inner steps x drones > 0, got {text!r}")
+    return value
+
+
 def seconds(text: str) -> float:
     """A time budget [s]: a finite number >= 0."""
     try:
@@ -57,6 +71,30 @@ def add_max_memory(cmd: argparse.ArgumentParser, per: str = "run") -> None:
         help=f"refuse a {per} estimated to need more memory than this [GiB] "
         f"(default {DEFAULT_MAX_MEMORY_GIB:g})",
     )
+
+
+def add_max_work(cmd: argparse.ArgumentParser, per: str = "run") -> None:
+    """The ``--max-work N`` option (see :func:`mpcform.scenario.size.check_work`)."""
+    cmd.add_argument(
+        "--max-work",
+        type=max_work,
+        default=DEFAULT_MAX_WORK,
+        metavar="N",
+        help=f"refuse a {per} whose plant takes more inner steps x drones than this "
+        f"(the quadrotor's rate x duration x n; default {DEFAULT_MAX_WORK:g})",
+    )
+
+
+@contextmanager
+def option_errors(*fields: str) -> Iterator[None]:
+    """Re-raise a :class:`ValidationError` of one of the library's ``fields`` (``max_speed``)
+    naming the option the user wrote (``--max-speed``)."""
+    try:
+        yield
+    except ValidationError as exc:
+        if exc.field not in fields:
+            raise
+        raise ValidationError("--" + exc.field.replace("_", "-"), exc.message) from None
 
 
 def print_bench(table: str, rows: list[dict[str, Any]], json_path: str | None) -> None:

@@ -20,8 +20,12 @@ FILE_OPTIONS = ("json", "report", "figure")
 
 
 def check_output_paths(args: argparse.Namespace) -> None:
-    """Raise :class:`ValidationError` naming the option when one of ``args``' output paths cannot
-    be written (``--figure`` only when a figure is drawn)."""
+    """Raise :class:`ValidationError` naming the option when one of ``args``' output paths is empty
+    (``--out ''`` would write into the current directory) or cannot be written (``--figure`` only
+    when a figure is drawn)."""
+    for dest in (*DIRECTORY_OPTIONS, *FILE_OPTIONS):
+        if isinstance(value := getattr(args, dest, None), str) and not value.strip():
+            raise ValidationError(_flag(dest), f"expected a path, got {value!r}")
     for dest in DIRECTORY_OPTIONS:
         value = getattr(args, dest, None)
         if value is not None:

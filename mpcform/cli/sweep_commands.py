@@ -1,11 +1,15 @@
 """The ``sweep`` subcommand of ``mpcform`` (wired in by :mod:`mpcform.cli.main`): one scenario over
-seeds and parameter values, run by :mod:`mpcform.run.sweep`."""
+seeds and parameter values, run by :mod:`mpcform.run.sweep`; ``--seeds`` and ``--set`` are parsed
+here (an empty one is an error, and so is a sweep of more than ``mpcform.run.sweep.MAX_RUNS`` runs)."""
 
 from __future__ import annotations
 
 import argparse
+import tomllib
+from typing import Any
 
-from mpcform.cli.options import add_max_memory, print_bench, progress, solver_help
+from mpcform.cli.options import add_max_memory, add_max_work, print_bench, progress, solver_help
+from mpcform.errors import ValidationError
 
 SWEEP_HELP = "run a scenario over seeds and parameter values in parallel"
 SWEEP_DESCRIPTION = (
@@ -21,15 +25,21 @@ SWEEP_DESCRIPTION = (
 def _sweep(args: argparse.Namespace) -> int:
     from mpcform.run import sweep
 
-    seeds = sweep.parse_seeds(args.seeds) if args.seeds else None
-    sets = [sweep.parse_set(text) for text in args.set]
+    seeds = parse_seeds(args.seeds) if args.seeds is not None else None  # '' is an error, not the file's
+    sets = [parse_set(text) for text in args.set]
     jobs = sweep.build_jobs(args.scenario, seeds, sets, args.solver, args.tol)
 
     def report(done: int, total: int) -> None:
         progress(f"sweep: {done}/{total} runs")
 
     records = sweep.run_sweep(
-        jobs, args.jobs, args.executor, args.scheduler, progress=report, max_memory_gib=args.max_memory
+        jobs,
+        args.jobs,
+        args.executor,
+        args.scheduler,
+        progress=report,
+        max_memory_gib=args.max_memory,
+        max_work=args.max_work,
     )
     groups = sweep.aggregate(records)
     failed = sweep.failures_text(records)
@@ -39,6 +49,70 @@ def _sweep(args: argparse.Namespace) -> int:
         args.json,
     )
     return 0
+
+
+def parse_seeds(text: str) -> list[int]:
+    """``"0..19"`` (inclusive), ``"0,3,7"``, ``"5"``, or a mix (``"0..3,10"``)."""
+    from mpcform.run.sweep import MAX_RUNS
+
+    seeds: list[int] = []
+    count = 0
+    for part in text.split(","):
+        part = part.strip()
+        lo, sep, hi = part.partition("..")
+        try:
+            first, last = (int(lo), int(hi)) if sep else (int(part), int(part))
+        except ValueError:
+            raise ValidationError("--seeds", f"expected e.g. 0..19 or 0,3,7, got {text!r}") from None
+        if first < 0 or last < first:
+            raise ValidationError("--seeds", f"expected seeds >= 0 and ranges lo..hi, lo <= hi; got {part!r}")
+        count += last - first + 1
+        if count > MAX_RUNS:  # before the list is built (0..100000000 allocated gigabytes)
+            raise ValidationError(
+                "--seeds", f"{text!r} lists {count:,} seeds or more, above the limit of {MAX_RUNS:,} runs"
+            )
+        seeds.extend(range(first, last + 1))
+    return list(dict.fromkeys(seeds))
+
+
+def parse_set(text: str) -> tuple[str, list[Any]]:
+    """``KEY=V1,V2,...``: a dotted key (``controller.horizon``; list items by index,
+    ``obstacles.0.radius``) and its values, each a TOML value (``5``, ``0.1``, ``true``,
+    ``[1.0, 2.0]``, ``"text"``) or a bare word taken as a string (``decoupled``)."""
+    key, sep, values = text.partition("=")
+    key = key.strip()
+    parts = _split_top_level(values)
+    if not sep or not key or any(not part for part in key.split(".")) or not all(p.strip() for p in parts):
+        raise ValidationError("--set", f"expected KEY=VALUE[,VALUE...] without empty values, got {text!r}")
+    return key, [parse_value(v) for v in parts]
+
+
+def parse_value(text: str) -> Any:
+    """A TOML value, or the stripped text itself when it is not one."""
+    text = text.strip()
+    try:
+        return tomllib.loads(f"v = {text}")["v"]
+    except tomllib.TOMLDecodeError:
+        return text
+
+
+def _split_top_level(text: str) -> list[str]:
+    """Split at commas outside brackets, braces and quotes."""
+    parts, depth, quote, start = [], 0, "", 0
+    for i, ch in enumerate(text):
+        if quote:
+            quote = "" if ch == quote else quote
+        elif ch in "\"'":
+            quote = ch
+        elif ch in "[{":
+            depth += 1
+        elif ch in "]}":
+            depth -= 1
+        elif ch == "," and depth == 0:
+            parts.append(text[start:i])
+            start = i + 1
+    parts.append(text[start:])
+    return parts
 
 
 def add_sweep(sub: argparse._SubParsersAction) -> None:
@@ -69,3 +143,4 @@ def add_sweep(sub: argparse._SubParsersAction) -> None:
     cmd.add_argument("--scheduler", metavar="ADDRESS", help="dask scheduler (default: a local cluster)")
     cmd.add_argument("--json", metavar="PATH", help="also write groups and runs as a JSON list of records")
     add_max_memory(cmd, "run (each run of the sweep)")
+    add_max_work(cmd, "run (each run of the sweep)")

@@ -1,8 +1,9 @@
 """``mpcform sweep``: one scenario file run over a grid of seeds and parameter values, in parallel.
 
 A job is one scenario run: the TOML document with the job's overrides (``--set KEY=V1,V2`` over
-dotted keys, e.g. ``controller.horizon=5,10``) and its top-level ``seed``. Jobs are the
-Cartesian product of the seeds and every ``--set`` list. A seed changes the initial
+dotted keys, e.g. ``controller.horizon=5,10``, parsed by :mod:`mpcform.cli.sweep_commands`) and
+its top-level ``seed``. Jobs are the Cartesian product of the seeds and every ``--set`` list (at
+most :data:`MAX_RUNS`). A seed changes the initial
 ``perturbation`` and the simulation ``noise`` (both seeded); a scenario with neither gives the
 same run for every seed.
 
@@ -21,6 +22,7 @@ from __future__ import annotations
 
 import copy
 import itertools
+import math
 import time
 import tomllib
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
@@ -36,13 +38,16 @@ from mpcform.outputs import tables
 from mpcform.run.parallel import process_pool, single_threaded_env
 from mpcform.run.runner import run_scenario
 from mpcform.scenario.load import load_scenario, scenario_from_dict, scenario_text
-from mpcform.scenario.size import check_memory
+from mpcform.scenario.size import check_memory, check_work
 from mpcform.scenario.spec import Scenario
 from mpcform.sim.metrics import REL_TOL
 from mpcform.solvers.registry import check_solver_name
 
 EXECUTORS = ("process", "dask")
 DEFAULT_TOLERANCE_M = 0.1
+MAX_RUNS = 100_000
+"""The most runs a sweep may have (seeds x every ``--set`` list): its job list is built at once, and
+a sweep of that many runs of the smallest scenario already takes hours."""
 
 Override = tuple[str, Any]
 
@@ -56,62 +61,6 @@ class SweepJob:
     seed: int | None
     solver: str | None = None
     tolerance_m: float = DEFAULT_TOLERANCE_M
-
-
-# ---- parsing the command line ----------------------------------------------------------------
-def parse_seeds(text: str) -> list[int]:
-    """``"0..19"`` (inclusive), ``"0,3,7"``, ``"5"``, or a mix (``"0..3,10"``)."""
-    seeds: list[int] = []
-    for part in text.split(","):
-        part = part.strip()
-        lo, sep, hi = part.partition("..")
-        try:
-            first, last = (int(lo), int(hi)) if sep else (int(part), int(part))
-        except ValueError:
-            raise ValidationError("--seeds", f"expected e.g. 0..19 or 0,3,7, got {text!r}") from None
-        if first < 0 or last < first:
-            raise ValidationError("--seeds", f"expected seeds >= 0 and ranges lo..hi, lo <= hi; got {part!r}")
-        seeds.extend(range(first, last + 1))
-    return list(dict.fromkeys(seeds))
-
-
-def parse_set(text: str) -> tuple[str, list[Any]]:
-    """``KEY=V1,V2,...``: a dotted key (``controller.horizon``; list items by index,
-    ``obstacles.0.radius``) and its values, each a TOML value (``5``, ``0.1``, ``true``,
-    ``[1.0, 2.0]``, ``"text"``) or a bare word taken as a string (``decoupled``)."""
-    key, sep, values = text.partition("=")
-    key = key.strip()
-    if not sep or not key or not values.strip() or any(not part for part in key.split(".")):
-        raise ValidationError("--set", f"expected KEY=VALUE[,VALUE...], got {text!r}")
-    return key, [parse_value(v) for v in _split_top_level(values)]
-
-
-def parse_value(text: str) -> Any:
-    """A TOML value, or the stripped text itself when it is not one."""
-    text = text.strip()
-    try:
-        return tomllib.loads(f"v = {text}")["v"]
-    except tomllib.TOMLDecodeError:
-        return text
-
-
-def _split_top_level(text: str) -> list[str]:
-    """Split at commas outside brackets, braces and quotes."""
-    parts, depth, quote, start = [], 0, "", 0
-    for i, ch in enumerate(text):
-        if quote:
-            quote = "" if ch == quote else quote
-        elif ch in "\"'":
-            quote = ch
-        elif ch in "[{":
-            depth += 1
-        elif ch in "]}":
-            depth -= 1
-        elif ch == "," and depth == 0:
-            parts.append(text[start:i])
-            start = i + 1
-    parts.append(text[start:])
-    return [p for p in parts if p.strip()]
 
 
 # ---- jobs ------------------------------------------------------------------------------------
@@ -133,6 +82,13 @@ def build_jobs(
     keys = [key for key, _ in sets]
     if len(set(keys)) != len(keys):
         raise ValidationError("--set", f"a key is given twice: {keys}")
+    sizes = [len(seeds) if seeds else 1, *(len(values) for _, values in sets)]
+    if (runs := math.prod(sizes)) > MAX_RUNS:
+        flag = "--seeds" if sizes[0] == max(sizes) else "--set"
+        counts = " x ".join(f"{s:,}" for s in sizes)
+        raise ValidationError(
+            flag, f"the sweep would make {runs:,} runs ({counts}), above the limit of {MAX_RUNS:,}"
+        )
     combos = itertools.product(*[values for _, values in sets])
     return [
         SweepJob(str(path), tuple(zip(keys, combo, strict=True)), seed, solver, tolerance_m)
@@ -141,13 +97,20 @@ def build_jobs(
     ]
 
 
-def load_job(job: SweepJob) -> Scenario:
-    """The job's scenario: the file with its overrides and seed, validated."""
-    base = load_scenario(job.path)  # readable, valid TOML (errors name the file)
+def load_job(job: SweepJob, max_memory_gib: float | None = None) -> Scenario:
+    """The job's scenario: the file with its overrides and seed, validated (``max_memory_gib``:
+    see :func:`~mpcform.scenario.load.scenario_from_dict`)."""
+    base = load_scenario(
+        job.path, max_memory_gib=max_memory_gib
+    )  # readable, valid TOML (errors name the file)
     data = tomllib.loads(scenario_text(Path(job.path).read_bytes()))
     data = apply_overrides(data, job.overrides + ((("seed", job.seed),) if job.seed is not None else ()))
     return scenario_from_dict(
-        data, source=base.source, source_sha256=base.source_sha256, default_name=Path(job.path).stem
+        data,
+        source=base.source,
+        source_sha256=base.source_sha256,
+        default_name=Path(job.path).stem,
+        max_memory_gib=max_memory_gib,
     )
 
 
@@ -247,22 +210,25 @@ def run_sweep(
     scheduler: str | None = None,
     progress: Callable[[int, int], None] | None = None,
     max_memory_gib: float | None = None,
+    max_work: float | None = None,
 ) -> list[dict[str, Any]]:
     """Run every job and return the records in job order.
 
     ``workers == 1`` with the process executor runs in this process (no pool). Every distinct
     parameter combination is validated here first, so a bad ``--set`` fails before any run, and
-    so does a run estimated to need more than ``max_memory_gib`` GiB (None: no limit; see
-    :func:`mpcform.scenario.size.check_memory`).
+    so does a run estimated to need more than ``max_memory_gib`` GiB or a plant's work above
+    ``max_work`` (None: no limit; see :mod:`mpcform.scenario.size`).
     """
     if executor not in EXECUTORS:
         raise ValidationError("--executor", f"expected one of {EXECUTORS}, got {executor!r}")
     if workers < 1:
         raise ValidationError("--jobs", f"expected an integer >= 1, got {workers}")
     for overrides in {repr(j.overrides): j.overrides for j in jobs}.values():  # list values: unhashable
-        scenario = load_job(SweepJob(jobs[0].path, overrides, jobs[0].seed))
+        scenario = load_job(SweepJob(jobs[0].path, overrides, jobs[0].seed), max_memory_gib)
         if max_memory_gib is not None:
             check_memory(scenario, max_memory_gib, files=False)
+        if max_work is not None:
+            check_work(scenario, max_work)
     results: list[dict[str, Any] | None] = [None] * len(jobs)
     done = 0
     for index, record in _execute(jobs, workers, executor, scheduler):

@@ -27,7 +27,7 @@ from mpcform.scenario.build import build_controller
 from mpcform.scenario.load import load_scenario, scenario_from_dict, scenario_text
 from mpcform.scenario.parse import parse_keys, parse_top_level
 from mpcform.scenario.schema import SCHEMA, TABLES, Table
-from mpcform.scenario.size import DEFAULT_MAX_MEMORY_GIB, check_memory
+from mpcform.scenario.size import DEFAULT_MAX_MEMORY_GIB, DEFAULT_MAX_WORK, check_memory, check_work
 from mpcform.scenario.spec import Scenario
 
 MAX_ROUNDS = 100
@@ -71,16 +71,18 @@ class CheckResult:
 
 
 def check_scenario_file(
-    path: str | Path, max_memory_gib: float | None = DEFAULT_MAX_MEMORY_GIB, controller: str | None = None
+    path: str | Path,
+    max_memory_gib: float | None = DEFAULT_MAX_MEMORY_GIB,
+    controller: str | None = None,
+    max_work: float | None = DEFAULT_MAX_WORK,
 ) -> CheckResult:
-    """Load ``path``, estimate the run's memory and build its controller (``controller``
-    overrides the kind); on failure, collect every problem found. ``max_memory_gib`` None: no
-    memory limit (see :mod:`mpcform.scenario.size`)."""
+    """Load ``path``, estimate the run's memory and its plant's work and build its controller
+    (``controller`` overrides the kind); on failure, collect every problem found.
+    ``max_memory_gib``, ``max_work`` None: no limit (see :mod:`mpcform.scenario.size`)."""
     path = Path(path)
     try:
-        scenario = load_scenario(path)
-        if max_memory_gib is not None:  # before the controller, which may allocate the QP's matrices
-            check_memory(scenario, max_memory_gib, controller)
+        scenario = load_scenario(path, max_memory_gib=max_memory_gib)
+        _check_size(scenario, max_memory_gib, max_work, controller)  # before the controller's QP
         build_controller(scenario, controller)  # e.g. the mpc controller needs limits.v_max with d_min
         return CheckResult(scenario, ())
     except ScenarioError as exc:
@@ -88,7 +90,7 @@ def check_scenario_file(
             return CheckResult(None, (_problem(exc, None),))
         first = exc
     text = scenario_text(path.read_bytes())
-    problems = check_document(tomllib.loads(text), path.stem, controller, max_memory_gib)
+    problems = check_document(tomllib.loads(text), path.stem, controller, max_memory_gib, max_work)
     if not problems:  # the document is valid: the memory estimate failed
         problems = [_problem(first, None)]
     located = [Problem(p.field, p.message, locate(text, p.field)) for p in problems]
@@ -113,9 +115,11 @@ def check_document(
     default_name: str = "scenario",
     controller: str | None = None,
     max_memory_gib: float | None = DEFAULT_MAX_MEMORY_GIB,
+    max_work: float | None = DEFAULT_MAX_WORK,
 ) -> list[Problem]:
     """Every problem of a parsed scenario document (the TOML as a dict); [] when valid
-    (``controller`` overrides the controller kind; ``max_memory_gib``: see :func:`check_scenario_file`)."""
+    (``controller`` overrides the controller kind; ``max_memory_gib``, ``max_work``: see
+    :func:`check_scenario_file`)."""
     doc = copy.deepcopy(data)
     problems: list[Problem] = []
     tainted: set[str] = set()
@@ -132,9 +136,8 @@ def check_document(
     }
     for _ in range(MAX_ROUNDS):
         try:
-            scenario = scenario_from_dict(doc, default_name=default_name)
-            if max_memory_gib is not None:
-                check_memory(scenario, max_memory_gib, controller)
+            scenario = scenario_from_dict(doc, default_name=default_name, max_memory_gib=max_memory_gib)
+            _check_size(scenario, max_memory_gib, max_work, controller)
             build_controller(scenario, controller)
             break
         except ValidationError as exc:
@@ -190,6 +193,15 @@ def locate(text: str, field: str) -> int | None:
 
 
 # ---- helpers ------------------------------------------------------------------------------
+def _check_size(
+    scenario: Scenario, max_memory_gib: float | None, max_work: float | None, controller: str | None
+) -> None:
+    if max_memory_gib is not None:
+        check_memory(scenario, max_memory_gib, controller)
+    if max_work is not None:
+        check_work(scenario, max_work)
+
+
 def _replace_table(doc: dict[str, Any], name: str, dim: int) -> bool:
     """Set aside a broken table so that the tables after it can be checked: drop an optional
     table, replace a required one by a valid stub (once); False for [template] and the top level."""

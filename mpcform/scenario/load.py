@@ -36,18 +36,16 @@ from mpcform.scenario.parse import as_scenario_error, parse_keys, parse_table, p
 from mpcform.scenario.placement import check_distinct, check_goal, check_start
 from mpcform.scenario.plant import parse_plant
 from mpcform.scenario.schema import CONSENSUS_FIELDS, NULLSPACE_FIELDS, TABLES
+from mpcform.scenario.size import MAX_STEPS, check_drone_count
 from mpcform.scenario.solve import solve_strategy
 from mpcform.scenario.spec import ControllerSpec, Scenario, SimulationSpec
 from mpcform.world.limits import Limits
 from mpcform.world.obstacles import SphereObstacle, resolve_clearances
 
-MAX_STEPS = 1e12
-"""The most control steps a file may ask for (``duration / dt``); the memory estimate refuses far
-fewer, but it needs the count as an integer (``duration = 1e308`` overflowed)."""
 
-
-def load_scenario(path: str | Path) -> Scenario:
-    """Read and validate a scenario TOML file; raises :class:`ScenarioError` on any problem."""
+def load_scenario(path: str | Path, *, max_memory_gib: float | None = None) -> Scenario:
+    """Read and validate a scenario TOML file; raises :class:`ScenarioError` on any problem
+    (``max_memory_gib``: see :func:`scenario_from_dict`)."""
     path = Path(path)
     try:
         raw = path.read_bytes()
@@ -62,7 +60,11 @@ def load_scenario(path: str | Path) -> Scenario:
         hint = _line_hint(text, str(exc))
         raise ScenarioError(str(path), f"TOML syntax error: {exc}{hint}") from None
     return scenario_from_dict(
-        data, source=path, source_sha256=hashlib.sha256(raw).hexdigest(), default_name=path.stem
+        data,
+        source=path,
+        source_sha256=hashlib.sha256(raw).hexdigest(),
+        default_name=path.stem,
+        max_memory_gib=max_memory_gib,
     )
 
 
@@ -78,11 +80,18 @@ def scenario_from_dict(
     source: Path | None = None,
     source_sha256: str | None = None,
     default_name: str = "scenario",
+    max_memory_gib: float | None = None,
 ) -> Scenario:
-    """Validate an already parsed scenario (the TOML document as a dict)."""
+    """Validate an already parsed scenario (the TOML document as a dict). ``max_memory_gib``: refuse
+    more drones than fit within it before the template is built (:func:`check_drone_count`; None:
+    no limit, and :func:`~mpcform.scenario.size.check_memory` then gives the whole estimate)."""
     top = parse_top_level(data)
     dim, seed = top["dim"], top["seed"]
-    tpl = _template(parse_table(data, "template", dim), dim)
+    template = parse_table(data, "template", dim)
+    if max_memory_gib is not None:
+        sim_keys = parse_table(data, "simulation", dim)
+        check_drone_count(template, sim_keys["duration"] / sim_keys["dt"], dim, max_memory_gib)
+    tpl = _template(template, dim)
     init = parse_table(data, "initial", dim, tpl.n)
     start, positions = _initial(tpl, init)
     limits = _limits(parse_table(data, "limits", dim), dim)

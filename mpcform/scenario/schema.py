@@ -247,7 +247,7 @@ SCHEMA: tuple[Table, ...] = (
         Key("rate", "float", "Inner-loop rate: a multiple of the control rate 1 / dt.", "Hz",
             QuadrotorPlantSpec.rate_hz, when=("quadrotor",), bound="> 0"),
         Key("altitude", "float", "Height a planar (dim = 2) flight holds with its thrust loop.", "m",
-            QuadrotorPlantSpec.altitude_m, when=("quadrotor",)),
+            QuadrotorPlantSpec.altitude_m, when=("quadrotor",), bound=">= 0"),
         Key("measurement_noise", "float", "Std of seeded Gaussian noise on the positions the "
             "controller sees.", "m", PlantSpec.measurement_noise_m, bound=">= 0"),
         Key("margin", "float", "Robust margin per drone that tightens the MPC's rows (pairs by "

@@ -17,12 +17,19 @@ a pair counts when it is within the planner's candidate radius ``d_min + margin 
 The bytes per unit were measured (peak resident memory, numpy 2, PIQP) and rounded up: 240 bytes
 per time-series value and 1 KiB per step with the output files (60 and 400 without), 300 bytes
 per QP nonzero (the solver's factorisation included), 20 bytes per dense per-drone row entry.
+
+Two checks need no built scenario: :func:`check_drone_count` refuses, from the file's keys and
+before the template is built, drones whose time series alone exceed the limit, and
+:func:`check_work` bounds a plant's work (its inner steps times the drones: the quadrotor's
+``rate x duration``), which costs time rather than memory (``--max-work`` raises it).
 """
 
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Mapping
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -36,6 +43,10 @@ GIB = 2.0**30
 DEFAULT_MAX_MEMORY_GIB = 4.0
 """Runs estimated above this are refused (``--max-memory`` raises it): below the memory of an 8 GB
 laptop or a CI runner, and far above every bundled scenario (the largest needs about 0.1 GiB)."""
+DEFAULT_MAX_WORK = 5e7
+"""Runs whose plant takes more inner steps x drones than this are refused (``--max-work`` raises
+it): the quadrotor plant took 0.5 ms per inner step plus 2 us per drone (2-core machine), so the
+bound is 2-30 minutes of plant alone; the bundled quadrotor scenario takes 7.2e5."""
 BYTES_PER_VALUE = {True: 240.0, False: 60.0}  # time series, with / without the output files
 BYTES_PER_STEP = {True: 1024.0, False: 400.0}  # step records (StepInfo, times, CSV rows)
 BYTES_PER_NONZERO = 300.0  # the sparse QP: planner arrays, the matrix and the solver's copy
@@ -44,6 +55,9 @@ REFERENCE_SAMPLES = 9
 CROSSING_FRACTIONS = (0.25, 0.5, 0.75)
 DEFAULT_FACETS = {2: 16, 3: 32}  # as the planner's velocity polytope
 DEFAULT_HORIZON = MPCSettings().horizon
+MAX_STEPS = 1e12
+"""The most control steps a file may ask for (``duration / dt``); the memory estimate refuses far
+fewer, but it needs the count as an integer (``duration = 1e308`` overflowed)."""
 
 
 @dataclass(frozen=True)
@@ -76,7 +90,7 @@ def estimate_memory(
     """The memory a run of ``scenario`` needs (``controller`` overrides its kind; ``files``: the
     run writes trajectory.npz and trajectory.csv). Costs O(n log n), allocates O(n d)."""
     n, dim, steps = scenario.n, scenario.dim, scenario.steps
-    series = float(steps + 1) * n * dim * BYTES_PER_VALUE[files] + float(steps + 1) * BYTES_PER_STEP[files]
+    series = _series_bytes(steps, n, dim, files)
     if (controller or scenario.controller.kind) != "mpc":
         return MemoryEstimate(steps, n, dim, None, 0, series, 0.0, 0.0)
     st, lim = scenario.controller.mpc, scenario.limits
@@ -137,6 +151,60 @@ def check_memory(
         f"the run would need about {est.total_gib:,.1f} GiB of memory ({'; '.join(shown)}), above the "
         f"limit of {max_gib:g} GiB: {fix}, or raise the limit with --max-memory GIB",
     )
+
+
+def check_drone_count(
+    template: Mapping[str, Any], steps: float, dim: int, max_gib: float, *, files: bool = True
+) -> None:
+    """Raise :class:`ScenarioError` naming the key that sets the number of drones when the parsed
+    ``[template]`` keys ask for more drones than fit within ``max_gib`` GiB with their time series
+    alone over ``steps`` control steps (the estimate's smallest part): before the template is built."""
+    shape = template["shape"]
+    if shape == "grid":
+        key, n = "template.rows", template["rows"] * template["cols"] * (template["layers"] or 1)
+    elif shape == "explicit":
+        key, n = "template.offsets", len(template["offsets"])
+    else:
+        key, n = "template.n", template["n"]
+    if not 0.0 <= steps <= MAX_STEPS:  # refused by the loader, naming simulation.duration
+        return
+    need = _series_bytes(round(steps), n, dim, files) / GIB
+    if need > max_gib and n > steps:  # else the duration drives it: check_memory names it
+        raise ScenarioError(
+            key,
+            f"{n:,} drones would need about {need:,.1f} GiB of memory for their time series alone "
+            f"({round(steps) + 1:,} samples x {n:,} drones x {dim} axes), above the limit of "
+            f"{max_gib:g} GiB: use fewer drones, or raise the limit with --max-memory GIB",
+        )
+
+
+def plant_work(scenario: Scenario) -> float:
+    """The plant's work: its inner steps x drones (the quadrotor's ``rate x duration x n``; 0 for
+    the ideal and linear plants, which take exact steps at the control samples)."""
+    rate = getattr(scenario.plant, "rate_hz", None)
+    return 0.0 if rate is None else float(rate) * scenario.steps * scenario.simulation.dt_s * scenario.n
+
+
+def check_work(scenario: Scenario, max_work: float = DEFAULT_MAX_WORK) -> float:
+    """Return :func:`plant_work`, or raise :class:`ScenarioError` naming ``plant.rate`` when it is
+    above ``max_work`` (``--max-work`` raises the limit)."""
+    work = plant_work(scenario)
+    if work <= max_work:
+        return work
+    rate = float(getattr(scenario.plant, "rate_hz", 0.0))
+    inner = rate * scenario.steps * scenario.simulation.dt_s
+    raise ScenarioError(
+        "plant.rate",
+        f"the plant would take {work:.3g} inner steps x drones ({inner:,.0f} steps at {rate:g} Hz over "
+        f"{scenario.steps * scenario.simulation.dt_s:g} s x {scenario.n:,} drones), above the limit of "
+        f"{max_work:.3g} (about 0.5 ms per inner step): lower plant.rate, shorten simulation.duration "
+        "or use fewer drones, or raise the limit with --max-work N",
+    )
+
+
+def _series_bytes(steps: int, n: int, dim: int, files: bool) -> float:
+    """The time series and step records of ``steps`` control steps of ``n`` drones [bytes]."""
+    return float(steps + 1) * n * dim * BYTES_PER_VALUE[files] + float(steps + 1) * BYTES_PER_STEP[files]
 
 
 def _size_key(scenario: Scenario) -> str:

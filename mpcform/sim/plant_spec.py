@@ -212,8 +212,10 @@ class QuadrotorPlantSpec(PlantSpec):
     def __post_init__(self) -> None:
         super().__post_init__()
         self._positive("rate_hz")
-        if not math.isfinite(self.altitude_m):
-            raise ValidationError("plant.altitude", f"expected a finite height [m], got {self.altitude_m!r}")
+        if not 0.0 <= self.altitude_m < math.inf:
+            raise ValidationError(
+                "plant.altitude", f"expected a finite height >= 0 [m], got {self.altitude_m!r}"
+            )
 
     def _plant(self, n: int, dim: int, **common: Any) -> Plant:
         spec = QuadrotorSpec(self.platform, self.model, self.rate_hz, altitude_m=self.altitude_m)

@@ -46,3 +46,40 @@ def test_bench_split_refuses_negative_rounds_before_running(
     assert main(["bench", "split", *extra]) == 2
     captured = capsys.readouterr()
     assert captured.out == "" and "--rounds must be >= 0 and --steps >= 1" in captured.err
+
+
+@pytest.mark.parametrize(
+    ("argv", "says"),
+    [
+        (
+            ["--n", "2", "--duration", "-1"],
+            "--duration: expected a flight time >= 0.1 s (one control interval), got -1",
+        ),
+        (["--duration", "nan"], "--duration: expected a flight time >= 0.1 s"),
+        (["--rate", "0"], "--rate: expected a finite inner-loop rate > 0 [Hz], got 0"),
+        (["--n", "0"], "--n: expected an integer >= 1, got 0"),
+        (["--repeats", "0"], "--repeats: expected an integer >= 1, got 0"),
+        (
+            ["--duration", "1e9"],
+            "--duration: the plant would take 1e+13 inner steps x drones (500 Hz x 1e+09 s x 20",
+        ),
+        (["--rate", "1e9"], "--rate: the plant would take 2.4e+11 inner steps x drones"),
+    ],
+)
+def test_bench_plant_refuses_bad_sizes_before_running(
+    argv: list[str], says: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    assert main(["bench", "plant", *argv]) == 2
+    captured = capsys.readouterr()
+    assert captured.out == ""
+    assert captured.err.startswith(f"mpcform: error: {says}") and captured.err.count("\n") == 1, captured.err
+
+
+def test_bench_mpc_without_cases_is_one_error(capsys: pytest.CaptureFixture[str]) -> None:
+    """``--n 0 --spatial-n --scenarios --cvxpy-budget 0`` divided by zero (issue 38)."""
+    assert main(["bench", "mpc", "--n", "0", "--spatial-n", "--scenarios", "--cvxpy-budget", "0"]) == 2
+    err = capsys.readouterr().err
+    assert (
+        err.startswith("mpcform: error: --n/--spatial-n/--steps: expected swaps of >= 2 drones")
+        and "\n" == err[-1]
+    )

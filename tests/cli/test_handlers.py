@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from saved_runs import short_run
+from saved_runs import SCENARIOS, short_run
 
 from mpcform.cli import handlers as cli_runner
 from mpcform.cli.main import main
@@ -312,3 +312,53 @@ def test_speed_is_checked_before_running(
     status = main(["run", str(WORKED), "--out", str(tmp_path / "o"), *flags])
     error_lines(capsys, status, "--speed", fragment)
     assert not (tmp_path / "o").exists()
+
+
+@pytest.mark.parametrize(
+    ("option", "says"),
+    [
+        (["--max-speed", "1e-6"], "--max-speed: at this limit the retimed flight would last"),
+        (["--rate", "1e7"], "--rate: the export would take "),
+        (["--floor", "nan"], "--floor: expected a finite height [m], got nan"),
+        (["--max-acc", "inf"], "--max-acc: expected a finite number > 0, got inf"),
+    ],
+)
+def test_export_options_are_one_error_naming_the_flag(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], option: list[str], says: str
+) -> None:
+    short_run("swap_planar_8", tmp_path, steps=40)
+    lines = error_lines(capsys, main(["export", str(tmp_path), "--no-flight-check", *option]), says)
+    assert len(lines) == 1 and not (tmp_path / "export").exists()
+
+
+def test_run_export_checks_its_options_before_the_run(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    argv = [
+        "run",
+        str(SCENARIOS / "swap_planar_8.toml"),
+        "--out",
+        str(tmp_path / "o"),
+        "--export",
+        "--rate",
+        "nan",
+    ]
+    lines = error_lines(capsys, main(argv), "--rate: expected a finite number > 0, got nan")
+    assert len(lines) == 1 and not (tmp_path / "o").exists()
+
+
+@pytest.mark.parametrize("command", ["view", "plot", "export", "compare"])
+def test_a_truncated_trajectory_is_one_error_naming_the_file(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], command: str
+) -> None:
+    short_run("swap_planar_8", tmp_path / "run", steps=40, formation=False)
+    cut = tmp_path / "cut"
+    cut.mkdir()
+    for name in ("summary.json", "trajectory.csv"):
+        (cut / name).write_bytes((tmp_path / "run" / name).read_bytes())
+    (cut / "trajectory.npz").write_bytes((tmp_path / "run" / "trajectory.npz").read_bytes()[:5000])
+    extra = ["--no-figure"] if command == "compare" else []
+    lines = error_lines(
+        capsys, main([command, str(cut), *extra]), f"{cut / 'trajectory.npz'}: cannot read it"
+    )
+    assert len(lines) == 1

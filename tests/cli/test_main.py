@@ -364,3 +364,53 @@ def test_ctrl_c_during_a_run_is_one_line_and_status_130(tmp_path: Path) -> None:
     proc.send_signal(signal.SIGINT)
     _, err = proc.communicate(timeout=60)
     assert proc.returncode == 130 and err.decode().strip().splitlines() == ["mpcform: interrupted"]
+
+
+def test_an_empty_out_is_refused_before_the_run(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    monkeypatch.chdir(tmp_path)
+    status = main(["run", WORKED, "--out", ""])
+    assert_one_line_error(capsys, status, "--out: expected a path, got ''")
+    assert list(tmp_path.iterdir()) == []  # nothing written into the current directory
+
+
+@pytest.mark.parametrize("command", ["run", "validate"])
+@pytest.mark.parametrize(
+    ("scenario", "change", "says"),
+    [
+        ("swap_planar_8", ("\nn = 8\n", "\nn = 1000000000\n"), "template.n: 1,000,000,000 drones would need"),
+        (
+            "formation_flight_100",
+            ("\nrows = 10\ncols = 10\n", "\nrows = 100000\ncols = 100000\n"),
+            "template.rows: 10,000,000,000 drones would need",
+        ),
+        ("swap_spatial_12_quadrotor_wind", ("\nrate = 500\n", "\nrate = 1000000\n"), "plant.rate: the plant"),
+    ],
+    ids=["n", "grid", "plant-rate"],
+)
+def test_too_many_drones_or_plant_steps_are_one_line_before_any_work(
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+    command: str,
+    scenario: str,
+    change: tuple[str, str],
+    says: str,
+) -> None:
+    text = (ROOT / "scenarios" / f"{scenario}.toml").read_text()
+    assert change[0] in text
+    path = tmp_path / "big.toml"
+    path.write_text(text.replace(*change))
+    status = main([command, str(path), *(["--out", str(tmp_path / "o")] if command == "run" else [])])
+    line = assert_one_line_error(capsys, status, f"{path}:", says)
+    assert "--max-memory GIB" in line or "--max-work N" in line
+    assert not (tmp_path / "o").exists()
+
+
+def test_max_work_raises_the_plant_limit(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    text = (ROOT / "scenarios" / "swap_spatial_12_quadrotor_wind.toml").read_text()
+    path = tmp_path / "fast.toml"
+    path.write_text(text.replace("\nrate = 500\n", "\nrate = 1000000\n"))
+    assert main(["validate", str(path), "--max-work", "2e8"]) == 0
+    capsys.readouterr()  # its OK line and the scenario's own warning
+    assert_one_line_error(capsys, main(["validate", str(path), "--max-work", "1e8"]), "plant.rate")

@@ -9,8 +9,17 @@ from pathlib import Path
 
 import pytest
 
-from mpcform.cli.options import add_max_memory, max_memory_gib, print_bench, progress, seconds, solver_help
-from mpcform.scenario.size import DEFAULT_MAX_MEMORY_GIB
+from mpcform.cli.options import (
+    add_max_memory,
+    add_max_work,
+    max_memory_gib,
+    max_work,
+    print_bench,
+    progress,
+    seconds,
+    solver_help,
+)
+from mpcform.scenario.size import DEFAULT_MAX_MEMORY_GIB, DEFAULT_MAX_WORK
 from mpcform.solvers.casadi_conic import CASADI_CONIC_PLUGINS
 from mpcform.solvers.registry import DEFAULT_SOLVER, PERSISTENT_SOLVERS
 
@@ -68,3 +77,17 @@ def test_print_bench_prints_the_table_and_writes_the_records(
 def test_progress_is_silent_when_stderr_is_not_a_terminal(capsys: pytest.CaptureFixture[str]) -> None:
     progress("bench: 1/3")
     assert capsys.readouterr() == ("", "")
+
+
+@pytest.mark.parametrize("text", ["0", "-1", "nan", "inf", "lots"])
+def test_max_work_must_be_a_positive_number(text: str) -> None:
+    with pytest.raises(argparse.ArgumentTypeError, match="expected a number of inner steps x drones > 0"):
+        max_work(text)
+
+
+def test_add_max_work_defaults_and_parses() -> None:
+    parser = argparse.ArgumentParser()
+    add_max_work(parser, "sweep run")
+    assert parser.parse_args([]).max_work == DEFAULT_MAX_WORK
+    assert parser.parse_args(["--max-work", "2e8"]).max_work == 2e8
+    assert "refuse a sweep run whose plant takes more inner steps x drones" in parser.format_help()

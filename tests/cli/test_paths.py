@@ -53,3 +53,10 @@ def test_a_directory_the_system_refuses_is_named_and_nothing_is_left(tmp_path: P
         check_output_dir("--out", "/proc/nope")
     check_output_dir("--out", tmp_path / "a" / "b" / "c")  # creatable: checked, then removed
     assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("dest", ["out", "json", "report", "figure"])
+@pytest.mark.parametrize("value", ["", " "])
+def test_an_empty_path_is_refused_not_taken_for_the_current_directory(dest: str, value: str) -> None:
+    with pytest.raises(ValidationError, match=f"^--{dest}: expected a path, got '{value}'$"):
+        check_output_paths(argparse.Namespace(**{dest: value}))

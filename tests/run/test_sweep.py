@@ -1,4 +1,4 @@
-"""``mpcform sweep``: argument parsing, overrides, parallel runs and their aggregation."""
+"""``mpcform sweep``: jobs and their limit, overrides, parallel runs and their aggregation."""
 
 from __future__ import annotations
 
@@ -11,6 +11,7 @@ from helpers import tiny_swap_toml
 from mpcform.cli.main import main
 from mpcform.errors import ScenarioError, ValidationError
 from mpcform.run.sweep import (
+    MAX_RUNS,
     SweepJob,
     aggregate,
     apply_overrides,
@@ -18,8 +19,6 @@ from mpcform.run.sweep import (
     failures_text,
     load_job,
     markdown_table,
-    parse_seeds,
-    parse_set,
     run_sweep,
 )
 
@@ -31,24 +30,6 @@ def tiny(tmp_path: Path) -> Path:
     path = tmp_path / "tiny.toml"
     path.write_text(TINY)
     return path
-
-
-def test_parse_seeds() -> None:
-    assert parse_seeds("0..3,7") == [0, 1, 2, 3, 7]
-    assert parse_seeds("5") == [5] and parse_seeds("2,2,1") == [2, 1]
-    for bad in ("a", "3..1", "-1", "1..x"):
-        with pytest.raises(ValidationError, match="--seeds"):
-            parse_seeds(bad)
-
-
-def test_parse_set_reads_toml_values_and_bare_words() -> None:
-    assert parse_set("controller.horizon=5,10") == ("controller.horizon", [5, 10])
-    assert parse_set("controller.coupling=joint,decoupled") == ("controller.coupling", ["joint", "decoupled"])
-    assert parse_set("initial.centroid=[1.0, 2.0],[0, 0]") == ("initial.centroid", [[1.0, 2.0], [0, 0]])
-    assert parse_set('name="a,b",true') == ("name", ["a,b", True])
-    for bad in ("=5", "controller.horizon=", "horizon", "a..b=1"):
-        with pytest.raises(ValidationError, match="--set"):
-            parse_set(bad)
 
 
 def test_apply_overrides_sets_nested_keys_on_a_copy() -> None:
@@ -180,7 +161,7 @@ def test_cli_tol_minus_one(tiny: Path, capsys: pytest.CaptureFixture[str]) -> No
 
 
 def test_a_combination_too_large_fails_before_any_run(tiny: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    jobs = build_jobs(tiny, None, [parse_set("simulation.duration=0.6,1e9")])
+    jobs = build_jobs(tiny, None, [("simulation.duration", [0.6, 1e9])])
     with pytest.raises(ScenarioError, match=r"^simulation.duration: the run would need about .* GiB"):
         run_sweep(jobs, max_memory_gib=4.0)
     assert main(["sweep", str(tiny), "--set", "simulation.duration=1e9"]) == 2
@@ -197,3 +178,18 @@ def test_a_byte_order_mark_is_accepted(tmp_path: Path) -> None:
 def test_an_unknown_solver_is_refused_before_any_job() -> None:
     with pytest.raises(ValidationError, match="--solver: solver 'bogus': unknown solver"):
         build_jobs("scenarios/swap_planar_8.toml", [0], [], solver="bogus")
+
+
+def test_a_sweep_over_the_run_limit_is_refused_naming_its_largest_list(tiny: Path) -> None:
+    assert len(build_jobs(tiny, list(range(1000)), [("seed", list(range(100)))])) == MAX_RUNS
+    with pytest.raises(ValidationError, match=r"^--seeds: the sweep would make 100,100 runs \(1,001 x 100\)"):
+        build_jobs(tiny, list(range(1001)), [("seed", list(range(100)))])
+    with pytest.raises(ValidationError, match=r"^--set: .* 200,000 runs \(2 x 100,000\), above the limit"):
+        build_jobs(tiny, [0, 1], [("controller.horizon", list(range(100_000)))])
+
+
+def test_a_plant_rate_too_high_fails_before_any_run() -> None:
+    quad = str(Path(__file__).resolve().parents[2] / "scenarios" / "swap_spatial_12_quadrotor_wind.toml")
+    jobs = build_jobs(quad, None, [("plant.rate", [1e6])])
+    with pytest.raises(ScenarioError, match=r"^plant.rate: the plant would take 1.2e\+08 inner steps"):
+        run_sweep(jobs, max_work=5e7)

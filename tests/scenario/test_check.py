@@ -179,3 +179,17 @@ def test_located_problem_finds_the_line_of_an_error(tmp_path: Path) -> None:
     problem = located_problem(ScenarioError("controller.gain", "too high"), path)
     assert (problem.field, problem.line, problem.message) == ("controller.gain", 29, "too high")
     assert located_problem(ScenarioError(str(path), "x"), path).line is None
+
+
+def test_too_many_drones_and_a_plant_rate_too_high_are_problems_at_their_keys(tmp_path: Path) -> None:
+    text = (ROOT / "scenarios" / "swap_planar_8.toml").read_text().replace("\nn = 8\n", "\nn = 1000000000\n")
+    start = time.perf_counter()
+    (problem,) = check_scenario_file(write(tmp_path, text)).problems
+    assert time.perf_counter() - start < 5.0  # the template of 10^9 drones is never built
+    assert problem.field == "template.n" and problem.message.startswith("1,000,000,000 drones would need")
+    assert text.splitlines()[problem.line - 1] == "n = 1000000000"  # type: ignore[operator]
+    quad = (ROOT / "scenarios" / "swap_spatial_12_quadrotor_wind.toml").read_text()
+    path = write(tmp_path, quad.replace("\nrate = 500\n", "\nrate = 1000000\n"))
+    (problem,) = check_scenario_file(path).problems
+    assert problem.field == "plant.rate" and "--max-work N" in problem.message
+    assert check_scenario_file(path, max_work=None).ok and check_scenario_file(path, max_work=2e8).ok

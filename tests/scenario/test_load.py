@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import copy
 import hashlib
+import time
 import tomllib
 from pathlib import Path
 from typing import Any
@@ -296,3 +297,12 @@ def test_the_solve_table_and_the_old_keys_give_the_same_strategy_with_one_deprec
         mutated({"controller.kind": "mpc", "controller.solver": "osqp", "controller.eps_abs": 1e-6})
     )
     assert sparse.controller.mpc.strategy == SparseSolve("osqp", SolverOptions(1e-6, 1e-4, 4000, 0.0))
+
+
+def test_scenario_from_dict_refuses_too_many_drones_before_building_the_template() -> None:
+    data = tomllib.loads((SCENARIOS / "swap_planar_8.toml").read_text())
+    data["template"]["n"] = 10**9  # a polygon of 10^9 drones would allocate gigabytes
+    start = time.perf_counter()
+    with pytest.raises(ScenarioError, match=r"^template.n: 1,000,000,000 drones would need about"):
+        scenario_from_dict(data, max_memory_gib=4.0)
+    assert time.perf_counter() - start < 1.0

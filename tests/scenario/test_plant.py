@@ -115,6 +115,7 @@ def test_lag_second_order_and_quadrotor_with_wind() -> None:
         ('[plant]\nkind = "quadrotor"\nplatform = "cf9"\n', "plant.platform", "cf2x_L250"),
         ('[plant]\nkind = "quadrotor"\nrate = 5\n', "plant.rate", "multiple"),
         ('[plant]\nkind = "quadrotor"\nrate = 505\n', "plant.rate", "multiple"),
+        ('[plant]\nkind = "quadrotor"\naltitude = -5.0\n', "plant.altitude", ">= 0 [m], got -5.0"),
         ('[plant]\nkind = "lag"\ndamping = 0.7\n', "plant.damping", "does not apply"),
         ('[plant]\nkind = "second_order"\nrate = 500\n', "plant.rate", "does not apply"),
         ('[plant]\nkind = "quadrotor"\ntime_constant = 0.1\n', "plant.time_constant", "does not apply"),

@@ -18,9 +18,13 @@ from mpcform.scenario.size import (
     BYTES_PER_STEP,
     BYTES_PER_VALUE,
     DEFAULT_MAX_MEMORY_GIB,
+    DEFAULT_MAX_WORK,
     GIB,
+    check_drone_count,
     check_memory,
+    check_work,
     estimate_memory,
+    plant_work,
 )
 
 
@@ -114,3 +118,59 @@ def test_the_key_of_the_drones_follows_the_template_shape() -> None:
     with pytest.raises(ScenarioError) as info:
         check_memory(scenario_from_dict(data), max_gib=1e-3)
     assert info.value.field == "template.offsets" and "435 drone pairs" in str(info.value)
+
+
+@pytest.mark.parametrize(
+    ("template", "key", "n"),
+    [
+        ({"shape": "polygon", "n": 10**9}, "template.n", "1,000,000,000"),
+        ({"shape": "grid", "rows": 10**5, "cols": 10**5, "layers": None}, "template.rows", "10,000,000,000"),
+        ({"shape": "explicit", "offsets": [[0.0, 0.0]] * 100_000}, "template.offsets", "100,000"),
+    ],
+    ids=["n", "grid", "offsets"],
+)
+def test_too_many_drones_are_refused_from_the_keys_alone(template: dict[str, Any], key: str, n: str) -> None:
+    with pytest.raises(ScenarioError) as info:
+        check_drone_count(template, 120.0, 2, DEFAULT_MAX_MEMORY_GIB)
+    message = str(info.value)
+    assert info.value.field == key and f"{n} drones would need about " in message
+    assert f"(121 samples x {n} drones x 2 axes), above the limit of 4 GiB: use fewer drones" in message
+    assert message.endswith("or raise the limit with --max-memory GIB")
+
+
+def test_the_drone_count_check_leaves_long_runs_and_fitting_ones_to_the_estimate() -> None:
+    polygon = {"shape": "polygon", "n": 8}
+    check_drone_count(polygon, 1e10, 2, 4.0)  # the duration drives it: check_memory names it
+    check_drone_count(polygon, float("inf"), 2, 4.0)  # the loader refuses it, naming the duration
+    check_drone_count({"shape": "polygon", "n": 10**9}, 120.0, 2, 1e9)  # a limit raised far enough
+    scenario = scenario_from_dict(doc(n=8))
+    need = estimate_memory(scenario).series_bytes / GIB
+    check_drone_count({"shape": "polygon", "n": 8}, scenario.steps, 2, need * 1.001)
+
+
+def quadrotor(rate: float, n: int = 12, duration: float = 10.0) -> dict[str, Any]:
+    data = doc(n=n, radius=3.0, duration=duration)
+    data["plant"] = {"kind": "quadrotor", "rate": rate}
+    return data
+
+
+def test_the_plant_work_is_its_inner_steps_times_the_drones() -> None:
+    assert plant_work(scenario_from_dict(doc())) == 0.0  # the ideal plant
+    lag = doc()
+    lag["plant"] = {"kind": "lag"}
+    assert plant_work(scenario_from_dict(lag)) == 0.0  # exact steps at the control samples
+    assert plant_work(scenario_from_dict(quadrotor(500.0))) == pytest.approx(500 * 10.0 * 12)
+    assert check_work(scenario_from_dict(quadrotor(500.0))) == pytest.approx(6e4)
+
+
+def test_a_plant_rate_too_high_is_refused_naming_plant_rate() -> None:
+    scenario = scenario_from_dict(quadrotor(1e6))
+    with pytest.raises(ScenarioError) as info:
+        check_work(scenario)
+    assert info.value.field == "plant.rate"
+    assert str(info.value) == (
+        "plant.rate: the plant would take 1.2e+08 inner steps x drones (10,000,000 steps at 1e+06 Hz over "
+        f"10 s x 12 drones), above the limit of {DEFAULT_MAX_WORK:.3g} (about 0.5 ms per inner step): lower "
+        "plant.rate, shorten simulation.duration or use fewer drones, or raise the limit with --max-work N"
+    )
+    assert check_work(scenario, max_work=1.3e8) == pytest.approx(1.2e8)

@@ -112,6 +112,7 @@ def test_with_kind_keeps_the_common_fields_and_takes_the_new_kinds_defaults() ->
         ("second_order", {"natural_frequency_z_rad_s": 0.0}, "plant.natural_frequency_z"),
         ("quadrotor", {"rate_hz": 0.0}, "plant.rate"),
         ("quadrotor", {"altitude_m": float("inf")}, "plant.altitude"),
+        ("quadrotor", {"altitude_m": -5.0}, "plant.altitude"),
         ("ideal", {"measurement_noise_m": -0.1}, "plant.measurement_noise"),
         ("lag", {"margin_m": -0.1}, "plant.margin"),
         ("ideal", {"wind": Wind([1.0, 0.0])}, "plant.wind"),

@@ -65,6 +65,9 @@ PATH_SAMPLES = 10  # per planned interval: the path is fitted to the planned pos
 FIT_RATE_HZ = 50.0  # samples of the retimed reference per second, besides the planned samples
 CHECK_RATE_HZ = 500.0  # sampling of the pieces for limits, floor and separation
 LIMIT_SLACK = 0.9  # the retiming aims at this fraction of each limit (the fit adds a little)
+MAX_SAMPLES = 7e6
+"""The most samples x drones an export takes (checks at 500 Hz and setpoints at ``rate_hz``): each
+took about 560 bytes and 34 us (setpoint CSVs written), so about 4 GiB and 4 minutes."""
 PROVENANCE_JSON = "provenance.json"
 YAW_MODES = ("zero", "formation")
 __all__ = [
@@ -156,8 +159,13 @@ def export_run(
     lines = np.stack([np.interp(dense, t, x) for x in planned.reshape(t.shape[0], -1).T], axis=-1)
     path = fit_positions(dense, lines.reshape(dense.shape[0], n, 3), half, opts.max_piece_s).polynomial
     timing = retime(
-        path, LIMIT_SLACK * lim.max_speed_mps, LIMIT_SLACK * lim.max_acc_mps2, LIMIT_SLACK * lim.max_jerk_mps3
+        path,
+        LIMIT_SLACK * lim.max_speed_mps,
+        LIMIT_SLACK * lim.max_acc_mps2,
+        LIMIT_SLACK * lim.max_jerk_mps3,
+        max_duration_s=MAX_SAMPLES / (n * (CHECK_RATE_HZ + DEFAULT_RATE_HZ)),
     )
+    _check_samples(timing.duration_s, n, opts.rate_hz)
     t_planned = timing.new_time(t)
     grid = np.linspace(0.0, timing.duration_s, int(np.ceil(FIT_RATE_HZ * timing.duration_s)) + 1)
     t_fit = np.unique(np.concatenate([grid, t_planned]))
@@ -248,6 +256,18 @@ def flat_state(poly: PiecewisePolynomial, t_s: Array, n: int) -> dict[str, Array
     }
     state["omega"] = body_rates(state["acc"], state["jerk"], state["yaw"], state["yaw_rate"])
     return state
+
+
+def _check_samples(duration_s: float, n: int, rate_hz: float) -> None:
+    """Refuse, naming ``rate``, an export of more than :data:`MAX_SAMPLES` samples x drones."""
+    samples = duration_s * (CHECK_RATE_HZ + rate_hz) * n
+    if samples > MAX_SAMPLES:
+        raise ValidationError(
+            "rate",
+            f"the export would take {samples:.3g} samples x drones ({duration_s:.3g} s x ({rate_hz:g} Hz of "
+            f"setpoints + {CHECK_RATE_HZ:g} Hz of checks) x {n:,} drones), above the limit of "
+            f"{MAX_SAMPLES:.3g} (about 4 GiB): lower it",
+        )
 
 
 def _check_floor(pos: Array, t_s: Array, floor_m: float) -> None:

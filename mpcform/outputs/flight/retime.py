@@ -26,7 +26,7 @@ from ruckig import InputParameter, Result, Ruckig
 from ruckig import Trajectory as RuckigTrajectory
 
 from mpcform._validate import Array, positive
-from mpcform.errors import MPCFormError
+from mpcform.errors import MPCFormError, ValidationError
 from mpcform.outputs.flight.polynomial import PiecewisePolynomial
 
 GRID_S = 0.002  # sampling of s(t) [s]; its inverse is interpolated on this grid
@@ -61,8 +61,17 @@ class Retiming:
         return self.path.evaluate(tau).reshape(tau.shape[0], -1, 3)
 
 
-def retime(path: PiecewisePolynomial, v_max_mps: float, a_max_mps2: float, j_max_mps3: float) -> Retiming:
-    """The rest-to-rest time scaling of ``path`` (series drone * 3 + axis, starting at 0 s)."""
+def retime(
+    path: PiecewisePolynomial,
+    v_max_mps: float,
+    a_max_mps2: float,
+    j_max_mps3: float,
+    *,
+    max_duration_s: float = np.inf,
+) -> Retiming:
+    """The rest-to-rest time scaling of ``path`` (series drone * 3 + axis, starting at 0 s); a
+    flight longer than ``max_duration_s`` raises :class:`ValidationError` naming the limit that
+    sets the speed of the scaling, before its samples are allocated."""
     v, a, j = (
         positive(name, x)
         for name, x in (("max_speed", v_max_mps), ("max_acc", a_max_mps2), ("max_jerk", j_max_mps3))
@@ -75,7 +84,8 @@ def retime(path: PiecewisePolynomial, v_max_mps: float, a_max_mps2: float, j_max
         )
         for r in (1, 2, 3)
     )
-    sd = min(v / m1, np.sqrt(0.5 * a / m2), np.cbrt(j / (3.0 * m3)))
+    speeds = (v / m1, np.sqrt(0.5 * a / m2), np.cbrt(j / (3.0 * m3)))
+    sd = min(speeds)
     sdd = min(0.5 * a / m1, j / (9.0 * m2 * sd))
     sddd = j / (3.0 * m1)
     otg, inp, out = Ruckig(1), InputParameter(1), RuckigTrajectory(1)
@@ -85,6 +95,13 @@ def retime(path: PiecewisePolynomial, v_max_mps: float, a_max_mps2: float, j_max
     result = otg.calculate(inp, out)
     if result not in (Result.Working, Result.Finished):
         raise MPCFormError(f"ruckig could not time the flight: {result}")
+    if out.duration > max_duration_s:
+        name = ("max_speed", "max_acc", "max_jerk")[int(np.argmin(speeds))]
+        raise ValidationError(
+            name,
+            f"at this limit the retimed flight would last {out.duration:.3g} s, above the longest "
+            f"export of {max_duration_s:.3g} s for this many drones: raise it",
+        )
     grid = np.append(np.arange(0.0, out.duration, GRID_S), out.duration)
     tau = np.array([out.at_time(float(x))[0][0] for x in grid])
     tau = np.clip(np.maximum.accumulate(tau), 0.0, end)

@@ -226,3 +226,16 @@ def test_a_floor_that_is_not_a_height_is_refused(floor: float) -> None:
     """``--floor nan`` used to pass every check and write a fly.py with a NaN takeoff height."""
     with pytest.raises(ValidationError, match="floor: expected a finite height"):
         ExportOptions(floor_m=floor)
+
+
+def test_an_export_of_too_many_samples_is_refused_naming_the_rate(tmp_path: Path) -> None:
+    short_run("swap_planar_8", tmp_path / "run", steps=40)
+    data = load_run(tmp_path / "run")
+    with pytest.raises(
+        ValidationError, match=r"^rate: the export would take .* samples x drones .* x 8 drones\), above"
+    ):
+        export_run(data, tmp_path / "export", ExportOptions(rate_hz=1e7, fly=False))
+    assert not (tmp_path / "export").exists()  # refused before any file
+    slow = ExportOptions(limits=FlightLimits(max_speed_mps=1e-6), fly=False)
+    with pytest.raises(ValidationError, match=r"^max_speed: at this limit the retimed flight would last"):
+        export_run(data, tmp_path / "export", slow)

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from mpcform.errors import ValidationError
 from mpcform.outputs.flight.polynomial import fit_positions
 from mpcform.outputs.flight.retime import retime
 
@@ -41,3 +42,18 @@ def test_tighter_limits_take_longer() -> None:
     t, p = _path()
     path = fit_positions(t, p, 1e-4).polynomial
     assert retime(path, 0.25, 1.0, 5.0).duration_s > retime(path, 0.5, 1.0, 5.0).duration_s
+
+
+@pytest.mark.parametrize(
+    ("limits", "field"),
+    [((1e-6, 1.0, 5.0), "max_speed"), ((0.5, 1e-9, 5.0), "max_acc"), ((0.5, 1.0, 1e-12), "max_jerk")],
+)
+def test_a_flight_too_long_is_refused_naming_the_limit_that_slows_it(
+    limits: tuple[float, float, float], field: str
+) -> None:
+    path = fit_positions(*_path(), 1e-4).polynomial
+    with pytest.raises(
+        ValidationError, match=rf"^{field}: at this limit the retimed flight would last .* s, above"
+    ):
+        retime(path, *limits, max_duration_s=100.0)  # before its 2 ms grid (50 GiB at 1e-6 m/s) is allocated
+    assert retime(path, 0.5, 1.0, 5.0, max_duration_s=100.0).duration_s < 100.0
