@@ -130,10 +130,14 @@ def check_document(
             _unknown_keys(table, raw, prefix, problems)
         else:
             _sweep(_key_check(table, raw, prefix, dim), doc, problems, table, dim, tainted)
-    reported = {p.field for p in problems}
     renamed = {
         m.group(1) for p in problems if (m := re.search(r"unknown table; did you mean '(\w+)'", p.message))
     }
+    for table in SCHEMA:  # every missing table at once (the build stops at the first)
+        name = table.name
+        if table.required and name and "." not in name and name not in doc and name not in renamed:
+            problems.append(_problem(ScenarioError(name, f"missing table [{name}] ({table.doc})"), None))
+    reported = {p.field for p in problems}
     for _ in range(MAX_ROUNDS):
         try:
             scenario = scenario_from_dict(doc, default_name=default_name, max_memory_gib=max_memory_gib)
@@ -225,7 +229,8 @@ def _sweep(
     """Call ``parse`` until it passes, reporting each offending key and setting it aside.
 
     A bad required number or vector is replaced by a neutral placeholder (so the later build
-    can go on) and its table is marked ``tainted``; other bad keys are removed (defaults apply).
+    can go on) and its table is marked ``tainted``; other bad keys are removed (defaults apply). A
+    bad selector (``plant.kind``) ends the table's sweep: which of its keys apply is unknown.
     """
     for _ in range(MAX_ROUNDS):
         try:
@@ -236,6 +241,9 @@ def _sweep(
                 return
             problems.append(_problem(exc, None))
             name = _tokens(exc.field)[-1] if _tokens(exc.field) else None
+            if name is not None and name == table.selector:  # which keys apply is unknown now
+                tainted.add(_table_of(exc.field))
+                return
             key = next((k for k in table.keys if k.name == name), None)
             placeholder = None
             if key is not None and key.default is None and key.type in ("vector", "float"):

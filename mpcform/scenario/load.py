@@ -107,7 +107,7 @@ def scenario_from_dict(
     if isinstance(reference, ConstantReference):
         goal = reference.start_positions_m()
         field = "reference.centroid" if ref["centroid"] is not None else "reference"
-        check_goal(goal, field, obstacles)
+        check_goal(goal, field, limits, obstacles)
     sim = SimulationSpec(**_renamed(parse_table(data, "simulation", dim), "simulation"))
     plant = parse_plant(data, dim, sim.dt_s)
     controller = _controller(parse_table(data, "controller", dim), sim.dt_s)

@@ -8,7 +8,8 @@ Checked when a scenario is loaded, each as a :class:`~mpcform.errors.ScenarioErr
   ``radius + clearance`` (the obstacles' clearances resolved, an unset one to d_min / 2 as for
   the planner's obstacle rows: :func:`mpcform.world.obstacles.resolve_clearances`), or outside
   the geofence box;
-- a constant reference whose goal puts a drone inside an obstacle: it would hold it there.
+- a constant reference whose goal puts a drone inside an obstacle or outside the geofence: it
+  would hold it there.
 
 A moving reference (exponential, mission) may pass through obstacles: the MPC goes around them.
 """
@@ -55,25 +56,31 @@ def check_distinct(points_m: Array, field: str, what: str = "offsets") -> None:
 
 def check_start(positions_m: Array, field: str, limits: Limits, obstacles: Obstacles) -> None:
     """Raise when a start position (n, d) lies inside an obstacle or outside the geofence."""
-    lo, hi = limits.geofence_min_m, limits.geofence_max_m
-    if lo is not None and hi is not None:
-        outside = np.flatnonzero(((positions_m < lo) | (positions_m > hi)).any(axis=1))
-        if outside.size:
-            i = int(outside[0])
-            raise ScenarioError(
-                field,
-                f"drone {i}{_more(outside)} starts at {_point(positions_m[i])}, "
-                f"outside the geofence box limits.geofence_min = {_point(lo)} to "
-                f"limits.geofence_max = {_point(hi)}; expected every start "
-                "inside it",
-            )
+    _inside_geofence(positions_m, field, "starts", "every start", limits)
     _clear_of_obstacles(positions_m, field, "starts", obstacles)
 
 
-def check_goal(goal_m: Array, field: str, obstacles: Obstacles) -> None:
-    """Raise when a constant reference's goal positions (n, d) put a drone inside an obstacle."""
+def check_goal(goal_m: Array, field: str, limits: Limits, obstacles: Obstacles) -> None:
+    """Raise when a constant reference's goal positions (n, d) put a drone inside an obstacle or
+    outside the geofence: it would hold it there (or the planner would keep it short of its goal)."""
+    _inside_geofence(goal_m, field, "has its constant goal", "every goal", limits)
     note = " (a moving reference, exponential or mission, may pass through obstacles)"
     _clear_of_obstacles(goal_m, field, "has its constant goal", obstacles, note)
+
+
+def _inside_geofence(points_m: Array, field: str, verb: str, every: str, limits: Limits) -> None:
+    lo, hi = limits.geofence_min_m, limits.geofence_max_m
+    if lo is None or hi is None or lo.shape != points_m.shape[1:]:
+        return
+    outside = np.flatnonzero(((points_m < lo) | (points_m > hi)).any(axis=1))
+    if outside.size:
+        i = int(outside[0])
+        raise ScenarioError(
+            field,
+            f"drone {i}{_more(outside)} {verb} at {_point(points_m[i])}, outside the geofence box "
+            f"limits.geofence_min = {_point(lo)} to limits.geofence_max = {_point(hi)}; expected "
+            f"{every} inside it",
+        )
 
 
 def _clear_of_obstacles(points_m: Array, field: str, verb: str, obstacles: Obstacles, note: str = "") -> None:

@@ -137,17 +137,23 @@ class Scenario:
     def spacing_warning(self, controller: str | None = None) -> str | None:
         """A line when the MPC cannot reach the final formation under the plant: its closest pair
         is nearer than ``d_min + 2 margin``, the distance the planner keeps between two drones
-        (:func:`mpcform.world.limits.tightened`); those drones then stop short of their targets.
-        None otherwise (an ideal plant, no d_min, a controller other than ``controller`` or the
-        file's ``mpc``)."""
+        (:func:`mpcform.world.limits.tightened`; ``d_min`` on the ideal plant); those drones then
+        stop short of their targets. None otherwise (no d_min, a controller other than
+        ``controller`` or the file's ``mpc``)."""
         rob = self.robustness
-        if (controller or self.controller.kind) != "mpc" or rob.margin_m == 0.0:
+        if (controller or self.controller.kind) != "mpc" or self.limits.d_min_m is None:
             return None
         keep = tightened(self.limits, (), rob.margin_m, rob.a_max_mps2)[0].d_min_m
         final = self.reference.targets(np.array([self.simulation.duration_s]))[0][0]
         closest = min_pair_distance(final)  # inf for one drone
         if keep is None or closest >= keep:
             return None
+        if rob.margin_m == 0.0:
+            return (
+                f"limits.d_min: the final formation's closest pair is {closest:.3g} m apart, below "
+                f"d_min = {keep:.3g} m: those drones stop short of their targets (widen the "
+                "formation or lower limits.d_min)"
+            )
         return (
             f"plant: the final formation's closest pair is {closest:.3g} m apart, below the "
             f"{keep:.3g} m (d_min + 2 x margin {rob.margin_m:.3g} m) the MPC keeps under this "

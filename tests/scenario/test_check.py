@@ -118,6 +118,20 @@ def test_consequences_are_not_reported(tmp_path: Path) -> None:
     assert [p.field for p in problems] == ["templates"]  # not: missing [template], unknown shape, ...
 
 
+def test_every_missing_table_at_once(tmp_path: Path) -> None:
+    problems = check_scenario_file(write(tmp_path, "version = 1\ndim = 2\n")).problems
+    assert [p.field for p in problems] == ["template", "initial", "reference", "controller", "simulation"]
+    assert all("missing table" in p.message for p in problems)
+
+
+def test_an_unknown_plant_kind_is_one_problem(tmp_path: Path) -> None:
+    """Not also "plant.rate: does not apply to kind = 'ideal'" for every quadrotor key after it."""
+    text = (ROOT / "scenarios" / "swap_spatial_12_quadrotor_wind.toml").read_text()
+    text = text.replace('kind = "quadrotor"', 'kind = "helicopter"')
+    problems = check_scenario_file(write(tmp_path, text)).problems
+    assert [p.field for p in problems] == ["plant.kind"]
+
+
 @pytest.mark.parametrize(
     ("field", "line"),
     [

@@ -96,8 +96,18 @@ def test_a_constant_goal_without_a_centroid_names_the_reference_table() -> None:
     scenario_from_dict(data)  # the goal is the start, which is clear
     goal = scenario_from_dict(data).reference.start_positions_m()
     with pytest.raises(ScenarioError) as info:
-        check_goal(goal, "reference", resolve_clearances((SphereObstacle(goal[0], 0.1),), 0.5))
+        check_goal(goal, "reference", Limits(), resolve_clearances((SphereObstacle(goal[0], 0.1),), 0.5))
     assert info.value.field == "reference" and "drone 0" in str(info.value)
+
+
+def test_a_constant_goal_outside_the_geofence() -> None:
+    """It would be held there, or kept short of it by the fence rows; a start there is refused too."""
+    goal = np.array([[0.0, 0.0], [5.0, 0.0]])
+    fence = Limits(geofence_min_m=np.array([-1.0, -1.0]), geofence_max_m=np.array([4.0, 1.0]))
+    with pytest.raises(ScenarioError) as info:
+        check_goal(goal, "reference.centroid", fence, ())
+    assert "drone 1 has its constant goal at [5, 0], outside the geofence box" in str(info.value)
+    check_goal(goal, "reference.centroid", Limits(), ())  # no fence
 
 
 def test_a_moving_reference_may_pass_through_an_obstacle() -> None:

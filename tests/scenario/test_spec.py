@@ -49,6 +49,18 @@ def test_spacing_warning_when_the_plant_margin_exceeds_the_final_spacing() -> No
     assert slow.spacing_warning("tracking") is None  # only the MPC keeps the margin
 
 
+def test_spacing_warning_on_the_ideal_plant_when_d_min_exceeds_the_final_spacing() -> None:
+    import tomllib
+
+    from mpcform.scenario.load import scenario_from_dict
+
+    data = tomllib.loads((SCENARIOS / "swap_planar_8.toml").read_text())
+    assert scenario_from_dict(data).spacing_warning() is None
+    data["limits"]["d_min"] = 3.0  # the goal's neighbours are 2.3 m apart
+    text = scenario_from_dict(data).spacing_warning()
+    assert text is not None and text.startswith("limits.d_min: ") and "2.3 m apart, below d_min = 3 m" in text
+
+
 def test_a_modelled_loop_keeps_only_the_winds_margin() -> None:
     """With the velocity loop in the MPC's rows a linear plant's margin is its wind part plus the
     bend of the true path within an interval (``chord_margin``): a few millimetres in still air."""
