@@ -23,9 +23,10 @@ from typing import NoReturn
 from mpcform.cli import bench_commands, sweep_commands
 from mpcform.cli import handlers as cli_runner
 from mpcform.cli.options import add_max_memory, add_max_work, solver_help
-from mpcform.cli.paths import check_output_dir, check_output_paths
+from mpcform.cli.paths import check_output_dir, check_output_paths, clear_outputs
 from mpcform.errors import MPCFormError, ScenarioError, ValidationError
 from mpcform.outputs.files import OUTPUT_FILES, format_summary
+from mpcform.outputs.rundata import FORMATION_NPZ
 from mpcform.run.heap import keep_heap
 from mpcform.run.runner import describe, run_scenario
 from mpcform.scenario.build import check_solver_key
@@ -47,6 +48,16 @@ class _UsageError(Exception):
     pass
 
 
+RUN_OUTPUTS = (
+    *OUTPUT_FILES,
+    FORMATION_NPZ,
+    cli_runner.VIEWER_FILE,
+    cli_runner.PLOTS_DIR,
+    cli_runner.EXPORT_DIR,
+)
+"""What ``run`` writes into its ``--out`` directory (an earlier run's are removed first)."""
+
+
 class _Parser(argparse.ArgumentParser):
     def error(self, message: str) -> NoReturn:  # one line, as every other error (no usage block)
         raise _UsageError(f"{message} (see `{self.prog} --help`)")
@@ -65,6 +76,8 @@ def _run(args: argparse.Namespace) -> int:
         check_output_dir("--out", out_dir)
         for warning in scenario.warnings(args.controller):
             print(f"mpcform: warning: {warning}", file=sys.stderr)
+        if removed := clear_outputs(out_dir, RUN_OUTPUTS):
+            print(f"mpcform: {out_dir}: removed the earlier run's {', '.join(removed)}", file=sys.stderr)
         run = run_scenario(
             scenario,
             out_dir,

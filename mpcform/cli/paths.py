@@ -3,7 +3,8 @@ because ``--out`` names a file or ``--json`` a missing directory.
 
 Every command's output options are checked by their argparse destination: ``out`` (a directory,
 created with its parents when missing) and ``json``, ``report``, ``figure`` (files, written into
-an existing directory).
+an existing directory). A run into a directory that holds an earlier run's outputs removes those
+first (:func:`clear_outputs`): its data and a stale viewer or export are never mixed.
 """
 
 from __future__ import annotations
@@ -34,6 +35,22 @@ def check_output_paths(args: argparse.Namespace) -> None:
         value = getattr(args, dest, None)
         if value is not None and not (dest == "figure" and getattr(args, "no_figure", False)):
             check_output_file(_flag(dest), value)
+
+
+def clear_outputs(out_dir: Path, names: tuple[str, ...]) -> list[str]:
+    """Remove the files and folders ``names`` (an earlier run's outputs) from ``out_dir``; the
+    names removed. Nothing else in ``out_dir`` is touched."""
+    removed = []
+    for name in names:
+        path = out_dir / name
+        if path.is_dir() and not path.is_symlink():
+            shutil.rmtree(path)
+        elif path.exists() or path.is_symlink():
+            path.unlink()
+        else:
+            continue
+        removed.append(name)
+    return removed
 
 
 def check_output_dir(flag: str, path: str | Path) -> None:

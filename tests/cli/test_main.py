@@ -49,6 +49,30 @@ def test_run_writes_the_outputs(tmp_path: Path, capsys: pytest.CaptureFixture[st
     assert summary["steps"] == 500 and summary["metrics"]["final_tracking_error"] < 1e-3
 
 
+def test_a_run_into_an_earlier_runs_directory_replaces_its_outputs(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A stale viewer or export never sits beside the new run's data; other files stay."""
+    out = tmp_path / "r"
+    assert main(["run", WORKED, "--out", str(out)]) == 0
+    (out / "viewer.html").write_text("old")
+    (out / "export").mkdir()
+    (out / "notes.txt").write_text("mine")
+    capsys.readouterr()
+    assert main(["run", WORKED, "--out", str(out)]) == 0
+    err = capsys.readouterr().err
+    assert (
+        f"{out}: removed the earlier run's trajectory.npz, trajectory.csv, summary.json, viewer.html, export"
+        in err
+    )
+    assert sorted(p.name for p in out.iterdir()) == [
+        "notes.txt",
+        "summary.json",
+        "trajectory.csv",
+        "trajectory.npz",
+    ]
+
+
 def test_run_default_out_dir_is_relative_to_the_working_directory(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
 ) -> None:

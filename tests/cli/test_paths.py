@@ -8,13 +8,24 @@ from pathlib import Path
 
 import pytest
 
-from mpcform.cli.paths import check_output_dir, check_output_file, check_output_paths
+from mpcform.cli.paths import check_output_dir, check_output_file, check_output_paths, clear_outputs
 from mpcform.errors import ValidationError
 
 
 def test_a_directory_may_exist_or_be_created(tmp_path: Path) -> None:
     check_output_dir("--out", tmp_path)
     check_output_dir("--out", tmp_path / "new" / "deeper")
+
+
+def test_clear_outputs_removes_only_the_names_given(tmp_path: Path) -> None:
+    (tmp_path / "plots").mkdir()
+    (tmp_path / "plots" / "old.png").write_text("x")
+    (tmp_path / "summary.json").write_text("{}")
+    (tmp_path / "notes.txt").write_text("mine")
+    names = ("summary.json", "trajectory.npz", "plots")
+    assert clear_outputs(tmp_path, names) == ["summary.json", "plots"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["notes.txt"]
+    assert clear_outputs(tmp_path, names) == []
 
 
 def test_a_directory_option_naming_a_file(tmp_path: Path) -> None:
