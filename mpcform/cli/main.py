@@ -37,7 +37,7 @@ from mpcform.scenario.plant import with_plant_kind
 from mpcform.scenario.schema import CONTROLLER_KINDS, did_you_mean, listing
 from mpcform.scenario.size import check_memory, check_work
 from mpcform.sim.plants import KINDS as PLANT_KINDS
-from mpcform.solvers.registry import solver_infos
+from mpcform.solvers.registry import solver_info, solver_infos
 
 EXIT_USAGE = 2
 EXIT_INTERRUPTED = 128 + 2  # what a shell reports for a program stopped by SIGINT (Ctrl-C)
@@ -105,6 +105,9 @@ def _check_overrides(args: argparse.Namespace) -> None:
             check_solver_key(args.solver, "--solver")
         except ScenarioError as exc:
             raise ValidationError("--solver", str(exc).removeprefix("--solver: ")) from None
+        info = solver_info(args.solver)
+        if not info.usable:  # not installed, or cannot take this QP: before the run, naming the flag
+            raise ValidationError("--solver", f"{args.solver!r}: {info.note}")
 
 
 def _validate(args: argparse.Namespace) -> int:

@@ -73,6 +73,25 @@ def test_a_run_into_an_earlier_runs_directory_replaces_its_outputs(
     ]
 
 
+@pytest.mark.parametrize(
+    ("solver", "why"),
+    [("qpsolvers:quadprog", "unsupported: needs a positive-definite P"), ("qpsolvers:scs", "")],
+)
+def test_a_solver_that_cannot_run_is_refused_before_the_run(
+    solver: str, why: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """One line naming --solver (it came without the flag, from inside the run); scs: whichever of
+    'not installed' or nothing applies here."""
+    from mpcform.solvers.registry import solver_info
+
+    if solver_info(solver).usable:
+        pytest.skip(f"{solver} is usable here")
+    assert main(["run", WORKED, "--out", str(tmp_path / "o"), "--solver", solver]) == 2
+    (line,) = capsys.readouterr().err.strip().splitlines()
+    assert line.startswith(f"mpcform: error: --solver: '{solver}': ") and why in line
+    assert not (tmp_path / "o" / "summary.json").exists()
+
+
 def test_run_default_out_dir_is_relative_to_the_working_directory(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
 ) -> None:
