@@ -15,6 +15,7 @@ from mpcform.errors import ValidationError
 from mpcform.scenario.size import DEFAULT_MAX_WORK
 from mpcform.solvers.registry import DEFAULT_SOLVER, PERSISTENT_SOLVERS
 
+PROBLEMS_OUT = "problems"  # problems export's default --out, relative to the working directory
 PLANT_DT_S = 0.1  # bench plant's control interval: its shortest flight
 
 
@@ -272,9 +273,9 @@ def _add_bench_scale(kinds: argparse._SubParsersAction) -> None:
 
 # ---- problems -------------------------------------------------------------------------------
 def _problems_export(args: argparse.Namespace) -> int:
-    from mpcform.bench.problems import DEFAULT_PROBLEMS_DIR, DEFAULT_SCENARIOS, export_problems
+    from mpcform.bench.problems import DEFAULT_SCENARIOS, export_problems
 
-    out = Path(args.out) if args.out else DEFAULT_PROBLEMS_DIR
+    out = Path(args.out) if args.out else Path(PROBLEMS_OUT)  # not into the installed package
     paths = export_problems(args.scenarios or DEFAULT_SCENARIOS, out, args.per_scenario, args.solver)
     size = sum(p.stat().st_size for p in paths) / 2**20
     print(f"wrote {len(paths)} problems ({size:.1f} MiB) to {out}")
@@ -287,10 +288,14 @@ def add_problems(sub: argparse._SubParsersAction) -> None:
 
     problems = sub.add_parser("problems", help="recorded QP instances (problems/)")
     actions = problems.add_subparsers(dest="problems", required=True, metavar="ACTION")
-    export = actions.add_parser("export", help="record the planner's QPs from scenarios into problems/")
+    export = actions.add_parser("export", help="record the planner's QPs from scenarios into ./problems/")
     export.set_defaults(func=_problems_export)
     export.add_argument("scenarios", nargs="*", metavar="SCENARIO", help="scenarios (default: the swaps)")
-    export.add_argument("--out", metavar="DIR", help="output directory (default: the bundled problems/)")
+    export.add_argument(
+        "--out",
+        metavar="DIR",
+        help=f"output directory (default: ./{PROBLEMS_OUT}/, the bundled one in a checkout)",
+    )
     export.add_argument(
         "--per-scenario",
         type=int,

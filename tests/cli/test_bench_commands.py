@@ -4,6 +4,7 @@ made before a benchmark runs."""
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 
 import pytest
 
@@ -83,3 +84,14 @@ def test_bench_mpc_without_cases_is_one_error(capsys: pytest.CaptureFixture[str]
         err.startswith("mpcform: error: --n/--spatial-n/--steps: expected swaps of >= 2 drones")
         and "\n" == err[-1]
     )
+
+
+def test_problems_export_writes_into_the_working_directory_by_default(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Not into the installed package's problems/ (in a checkout's root: the bundled one)."""
+    monkeypatch.chdir(tmp_path)
+    swap = str(Path(__file__).resolve().parents[2] / "scenarios" / "swap_planar_8.toml")
+    assert main(["problems", "export", swap, "--per-scenario", "1"]) == 0
+    assert [p.parent for p in (tmp_path / "problems").rglob("*") if p.is_file()]
+    assert "to problems" in capsys.readouterr().out
