@@ -33,10 +33,10 @@ from mpcform.reference.keyframes import DEFAULT_SPEED_FRACTION, MissionLimits, S
 from mpcform.reference.mission import MissionReference
 from mpcform.scenario.mpc_keys import DEPRECATED, MPC_FIELDS, MPC_KEYS
 from mpcform.scenario.parse import as_scenario_error, parse_keys, parse_table, parse_top_level
-from mpcform.scenario.placement import check_distinct, check_goal, check_start
+from mpcform.scenario.placement import check_distinct, check_extent, check_goal, check_start
 from mpcform.scenario.plant import parse_plant
 from mpcform.scenario.schema import CONSENSUS_FIELDS, NULLSPACE_FIELDS, TABLES
-from mpcform.scenario.size import MAX_STEPS, check_drone_count
+from mpcform.scenario.size import MAX_STEPS, REFERENCE_SAMPLES, check_drone_count
 from mpcform.scenario.solve import solve_strategy
 from mpcform.scenario.spec import ControllerSpec, Scenario, SimulationSpec
 from mpcform.world.limits import Limits
@@ -96,6 +96,9 @@ def scenario_from_dict(
     start, positions = _initial(tpl, init)
     limits = _limits(parse_table(data, "limits", dim), dim)
     obstacles = resolve_clearances(_obstacles(data.get("obstacles"), dim), limits.d_min_m)  # unset: d_min / 2
+    check_extent(
+        positions, "initial.positions" if init["positions"] is not None else "initial", "the start puts"
+    )
     check_start(
         positions,
         "initial.positions" if init["positions"] is not None else "initial.centroid",
@@ -103,9 +106,11 @@ def scenario_from_dict(
         obstacles,
     )
     ref = parse_table(data, "reference", dim)
-    reference = _reference(tpl, start, ref, limits)
-    if isinstance(reference, ConstantReference):
+    with np.errstate(over="ignore", invalid="ignore"):  # an overflow is what check_extent reports
+        reference = _reference(tpl, start, ref, limits)
         goal = reference.start_positions_m()
+    check_extent(goal, "reference", "the reference takes")
+    if isinstance(reference, ConstantReference):
         field = "reference.centroid" if ref["centroid"] is not None else "reference"
         check_goal(goal, field, limits, obstacles)
     sim = SimulationSpec(**_renamed(parse_table(data, "simulation", dim), "simulation"))
@@ -122,6 +127,9 @@ def scenario_from_dict(
             "simulation.duration",
             f"expected at least one step, dt = {sim.dt_s:g} s; got {sim.duration_s:g} s",
         )
+    with np.errstate(over="ignore", invalid="ignore"):  # an overflow is what check_extent reports
+        reach = reference.targets(np.linspace(0.0, sim.duration_s, REFERENCE_SAMPLES))[0]
+    check_extent(reach, "reference", "the reference takes")
     if init["perturbation"] > 0.0:
         rng = np.random.default_rng([seed, 1])  # independent of the simulation noise (seed)
         positions = positions + rng.normal(0.0, init["perturbation"], positions.shape)

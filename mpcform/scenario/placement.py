@@ -9,7 +9,9 @@ Checked when a scenario is loaded, each as a :class:`~mpcform.errors.ScenarioErr
   the planner's obstacle rows: :func:`mpcform.world.obstacles.resolve_clearances`), or outside
   the geofence box;
 - a constant reference whose goal puts a drone inside an obstacle or outside the geofence: it
-  would hold it there.
+  would hold it there;
+- a start or a reference that takes a drone beyond :data:`MAX_EXTENT_M` (a scale of 1e308): the
+  distances would overflow.
 
 A moving reference (exponential, mission) may pass through obstacles: the MPC goes around them.
 """
@@ -25,6 +27,7 @@ from mpcform.world.limits import Limits
 from mpcform.world.obstacles import SphereObstacle
 
 Obstacles = tuple[SphereObstacle, ...]
+MAX_EXTENT_M = 1e6  # the farthest a drone may be from the origin (as a vector key's magnitude)
 COINCIDENT_RTOL = 1e-9  # points closer than this times max(1 m, their extent) coincide
 
 
@@ -52,6 +55,17 @@ def check_distinct(points_m: Array, field: str, what: str = "offsets") -> None:
         f"{dist[i, 1]:.3g} m): no separation d_min > 0 can hold between them; "
         "expected distinct points",
     )
+
+
+def check_extent(points_m: Array, field: str, what: str) -> None:
+    """Raise when positions (..., d) are not finite or lie beyond :data:`MAX_EXTENT_M`."""
+    far = float(np.abs(points_m).max(initial=0.0)) if np.isfinite(points_m).all() else np.inf
+    if far > MAX_EXTENT_M:
+        raise ScenarioError(
+            field,
+            f"{what} a drone {far:.3g} m from the origin; expected at most {MAX_EXTENT_M:g} m "
+            "(check the scale, centroid and offsets)",
+        )
 
 
 def check_start(positions_m: Array, field: str, limits: Limits, obstacles: Obstacles) -> None:

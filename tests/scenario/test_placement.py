@@ -12,7 +12,7 @@ from saved_runs import SCENARIOS
 
 from mpcform.errors import ScenarioError
 from mpcform.scenario.load import scenario_from_dict
-from mpcform.scenario.placement import check_distinct, check_goal, check_start
+from mpcform.scenario.placement import check_distinct, check_extent, check_goal, check_start
 from mpcform.world.limits import Limits
 from mpcform.world.obstacles import SphereObstacle, resolve_clearances
 
@@ -151,3 +151,14 @@ def test_a_keyframe_template_switch_is_checked_too() -> None:
 def test_bundled_scenarios_place_their_drones_well(path: Any) -> None:
     s = scenario_from_dict(tomllib.loads(path.read_text()))
     check_distinct(s.initial_positions_m, "initial.positions", "start positions")
+
+
+def test_a_start_or_reference_beyond_the_extent_names_its_table() -> None:
+    """A scale of 1e308 took the drones to inf: a ValueError from cKDTree in the memory estimate."""
+    data = tomllib.loads((SCENARIOS / "swap_spatial_20.toml").read_text())
+    data["reference"]["scale"] = 1e308
+    with pytest.raises(ScenarioError, match=r"^reference: the reference takes a drone inf m from the origin"):
+        scenario_from_dict(data)
+    with pytest.raises(ScenarioError, match=r"^initial: the start puts a drone 2e\+06 m"):
+        check_extent(np.array([[0.0, 2e6]]), "initial", "the start puts")
+    check_extent(np.array([[0.0, 1e6]]), "initial", "the start puts")
