@@ -101,9 +101,17 @@ class Scenario:
         return self.plant.robustness(self.dim, self.simulation.dt_s, self.limits.a_max_mps2, modelled)
 
     def warnings(self, controller: str | None = None) -> list[str]:
-        """The plant's warnings for a run with ``controller`` (None: the file's): the spacing and
-        the speed warnings; first the deprecated keys of the file."""
+        """The warnings for a run with ``controller`` (None: the file's): the deprecated keys of the
+        file, a duration that is no whole number of steps, a mission cut short, then the plant's
+        spacing and speed warnings."""
         old = list(self.controller.deprecations)
+        sim = self.simulation
+        flown = self.steps * sim.dt_s
+        if abs(flown - sim.duration_s) > 1e-9 * max(1.0, sim.duration_s):
+            old.append(
+                f"simulation.duration: {sim.duration_s:g} s is not a whole number of dt = {sim.dt_s:g} s "
+                f"steps; the run takes {self.steps:,} steps ({flown:g} s)"
+            )
         if self.goal_after_end() is not None:
             end = self.reference.duration_s  # type: ignore[attr-defined]
             old.append(

@@ -120,3 +120,11 @@ def test_a_mission_cut_short_is_said_and_its_final_targets_counted() -> None:
         w.startswith("simulation.duration: the run ends at 3 s, before the reference's end")
         for w in short.warnings()
     )
+
+
+def test_a_duration_that_is_no_whole_number_of_steps_is_said() -> None:
+    s = load_scenario(WORKED)  # dt 0.02
+    odd = dataclasses.replace(s, simulation=dataclasses.replace(s.simulation, duration_s=1.05))
+    assert odd.steps == 52 and not any("whole number" in w for w in s.warnings())
+    want = "simulation.duration: 1.05 s is not a whole number of dt = 0.02 s steps; the run takes 52 steps"
+    assert f"{want} (1.04 s)" in odd.warnings()
