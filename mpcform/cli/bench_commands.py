@@ -10,7 +10,7 @@ import math
 import sys
 from pathlib import Path
 
-from mpcform.cli.options import print_bench, progress, seconds, solver_help
+from mpcform.cli.options import DefaultsFormatter, print_bench, progress, seconds, solver_help
 from mpcform.errors import ValidationError
 from mpcform.scenario.size import DEFAULT_MAX_WORK
 from mpcform.solvers.registry import DEFAULT_SOLVER, PERSISTENT_SOLVERS
@@ -104,6 +104,9 @@ def add_bench(sub: argparse._SubParsersAction) -> None:
     plant.add_argument("--repeats", type=int, default=3, help="runs (median and max are reported)")
     plant.add_argument("--no-wind", action="store_true", help="still air (default: gusts of 0.5 m/s)")
     plant.add_argument("--json", metavar="PATH", help="also write the rows as a JSON list of records")
+    for choice in kinds._choices_actions:  # each benchmark's --help: what it measures, and the defaults
+        parser = kinds.choices[choice.dest]
+        parser.description, parser.formatter_class = choice.help, DefaultsFormatter
 
 
 def _bench_split(args: argparse.Namespace) -> int:

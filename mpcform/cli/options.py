@@ -28,6 +28,20 @@ def solver_help(what: str = "QP backend") -> str:
     )
 
 
+class DefaultsFormatter(argparse.HelpFormatter):
+    """Help that ends each option with its default, unless it has none (None, False) or says it."""
+
+    def _get_help_string(self, action: argparse.Action) -> str:
+        text = action.help or ""
+        if (
+            action.default in (None, False, argparse.SUPPRESS)
+            or "default" in text
+            or not action.option_strings
+        ):
+            return text
+        return f"{text} (default: %(default)s)"
+
+
 def max_memory_gib(text: str) -> float:
     """The ``--max-memory`` value: a number of GiB > 0."""
     try:

@@ -95,3 +95,13 @@ def test_problems_export_writes_into_the_working_directory_by_default(
     assert main(["problems", "export", swap, "--per-scenario", "1"]) == 0
     assert [p.parent for p in (tmp_path / "problems").rglob("*") if p.is_file()]
     assert "to problems" in capsys.readouterr().out
+
+
+def test_every_bench_help_says_what_it_measures_and_its_defaults() -> None:
+    for name, cmd in _choices(_choices(build_parser())["bench"]).items():
+        text = cmd.format_help()
+        assert cmd.description and cmd.description in " ".join(text.split()), name
+    plant = _choices(_choices(build_parser())["bench"])["plant"].format_help()
+    assert (
+        "drones (default: 20)" in plant and "(default: None)" not in plant and "(default: False)" not in plant
+    )
