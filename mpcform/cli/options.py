@@ -42,37 +42,32 @@ class DefaultsFormatter(argparse.HelpFormatter):
         return f"{text} (default: %(default)s)"
 
 
-def max_memory_gib(text: str) -> float:
-    """The ``--max-memory`` value: a number of GiB > 0."""
+def _finite(text: str, what: str, zero: bool = False) -> float:
+    """``text`` as a finite number > 0 (``zero``: >= 0), else an argparse error naming ``what``."""
     try:
         value = float(text)
     except ValueError:
         value = float("nan")
-    if not value > 0 or value == float("inf"):
-        raise argparse.ArgumentTypeError(f"expected a number of GiB > 0, got {text!r}")
+    if not (0 <= value if zero else 0 < value) or value == float("inf"):
+        raise argparse.ArgumentTypeError(
+            f"expected a number of {what} {'>=' if zero else '>'} 0, got {text!r}"
+        )
     return value
+
+
+def max_memory_gib(text: str) -> float:
+    """The ``--max-memory`` value: a number of GiB > 0."""
+    return _finite(text, "GiB")
 
 
 def max_work(text: str) -> float:
     """The ``--max-work`` value: a number of plant inner steps x drones > 0."""
-    try:
-        value = float(text)
-    except ValueError:
-        value = float("nan")
-    if not 0 < value < float("inf"):
-        raise argparse.ArgumentTypeError(f"expected a number of inner steps x drones > 0, got {text!r}")
-    return value
+    return _finite(text, "inner steps x drones")
 
 
 def seconds(text: str) -> float:
     """A time budget [s]: a finite number >= 0."""
-    try:
-        value = float(text)
-    except ValueError:
-        value = float("nan")
-    if not 0 <= value < float("inf"):
-        raise argparse.ArgumentTypeError(f"expected a number of seconds >= 0, got {text!r}")
-    return value
+    return _finite(text, "seconds", zero=True)
 
 
 def add_max_memory(cmd: argparse.ArgumentParser, per: str = "run") -> None:
