@@ -96,15 +96,9 @@ def scenario_from_dict(
     start, positions = _initial(tpl, init)
     limits = _limits(parse_table(data, "limits", dim), dim)
     obstacles = resolve_clearances(_obstacles(data.get("obstacles"), dim), limits.d_min_m)  # unset: d_min / 2
-    check_extent(
-        positions, "initial.positions" if init["positions"] is not None else "initial", "the start puts"
-    )
-    check_start(
-        positions,
-        "initial.positions" if init["positions"] is not None else "initial.centroid",
-        limits,
-        obstacles,
-    )
+    explicit = init["positions"] is not None
+    check_extent(positions, "initial.positions" if explicit else "initial", "the start puts")
+    check_start(positions, "initial.positions" if explicit else "initial.centroid", limits, obstacles)
     ref = parse_table(data, "reference", dim)
     with np.errstate(over="ignore", invalid="ignore"):  # an overflow is what check_extent reports
         reference = _reference(tpl, start, ref, limits)

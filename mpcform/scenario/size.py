@@ -122,13 +122,14 @@ def check_memory(
     est = estimate_memory(scenario, controller, files=files)
     if est.total_gib <= max_gib:
         return est
+    size_key = _drone_key(scenario.template.name)
     parts = {
         "simulation.duration": est.series_bytes,
         "controller.horizon": est.horizon_bytes,
-        _size_key(scenario): est.pair_bytes,
+        size_key: est.pair_bytes,
     }
     key = max(parts, key=lambda k: parts[k])
-    if key == _size_key(scenario) and (est.horizon or 0) > DEFAULT_HORIZON:
+    if key == size_key and (est.horizon or 0) > DEFAULT_HORIZON:
         spec = scenario.controller
         mpc = dataclasses.replace(spec.mpc, horizon=DEFAULT_HORIZON)
         shorter = dataclasses.replace(scenario, controller=dataclasses.replace(spec, mpc=mpc))
@@ -138,7 +139,7 @@ def check_memory(
         "simulation.duration": f"time series of {est.steps + 1:,} samples x {est.n:,} drones x "
         f"{est.dim} axes",
         "controller.horizon": f"MPC rows over a horizon of {est.horizon or 0:,} steps",
-        _size_key(scenario): f"separation rows of about {est.pairs:,} drone pairs within reach x "
+        size_key: f"separation rows of about {est.pairs:,} drone pairs within reach x "
         f"{2 * (est.horizon or 0) - 1:,}",
     }
     shown = [f"{what[k]}: {b / GIB:,.1f} GiB" for k, b in parts.items() if b >= 0.01 * est.total_bytes]
@@ -159,13 +160,11 @@ def check_drone_count(
     """Raise :class:`ScenarioError` naming the key that sets the number of drones when the parsed
     ``[template]`` keys ask for more drones than fit within ``max_gib`` GiB with their time series
     alone over ``steps`` control steps (the estimate's smallest part): before the template is built."""
-    shape = template["shape"]
+    shape, key = template["shape"], _drone_key(template["shape"])
     if shape == "grid":
-        key, n = "template.rows", template["rows"] * template["cols"] * (template["layers"] or 1)
-    elif shape == "explicit":
-        key, n = "template.offsets", len(template["offsets"])
+        n = template["rows"] * template["cols"] * (template["layers"] or 1)
     else:
-        key, n = "template.n", template["n"]
+        n = len(template["offsets"]) if shape == "explicit" else template["n"]
     if not 0.0 <= steps <= MAX_STEPS:  # refused by the loader, naming simulation.duration
         return
     need = _series_bytes(round(steps), n, dim, files) / GIB
@@ -191,12 +190,11 @@ def check_work(scenario: Scenario, max_work: float = DEFAULT_MAX_WORK) -> float:
     work = plant_work(scenario)
     if work <= max_work:
         return work
-    rate = float(getattr(scenario.plant, "rate_hz", 0.0))
-    inner = rate * scenario.steps * scenario.simulation.dt_s
+    rate, flight_s = float(scenario.plant.rate_hz), scenario.steps * scenario.simulation.dt_s  # type: ignore[attr-defined]
     raise ScenarioError(
         "plant.rate",
-        f"the plant would take {work:.3g} inner steps x drones ({inner:,.0f} steps at {rate:g} Hz over "
-        f"{scenario.steps * scenario.simulation.dt_s:g} s x {scenario.n:,} drones), above the limit of "
+        f"the plant would take {work:.3g} inner steps x drones ({rate * flight_s:,.0f} steps at {rate:g} "
+        f"Hz over {flight_s:g} s x {scenario.n:,} drones), above the limit of "
         f"{max_work:.3g} (about 0.5 ms per inner step): lower plant.rate, shorten simulation.duration "
         "or use fewer drones, or raise the limit with --max-work N",
     )
@@ -207,9 +205,9 @@ def _series_bytes(steps: int, n: int, dim: int, files: bool) -> float:
     return float(steps + 1) * n * dim * BYTES_PER_VALUE[files] + float(steps + 1) * BYTES_PER_STEP[files]
 
 
-def _size_key(scenario: Scenario) -> str:
-    """The scenario key that sets the number of drones."""
-    return {"grid": "template.rows", "explicit": "template.offsets"}.get(scenario.template.name, "template.n")
+def _drone_key(shape: str) -> str:
+    """The scenario key that sets the number of drones of a template ``shape``."""
+    return {"grid": "template.rows", "explicit": "template.offsets"}.get(shape, "template.n")
 
 
 def _candidates(scenario: Scenario) -> tuple[int, int]:
