@@ -59,7 +59,7 @@ from mpcform.mpc.step_solvers import build_step_solvers
 from mpcform.mpc.strategy import with_backend
 from mpcform.reference.base import Reference
 from mpcform.solvers.base import QPBackend, QPSolution
-from mpcform.world.limits import Limits
+from mpcform.world.limits import Limits, planning_limits
 from mpcform.world.obstacles import SphereObstacle, resolve_clearances
 
 SLACK_REPORT_M = 1e-6  # slack above this is reported
@@ -87,7 +87,7 @@ class MPCPlanner(Controller):
         loop: VelocityLoop | None = None,
     ) -> None:
         self.reference, self.dt_s = reference, positive("simulation.dt", dt_s)
-        self.limits = limits = limits or Limits()
+        self.limits = limits = planning_limits(limits or Limits())  # a_max: platform default
         settings = settings or MPCSettings()
         if solver is not None:  # the sparse strategy's backend replaced (a per-drone one refuses)
             settings = replace(settings, solve=with_backend(settings.strategy, solver, "controller.solver"))

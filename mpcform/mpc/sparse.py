@@ -21,7 +21,7 @@ import numpy as np
 
 from mpcform._validate import Array
 from mpcform.errors import ValidationError
-from mpcform.mpc.limit_families import LimitRows
+from mpcform.mpc.limit_families import AccelerationRows, LimitRows
 from mpcform.mpc.loop import VelocityLoop
 from mpcform.mpc.problem import ACTIVE_TOL, StepQP, StepSolver
 from mpcform.mpc.qp import MPCQP
@@ -60,6 +60,12 @@ class SparseSolver(StepSolver):
                 f"{backend.name!r} models the separation itself "
                 "and cannot take the plant's velocity loop; set controller.plant_model "
                 "= false",
+            )
+        if backend.stagewise and any(isinstance(f, AccelerationRows) for f in families):
+            raise ValidationError(
+                "controller.solver",
+                f"{backend.name!r} takes rows within one stage only and a_max's rows join two; "
+                "set limits.a_max = inf (no bound, ideal plant) or choose another solver",
             )
         self.reset()
 

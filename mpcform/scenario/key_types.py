@@ -33,6 +33,8 @@ class Key:
     choices: tuple[Any, ...] = ()
     bound: str = ""
     shown_default: str | None = None
+    inf: bool = False
+    """A float key that also takes ``inf`` (meaning: no bound)."""
 
     @property
     def bound_text(self) -> str:

@@ -265,8 +265,8 @@ def _mission(tpl: Template, start: FormationState, ref: dict[str, Any], limits: 
         if limits.v_max_mps is not None:
             fraction = DEFAULT_SPEED_FRACTION if ref["speed_fraction"] is None else ref["speed_fraction"]
             accel = ref["drone_acceleration"]
-            if accel is None and limits.a_max_mps2 is not None:
-                accel = fraction * limits.a_max_mps2
+            if accel is None and limits.a_max_bounded:
+                accel = fraction * float(limits.a_max_mps2)  # type: ignore[arg-type]
             budget = SpeedBudget(limits.v_max_mps, fraction, accel, ref["drone_jerk"])
         bounds = MissionLimits(*(ref[key] or {} for key in ("max_velocity", "max_acceleration", "max_jerk")))
         return MissionReference(tpl, start, keyframes, limits=bounds, budget=budget, d_min_m=limits.d_min_m)

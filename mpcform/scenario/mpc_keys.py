@@ -76,8 +76,8 @@ MPC_KEYS: tuple[Key, ...] = (
              "(a braking drone overshoots its commands), with the last interval's velocity offset "
              "(wind) estimated; cost and eq. 14 unchanged."),
     _mpc_key("braking", "bool", "End every plan where the drones can still stop, braking within "
-             "`limits.a_max` or the plant's default (the plans' terminal condition: a horizon shorter "
-             "than the braking keeps d_min)."),
+             "`limits.a_max` or its default (the plans' terminal condition: a horizon shorter "
+             "than the braking keeps d_min; off with `limits.a_max = inf`)."),
     Key("solve", "table", "`[controller.solve]`: how the QP is solved (below).", when=_MPC),
     _old_key("solver", "string"),
     _old_key("per_drone", "bool"),

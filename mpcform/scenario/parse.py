@@ -114,13 +114,14 @@ def _convert(key: Key, value: Any, field: str, dim: int, n: int | None) -> Any:
             )
         return value
     if key.type in ("int", "float"):
-        number = _number(value, integer=key.type == "int")
+        number = _number(value, integer=key.type == "int", allow_inf=key.inf)
         allowed = not key.choices or number in key.choices
         if number is None or not allowed or not key.within_bound(number):
             what = "an integer" if key.type == "int" else "a finite number"
             if key.choices:
                 what = f"one of {listing(key.choices, '')}"
-            raise ScenarioError(field, f"expected {what}{key.bound_text}{unit}, got {value!r}")
+            inf = " or inf" if key.inf else ""
+            raise ScenarioError(field, f"expected {what}{key.bound_text}{unit}{inf}, got {value!r}")
         return number
     if key.type == "table":
         if not isinstance(value, dict):
@@ -155,12 +156,12 @@ def _indices(field: str, value: Any, *, pairs: bool) -> tuple[Any, ...]:
     return tuple(tuple(v) for v in value) if pairs else tuple(value)
 
 
-def _number(value: Any, *, integer: bool) -> float | int | None:
+def _number(value: Any, *, integer: bool, allow_inf: bool = False) -> float | int | None:
     if isinstance(value, bool) or not isinstance(value, int | float):
         return None
     if integer:
         return value if isinstance(value, int) else None
-    return float(value) if math.isfinite(value) else None
+    return float(value) if math.isfinite(value) or (allow_inf and value == math.inf) else None
 
 
 def _array(

@@ -146,8 +146,9 @@ SCHEMA: tuple[Table, ...] = (
     Table("limits", "Physical limits; each unset one is not enforced.", (
         Key("v_max", "float", "Speed bound per drone.", "m/s", bound="> 0"),
         Key("d_min", "float", "Minimum distance between two drones.", "m", bound="> 0"),
-        Key("a_max", "float", "Componentwise bound on command changes (mpc).", "m/s^2",
-            bound="> 0"),
+        Key("a_max", "float", "Componentwise bound on command changes (mpc; inf: none, ideal "
+            "plant only).", "m/s^2", bound="> 0", inf=True,
+            shown_default="1.79 (mpc: a Crazyflie's; a quadrotor plant: its own)"),
         Key("geofence_min", "bounds", "Lower corner of the allowed box (mpc; -inf: open).", "m"),
         Key("geofence_max", "bounds", "Upper corner of the allowed box (mpc; inf: open).", "m"),
         Key("downwash", "float", "Vertical separation factor kappa (spatial, mpc).", "",

@@ -102,7 +102,8 @@ def estimate_memory(
         constant = 8.0 * nu * (10.0 * nu + (h * facets if lim.v_max_mps is not None else 0.0))
         dense = BYTES_PER_DENSE_ENTRY * (2.0 * pairs + items) * rows * nu
         return MemoryEstimate(steps, n, dim, h, pairs, series, constant, dense)
-    per_value = 3 + 2 * (lim.a_max_mps2 is not None) + (lim.geofence_min_m is not None)
+    bounded = lim.a_max_mps2 is None or lim.a_max_bounded  # unset: the MPC's default
+    per_value = 3 + 2 * bounded + (lim.geofence_min_m is not None)
     base = float(h) * n * (dim * per_value + 1 + (facets * dim if lim.v_max_mps is not None else 0))
     separation = float(rows) * (pairs * (2 * dim + 2) + items * (dim + 1))
     return MemoryEstimate(

@@ -48,6 +48,7 @@ from mpcform._validate import Array, positive
 from mpcform.errors import ValidationError
 from mpcform.sim.plants import Plant
 from mpcform.sim.quadrotor import QuadrotorPlant
+from mpcform.world.limits import DEFAULT_A_MAX_MPS2
 
 QUADROTOR_SAFETY = 1.25
 LINEARISATION_REMAINDER = 0.1
@@ -56,8 +57,6 @@ linearisation leaves out at the interval ends, as a fraction of the unmodelled c
 (measured: at most 0.033 on random and worst-case command sequences, 3-D, no wind; tested)."""
 ACCEL_FRACTION = 0.5
 """Default a_max is this fraction of what the airframe can deliver (the rest is kept for feedback)."""
-REFERENCE_TILT_RAD = float(np.radians(20.0))
-"""Tilt of the airframe the linear plants stand for (their default a_max: g tan of it, halved)."""
 GRID = 50
 
 
@@ -78,8 +77,9 @@ def default_a_max(plant: Plant) -> float:
     """Componentwise command-change bound [m/s^2] when the scenario gives none.
 
     Quadrotor: half of the smaller of ``g tan(max_tilt)`` and the vertical thrust reserve
-    ``(acc_coef + cmd_f_coef 4 thrust_max) / m - g`` (d = 3). Other plants: half of
-    ``g tan(20 deg)``, the airframe a lag or second-order loop stands for.
+    ``(acc_coef + cmd_f_coef 4 thrust_max) / m - g`` (d = 3). Other plants: the platform's
+    :data:`~mpcform.world.limits.DEFAULT_A_MAX_MPS2` (half of ``g tan(20 deg)``), the airframe a lag
+    or second-order loop stands for.
     """
     if isinstance(plant, QuadrotorPlant):
         pr = plant.params
@@ -89,7 +89,7 @@ def default_a_max(plant: Plant) -> float:
                 avail, (pr.acc_coef_N + pr.cmd_f_coef * pr.thrust_max_N) / pr.mass_kg - pr.gravity_mps2
             )
         return float(ACCEL_FRACTION * avail)
-    return float(ACCEL_FRACTION * 9.81 * np.tan(REFERENCE_TILT_RAD))
+    return DEFAULT_A_MAX_MPS2
 
 
 def _loop_series(a: Array, b: Array, e: Array, c: Array, h: float, count: int) -> tuple[Array, Array]:

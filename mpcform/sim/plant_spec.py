@@ -105,6 +105,12 @@ class PlantSpec(ABC):
         (:func:`mpcform.sim.margin.modelled_margin`). Measurement noise is not part of it."""
         if self.kind == "ideal":
             return Robustness(self.margin_m or 0.0, a_max_mps2)
+        if a_max_mps2 is not None and not np.isfinite(a_max_mps2):
+            raise ValidationError(
+                "limits.a_max",
+                f"inf (no bound) applies to the ideal plant only: the {self.kind} plant's margin "
+                "assumes a bound on command changes (omit a_max for the platform's default)",
+            )
         from mpcform.sim.margin import default_a_max, modelled_margin, plant_margin
 
         plant = self.build(1, dim)

@@ -106,7 +106,8 @@ class QPBackend(ABC):
 
     Class attributes say what a caller may rely on: ``warm_starts`` (``solve`` uses ``x0``),
     ``persistent`` (``update`` is cheaper than ``setup``), ``needs_context`` (call
-    :meth:`set_context` before each solve).
+    :meth:`set_context` before each solve), ``stagewise`` (every row but the dynamics lies in
+    one stage: no acceleration rows).
     """
 
     name: str
@@ -114,6 +115,7 @@ class QPBackend(ABC):
     """Whether :meth:`solve` uses ``x0`` (callers skip building it otherwise)."""
     persistent: bool = False
     needs_context: bool = False
+    stagewise: bool = False
 
     def __init__(self, options: SolverOptions) -> None:
         self.options = options

@@ -165,7 +165,7 @@ class CasadiConicBackend(StoredQP):
         self._casadi, self.plugin = casadi, plugin
         self.name = f"casadi:{plugin}"
         self.warm_starts = plugin in CASADI_WARM
-        self.needs_context = plugin == "hpipm"
+        self.needs_context = self.stagewise = plugin == "hpipm"
         self._options = casadi_conic_options(plugin, options)
         self._fn: Any = None
         self._order: StageOrder | None = None

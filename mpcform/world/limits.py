@@ -3,13 +3,21 @@ planner keeps for a plant that may be off its plan by a tube (:func:`tightened`)
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from mpcform._validate import Array, positive
 from mpcform.errors import ValidationError
 from mpcform.world.obstacles import SphereObstacle, require_resolved
+
+PLATFORM_TILT_RAD = float(np.radians(20.0))
+"""Tilt of the airframe a plan is flown on when nothing says otherwise (a Crazyflie 2.x)."""
+DEFAULT_A_MAX_MPS2 = float(0.5 * 9.81 * np.tan(PLATFORM_TILT_RAD))
+"""The MPC's command-change bound [m/s^2] when ``a_max`` is unset (1.79): half the horizontal
+acceleration of a 20 deg tilt, so that the position loop keeps the other half for its own
+corrections; the linear plants' default too (:func:`mpcform.sim.margin.default_a_max`). A step
+beyond what the firmware's attitude loop can follow from hover flips a Crazyflie."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -18,9 +26,11 @@ class Limits:
 
     ``v_max_mps``: speed bound per drone [m/s]; ``d_min_m``: minimum distance between two drones
     [m]; ``a_max_mps2``: componentwise bound on command changes, ``|u_j - u_{j-1}| <= a_max dt``
-    [m/s^2]; ``geofence_min_m`` / ``geofence_max_m``: axis-aligned box (d,) the drones stay in
-    (a floor is ``geofence_min_m[2]``; use +-inf for open sides); ``downwash_kappa``: separation
-    is measured as ``||diag(1, 1, 1/kappa) (p_i - p_k)||`` (spatial only, kappa >= 1);
+    [m/s^2] (inf: no bound; the MPC takes :data:`DEFAULT_A_MAX_MPS2` for None, see
+    :func:`planning_limits`); ``geofence_min_m`` / ``geofence_max_m``: axis-aligned box (d,) the
+    drones stay in (a floor is ``geofence_min_m[2]``; use +-inf for open sides);
+    ``downwash_kappa``: separation is measured as ``||diag(1, 1, 1/kappa) (p_i - p_k)||``
+    (spatial only, kappa >= 1);
     ``tube_m``: the plant's margin these limits are already tightened by (:func:`tightened`).
     """
 
@@ -36,7 +46,9 @@ class Limits:
         positive("limits.tube", self.tube_m, allow_zero=True)
         for name in ("v_max_mps", "d_min_m", "a_max_mps2", "downwash_kappa"):
             value = getattr(self, name)
-            if value is not None:
+            if name == "a_max_mps2" and _is_inf(value):
+                object.__setattr__(self, name, float("inf"))
+            elif value is not None:
                 object.__setattr__(self, name, positive(f"limits.{_key(name)}", value))
         if self.downwash_kappa is not None and self.downwash_kappa < 1.0:
             raise ValidationError("limits.downwash", f"expected kappa >= 1, got {self.downwash_kappa}")
@@ -55,6 +67,28 @@ class Limits:
                 )
             object.__setattr__(self, "geofence_min_m", lo_a)
             object.__setattr__(self, "geofence_max_m", hi_a)
+
+    @property
+    def a_max_bounded(self) -> bool:
+        """Whether ``a_max`` is a finite bound (unset and inf are not)."""
+        return self.a_max_mps2 is not None and np.isfinite(self.a_max_mps2)
+
+
+def planning_limits(limits: Limits) -> Limits:
+    """The limits an MPC plans with: ``a_max`` unset takes the platform's
+    :data:`DEFAULT_A_MAX_MPS2`, ``a_max = inf`` turns the bound off (None)."""
+    if limits.a_max_mps2 is None:
+        return replace(limits, a_max_mps2=DEFAULT_A_MAX_MPS2)
+    if not limits.a_max_bounded:
+        return replace(limits, a_max_mps2=None)
+    return limits
+
+
+def _is_inf(value: object) -> bool:
+    try:
+        return float(value) == float("inf")  # type: ignore[arg-type]
+    except (TypeError, ValueError):
+        return False
 
 
 def _key(attr: str) -> str:

@@ -54,8 +54,9 @@ def check_limits(res: SimulationResult, v_max: float, d_min: float) -> None:
 def test_first_input_is_eq14_when_no_row_is_active(
     dim: int, fast_path: bool, solver: str, loop: bool
 ) -> None:
-    """Also with a lag's velocity loop in the rows (the cost is still eq. 14's, the loop moved by
-    earlier commands)."""
+    """Without the acceleration bound (``a_max = inf``; the default's ramp is tested below), also
+    with a lag's velocity loop in the rows (the cost is still eq. 14's, the loop moved by earlier
+    commands)."""
     from mpcform.mpc.loop import VelocityLoop
 
     rng = np.random.default_rng(dim)
@@ -69,9 +70,7 @@ def test_first_input_is_eq14_when_no_row_is_active(
         ref = ExponentialReference(tpl, start, goal, 0.5)
         p = forward_kinematics(tpl, start) + rng.normal(0, 0.1, (6, dim))
         settings_ = MPCSettings(horizon=8, gain_per_s=2.0, fast_path=fast_path)
-        planner = MPCPlanner(
-            ref, 0.05, Limits(v_max_mps=100.0, d_min_m=0.2), settings_, solver=solver, loop=model
-        )
+        planner = MPCPlanner(ref, 0.05, Limits(100.0, 0.2, np.inf), settings_, solver=solver, loop=model)
         planner.reset(0.0, p)
         t = float(rng.uniform(0, 3))
         if loop:  # the drones moving: the loop has a state
@@ -80,6 +79,40 @@ def test_first_input_is_eq14_when_no_row_is_active(
         want = TrackingController(ref, 2.0, 0.05).step(t, p).command_mps
         assert out.info.mode == ("fast_path" if fast_path else "qp")
         np.testing.assert_allclose(out.command_mps, want, atol=tol, rtol=0)
+
+
+@pytest.mark.parametrize("solver", SOLVERS)
+@pytest.mark.parametrize("fast_path", [True, False])
+@pytest.mark.parametrize("dim", [2, 3])
+def test_with_the_default_a_max_commands_are_eq14_after_the_ramp(
+    dim: int, fast_path: bool, solver: str
+) -> None:
+    """The platform's a_max (1.79 m/s^2) by default: from rest each command moves by at most
+    ``a_max dt`` per axis; on a slow reference (eq. 14's rollout then changes by less than that, so
+    no row is active once the ramp has caught up), every command after the ramp is eq. 14's, and
+    the ramp ends within 2 s."""
+    from mpcform.world.limits import DEFAULT_A_MAX_MPS2
+
+    rng, dt = np.random.default_rng(10 + dim), 0.05
+    tpl = Template.polygon(6, 3.0, dim)
+    start = FormationState.from_param(rng.uniform(-1, 1, dim), 0.1 * np.asarray(_rot(rng, dim)), 1.0)
+    goal = FormationState.from_param(rng.uniform(-1, 1, dim), 0.1 * np.asarray(_rot(rng, dim)), 1.1)
+    ref = ExponentialReference(tpl, start, goal, 2.0)
+    settings_ = MPCSettings(horizon=20, gain_per_s=2.0, fast_path=fast_path)
+    planner = MPCPlanner(ref, dt, Limits(v_max_mps=3.0, d_min_m=0.2), settings_, solver=solver)
+    assert planner.limits.a_max_mps2 == DEFAULT_A_MAX_MPS2
+    p = forward_kinematics(tpl, start) + rng.normal(0, 0.1, (6, dim))
+    planner.reset(0.0, p)
+    step, u_prev, matched = DEFAULT_A_MAX_MPS2 * dt, np.zeros((6, dim)), []
+    for k in range(80):
+        out = planner.step(k * dt, p)
+        want = TrackingController(ref, 2.0, dt).step(k * dt, p).command_mps
+        assert np.abs(out.command_mps - u_prev).max() <= step + 1e-9
+        if np.abs(want - u_prev).max() <= step - 1e-6:  # eq. 14 within reach: nothing is active
+            np.testing.assert_allclose(out.command_mps, want, atol=1e-9 if fast_path else 1e-6, rtol=0)
+            matched.append(k)
+        u_prev, p = out.command_mps, p + dt * out.command_mps
+    assert matched and 1 <= matched[0] <= 40 and len(matched) == 80 - matched[0]
 
 
 def test_secant_feedforward_matches_the_secant_law() -> None:
@@ -91,7 +124,8 @@ def test_secant_feedforward_matches_the_secant_law() -> None:
         1.0,
     )
     p = forward_kinematics(tpl, ref.state(0.0)) + 0.05
-    planner = MPCPlanner(ref, 0.1, Limits(v_max_mps=50.0), MPCSettings(gain_per_s=3.0, feedforward="secant"))
+    unbounded = Limits(v_max_mps=50.0, a_max_mps2=np.inf)
+    planner = MPCPlanner(ref, 0.1, unbounded, MPCSettings(gain_per_s=3.0, feedforward="secant"))
     want = TrackingController(ref, 3.0, 0.1, feedforward="secant").step(0.7, p).command_mps
     np.testing.assert_allclose(planner.step(0.7, p).command_mps, want, atol=1e-12)
 
@@ -340,10 +374,11 @@ def translating_run(
     fast_path: bool,
     duration_s: float = 0.5,
 ) -> np.ndarray:
-    """Commands of a planner (horizon 8, v_max 20, d_min 0.3, tight tolerances) tracking ``Translating``."""
+    """Commands of a planner (horizon 8, v_max 20, d_min 0.3, no a_max, tight tolerances) tracking
+    ``Translating``."""
     tight = SparseSolve(options=SolverOptions(1e-8, 1e-8, 4000))
     st_ = MPCSettings(horizon=8, coupling=mode[0], solve=None if mode[1] else tight, fast_path=fast_path)
-    planner = MPCPlanner(Translating(tpl, v), 0.1, Limits(v_max_mps=20.0, d_min_m=0.3), st_)
+    planner = MPCPlanner(Translating(tpl, v), 0.1, Limits(20.0, 0.3, np.inf), st_)
     return simulate(planner, start, duration_s).commands_mps
 
 

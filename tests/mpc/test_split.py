@@ -1,5 +1,6 @@
 """Iterated split points: every iterate meets the joint pair rows, the cost never rises and never
-goes below the joint QP's optimum (Clarabel), and reaches it on small encounters."""
+goes below the joint QP's optimum (Clarabel), and reaches it on small encounters. Without a_max:
+the braking tail's stop-point rows (tests/mpc/test_braking.py) are not at the interval ends."""
 
 from __future__ import annotations
 
@@ -23,7 +24,7 @@ from mpcform.solvers.base import SolverOptions
 from mpcform.solvers.registry import make_backend
 from mpcform.world.limits import Limits
 
-LIMITS = Limits(v_max_mps=1.0, d_min_m=0.5)
+LIMITS = Limits(v_max_mps=1.0, d_min_m=0.5, a_max_mps2=np.inf)  # rows at the interval ends only
 DT = 0.1
 
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from pathlib import Path
 
@@ -76,7 +77,8 @@ def test_spatial_scenario_reaches_the_goal_formation() -> None:
 
 def test_mpc_reproduces_tracking_when_no_constraint_is_active() -> None:
     pytest.importorskip("mpcform.mpc.planner")
-    scenario = shortened(load_scenario(WORKED), 50)  # 1 s
+    scenario = shortened(load_scenario(WORKED), 50)  # 1 s; without a_max (the default ramps a start)
+    scenario = dataclasses.replace(scenario, limits=dataclasses.replace(scenario.limits, a_max_mps2=np.inf))
     tracking = run_scenario(scenario, controller="tracking")
     mpc = run_scenario(scenario, controller="mpc", solver="osqp")
     assert mpc.summary["controller"] == "mpc" and mpc.summary["solver"] == "osqp"

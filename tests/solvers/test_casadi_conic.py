@@ -1,14 +1,14 @@
 """casadi conic backends: they solve the recorded problems to the reference, the planner gives
-piqp's first input with each, and hpipm reports a QP it cannot put in stage order."""
+piqp's first input with each (without a_max), and hpipm is refused with a_max's rows."""
 
 from __future__ import annotations
 
 from collections.abc import Callable
 from typing import Any
 
-import numpy as np
 import pytest
 
+from mpcform.errors import ValidationError
 from mpcform.mpc.planner import MPCPlanner
 from mpcform.mpc.settings import MPCSettings
 from mpcform.world.limits import Limits
@@ -45,14 +45,14 @@ def test_planner_first_input_agrees(name: str, first_input_agrees: Callable[...,
     first_input_agrees(name, **FIRST_INPUT[name])
 
 
-def test_hpipm_reports_a_structure_it_cannot_take_and_the_planner_falls_back(
+def test_the_planner_refuses_hpipm_with_acceleration_rows(
     active_start: Any, require_usable: Callable[[str], None]
 ) -> None:
+    """With a_max (the default too) hpipm is refused when the planner is built: its rows join two
+    stages (hpipm's own stage-order check would fail every solve)."""
     require_usable("casadi:hpipm")
-    ref, p, t = active_start
-    limits = Limits(v_max_mps=1.0, d_min_m=0.5, a_max_mps2=5.0)  # acceleration rows couple stages
-    planner = MPCPlanner(ref, 0.1, limits, MPCSettings(horizon=6, fast_path=False), solver="casadi:hpipm")
-    planner.reset(t, p)
-    out = planner.step(t, p)
-    assert out.info.mode == "fallback" and "optimal-control" in out.info.status
-    assert np.all(np.isfinite(out.command_mps))
+    ref, _, _ = active_start
+    settings = MPCSettings(horizon=6, fast_path=False)
+    for limits in (Limits(v_max_mps=1.0, d_min_m=0.5, a_max_mps2=5.0), Limits(v_max_mps=1.0, d_min_m=0.5)):
+        with pytest.raises(ValidationError, match="controller.solver: 'casadi:hpipm' takes rows within one"):
+            MPCPlanner(ref, 0.1, limits, settings, solver="casadi:hpipm")
