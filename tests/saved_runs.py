@@ -20,9 +20,13 @@ def shortened(scenario: Scenario, steps: int) -> Scenario:
     return dataclasses.replace(scenario, simulation=sim)
 
 
-def short_run(name: str, out_dir: Path, steps: int = 40, formation: bool = True) -> RunResult:
-    """Run ``scenarios/<name>.toml`` for ``steps`` steps into ``out_dir`` (with formation.npz)."""
+def short_run(
+    name: str, out_dir: Path, steps: int = 40, formation: bool = True, flyable: bool = False
+) -> RunResult:
+    """Run ``scenarios/<name>.toml`` for ``steps`` steps into ``out_dir`` (with formation.npz;
+    ``flyable``: with the platform's tracking allowance, as ``export`` requires)."""
     scenario = shortened(load_scenario(SCENARIOS / f"{name}.toml"), steps)
+    scenario = scenario.flyable() if flyable else scenario
     run = run_scenario(scenario, out_dir)
     if formation:
         write_formation_npz(out_dir, formation_data(scenario, run.simulation.t_s))

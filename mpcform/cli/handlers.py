@@ -26,6 +26,7 @@ from mpcform.outputs.flight.export import (
     YAW_MODES,
     ExportOptions,
     ExportResult,
+    check_tracked,
     export_run,
 )
 from mpcform.outputs.flight.limits import FlightLimits, platform_thrust_acc_mps2
@@ -83,6 +84,9 @@ def check_run_options(args: argparse.Namespace, scenario: Scenario) -> None:
         raise ValidationError(
             "--altitude", "applies only to planar scenarios; shift a spatial run with --offset X,Y,Z"
         )
+    if args.export and not args.allow_untracked:  # before the run (only the MPC keeps the allowance)
+        mpc = (args.controller or scenario.controller.kind) == "mpc"
+        check_tracked(scenario.limits.d_min_m, scenario.n, scenario.limits.tracking_m if mpc else 0.0)
 
 
 def finish_run(args: argparse.Namespace, scenario: Scenario, run: RunResult) -> None:
@@ -287,6 +291,11 @@ def _add_export_options(cmd: argparse.ArgumentParser) -> None:
         help="export even when a flight limit is exceeded (then a warning)",
     )
     cmd.add_argument(
+        "--allow-untracked",
+        action="store_true",
+        help="export a run planned without a tracking allowance (run it with --flyable instead)",
+    )
+    cmd.add_argument(
         "--no-flight-check",
         action="store_true",
         help="do not fly the export on the quadrotor plant (needs drone-models)",
@@ -311,6 +320,7 @@ def export_options(args: argparse.Namespace) -> ExportOptions:
         yaw=args.yaw,
         limits=limits,
         allow_limits=args.allow_limits,
+        allow_untracked=args.allow_untracked,
         fly=not args.no_flight_check,
     )
 

@@ -38,6 +38,7 @@ from mpcform.scenario.schema import CONTROLLER_KINDS, did_you_mean, listing
 from mpcform.scenario.size import check_memory, check_work
 from mpcform.sim.plants import KINDS as PLANT_KINDS
 from mpcform.solvers.registry import solver_info, solver_infos
+from mpcform.world.limits import PLATFORM_TRACKING_M
 
 EXIT_USAGE = 2
 EXIT_INTERRUPTED = 128 + 2  # what a shell reports for a program stopped by SIGINT (Ctrl-C)
@@ -68,6 +69,8 @@ def _run(args: argparse.Namespace) -> int:
         scenario = load_scenario(args.scenario, max_memory_gib=args.max_memory)
         if args.plant is not None:
             scenario = with_plant_kind(scenario, args.plant)
+        if args.flyable:
+            scenario = scenario.flyable()
         _check_overrides(args)
         check_memory(scenario, args.max_memory, args.controller)  # before anything large is allocated
         check_work(scenario, args.max_work)
@@ -187,6 +190,12 @@ def build_parser() -> argparse.ArgumentParser:
                 metavar="KIND",
                 choices=PLANT_KINDS,
                 help=f"override plant.kind: {', '.join(PLANT_KINDS)}",
+            )
+            cmd.add_argument(
+                "--flyable",
+                action="store_true",
+                help="plan for a Crazyflie: keep its tracking allowance (limits.tracking, else "
+                f"{PLATFORM_TRACKING_M:g} m per drone), which export requires",
             )
             cli_runner.add_run_options(cmd)
         if name == "solvers":

@@ -59,7 +59,7 @@ from mpcform.mpc.step_solvers import build_step_solvers
 from mpcform.mpc.strategy import with_backend
 from mpcform.reference.base import Reference
 from mpcform.solvers.base import QPBackend, QPSolution
-from mpcform.world.limits import Limits, planning_limits
+from mpcform.world.limits import Limits, planning_limits, tightened
 from mpcform.world.obstacles import SphereObstacle, resolve_clearances
 
 SLACK_REPORT_M = 1e-6  # slack above this is reported
@@ -87,14 +87,16 @@ class MPCPlanner(Controller):
         loop: VelocityLoop | None = None,
     ) -> None:
         self.reference, self.dt_s = reference, positive("simulation.dt", dt_s)
-        self.limits = limits = planning_limits(limits or Limits())  # a_max: platform default
+        limits = planning_limits(limits or Limits())  # a_max: the platform's default
         settings = settings or MPCSettings()
         if solver is not None:  # the sparse strategy's backend replaced (a per-drone one refuses)
             settings = replace(settings, solve=with_backend(settings.strategy, solver, "controller.solver"))
         self.settings = settings
         check_gain_dt(settings.gain_per_s, dt_s)
         self.n, self.dim = reference.template.n, reference.template.dim
-        self.obstacles = resolve_clearances(tuple(obstacles), limits.d_min_m)  # unset: d_min / 2
+        obstacles = resolve_clearances(tuple(obstacles), limits.d_min_m)  # unset: d_min / 2
+        limits, obstacles = tightened(limits, obstacles, 0.0, None)  # the tracking allowance, if any
+        self.limits, self.obstacles = limits, obstacles
         _check_limits(self.dim, limits, self.obstacles)
         self.loop = _check_loop(loop, self.dim, settings)
         self._families = limit_rows(self.dim, dt_s, limits, settings, self.loop)

@@ -87,6 +87,11 @@ class RunData:
         return _limit(self.summary, "d_min")
 
     @property
+    def tracking_m(self) -> float:
+        """The tracking allowance the plan kept (0: none, or a run saved before it was recorded)."""
+        return _limit(self.summary, "tracking") or 0.0
+
+    @property
     def v_max_mps(self) -> float | None:
         return _limit(self.summary, "v_max")
 

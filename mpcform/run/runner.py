@@ -13,6 +13,7 @@ from mpcform.scenario.spec import Scenario
 from mpcform.sim.metrics import run_metrics
 from mpcform.sim.simulation import SimulationResult, simulate
 from mpcform.solvers.base import QPBackend
+from mpcform.world.limits import Limits
 
 
 @dataclass(frozen=True)
@@ -64,21 +65,27 @@ def run_scenario(
         scenario_sha256=scenario.source_sha256,
         metrics=run_metrics(result, scenario.world, goal_m=scenario.goal_after_end()),
         steps=result.commands_mps.shape[0],
-        plant=plant_record(scenario, result.wind_clip_fraction),
+        plant=plant_record(
+            scenario, result.wind_clip_fraction, getattr(ctrl, "limits", None) if is_mpc else None
+        ),
+        tracking_m=limits.tracking_m if is_mpc else 0.0,
     )
     path = None if out_dir is None else write_outputs(Path(out_dir), result, summary)
     return RunResult(result, summary, path)
 
 
-def plant_record(scenario: Scenario, wind_clip_fraction: float) -> dict[str, Any]:
-    """``summary.json``'s ``plant``: kind, robust margin [m] per drone, the acceleration bound it
-    assumes [m/s^2], the speed it is valid below [m/s], the share of clipped gust samples, and
+def plant_record(
+    scenario: Scenario, wind_clip_fraction: float, planned: Limits | None = None
+) -> dict[str, Any]:
+    """``summary.json``'s ``plant``: kind, robust margin [m] per drone, the acceleration bound
+    [m/s^2] the margin assumes (``planned``: the MPC's, its default included; None: none), the speed
+    it is valid below [m/s], the share of clipped gust samples, and
     whether the MPC's rows model the plant's velocity loop (``controller.plant_model``)."""
     rob, spec = scenario.robustness, scenario.controller
     return {
         "kind": scenario.plant.kind,
         "margin": rob.margin_m,
-        "a_max": rob.a_max_mps2,
+        "a_max": rob.a_max_mps2 if planned is None else planned.a_max_mps2,
         "margin_valid_below_speed": rob.valid_speed_mps,
         "wind_clip_fraction": wind_clip_fraction,
         "velocity_loop_modelled": bool(rob.loop) and spec.kind == "mpc" and spec.mpc.plant_model,

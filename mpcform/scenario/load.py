@@ -266,7 +266,7 @@ def _mission(tpl: Template, start: FormationState, ref: dict[str, Any], limits: 
             fraction = DEFAULT_SPEED_FRACTION if ref["speed_fraction"] is None else ref["speed_fraction"]
             accel = ref["drone_acceleration"]
             if accel is None and limits.a_max_bounded:
-                accel = fraction * float(limits.a_max_mps2)  # type: ignore[arg-type]
+                accel = fraction * float(limits.a_max_mps2)  # type: ignore[arg-type,operator]
             budget = SpeedBudget(limits.v_max_mps, fraction, accel, ref["drone_jerk"])
         bounds = MissionLimits(*(ref[key] or {} for key in ("max_velocity", "max_acceleration", "max_jerk")))
         return MissionReference(tpl, start, keyframes, limits=bounds, budget=budget, d_min_m=limits.d_min_m)
@@ -364,6 +364,7 @@ _ATTRS = {
         "geofence_min": "geofence_min_m",
         "geofence_max": "geofence_max_m",
         "downwash": "downwash_kappa",
+        "tracking": "tracking_m",
     },
     "simulation": {"dt": "dt_s", "duration": "duration_s", "noise": "noise_std_m"},
 }

@@ -153,6 +153,10 @@ SCHEMA: tuple[Table, ...] = (
         Key("geofence_max", "bounds", "Upper corner of the allowed box (mpc; inf: open).", "m"),
         Key("downwash", "float", "Vertical separation factor kappa (spatial, mpc).", "",
             bound=">= 1"),
+        Key("tracking", "float", "Room per drone for the position controller's tracking error when "
+            "the plan is flown (mpc; `mpcform run --flyable`: a Crazyflie's 0.05): pairs keep "
+            "d_min + 2 tracking apart, obstacles and the geofence tracking more. `export` refuses a run "
+            "planned without it.", "m", default=0.0, bound=">= 0"),
     ), required=False),
     Table("controller", "Controller and its parameters; `mpcform run --controller` overrides "
           "`kind`, then keys of other kinds take their defaults.", (

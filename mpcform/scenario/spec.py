@@ -19,7 +19,7 @@ from mpcform.formation.template import Template
 from mpcform.mpc.settings import MPCSettings
 from mpcform.reference.base import Reference
 from mpcform.sim.plant_spec import IdealPlantSpec, PlantSpec, Robustness
-from mpcform.world.limits import Limits, tightened
+from mpcform.world.limits import PLATFORM_TRACKING_M, Limits, tightened
 from mpcform.world.obstacles import SphereObstacle, resolve_clearances
 from mpcform.world.world import World
 
@@ -100,6 +100,16 @@ class Scenario:
         modelled = spec.kind == "mpc" and spec.mpc.plant_model
         return self.plant.robustness(self.dim, self.simulation.dt_s, self.limits.a_max_mps2, modelled)
 
+    def flyable(self) -> Scenario:
+        """This scenario planned for a Crazyflie (``mpcform run --flyable``): its
+        ``limits.tracking``, or the platform's :data:`~mpcform.world.limits.PLATFORM_TRACKING_M`
+        where it is 0."""
+        if self.limits.tracking_m > 0.0:
+            return self
+        return dataclasses.replace(
+            self, limits=dataclasses.replace(self.limits, tracking_m=PLATFORM_TRACKING_M)
+        )
+
     def warnings(self, controller: str | None = None) -> list[str]:
         """The warnings for a run with ``controller`` (None: the file's): the deprecated keys of the
         file, a duration that is no whole number of steps, a mission cut short, then the plant's
@@ -156,15 +166,18 @@ class Scenario:
         closest = min_pair_distance(final)  # inf for one drone
         if keep is None or closest >= keep:
             return None
-        if rob.margin_m == 0.0:
+        if rob.margin_m == 0.0 and self.limits.tracking_m == 0.0:
             return (
                 f"limits.d_min: the final formation's closest pair is {closest:.3g} m apart, below "
                 f"d_min = {keep:.3g} m: those drones stop short of their targets (widen the "
                 "formation or lower limits.d_min)"
             )
+        room = f"margin {rob.margin_m:.3g} m" + (
+            f" + tracking {self.limits.tracking_m:.3g} m" if self.limits.tracking_m else ""
+        )
         return (
             f"plant: the final formation's closest pair is {closest:.3g} m apart, below the "
-            f"{keep:.3g} m (d_min + 2 x margin {rob.margin_m:.3g} m) the MPC keeps under this "
+            f"{keep:.3g} m (d_min + 2 x ({room})) the MPC keeps under this "
             "plant: those drones stop short of their targets (widen the formation, lower "
             "limits.a_max or set plant.margin)"
         )

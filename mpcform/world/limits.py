@@ -18,6 +18,10 @@ DEFAULT_A_MAX_MPS2 = float(0.5 * 9.81 * np.tan(PLATFORM_TILT_RAD))
 acceleration of a 20 deg tilt, so that the position loop keeps the other half for its own
 corrections; the linear plants' default too (:func:`mpcform.sim.margin.default_a_max`). A step
 beyond what the firmware's attitude loop can follow from hover flips a Crazyflie."""
+PLATFORM_TRACKING_M = 0.05
+"""A Crazyflie 2.x's (cf2x_L250) tracking allowance per drone [m] (``--flyable``): the largest
+absolute per-drone error of the firmware's Mellinger position loop flying exported setpoints,
+3.5-5 cm measured in crazyflow (utiasDSL's simulator) on the bundled swaps, rounded up."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -31,7 +35,10 @@ class Limits:
     drones stay in (a floor is ``geofence_min_m[2]``; use +-inf for open sides);
     ``downwash_kappa``: separation is measured as ``||diag(1, 1, 1/kappa) (p_i - p_k)||``
     (spatial only, kappa >= 1);
-    ``tube_m``: the plant's margin these limits are already tightened by (:func:`tightened`).
+    ``tracking_m``: room per drone for the position controller's tracking error when the plan is
+    flown as setpoints (:data:`PLATFORM_TRACKING_M` for a Crazyflie; 0: none, and ``export``
+    refuses the run), applied by :func:`tightened`; ``tube_m``: the plant's margin and tracking
+    allowance these limits are already tightened by.
     """
 
     v_max_mps: float | None = None
@@ -40,10 +47,12 @@ class Limits:
     geofence_min_m: Array | None = None
     geofence_max_m: Array | None = None
     downwash_kappa: float | None = None
+    tracking_m: float = 0.0
     tube_m: float = 0.0
 
     def __post_init__(self) -> None:
         positive("limits.tube", self.tube_m, allow_zero=True)
+        object.__setattr__(self, "tracking_m", positive("limits.tracking", self.tracking_m, allow_zero=True))
         for name in ("v_max_mps", "d_min_m", "a_max_mps2", "downwash_kappa"):
             value = getattr(self, name)
             if name == "a_max_mps2" and _is_inf(value):
@@ -111,29 +120,30 @@ def tightened(
     ``clearance + 2 tube`` from every obstacle and the geofence shrunk by ``2 tube`` (the plan starts
     from a measured position up to a tube off the previous plan, and the next interval adds up to
     another: a static obstacle, unlike a pair, has no second drone to share it), and ``a_max_mps2``
-    (the bound on command changes the tube assumes) where the limits set none. The obstacles'
-    clearances must be resolved (:func:`mpcform.world.obstacles.resolve_clearances`). A zero tube
-    and no new ``a_max`` return the inputs themselves."""
+    (the bound on command changes the tube assumes) where the limits set none. The tracking
+    allowance ``e = limits.tracking_m`` is added once more, for the flown drone off the planned
+    path: ``d_min + 2 (tube + e)``, ``clearance + 2 tube + e``, the fence shrunk by ``2 tube + e``
+    (the result's ``tracking_m`` is 0: applied). The obstacles' clearances must be resolved
+    (:func:`mpcform.world.obstacles.resolve_clearances`). A zero tube, no allowance and no new
+    ``a_max`` return the inputs themselves."""
     obstacles = require_resolved(obstacles)
     tube = positive("plant.margin", tube_m, allow_zero=True)
+    e = limits.tracking_m
     a_max = limits.a_max_mps2 if limits.a_max_mps2 is not None else a_max_mps2
-    if tube == 0.0 and a_max == limits.a_max_mps2:
+    if tube == 0.0 and e == 0.0 and a_max == limits.a_max_mps2:
         return limits, obstacles
-    fence = {}
-    if limits.geofence_min_m is not None and limits.geofence_max_m is not None:
-        fence = {
-            "geofence_min_m": limits.geofence_min_m + 2.0 * tube,
-            "geofence_max_m": limits.geofence_max_m - 2.0 * tube,
-        }
+    static = 2.0 * tube + e  # a fence or an obstacle: the plant's tube twice, the tracking once
+    lo, hi = limits.geofence_min_m, limits.geofence_max_m
     planned = Limits(
         limits.v_max_mps,
-        None if limits.d_min_m is None else limits.d_min_m + 2.0 * tube,
+        None if limits.d_min_m is None else limits.d_min_m + 2.0 * (tube + e),
         a_max,
-        downwash_kappa=limits.downwash_kappa,
-        tube_m=tube,
-        **fence,
+        None if lo is None else lo + static,
+        None if hi is None else hi - static,
+        limits.downwash_kappa,
+        tube_m=tube + e,
     )
     inflated = tuple(
-        SphereObstacle(o.center_m, o.radius_m, o.resolved_clearance_m + 2 * tube) for o in obstacles
+        SphereObstacle(o.center_m, o.radius_m, o.resolved_clearance_m + static) for o in obstacles
     )
     return planned, inflated

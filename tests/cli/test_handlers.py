@@ -14,6 +14,7 @@ from mpcform.cli import handlers as cli_runner
 from mpcform.cli.main import main
 from mpcform.outputs import rundata
 from mpcform.outputs.rundata import load_run
+from mpcform.world.limits import PLATFORM_TRACKING_M
 
 ROOT = Path(__file__).resolve().parents[2]
 WORKED = ROOT / "scenarios" / "worked_example.toml"
@@ -57,6 +58,7 @@ def test_run_with_plot_animate_export(tmp_path: Path, capsys: pytest.CaptureFixt
                 "--altitude",
                 "1.5",
                 "--no-flight-check",
+                "--allow-untracked",  # the worked example flies eq. 14: no tracking allowance
             ]
         )
         == 0
@@ -101,7 +103,7 @@ def test_run_draws_and_exports_from_memory(
     with monkeypatch.context() as patch:
         for module, name in ((cli_runner, "load_run"), (rundata, "load_run"), (np, "load")):
             patch.setattr(module, name, no_read_back)
-        assert main(["run", path, "--out", str(out), "--plot", "--export"]) == 0
+        assert main(["run", path, "--out", str(out), "--plot", "--export", "--flyable"]) == 0
     assert "wrote 6 figures" in capsys.readouterr().out  # clearance.png: the scenario has obstacles
     assert main(["plot", str(out), "--out", str(tmp_path / "plots")]) == 0
     assert main(["export", str(out), "--out", str(tmp_path / "export")]) == 0
@@ -114,8 +116,22 @@ def test_run_draws_and_exports_from_memory(
 
 def test_run_export_without_plotting(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     out = tmp_path / "out"
-    assert main(["run", short_copy(tmp_path), "--out", str(out), "--export"]) == 0
+    assert main(["run", short_copy(tmp_path), "--out", str(out), "--export", "--allow-untracked"]) == 0
     assert (out / "export" / "drone000_poly7.csv").exists() and not (out / "plots").exists()
+
+
+def test_run_export_without_a_tracking_allowance_is_refused_before_the_run(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    path = short_copy(tmp_path, SCENARIOS / "swap_planar_8.toml", ("duration = ", "duration = 0.3 #"))
+    status = main(["run", path, "--out", str(tmp_path / "o"), "--export", "--no-flight-check"])
+    error_lines(capsys, status, "tracking: the run was planned without a tracking allowance", "--flyable")
+    assert not (tmp_path / "o").exists()
+    argv = ["run", path, "--out", str(tmp_path / "o"), "--export", "--no-flight-check", "--flyable"]
+    assert main(argv) == 0
+    summary = json.loads((tmp_path / "o" / "summary.json").read_text())
+    assert summary["limits"]["tracking"] == PLATFORM_TRACKING_M
+    assert json.loads((tmp_path / "o" / "export" / "provenance.json").read_text())["tracking_m"] == 0.05
 
 
 def test_plain_run_writes_only_the_contract_files(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
@@ -221,7 +237,7 @@ def test_compare_table_only_and_bad_directory(tmp_path: Path, capsys: pytest.Cap
 
 
 def test_export_command(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    short_run("swap_planar_8", tmp_path, steps=40)
+    short_run("swap_planar_8", tmp_path, steps=40, flyable=True)
     argv = ["export", str(tmp_path), "--altitude", "1.2", "--tolerance", "0.01", "--rate", "50"]
     argv.append("--no-flight-check")
     assert main(argv) == 0
@@ -234,7 +250,7 @@ def test_export_command(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> N
 
 
 def test_export_refuses_the_floor_and_limits(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    short_run("swap_spatial_12", tmp_path, steps=10)
+    short_run("swap_spatial_12", tmp_path, steps=10, flyable=True)
     assert main(["export", str(tmp_path), "--no-flight-check"]) != 0
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "below the floor 0 m" in err[0] and "drone" in err[0]
@@ -326,7 +342,7 @@ def test_speed_is_checked_before_running(
 def test_export_options_are_one_error_naming_the_flag(
     tmp_path: Path, capsys: pytest.CaptureFixture[str], option: list[str], says: str
 ) -> None:
-    short_run("swap_planar_8", tmp_path, steps=40)
+    short_run("swap_planar_8", tmp_path, steps=40, flyable=True)
     lines = error_lines(capsys, main(["export", str(tmp_path), "--no-flight-check", *option]), says)
     assert len(lines) == 1 and not (tmp_path / "export").exists()
 

@@ -128,3 +128,20 @@ def test_a_duration_that_is_no_whole_number_of_steps_is_said() -> None:
     assert odd.steps == 52 and not any("whole number" in w for w in s.warnings())
     want = "simulation.duration: 1.05 s is not a whole number of dt = 0.02 s steps; the run takes 52 steps"
     assert f"{want} (1.04 s)" in odd.warnings()
+
+
+def test_a_flyable_swap_keeps_d_min_plus_twice_the_tracking_allowance_along_its_path() -> None:
+    from mpcform.formation.geometry import min_segment_distance
+    from mpcform.run.runner import run_scenario
+    from mpcform.world.limits import PLATFORM_TRACKING_M
+
+    scenario = load_scenario(SCENARIOS / "swap_planar_8.toml")
+    flyable = scenario.flyable()
+    assert flyable.limits.tracking_m == PLATFORM_TRACKING_M and scenario.limits.tracking_m == 0.0
+    assert flyable.flyable() is flyable  # a file's own allowance is kept
+    run = run_scenario(flyable)
+    pos = run.simulation.positions_m
+    closest = min(min_segment_distance(a, b) for a, b in zip(pos[:-1], pos[1:], strict=True))
+    d_min = scenario.limits.d_min_m
+    assert closest >= d_min + 2 * PLATFORM_TRACKING_M - 1e-6 and run.summary["metrics"]["completion"] == 1.0
+    assert run.summary["limits"]["tracking"] == PLATFORM_TRACKING_M

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from mpcform.errors import ValidationError
-from mpcform.world.limits import Limits, tightened
+from mpcform.world.limits import DEFAULT_A_MAX_MPS2, Limits, planning_limits, tightened
 from mpcform.world.obstacles import SphereObstacle
 
 
@@ -53,6 +53,28 @@ def test_tightened_limits_inflate_separation_obstacles_and_the_fence_by_the_tube
     assert [o.clearance_m for o in inflated] == pytest.approx([0.25 + 0.1, 0.1 + 0.1])
     kept = tightened(Limits(1.0, 0.5, a_max_mps2=1.0), (), 0.05, 2.0)[0]
     assert kept.a_max_mps2 == 1.0  # a declared a_max stays
+
+
+def test_the_tracking_allowance_adds_twice_between_drones_and_once_to_obstacles_and_the_fence():
+    lim = Limits(1.0, 0.5, geofence_min_m=[-5.0, -5.0], geofence_max_m=[5.0, 5.0], tracking_m=0.05)
+    obstacles = (SphereObstacle([1.0, 0.0], 0.5, clearance_m=0.25),)
+    planned, inflated = tightened(lim, obstacles, 0.02, None)
+    assert planned.d_min_m == pytest.approx(0.5 + 2 * (0.02 + 0.05)) and planned.tube_m == pytest.approx(0.07)
+    np.testing.assert_allclose(planned.geofence_max_m, [5.0 - 0.04 - 0.05] * 2)
+    assert inflated[0].clearance_m == pytest.approx(0.25 + 0.04 + 0.05)
+    assert planned.tracking_m == 0.0 and tightened(planned, inflated, 0.0, None)[0] is planned  # applied once
+
+
+def test_planning_limits_take_the_platform_a_max_and_inf_turns_it_off():
+    assert (
+        planning_limits(Limits(1.0)).a_max_mps2
+        == DEFAULT_A_MAX_MPS2
+        == pytest.approx(0.5 * 9.81 * np.tan(np.radians(20)))
+    )
+    assert planning_limits(Limits(1.0, a_max_mps2=np.inf)).a_max_mps2 is None
+    assert planning_limits(Limits(1.0, a_max_mps2=0.7)).a_max_mps2 == 0.7
+    with pytest.raises(ValidationError, match="limits.a_max"):
+        Limits(1.0, a_max_mps2=-np.inf)
 
 
 def test_tightened_needs_resolved_clearances():

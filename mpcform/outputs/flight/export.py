@@ -57,6 +57,7 @@ from mpcform.outputs.flight.polynomial import (
 from mpcform.outputs.flight.retime import Retiming, retime
 from mpcform.outputs.flight.yaw import formation_yaw
 from mpcform.outputs.rundata import RunData
+from mpcform.world.limits import PLATFORM_TRACKING_M
 
 CRAZYFLIE_MAX_PIECES = crazyswarm.CRAZYFLIE_MAX_PIECES
 DEFAULT_ALTITUDE_M = 1.0
@@ -95,6 +96,7 @@ class ExportOptions:
     yaw: str = "zero"
     limits: FlightLimits = field(default_factory=FlightLimits)
     allow_limits: bool = False
+    allow_untracked: bool = False  # export a run planned without a tracking allowance
     fly: bool = True  # fly the export on the quadrotor plant (skipped without drone-models)
 
     def __post_init__(self) -> None:
@@ -147,6 +149,8 @@ def export_run(
 ) -> ExportResult:
     """Retime, fit, check and write every drone's files (``fields`` override ``options``)."""
     opts = replace(options or ExportOptions(), **fields)
+    if not opts.allow_untracked:
+        check_tracked(run.d_min_m, run.n, run.tracking_m)
     out = Path(out_dir)
     t = run.trajectory.t_s - run.trajectory.t_s[0]
     planned = positions_3d(run, opts)
@@ -240,6 +244,20 @@ def export_run(
     return ExportResult(
         out, tuple(files), fit, len(chunks), tuple(warnings), timing, env, min_sep, record, flight
     )
+
+
+def check_tracked(d_min_m: float | None, n: int, tracking_m: float) -> None:
+    """Refuse (ValidationError ``tracking``) a swarm with ``d_min`` planned without a tracking
+    allowance: a real drone's position loop is off its setpoints by up to
+    :data:`~mpcform.world.limits.PLATFORM_TRACKING_M`, for which such a plan keeps no room."""
+    if d_min_m is not None and n > 1 and tracking_m <= 0.0:
+        raise ValidationError(
+            "tracking",
+            f"the run was planned without a tracking allowance (limits.tracking = 0), so a "
+            f"Crazyflie off its setpoints by up to {PLATFORM_TRACKING_M:g} m may come closer than "
+            f"d_min = {d_min_m:g} m: run it with --flyable (or set limits.tracking), or pass "
+            "--allow-untracked to export it anyway",
+        )
 
 
 def flat_state(poly: PiecewisePolynomial, t_s: Array, n: int) -> dict[str, Array]:
@@ -358,6 +376,7 @@ def _record(
         "altitude_m": None if run.dim == 3 else (opts.altitude_m or DEFAULT_ALTITUDE_M),
         "offset_m": list(opts.offset_m),
         "floor_m": opts.floor_m,
+        "tracking_m": run.tracking_m,
         "yaw": opts.yaw,
         "setpoint_rate_hz": opts.rate_hz,
         "planned_duration_s": float(run.trajectory.t_s[-1] - run.trajectory.t_s[0]),

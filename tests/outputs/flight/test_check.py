@@ -30,7 +30,7 @@ def test_hover_is_flown_in_place() -> None:
 
 @needs_drone_models
 def test_export_records_the_flown_swarm(tmp_path: Path) -> None:
-    short_run("swap_planar_8", tmp_path / "run", steps=60)
+    short_run("swap_planar_8", tmp_path / "run", steps=60, flyable=True)
     result = export_run(load_run(tmp_path / "run"), tmp_path / "export")
     flight = result.record["quadrotor_flight"]
     assert flight is not None and flight["within_tolerance"]

@@ -26,6 +26,7 @@ from mpcform.outputs.flight.limits import FlightLimits
 from mpcform.outputs.rundata import load_run
 from mpcform.run.runner import run_scenario
 from mpcform.scenario.load import load_scenario
+from mpcform.world.limits import PLATFORM_TRACKING_M
 
 TOLERANCE_M = 0.02  # the stated tolerance: every planned sample within 2 cm of the pieces
 LIFT = (0.0, 0.0, 3.0)  # the spatial swaps are centred at z = 0
@@ -77,9 +78,17 @@ class CrazyswarmTrajectory:
 def test_crazyswarm_reader_reproduces_the_retimed_plan(
     tmp_path: Path, name: str, steps: int, offset: tuple
 ) -> None:
-    run = short_run(name, tmp_path / "run", steps=steps)
+    run = short_run(name, tmp_path / "run", steps=steps, flyable=True)
     data = load_run(tmp_path / "run")
-    result = export_run(data, tmp_path / "export", tolerance_m=TOLERANCE_M, offset_m=offset, fly=False)
+    untracked = data.summary["controller"] != "mpc"  # the worked example: eq. 14, no allowance
+    result = export_run(
+        data,
+        tmp_path / "export",
+        tolerance_m=TOLERANCE_M,
+        offset_m=offset,
+        fly=False,
+        allow_untracked=untracked,
+    )
     assert result.fit.within_tolerance and result.fit.max_error_m <= TOLERANCE_M
     p = run.simulation.positions_m
     t = run.simulation.t_s - run.simulation.t_s[0]
@@ -96,7 +105,7 @@ def test_crazyswarm_reader_reproduces_the_retimed_plan(
 
 @pytest.mark.parametrize("name", ["swap_planar_8", "swap_spatial_12"])
 def test_flight_starts_and_ends_at_rest(tmp_path: Path, name: str) -> None:
-    short_run(name, tmp_path / "run", steps=100)
+    short_run(name, tmp_path / "run", steps=100, flyable=True)
     result = export_run(load_run(tmp_path / "run"), tmp_path / "export", offset_m=LIFT, fly=False)
     poly = read_poly([tmp_path / "export" / "drone000_poly7.csv"])
     for end in (0.0, poly.duration_s):
@@ -110,7 +119,7 @@ def test_flight_starts_and_ends_at_rest(tmp_path: Path, name: str) -> None:
 
 
 def test_setpoints_agree_with_the_polynomials(tmp_path: Path) -> None:
-    short_run("swap_spatial_12", tmp_path / "run", steps=60)
+    short_run("swap_spatial_12", tmp_path / "run", steps=60, flyable=True)
     export_run(
         load_run(tmp_path / "run"),
         tmp_path / "export",
@@ -136,7 +145,9 @@ def test_setpoints_agree_with_the_polynomials(tmp_path: Path) -> None:
 
 def test_poly_files_follow_the_uav_trajectories_format(tmp_path: Path) -> None:
     short_run("worked_example", tmp_path / "run", steps=100)
-    export_run(load_run(tmp_path / "run"), tmp_path / "export", altitude_m=1.5, fly=False)
+    export_run(
+        load_run(tmp_path / "run"), tmp_path / "export", altitude_m=1.5, fly=False, allow_untracked=True
+    )
     path = tmp_path / "export" / "drone000_poly7.csv"
     header = path.read_text().splitlines()[0]
     assert header == ",".join(POLY_HEADER)
@@ -148,7 +159,7 @@ def test_poly_files_follow_the_uav_trajectories_format(tmp_path: Path) -> None:
 
 
 def test_long_fits_are_split_for_the_crazyflie(tmp_path: Path) -> None:
-    short_run("obstacles_planar", tmp_path / "run", steps=300)
+    short_run("obstacles_planar", tmp_path / "run", steps=300, flyable=True)
     result = export_run(load_run(tmp_path / "run"), tmp_path / "export", tolerance_m=0.001, fly=False)
     assert result.fit.polynomial.pieces > CRAZYFLIE_MAX_PIECES and result.files_per_drone >= 2
     assert any("exceed the Crazyflie's 31" in w for w in result.warnings)
@@ -157,14 +168,14 @@ def test_long_fits_are_split_for_the_crazyflie(tmp_path: Path) -> None:
     rows = [sum(1 for _ in csv.reader(p.open())) - 1 for p in parts]
     assert all(0 < r <= CRAZYFLIE_MAX_PIECES for r in rows) and sum(rows) == result.fit.polynomial.pieces
     # a later export with fewer pieces (a shorter run: at most 8 samples per piece) replaces the parts
-    short_run("obstacles_planar", tmp_path / "short", steps=60)
+    short_run("obstacles_planar", tmp_path / "short", steps=60, flyable=True)
     export_run(load_run(tmp_path / "short"), tmp_path / "export", tolerance_m=0.05, fly=False)
     assert not list((tmp_path / "export").glob("drone000_poly7_part*.csv"))
 
 
 def test_provenance_goes_with_the_export(tmp_path: Path) -> None:
     short_run("worked_example", tmp_path / "run", steps=20)
-    result = export_run(load_run(tmp_path / "run"), tmp_path / "export", fly=False)
+    result = export_run(load_run(tmp_path / "run"), tmp_path / "export", fly=False, allow_untracked=True)
     record = json.loads((tmp_path / "export" / PROVENANCE_JSON).read_text())
     assert tmp_path / "export" / PROVENANCE_JSON in result.files
     for side in ("export", "run"):
@@ -177,8 +188,21 @@ def test_provenance_goes_with_the_export(tmp_path: Path) -> None:
     assert record["quadrotor_flight"] is None  # fly=False
 
 
+def test_a_swarm_planned_without_a_tracking_allowance_is_refused_unless_allowed(tmp_path: Path) -> None:
+    short_run("swap_planar_8", tmp_path / "run", steps=20)
+    data = load_run(tmp_path / "run")
+    assert data.summary["limits"]["tracking"] == 0.0
+    with pytest.raises(ValidationError, match=r"tracking: the run was planned without a tracking allowance"):
+        export_run(data, tmp_path / "export", fly=False)
+    result = export_run(data, tmp_path / "export", fly=False, allow_untracked=True)
+    assert result.record["tracking_m"] == 0.0
+    short_run("swap_planar_8", tmp_path / "flyable", steps=20, flyable=True)
+    result = export_run(load_run(tmp_path / "flyable"), tmp_path / "export", fly=False)
+    assert result.record["tracking_m"] == PLATFORM_TRACKING_M
+
+
 def test_floor_offset_and_altitude(tmp_path: Path) -> None:
-    short_run("swap_spatial_12", tmp_path / "run", steps=10)
+    short_run("swap_spatial_12", tmp_path / "run", steps=10, flyable=True)
     data = load_run(tmp_path / "run")
     with pytest.raises(
         ValidationError, match="altitude: applies only to planar runs; shift a spatial run with --offset"
@@ -200,7 +224,7 @@ def test_floor_offset_and_altitude(tmp_path: Path) -> None:
 
 
 def test_limits_are_errors_unless_allowed(tmp_path: Path) -> None:
-    short_run("swap_planar_8", tmp_path / "run", steps=60)
+    short_run("swap_planar_8", tmp_path / "run", steps=60, flyable=True)
     data = load_run(tmp_path / "run")
     tight = FlightLimits(max_body_rate_rad_s=0.01)
     with pytest.raises(
@@ -218,7 +242,7 @@ def test_limits_are_errors_unless_allowed(tmp_path: Path) -> None:
 def test_a_colliding_plan_is_flagged(tmp_path: Path) -> None:
     scenario = shortened(load_scenario(SCENARIOS / "swap_planar_8.toml"), 40)
     run_scenario(scenario, tmp_path, controller="tracking")  # no separation rows: they meet at the centre
-    result = export_run(load_run(tmp_path), tmp_path / "export", fly=False)
+    result = export_run(load_run(tmp_path), tmp_path / "export", fly=False, allow_untracked=True)
     assert any("closer than d_min = 0.5 m" in w and "do not fly it" in w for w in result.warnings)
 
 
@@ -230,7 +254,7 @@ def test_a_floor_that_is_not_a_height_is_refused(floor: float) -> None:
 
 
 def test_an_export_of_too_many_samples_is_refused_naming_the_rate(tmp_path: Path) -> None:
-    short_run("swap_planar_8", tmp_path / "run", steps=40)
+    short_run("swap_planar_8", tmp_path / "run", steps=40, flyable=True)
     data = load_run(tmp_path / "run")
     with pytest.raises(
         ValidationError, match=r"^rate: the export would take .* samples x drones .* x 8 drones\), above"
