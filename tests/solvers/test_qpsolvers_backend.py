@@ -23,7 +23,7 @@ RECORDED: dict[str, dict[str, Any]] = {
     "qpsolvers:daqp": dict(objective=1e-8, residual=1e-8, problems=1),
     "qpsolvers:highs": dict(objective=1e-6, residual=1e-8),  # HiGHS stops with a larger dual error
     "qpsolvers:osqp": dict(objective=1e-5, residual=1e-5, eps=1e-6),
-    "qpsolvers:piqp": dict(objective=1e-8, residual=1e-8),
+    "qpsolvers:piqp": dict(objective=1e-7, residual=1e-8),
     "qpsolvers:proxqp": dict(objective=1e-6, residual=1e-6, eps=1e-6, problems=1),
     "qpsolvers:scs": dict(objective=1e-6, residual=1e-6),
 }
