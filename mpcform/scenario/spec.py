@@ -153,8 +153,8 @@ class Scenario:
         )
 
     def spacing_warning(self, controller: str | None = None) -> str | None:
-        """A line when the MPC cannot reach the final formation under the plant: its closest pair
-        is nearer than ``d_min + 2 margin``, the distance the planner keeps between two drones
+        """A line when the MPC cannot reach the final formation: its closest pair is nearer than
+        ``d_min + 2 (margin + tracking)``, the distance the planner keeps between two drones
         (:func:`mpcform.world.limits.tightened`; ``d_min`` on the ideal plant); those drones then
         stop short of their targets. None otherwise (no d_min, a controller other than
         ``controller`` or the file's ``mpc``)."""
@@ -164,22 +164,24 @@ class Scenario:
         keep = tightened(self.limits, (), rob.margin_m, rob.a_max_mps2)[0].d_min_m
         final = self.reference.targets(np.array([self.simulation.duration_s]))[0][0]
         closest = min_pair_distance(final)  # inf for one drone
-        if keep is None or closest >= keep:
+        if keep is None or closest >= keep * (1.0 - 1e-12):  # at d_min exactly the rows are met
             return None
-        if rob.margin_m == 0.0 and self.limits.tracking_m == 0.0:
+        tracking = self.limits.tracking_m
+        if rob.margin_m == 0.0 and tracking == 0.0:
             return (
                 f"limits.d_min: the final formation's closest pair is {closest:.3g} m apart, below "
                 f"d_min = {keep:.3g} m: those drones stop short of their targets (widen the "
                 "formation or lower limits.d_min)"
             )
-        room = f"margin {rob.margin_m:.3g} m" + (
-            f" + tracking {self.limits.tracking_m:.3g} m" if self.limits.tracking_m else ""
+        parts = [f"margin {rob.margin_m:.3g} m"] * (rob.margin_m > 0) + [f"tracking {tracking:.3g} m"] * (
+            tracking > 0
         )
+        field = "plant" if rob.margin_m > 0 else "limits.tracking"
         return (
-            f"plant: the final formation's closest pair is {closest:.3g} m apart, below the "
-            f"{keep:.3g} m (d_min + 2 x ({room})) the MPC keeps under this "
-            "plant: those drones stop short of their targets (widen the formation, lower "
-            "limits.a_max or set plant.margin)"
+            f"{field}: the final formation's closest pair is {closest:.3g} m apart, below the "
+            f"{keep:.3g} m (d_min + 2 x ({' + '.join(parts)})) the MPC keeps: those drones stop "
+            "short of their targets (widen the formation, lower limits.a_max or limits.tracking, "
+            "or set plant.margin)"
         )
 
     @property

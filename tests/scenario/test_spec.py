@@ -47,6 +47,11 @@ def test_spacing_warning_when_the_plant_margin_exceeds_the_final_spacing() -> No
     assert text is not None and "0.6 m apart" in text and "0.651 m" in text
     assert abs(0.5 + 2 * slow.robustness.margin_m - 0.651) < 5e-4
     assert slow.spacing_warning("tracking") is None  # only the MPC keeps the margin
+    ideal = scenario_from_dict(tomllib.loads((SCENARIOS / "formation_flight_100.toml").read_text()))
+    assert ideal.flyable().spacing_warning() is None  # 0.6 m: exactly d_min + 2 x 0.05, reachable
+    wide = dataclasses.replace(ideal, limits=dataclasses.replace(ideal.limits, tracking_m=0.08))
+    text = wide.spacing_warning()
+    assert text is not None and text.startswith("limits.tracking: ") and "(tracking 0.08 m)" in text
 
 
 def test_spacing_warning_on_the_ideal_plant_when_d_min_exceeds_the_final_spacing() -> None:
