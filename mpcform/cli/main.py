@@ -25,7 +25,7 @@ from mpcform.cli import handlers as cli_runner
 from mpcform.cli.options import add_max_memory, add_max_work, solver_help
 from mpcform.cli.paths import check_output_dir, check_output_paths, clear_outputs
 from mpcform.errors import MPCFormError, ScenarioError, ValidationError
-from mpcform.outputs.files import OUTPUT_FILES, format_summary
+from mpcform.outputs.files import OUTPUT_FILES, format_summary, incomplete_warning
 from mpcform.outputs.rundata import FORMATION_NPZ
 from mpcform.run.heap import keep_heap
 from mpcform.run.runner import describe, run_scenario
@@ -91,6 +91,8 @@ def _run(args: argparse.Namespace) -> int:
     except ScenarioError as exc:
         raise MPCFormError(located_problem(exc, args.scenario).text(args.scenario)) from None
     print(format_summary(run.summary))
+    if (incomplete := incomplete_warning(run.summary)) is not None:
+        print(f"mpcform: warning: {incomplete}", file=sys.stderr)
     print(f"wrote {', '.join(OUTPUT_FILES)} to {run.out_dir}")
     cli_runner.finish_run(args, scenario, run)  # --plot, --animate, --export
     return 0

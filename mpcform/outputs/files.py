@@ -182,6 +182,27 @@ def write_outputs(out_dir: Path, trajectory: Trajectory, summary: dict[str, Any]
     return out_dir
 
 
+def incomplete_warning(summary: dict[str, Any]) -> str | None:
+    """One line when the run ended with drones away from their final targets (None otherwise)."""
+    m = summary["metrics"]
+    if not m.get("incomplete_drones"):
+        return None
+    n, k = summary["n"], len(m["incomplete_drones"])
+    return (
+        f"the run ended incomplete: {k} of {n} drones not at their final targets: {_away(m)}, "
+        f"{m['stalled_drones']} of them stalled"
+    )
+
+
+def _away(m: dict[str, Any]) -> str:
+    """``drones 2, 5 (0.65 m, 8.9 m away)``, the first eight listed."""
+    ids, dist = m["incomplete_drones"], m["incomplete_distances_m"]
+    more = f", +{len(ids) - 8} more" if len(ids) > 8 else ""
+    listed = ", ".join(str(i) for i in ids[:8]) + more
+    away = ", ".join(f"{d:.3g} m" for d in dist[:8]) + (", ..." if more else "")
+    return f"drone{'s' * (len(ids) > 1)} {listed} ({away} away)"
+
+
 def format_summary(summary: dict[str, Any]) -> str:
     """A short aligned table of the run and its metrics, for the terminal."""
     m, lim = summary["metrics"], summary["limits"]
@@ -213,6 +234,8 @@ def format_summary(summary: dict[str, Any]) -> str:
         done = m["time_to_complete"]
         end = f" from t = {done:.4g} s" if done is not None else f", {m['stalled_drones']} stalled"
         rows.append(("completion", f"{m['completion']:.0%} of drones at their final targets{end}"))
+        if m.get("incomplete_drones"):
+            rows.append(("not arrived", _away(m)))
     if "obstacle_violations" in m:
         rows.append(
             (

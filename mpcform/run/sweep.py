@@ -178,6 +178,7 @@ def run_job(job: SweepJob) -> dict[str, Any]:
                 "fast_path_steps",
                 "solver_failures",
                 "max_slack",
+                "completion",
             )
         }
     )
@@ -194,6 +195,7 @@ def run_job(job: SweepJob) -> dict[str, Any]:
         "separation": m["separation_violations"] > 0 or not separated,
         "speed": m["speed_violations"] > 0,
         "tracking": m["final_tracking_error"] > job.tolerance_m,
+        "completion": m["completion"] < 1.0,
     }
     record["error"] = None
     record["failed_checks"] = [name for name, failed in checks.items() if failed]

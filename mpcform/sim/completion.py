@@ -23,12 +23,16 @@ def completion_metrics(
     trajectory: Trajectory, tol_m: float = COMPLETION_TOL_M, goal_m: Array | None = None
 ) -> dict[str, Any]:
     """``completion`` (fraction of drones within ``tol_m`` of their final target at the end),
-    ``stalled_drones`` and ``time_to_complete`` [s] (from when on every drone stays within
-    ``tol_m``; None if the run ends incomplete). ``goal_m`` (n, d): the final targets when the
-    reference ends after the run (a mission cut short), else the reference at the run's end."""
+    ``incomplete_drones`` and ``incomplete_distances_m`` (the ids of the drones that end farther,
+    and how far [m]: moving or not), ``stalled_drones`` (how many of them barely moved over the last
+    ``STALL_WINDOW_S``) and ``time_to_complete`` [s] (from when on every drone stays within
+    ``tol_m``; None if the run ends incomplete). Positions are the plant's: the true motion.
+    ``goal_m`` (n, d): the final targets when the reference ends after the run (a mission cut
+    short), else the reference at the run's end."""
     p, t = trajectory.positions_m, trajectory.t_s
     goal = trajectory.reference_m[-1] if goal_m is None else goal_m
-    done = np.linalg.norm(p - goal, axis=-1) <= tol_m  # (T, n)
+    dist = np.linalg.norm(p - goal, axis=-1)  # (T, n)
+    done = dist <= tol_m
     window = t >= t[-1] - STALL_WINDOW_S
     moved = np.linalg.norm(p[window] - p[-1], axis=-1).max(axis=0)  # (n,)
     every = done.all(axis=1)
@@ -36,8 +40,11 @@ def completion_metrics(
     if every[-1]:
         last_miss = np.flatnonzero(~every)
         since = float(t[0] if last_miss.size == 0 else t[last_miss[-1] + 1])
+    missing = np.flatnonzero(~done[-1])
     return {
         "completion": float(done[-1].mean()),
+        "incomplete_drones": [int(i) for i in missing],
+        "incomplete_distances_m": [float(dist[-1, i]) for i in missing],
         "stalled_drones": int((~done[-1] & (moved < tol_m)).sum()),
         "time_to_complete": since,
     }

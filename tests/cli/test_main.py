@@ -457,3 +457,23 @@ def test_max_work_raises_the_plant_limit(tmp_path: Path, capsys: pytest.CaptureF
     assert main(["validate", str(path), "--max-work", "2e8"]) == 0
     capsys.readouterr()  # its OK line and the scenario's own warning
     assert_one_line_error(capsys, main(["validate", str(path), "--max-work", "1e8"]), "plant.rate")
+
+
+def test_a_run_that_ends_incomplete_says_which_drones_and_how_far(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The 8-drone swap cut to 2 s: drones are still on their way; the summary, the table and one
+    warning say which and how far."""
+    text = (ROOT / "scenarios" / "swap_planar_8.toml").read_text()
+    path = tmp_path / "short.toml"
+    path.write_text(text.replace("duration = ", "duration = 2.0 #", 1))
+    assert main(["run", str(path), "--out", str(tmp_path / "o")]) == 0
+    out, err = capsys.readouterr()
+    summary = json.loads((tmp_path / "o" / "summary.json").read_text())
+    m = summary["metrics"]
+    assert m["completion"] < 1.0 and len(m["incomplete_drones"]) == round(8 * (1 - m["completion"]))
+    assert all(d > 0.1 for d in m["incomplete_distances_m"])
+    assert "not arrived" in out
+    lines = [line for line in err.splitlines() if "incomplete" in line]
+    assert len(lines) == 1 and lines[0].startswith("mpcform: warning: the run ended incomplete: ")
+    assert f"{len(m['incomplete_drones'])} of 8 drones" in lines[0]

@@ -26,6 +26,8 @@ from mpcform.scenario.load import load_scenario
 
 ROOT = Path(__file__).resolve().parents[2]
 METRIC_KEYS = {
+    "incomplete_drones",
+    "incomplete_distances_m",
     "final_tracking_error",
     "max_tracking_error",
     "min_separation",

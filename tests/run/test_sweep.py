@@ -193,3 +193,10 @@ def test_a_plant_rate_too_high_fails_before_any_run() -> None:
     jobs = build_jobs(quad, None, [("plant.rate", [1e6])])
     with pytest.raises(ScenarioError, match=r"^plant.rate: the plant would take 1.2e\+08 inner steps"):
         run_sweep(jobs, max_work=5e7)
+
+
+def test_a_run_that_ends_incomplete_is_a_failure_of_its_completion(tiny: Path) -> None:
+    """The tiny swap cut to 0.2 s: its drones have not arrived, so the run fails its completion check."""
+    record = run_sweep([SweepJob(tiny, (("simulation.duration", 0.2),), None)], workers=1)[0]
+    assert record["completion"] < 1.0 and not record["success"]
+    assert "completion" in record["failed_checks"]

@@ -21,19 +21,31 @@ def line_run(final: list[float], t_end: float = 10.0) -> Trajectory:
 
 def test_complete_run_says_when() -> None:
     m = completion_metrics(line_run([4.0, 0.0]))
-    assert m == {"completion": 1.0, "stalled_drones": 0, "time_to_complete": 10.0}
+    assert m == {
+        "completion": 1.0,
+        "incomplete_drones": [],
+        "incomplete_distances_m": [],
+        "stalled_drones": 0,
+        "time_to_complete": 10.0,
+    }
     m = completion_metrics(line_run([4.05, 0.0]), tol_m=0.1)
     assert m["completion"] == 1.0 and m["time_to_complete"] == pytest.approx(10.0)
 
 
 def test_short_drone_is_incomplete_and_stalled_only_if_it_stopped() -> None:
     moving = completion_metrics(line_run([3.0, 0.0]))  # still moving 0.3 m/s at the end
-    assert moving == {"completion": 0.5, "stalled_drones": 0, "time_to_complete": None}
+    assert moving == {
+        "completion": 0.5,
+        "incomplete_drones": [1],
+        "incomplete_distances_m": [1.0],
+        "stalled_drones": 0,
+        "time_to_complete": None,
+    }
     run = line_run([3.0, 0.0])
     p = run.positions_m.copy()
     p[-int(STALL_WINDOW_S) - 1 :, 1] = p[-1, 1]  # held still over the last window
     stuck = completion_metrics(Trajectory(run.t_s, p, run.commands_mps, run.reference_m))
-    assert stuck == {"completion": 0.5, "stalled_drones": 1, "time_to_complete": None}
+    assert stuck["incomplete_drones"] == [1] and stuck["stalled_drones"] == 1
 
 
 def test_a_goal_after_the_run_is_what_completion_counts() -> None:
