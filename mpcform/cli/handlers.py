@@ -12,25 +12,15 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 from importlib.util import find_spec
 from pathlib import Path
 from typing import Any
 
+from mpcform.cli.export_flags import EXPORT_FIELDS, add_export_options, export_options, report_export
 from mpcform.cli.options import option_errors
 from mpcform.cli.progress import ProgressBar
 from mpcform.errors import MPCFormError, ValidationError
-from mpcform.outputs.flight.export import (
-    CRAZYFLIE_MAX_PIECES,
-    DEFAULT_RATE_HZ,
-    YAW_MODES,
-    ExportOptions,
-    ExportResult,
-    check_tracked,
-    export_run,
-)
-from mpcform.outputs.flight.limits import FlightLimits, platform_thrust_acc_mps2
-from mpcform.outputs.flight.polynomial import DEFAULT_TOLERANCE_M
+from mpcform.outputs.flight.export import check_tracked, export_run
 from mpcform.outputs.rundata import RunData, formation_data, load_run, write_formation_npz
 from mpcform.run.runner import RunResult
 from mpcform.scenario.spec import Scenario
@@ -39,7 +29,6 @@ PLOTS_DIR = "plots"
 EXPORT_DIR = "export"
 VIEWER_FILE = "viewer.html"
 PLOT_HINT = "plotting needs matplotlib: pip install 'mpcform[plot]'"
-EXPORT_FIELDS = "altitude offset floor tolerance rate max_speed max_acc max_jerk max_body_rate".split()
 """The library's names of the export options: their errors name the flag (``--max-speed``)."""
 
 
@@ -63,7 +52,7 @@ def add_run_options(cmd: argparse.ArgumentParser) -> None:
         action="store_true",
         help="also write per-drone setpoint and polynomial CSVs into DIR/export/",
     )
-    _add_export_options(cmd)
+    add_export_options(cmd)
 
 
 def progress_bar(scenario: Scenario) -> ProgressBar:
@@ -103,7 +92,7 @@ def finish_run(args: argparse.Namespace, scenario: Scenario, run: RunResult) -> 
         print(f"wrote {write_view(data, run.out_dir / VIEWER_FILE, fence)}")
     if args.export:
         with option_errors(*EXPORT_FIELDS):
-            _report_export(export_run(data, run.out_dir / EXPORT_DIR, export_options(args)))
+            report_export(export_run(data, run.out_dir / EXPORT_DIR, export_options(args)))
 
 
 # ---- plot, compare, export ----------------------------------------------------------------
@@ -167,7 +156,7 @@ def _export(args: argparse.Namespace) -> int:
     data = load_run(args.dir)
     out = Path(args.dir) / EXPORT_DIR if args.out is None else Path(args.out)
     with option_errors(*EXPORT_FIELDS):
-        _report_export(export_run(data, out, export_options(args)))
+        report_export(export_run(data, out, export_options(args)))
     return 0
 
 
@@ -218,7 +207,7 @@ def add_commands(sub: Any) -> None:
     export.set_defaults(func=_export)
     export.add_argument("dir", metavar="DIR", help="output directory of `mpcform run`")
     export.add_argument("--out", metavar="OUT", help="export directory (default: DIR/export/)")
-    _add_export_options(export)
+    add_export_options(export)
 
 
 def require_plotting(gif: bool = False) -> None:
@@ -230,112 +219,6 @@ def require_plotting(gif: bool = False) -> None:
 
 
 # ---- helpers ------------------------------------------------------------------------------
-def _add_export_options(cmd: argparse.ArgumentParser) -> None:
-    cmd.add_argument(
-        "--altitude", type=float, metavar="M", help="flight altitude of a planar run [m] (default 1)"
-    )
-    cmd.add_argument(
-        "--tolerance",
-        type=float,
-        default=DEFAULT_TOLERANCE_M,
-        metavar="M",
-        help=f"largest distance between the polynomials and the planned positions [m] "
-        f"(default {DEFAULT_TOLERANCE_M:g}); raise it for fewer pieces",
-    )
-    cmd.add_argument(
-        "--offset",
-        type=_offset,
-        default=(0.0, 0.0, 0.0),
-        metavar="X,Y,Z",
-        help="shift the exported positions [m] (e.g. 0,0,2.5 lifts a spatial run)",
-    )
-    cmd.add_argument(
-        "--floor",
-        type=float,
-        default=0.0,
-        metavar="M",
-        help="refuse an export whose lowest point is below this height [m]",
-    )
-    cmd.add_argument(
-        "--rate",
-        type=float,
-        default=DEFAULT_RATE_HZ,
-        metavar="HZ",
-        help=f"rate of the setpoint CSVs [Hz] (default {DEFAULT_RATE_HZ:g})",
-    )
-    cmd.add_argument(
-        "--yaw",
-        choices=YAW_MODES,
-        default="zero",
-        help="yaw of the drones: zero, or the formation's rotation about z",
-    )
-    d = FlightLimits()
-    flags = (
-        ("--max-speed", "max_speed_mps", d.max_speed_mps, "m/s"),
-        ("--max-acc", "max_acc_mps2", d.max_acc_mps2, "m/s^2"),
-        ("--max-jerk", "max_jerk_mps3", d.max_jerk_mps3, "m/s^3"),
-        ("--max-body-rate", "max_body_rate_rad_s", d.max_body_rate_rad_s, "rad/s"),
-    )
-    for flag, dest, value, unit in flags:
-        cmd.add_argument(
-            flag,
-            dest=dest,
-            type=float,
-            default=value,
-            metavar="X",
-            help=f"flight limit [{unit}] (default {value:.3g}, Crazyflie 2.x)",
-        )
-    cmd.add_argument(
-        "--allow-limits",
-        action="store_true",
-        help="export even when a flight limit is exceeded (then a warning)",
-    )
-    cmd.add_argument(
-        "--allow-untracked",
-        action="store_true",
-        help="export a run planned without a tracking allowance (run it with --flyable instead)",
-    )
-    cmd.add_argument(
-        "--no-flight-check",
-        action="store_true",
-        help="do not fly the export on the quadrotor plant (needs drone-models)",
-    )
-
-
-def export_options(args: argparse.Namespace) -> ExportOptions:
-    """The :class:`ExportOptions` of the command line."""
-    limits = FlightLimits(
-        args.max_speed_mps,
-        args.max_acc_mps2,
-        args.max_jerk_mps3,
-        args.max_body_rate_rad_s,
-        platform_thrust_acc_mps2(),
-    )
-    return ExportOptions(
-        altitude_m=args.altitude,
-        offset_m=args.offset,
-        floor_m=args.floor,
-        tolerance_m=args.tolerance,
-        rate_hz=args.rate,
-        yaw=args.yaw,
-        limits=limits,
-        allow_limits=args.allow_limits,
-        allow_untracked=args.allow_untracked,
-        fly=not args.no_flight_check,
-    )
-
-
-def _offset(text: str) -> tuple[float, float, float]:
-    parts = text.split(",")
-    try:
-        values = tuple(float(p) for p in parts)
-    except ValueError:
-        values = ()
-    if len(values) != 3:
-        raise argparse.ArgumentTypeError(f"expected X,Y,Z (three numbers), got {text!r}")
-    return values
-
-
 def _add_speed_option(cmd: argparse.ArgumentParser) -> None:
     cmd.add_argument(
         "--speed",
@@ -371,31 +254,3 @@ def _figures(data: RunData, out: Path, plot: bool, animate: bool, speed: float =
         finally:
             bar.close()
         print(f"wrote {path}")
-
-
-def _report_export(result: ExportResult) -> None:
-    fit, rec, env = result.fit, result.record, result.envelope
-    n = sum(p.name.endswith("_setpoints.csv") for p in result.files)
-    print(
-        f"exported {n} drone{'s' * (n != 1)} to {result.directory}: rest to rest in "
-        f"{result.retiming.duration_s:.2f} s (planned {rec['planned_duration_s']:.2f} s), "
-        f"{fit.polynomial.pieces} polynomial pieces of {fit.polynomial.durations_s[0]:.3g} s each "
-        f"({result.files_per_drone} file{'s' * (result.files_per_drone != 1)} per drone, at most "
-        f"{CRAZYFLIE_MAX_PIECES} pieces each), max fit error {fit.max_error_m:.2g} m "
-        f"(tolerance {fit.tolerance_m:g} m)"
-    )
-    print(
-        f"  peaks: speed {env.speed.value:.3g} m/s, acceleration {env.acc.value:.3g} m/s^2, jerk "
-        f"{env.jerk.value:.3g} m/s^3, body rate {env.body_rate.value:.3g} rad/s; min separation "
-        f"{result.min_separation_m:.3g} m; setpoints at {rec['setpoint_rate_hz']:g} Hz; Crazyswarm2: "
-        "crazyflies.yaml, fly.py"
-    )
-    if result.flight is not None:
-        f = result.flight
-        print(
-            f"  flown on the quadrotor plant: true tracking error {f.max_error_m:.3g} m (declared "
-            f"{f.declared_tolerance_m:.3g} m = margin {f.plant_margin_m:.3g} + fit {f.fit_tolerance_m:g}), "
-            f"true min separation {f.min_separation_m:.3g} m"
-        )
-    for warning in result.warnings:
-        print(f"mpcform: warning: {warning}", file=sys.stderr)

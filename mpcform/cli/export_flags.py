@@ -1,0 +1,154 @@
+"""The export's command-line flags (``run --export`` and ``export``): parsing them into
+:class:`~mpcform.outputs.flight.export.ExportOptions`, and the report of what was written."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from mpcform.outputs.flight.export import (
+    CRAZYFLIE_MAX_PIECES,
+    DEFAULT_RATE_HZ,
+    YAW_MODES,
+    ExportOptions,
+    ExportResult,
+)
+from mpcform.outputs.flight.limits import FlightLimits, platform_thrust_acc_mps2
+from mpcform.outputs.flight.polynomial import DEFAULT_TOLERANCE_M
+
+EXPORT_FIELDS = "altitude offset floor tolerance rate max_speed max_acc max_jerk max_body_rate".split()
+"""The library's fields that are export flags (their errors name ``--max-speed``, not ``max_speed``)."""
+
+
+def add_export_options(cmd: argparse.ArgumentParser) -> None:
+    cmd.add_argument(
+        "--altitude", type=float, metavar="M", help="flight altitude of a planar run [m] (default 1)"
+    )
+    cmd.add_argument(
+        "--tolerance",
+        type=float,
+        default=DEFAULT_TOLERANCE_M,
+        metavar="M",
+        help=f"largest distance between the polynomials and the planned positions [m] "
+        f"(default {DEFAULT_TOLERANCE_M:g}); raise it for fewer pieces",
+    )
+    cmd.add_argument(
+        "--offset",
+        type=_offset,
+        default=(0.0, 0.0, 0.0),
+        metavar="X,Y,Z",
+        help="shift the exported positions [m] (e.g. 0,0,2.5 lifts a spatial run)",
+    )
+    cmd.add_argument(
+        "--floor",
+        type=float,
+        default=0.0,
+        metavar="M",
+        help="refuse an export whose lowest point is below this height [m]",
+    )
+    cmd.add_argument(
+        "--rate",
+        type=float,
+        default=DEFAULT_RATE_HZ,
+        metavar="HZ",
+        help=f"rate of the setpoint CSVs [Hz] (default {DEFAULT_RATE_HZ:g})",
+    )
+    cmd.add_argument(
+        "--yaw",
+        choices=YAW_MODES,
+        default="zero",
+        help="yaw of the drones: zero, or the formation's rotation about z",
+    )
+    d = FlightLimits()
+    flags = (
+        ("--max-speed", "max_speed_mps", d.max_speed_mps, "m/s"),
+        ("--max-acc", "max_acc_mps2", d.max_acc_mps2, "m/s^2"),
+        ("--max-jerk", "max_jerk_mps3", d.max_jerk_mps3, "m/s^3"),
+        ("--max-body-rate", "max_body_rate_rad_s", d.max_body_rate_rad_s, "rad/s"),
+    )
+    for flag, dest, value, unit in flags:
+        cmd.add_argument(
+            flag,
+            dest=dest,
+            type=float,
+            default=value,
+            metavar="X",
+            help=f"flight limit [{unit}] (default {value:.3g}, Crazyflie 2.x)",
+        )
+    cmd.add_argument(
+        "--allow-limits",
+        action="store_true",
+        help="export even when a flight limit is exceeded (then a warning)",
+    )
+    cmd.add_argument(
+        "--allow-untracked",
+        action="store_true",
+        help="export a run planned without a tracking allowance (run it with --flyable instead)",
+    )
+    cmd.add_argument(
+        "--no-flight-check",
+        action="store_true",
+        help="do not fly the export on the quadrotor plant (needs drone-models)",
+    )
+
+
+def export_options(args: argparse.Namespace) -> ExportOptions:
+    """The :class:`ExportOptions` of the command line."""
+    limits = FlightLimits(
+        args.max_speed_mps,
+        args.max_acc_mps2,
+        args.max_jerk_mps3,
+        args.max_body_rate_rad_s,
+        platform_thrust_acc_mps2(),
+    )
+    return ExportOptions(
+        altitude_m=args.altitude,
+        offset_m=args.offset,
+        floor_m=args.floor,
+        tolerance_m=args.tolerance,
+        rate_hz=args.rate,
+        yaw=args.yaw,
+        limits=limits,
+        allow_limits=args.allow_limits,
+        allow_untracked=args.allow_untracked,
+        fly=not args.no_flight_check,
+    )
+
+
+def _offset(text: str) -> tuple[float, float, float]:
+    parts = text.split(",")
+    try:
+        values = tuple(float(p) for p in parts)
+    except ValueError:
+        values = ()
+    if len(values) != 3:
+        raise argparse.ArgumentTypeError(f"expected X,Y,Z (three numbers), got {text!r}")
+    return values
+
+
+def report_export(result: ExportResult) -> None:
+    fit, rec, env = result.fit, result.record, result.envelope
+    n = sum(p.name.endswith("_setpoints.csv") for p in result.files)
+    print(
+        f"exported {n} drone{'s' * (n != 1)} to {result.directory}: rest to rest in "
+        f"{result.retiming.duration_s:.2f} s (planned {rec['planned_duration_s']:.2f} s), "
+        f"{fit.polynomial.pieces} polynomial pieces of {fit.polynomial.durations_s[0]:.3g} s each "
+        f"({result.files_per_drone} file{'s' * (result.files_per_drone != 1)} per drone, at most "
+        f"{CRAZYFLIE_MAX_PIECES} pieces each), max fit error {fit.max_error_m:.2g} m "
+        f"(tolerance {fit.tolerance_m:g} m)"
+    )
+    print(
+        f"  peaks: speed {env.speed.value:.3g} m/s, acceleration {env.acc.value:.3g} m/s^2, jerk "
+        f"{env.jerk.value:.3g} m/s^3, body rate {env.body_rate.value:.3g} rad/s; min separation "
+        f"{result.min_separation_m:.3g} m; setpoints at {rec['setpoint_rate_hz']:g} Hz; Crazyswarm2: "
+        "crazyflies.yaml, fly.py"
+    )
+    if result.flight is not None:
+        f = result.flight
+        print(
+            f"  flown on the quadrotor plant: true tracking error {f.max_error_m:.3g} m (declared "
+            f"{f.declared_tolerance_m:.3g} m = margin {f.plant_margin_m:.3g} + fit {f.fit_tolerance_m:g}), "
+            f"true min separation {f.min_separation_m:.3g} m"
+        )
+    for warning in result.warnings:
+        print(f"mpcform: warning: {warning}", file=sys.stderr)
