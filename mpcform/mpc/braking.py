@@ -46,7 +46,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from mpcform._validate import Array
+from mpcform.errors import ValidationError
 from mpcform.world.limits import Limits
+
+MAX_STOP_M = 1e6
+"""The longest braking distance ``v_max^2 / (2 a_max)`` taken [m] (a scenario's extent bound too):
+beyond it the stop points are numbers no QP can use, and no drone brakes over 1000 km."""
 
 
 @dataclass(frozen=True)
@@ -64,6 +69,13 @@ class Braking:
         a_max, v_max = limits.a_max_mps2, limits.v_max_mps
         if not enabled or a_max is None or v_max is None or not np.isfinite(a_max):
             return None
+        if v_max**2 / (2.0 * a_max) > MAX_STOP_M:
+            raise ValidationError(
+                "limits.v_max",
+                f"braking from {v_max:.3g} m/s at a_max = {a_max:.3g} m/s^2 would take "
+                f"{v_max**2 / (2.0 * a_max):.3g} m; expected a speed a drone stops from within "
+                f"{MAX_STOP_M:g} m (or controller.braking = false)",
+            )
         rho = max(0.0, 1.0 - a_max * dt_s / v_max)
         return cls(dt_s, rho, dt_s * rho / (1.0 - rho))
 

@@ -7,6 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from mpcform.errors import ValidationError
 from mpcform.mpc.braking import Braking, separation_steps
 from mpcform.run.runner import run_scenario
 from mpcform.scenario.load import scenario_from_dict
@@ -27,6 +28,16 @@ def test_braking_needs_a_finite_a_max_and_v_max() -> None:
     fast = Braking.of(DT, Limits(v_max_mps=0.1, a_max_mps2=5.0))  # stops in one step
     assert fast is not None and fast.rho == 0.0 and fast.kappa_s == 0.0
     assert separation_steps(10, b) == 11 and separation_steps(10, None) == 10
+
+
+def test_a_speed_no_drone_stops_from_is_refused_naming_v_max() -> None:
+    """Braking over more than MAX_STOP_M (the stop points would be numbers no QP can use; at
+    v_max 2**62 the braking factor rounds to 1 and divided by zero)."""
+    assert Braking.of(DT, Limits(v_max_mps=1800.0, a_max_mps2=1.79)) is not None  # 905 km
+    for v_max in (2000.0, 2.0**62):
+        with pytest.raises(ValidationError, match=r"limits.v_max: braking from .* would take"):
+            Braking.of(DT, Limits(v_max_mps=v_max, a_max_mps2=1.79))
+    assert Braking.of(DT, Limits(v_max_mps=2.0**62, a_max_mps2=1.79), enabled=False) is None
 
 
 def test_the_tail_keeps_a_max_and_ends_at_the_stop_point() -> None:
