@@ -7,7 +7,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from mpcform.errors import ValidationError
+from mpcform.errors import ValidationError, shown
 
 Array = NDArray[Any]  # float arrays mostly; index arrays share the alias
 
@@ -17,7 +17,9 @@ def finite_array(field: str, value: Any, shape: tuple[int | None, ...]) -> Array
     try:
         arr = np.array(value, dtype=float)
     except (TypeError, ValueError) as exc:
-        raise ValidationError(field, f"expected numbers of shape {_shape(shape)}, got {value!r}") from exc
+        raise ValidationError(
+            field, f"expected numbers of shape {_shape(shape)}, got {shown(value)}"
+        ) from exc
     if arr.ndim != len(shape) or any(
         s is not None and s != a for s, a in zip(shape, arr.shape, strict=False)
     ):
@@ -32,18 +34,18 @@ def positive(field: str, value: Any, *, allow_zero: bool = False) -> float:
     try:
         x = float(value)
     except (TypeError, ValueError) as exc:
-        raise ValidationError(field, f"expected a number, got {value!r}") from exc
+        raise ValidationError(field, f"expected a number, got {shown(value)}") from exc
     ok = np.isfinite(x) and (x >= 0 if allow_zero else x > 0)
     if not ok:
         raise ValidationError(
-            field, f"expected a finite number {'>= 0' if allow_zero else '> 0'}, got {value!r}"
+            field, f"expected a finite number {'>= 0' if allow_zero else '> 0'}, got {shown(value)}"
         )
     return x
 
 
 def dimension(field: str, value: Any) -> int:
     if value not in (2, 3) or isinstance(value, bool):
-        raise ValidationError(field, f"expected 2 (planar) or 3 (spatial), got {value!r}")
+        raise ValidationError(field, f"expected 2 (planar) or 3 (spatial), got {shown(value)}")
     return int(value)
 
 

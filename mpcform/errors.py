@@ -2,6 +2,18 @@
 
 from __future__ import annotations
 
+import reprlib
+
+_SHORT = reprlib.Repr()
+_SHORT.maxlist = _SHORT.maxtuple = 6
+_SHORT.maxstring = _SHORT.maxother = 60
+
+
+def shown(value: object) -> str:
+    """``repr(value)`` cut short (``[0.0, 0.0, 0.0, 0.0, 0.0, 0.0, ...]``): a bad value echoed in an
+    error message stays one readable line, however large it is."""
+    return _SHORT.repr(value)
+
 
 class MPCFormError(Exception):
     """Base class of every error raised by mpcform."""

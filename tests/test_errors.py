@@ -81,3 +81,21 @@ def test_errors_survive_pickling(err: MPCFormError) -> None:
 def test_the_base_error_survives_pickling() -> None:
     back = pickle.loads(pickle.dumps(MPCFormError("plain")))
     assert type(back) is MPCFormError and str(back) == "plain"
+
+
+def test_a_large_bad_value_is_echoed_cut_short() -> None:
+    """A list of 1000 zeros given for template.radius is named in one short line, not 6000 characters."""
+    from mpcform.errors import shown
+    from mpcform.scenario.load import scenario_from_dict
+
+    assert shown([0.0] * 1000) == "[0.0, 0.0, 0.0, 0.0, 0.0, 0.0, ...]" and shown(0.25) == "0.25"
+    assert len(shown("x" * 10_000)) <= 62 and shown(float("inf")) == "inf"
+    doc = {
+        "version": 1,
+        "name": "x",
+        "dim": 2,
+        "template": {"shape": "polygon", "n": 3, "radius": [0.0] * 1000},
+    }
+    with pytest.raises(ScenarioError) as info:
+        scenario_from_dict(doc)
+    assert "template.radius" in str(info.value) and len(str(info.value)) < 200

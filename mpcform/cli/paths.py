@@ -14,7 +14,7 @@ import os
 import shutil
 from pathlib import Path
 
-from mpcform.errors import ValidationError
+from mpcform.errors import ValidationError, shown
 
 DIRECTORY_OPTIONS = ("out",)
 FILE_OPTIONS = ("json", "report", "figure")
@@ -26,7 +26,7 @@ def check_output_paths(args: argparse.Namespace) -> None:
     when a figure is drawn)."""
     for dest in (*DIRECTORY_OPTIONS, *FILE_OPTIONS):
         if isinstance(value := getattr(args, dest, None), str) and not value.strip():
-            raise ValidationError(_flag(dest), f"expected a path, got {value!r}")
+            raise ValidationError(_flag(dest), f"expected a path, got {shown(value)}")
     for dest in DIRECTORY_OPTIONS:
         value = getattr(args, dest, None)
         if value is not None:

@@ -8,7 +8,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from mpcform._validate import Array, dimension, finite_array, positive
-from mpcform.errors import ValidationError
+from mpcform.errors import ValidationError, shown
 from mpcform.formation.geometry import min_pair_distance
 
 CENTRED_RTOL = 1e-9
@@ -113,7 +113,7 @@ class Template:
 
 def _count(field: str, value: object, minimum: int) -> int:
     if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < minimum:
-        raise ValidationError(field, f"expected an integer >= {minimum}, got {value!r}")
+        raise ValidationError(field, f"expected an integer >= {minimum}, got {shown(value)}")
     return int(value)
 
 

@@ -20,7 +20,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field, replace
 
 from mpcform._validate import positive
-from mpcform.errors import ValidationError
+from mpcform.errors import ValidationError, shown
 from mpcform.solvers.base import QPBackend, SolverOptions
 from mpcform.solvers.registry import DEFAULT_PER_DRONE_SOLVER, DEFAULT_SOLVER
 
@@ -29,7 +29,7 @@ SOLVE_KINDS = ("sparse", "per_drone")
 
 def _count(field_name: str, value: object, least: int) -> int:
     if isinstance(value, bool) or not isinstance(value, int) or value < least:
-        raise ValidationError(field_name, f"expected an integer >= {least}, got {value!r}")
+        raise ValidationError(field_name, f"expected an integer >= {least}, got {shown(value)}")
     return value
 
 

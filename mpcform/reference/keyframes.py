@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 
 from mpcform._validate import Array, finite_array, positive
-from mpcform.errors import ValidationError
+from mpcform.errors import ValidationError, shown
 from mpcform.formation.rotation import check_rotation, rotation_matrix
 from mpcform.formation.template import Template
 
@@ -103,7 +103,7 @@ class MissionLimits:
                 if group not in GROUPS:
                     raise ValidationError(where, f"unknown DOF group; expected one of {', '.join(GROUPS)}")
                 if isinstance(value, bool):
-                    raise ValidationError(where, f"expected a finite number > 0, got {value!r}")
+                    raise ValidationError(where, f"expected a finite number > 0, got {shown(value)}")
                 checked[group] = positive(where, value)
             object.__setattr__(self, name, MappingProxyType(checked))
 

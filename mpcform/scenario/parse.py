@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 
 from mpcform._validate import Array
-from mpcform.errors import ScenarioError, ValidationError
+from mpcform.errors import ScenarioError, ValidationError, shown
 from mpcform.scenario.schema import SCHEMA, TABLES, Key, Table, did_you_mean, listing
 
 MAX_MAGNITUDE = 1e6
@@ -102,15 +102,16 @@ def _convert(key: Key, value: Any, field: str, dim: int, n: int | None) -> Any:
     unit = f" [{key.unit}]" if key.unit else ""
     if key.type == "bool":
         if not isinstance(value, bool):
-            raise ScenarioError(field, f"expected true or false, got {value!r}")
+            raise ScenarioError(field, f"expected true or false, got {shown(value)}")
         return value
     if key.type == "string":
         if not isinstance(value, str):
-            raise ScenarioError(field, f"expected a string, got {value!r}")
+            raise ScenarioError(field, f"expected a string, got {shown(value)}")
         if key.choices and value not in key.choices:
             raise ScenarioError(
                 field,
-                f"expected one of {listing(key.choices)}, got {value!r}{did_you_mean(value, key.choices)}",
+                f"expected one of {listing(key.choices)}, "
+                f"got {shown(value)}{did_you_mean(value, key.choices)}",
             )
         return value
     if key.type in ("int", "float"):
@@ -121,15 +122,17 @@ def _convert(key: Key, value: Any, field: str, dim: int, n: int | None) -> Any:
             if key.choices:
                 what = f"one of {listing(key.choices, '')}"
             inf = " or inf" if key.inf else ""
-            raise ScenarioError(field, f"expected {what}{key.bound_text}{unit}{inf}, got {value!r}")
+            raise ScenarioError(field, f"expected {what}{key.bound_text}{unit}{inf}, got {shown(value)}")
         return number
     if key.type == "table":
         if not isinstance(value, dict):
-            raise ScenarioError(field, f"expected a table {{ key = value, ... }}, got {value!r}")
+            raise ScenarioError(field, f"expected a table {{ key = value, ... }}, got {shown(value)}")
         return value
     if key.type == "tables":
         if not isinstance(value, list) or not value or not all(isinstance(v, dict) for v in value):
-            raise ScenarioError(field, f"expected a non-empty array of tables [[{field}]], got {value!r}")
+            raise ScenarioError(
+                field, f"expected a non-empty array of tables [[{field}]], got {shown(value)}"
+            )
         return value
     if key.type == "rotation" and dim == 2:
         return _convert(dataclasses.replace(key, type="float"), value, field, dim, n)
@@ -152,7 +155,7 @@ def _indices(field: str, value: Any, *, pairs: bool) -> tuple[Any, ...]:
 
     if not isinstance(value, list) or not all(item(v) for v in value):
         what = "a list of [i, j] pairs of drone indices" if pairs else "a list of drone indices"
-        raise ScenarioError(field, f"expected {what} (integers >= 0), got {value!r}")
+        raise ScenarioError(field, f"expected {what} (integers >= 0), got {shown(value)}")
     return tuple(tuple(v) for v in value) if pairs else tuple(value)
 
 
@@ -178,11 +181,11 @@ def _array(
         )
 
     if not fits(value, 0):
-        raise ScenarioError(field, f"expected {expected}, got {value!r}")
+        raise ScenarioError(field, f"expected {expected}, got {shown(value)}")
     arr = np.array(value, dtype=float)
     if np.isnan(arr).any() or (not allow_inf and np.isinf(arr).any()):
         finite = "numbers (inf allowed)" if allow_inf else "finite numbers"
-        raise ScenarioError(field, f"expected {finite}, got {value!r}")
+        raise ScenarioError(field, f"expected {finite}, got {shown(value)}")
     if np.any(np.abs(arr[np.isfinite(arr)]) > MAX_MAGNITUDE):  # squared distances must not overflow
         big = float(np.abs(arr[np.isfinite(arr)]).max())
         raise ScenarioError(field, f"expected numbers of magnitude at most {MAX_MAGNITUDE:g}, got {big:g}")

@@ -8,7 +8,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from mpcform._validate import Array, positive
-from mpcform.errors import ValidationError
+from mpcform.errors import ValidationError, shown
 from mpcform.world.obstacles import SphereObstacle, require_resolved
 
 PLATFORM_TILT_RAD = float(np.radians(20.0))
@@ -107,7 +107,7 @@ def _key(attr: str) -> str:
 def _bound(field: str, value: object) -> Array:
     arr = np.array(value, dtype=float)
     if arr.ndim != 1 or arr.shape[0] not in (2, 3) or np.any(np.isnan(arr)):
-        raise ValidationError(field, f"expected 2 or 3 numbers (inf allowed), got {value!r}")
+        raise ValidationError(field, f"expected 2 or 3 numbers (inf allowed), got {shown(value)}")
     return arr
 
 
