@@ -57,7 +57,7 @@ class SplitPolicy:
     0: never); no new round starts after ``budget_s`` of a step's solve [s] (None: no limit)."""
 
     iterations: int = 0
-    stalled: int = 10
+    stalled: int = 20
     budget_s: float | None = None
 
     def __post_init__(self) -> None:

@@ -41,7 +41,9 @@ def test_the_defaults_are_the_last_releases():
     sparse, per_drone = SparseSolve(), PerDroneSolve()
     assert sparse.backend == DEFAULT_SOLVER and sparse.options == SolverOptions(1e-4, 1e-4, 4000, 0.0)
     assert per_drone.backend == DEFAULT_PER_DRONE_SOLVER == "daqp" and per_drone.max_iter == 4000
-    assert per_drone.split == SplitPolicy(0, 10, None)
+    assert per_drone.split == SplitPolicy(
+        0, 20, None
+    )  # 20 stalled rounds since the default a_max (10 before)
     assert default_strategy("decoupled") == per_drone and default_strategy("joint") == sparse
 
 

@@ -29,7 +29,7 @@ def test_the_solve_table() -> None:
     assert got == SparseSolve("osqp", SolverOptions(1e-6, 1e-4, 4000, 0.0)) and lines == []
     table = {"kind": "per_drone", "split_iterations": 3, "split_budget": 0.01, "max_iter": 50}
     got, _ = strategy("decoupled", solve=table)
-    assert got == PerDroneSolve("daqp", 50, SplitPolicy(3, 10, 0.01))
+    assert got == PerDroneSolve("daqp", 50, SplitPolicy(3, 20, 0.01))
 
 
 def test_old_keys_load_with_one_deprecation_line_each() -> None:
