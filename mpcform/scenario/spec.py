@@ -13,11 +13,12 @@ from mpcform._validate import Array
 from mpcform.control.consensus import ConsensusSettings, Network
 from mpcform.control.graph import Graph
 from mpcform.control.nullspace import NullSpaceSettings
-from mpcform.formation.geometry import min_pair_distance
+from mpcform.formation.geometry import min_pair_distance, pairs_within
 from mpcform.formation.state import FormationState
 from mpcform.formation.template import Template
 from mpcform.mpc.settings import MPCSettings
 from mpcform.reference.base import Reference
+from mpcform.scenario.reachability import unreachable_warning
 from mpcform.sim.plant_spec import IdealPlantSpec, PlantSpec, Robustness
 from mpcform.world.limits import PLATFORM_TRACKING_M, Limits, tightened
 from mpcform.world.obstacles import SphereObstacle, resolve_clearances
@@ -113,7 +114,8 @@ class Scenario:
     def warnings(self, controller: str | None = None) -> list[str]:
         """The warnings for a run with ``controller`` (None: the file's): the deprecated keys of the
         file, a duration that is no whole number of steps, a mission cut short, then the plant's
-        spacing and speed warnings."""
+        spacing and speed warnings and the goals closed off by obstacles
+        (:mod:`mpcform.scenario.reachability`)."""
         old = list(self.controller.deprecations)
         sim = self.simulation
         flown = self.steps * sim.dt_s
@@ -130,7 +132,8 @@ class Scenario:
             )
         if (controller or self.controller.kind) != "mpc":
             return old
-        return old + [w for w in (self.spacing_warning(controller), self.speed_warning()) if w is not None]
+        lines = (self.spacing_warning(controller), self.speed_warning(), unreachable_warning(self))
+        return old + [w for w in lines if w is not None]
 
     def goal_after_end(self) -> Array | None:
         """The reference's final targets (n, d) when it ends after the run (a mission longer than
@@ -166,10 +169,15 @@ class Scenario:
         closest = min_pair_distance(final)  # inf for one drone
         if keep is None or closest >= keep * (1.0 - 1e-12):  # at d_min exactly the rows are met
             return None
+        near = pairs_within(final, keep * (1.0 - 1e-12))
+        gaps = np.linalg.norm(final[near[:, 0]] - final[near[:, 1]], axis=1)
+        i, k = near[int(np.argmin(gaps))].tolist()
+        more = f", {near.shape[0] - 1} more pairs closer than it" if near.shape[0] > 1 else ""
+        pair = f"closest pair (drones {i} and {k}{more})"
         tracking = self.limits.tracking_m
         if rob.margin_m == 0.0 and tracking == 0.0:
             return (
-                f"limits.d_min: the final formation's closest pair is {closest:.3g} m apart, below "
+                f"limits.d_min: the final formation's {pair} is {closest:.3g} m apart, below "
                 f"d_min = {keep:.3g} m: those drones stop short of their targets (widen the "
                 "formation or lower limits.d_min)"
             )
@@ -178,7 +186,7 @@ class Scenario:
         )
         field = "plant" if rob.margin_m > 0 else "limits.tracking"
         return (
-            f"{field}: the final formation's closest pair is {closest:.3g} m apart, below the "
+            f"{field}: the final formation's {pair} is {closest:.3g} m apart, below the "
             f"{keep:.3g} m (d_min + 2 x ({' + '.join(parts)})) the MPC keeps: those drones stop "
             "short of their targets (widen the formation, lower limits.a_max or limits.tracking, "
             "or set plant.margin)"

@@ -1,0 +1,73 @@
+"""Goals the MPC cannot reach are said before the run, with the drones, spheres and time."""
+
+from __future__ import annotations
+
+import copy
+from typing import Any
+
+import pytest
+
+from mpcform.scenario.load import scenario_from_dict
+from mpcform.scenario.reachability import unreachable_warning
+
+GAP: dict[str, Any] = {  # three drones to the far side of two spheres that close a corridor
+    "version": 1,
+    "name": "closed_gap",
+    "dim": 2,
+    "template": {"shape": "polygon", "n": 3, "radius": 0.6},
+    "initial": {"centroid": [-4.0, 0.0], "rotation": 0.0},
+    "reference": {"kind": "constant", "centroid": [4.0, 0.0], "rotation": 0.0},
+    "limits": {"v_max": 1.5, "d_min": 0.4, "geofence_min": [-8.0, -3.0], "geofence_max": [8.0, 3.0]},
+    "obstacles": [{"center": [0.0, -1.6], "radius": 1.5}, {"center": [0.0, 1.6], "radius": 1.5}],
+    "controller": {"kind": "mpc", "gain": 2.0, "horizon": 10},
+    "simulation": {"dt": 0.1, "duration": 20.0},
+}
+
+
+def changed(**tables: dict[str, Any]) -> dict[str, Any]:
+    sc = copy.deepcopy(GAP)
+    for name, values in tables.items():
+        sc[name] = values if name == "obstacles" else sc[name] | values
+    return sc
+
+
+def test_a_closed_gap_names_the_drones_the_spheres_and_the_fence() -> None:
+    line = unreachable_warning(scenario_from_dict(GAP))
+    assert line is not None and line.startswith("reference: drone 0 (and drones 1, 2) cannot reach")
+    assert "from t = 0 s" in line and "obstacles[0], obstacles[1] and the geofence" in line
+
+
+def test_an_open_gap_or_a_way_around_is_not_reported() -> None:
+    wide = [{"center": [0.0, -2.2], "radius": 1.5}, {"center": [0.0, 2.2], "radius": 1.5}]
+    assert unreachable_warning(scenario_from_dict(changed(obstacles=wide))) is None
+    around = changed(limits={"geofence_min": [-8.0, -6.0], "geofence_max": [8.0, 6.0]})
+    assert unreachable_warning(scenario_from_dict(around)) is None
+
+
+def test_the_tracking_allowance_can_close_a_gap_the_ideal_plan_passes() -> None:
+    """A passage 0.04 m wide between the keep-outs (radius 1.5 m + clearance 0.2 m): open for the
+    plan without allowance, closed by the flyable plan's 0.05 m on each sphere."""
+    gap = [{"center": [0.0, -1.72], "radius": 1.5}, {"center": [0.0, 1.72], "radius": 1.5}]
+    plain = scenario_from_dict(changed(obstacles=gap))
+    assert unreachable_warning(plain) is None
+    line = unreachable_warning(plain.flyable())
+    assert line is not None and "radius + clearance + 0.05 m" in line
+
+
+def test_a_mission_that_ends_in_a_closed_pocket_says_when() -> None:
+    frames = [{"centroid": [-4.0, 2.0]}, {"centroid": [4.0, 0.0]}]
+    sc = changed(reference={"kind": "mission", "keyframes": frames})
+    sc["reference"].pop("centroid"), sc["reference"].pop("rotation")
+    line = unreachable_warning(scenario_from_dict(sc))
+    assert line is not None
+    since = float(line.split("from t = ")[1].split(" s")[0])
+    assert since > 1.0
+
+
+@pytest.mark.parametrize("name", ["mission_obstacle_gap", "obstacles_planar"])
+def test_the_bundled_scenarios_with_obstacles_are_not_reported(name: str) -> None:
+    from saved_runs import SCENARIOS
+
+    from mpcform.scenario.load import load_scenario
+
+    assert unreachable_warning(load_scenario(SCENARIOS / f"{name}.toml")) is None
