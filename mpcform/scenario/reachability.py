@@ -11,43 +11,45 @@ around it, and only where it ends matters.
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
 import numpy as np
 
+from mpcform._validate import Array
 from mpcform.world.free_space import FreeSpace
-from mpcform.world.limits import tightened
-
-if TYPE_CHECKING:
-    from mpcform.scenario.spec import Scenario
+from mpcform.world.limits import Limits, tightened
+from mpcform.world.obstacles import SphereObstacle
 
 TIMES = 200  # reference samples searched for the time a target becomes unreachable
 
 
-def unreachable_warning(scenario: Scenario) -> str | None:
-    """One line naming the drones whose final targets the MPC cannot reach, or None."""
-    if not scenario.obstacles:
+def unreachable_warning(
+    limits: Limits,
+    obstacles: tuple[SphereObstacle, ...],
+    tube_m: float,
+    a_max_mps2: float | None,
+    start_m: Array,
+    times_s: Array,
+    targets_m: Array,
+) -> str | None:
+    """One line naming the drones whose final targets the MPC cannot reach, or None: ``start_m``
+    (n, d) the starts, ``targets_m`` (T, n, d) the reference's targets at ``times_s`` (T,), the
+    last at the end; the limits and (resolved) obstacles tightened by the plant's ``tube_m``."""
+    if not obstacles:
         return None
-    rob = scenario.robustness
-    limits, obstacles = tightened(scenario.limits, scenario.obstacles, rob.margin_m, rob.a_max_mps2)
-    end = max(scenario.simulation.duration_s, getattr(scenario.reference, "duration_s", 0.0) or 0.0)
-    times = np.linspace(0.0, end, TIMES + 1)
-    targets = scenario.reference.targets(times)[0]  # (T, n, d)
-    start = scenario.initial_positions_m
-    points = np.concatenate([start, targets.reshape(-1, start.shape[1])])
-    space = FreeSpace(obstacles, limits.geofence_min_m, limits.geofence_max_m, points)
-    home = space.region(start)
-    region = space.region(targets.reshape(-1, start.shape[1])).reshape(targets.shape[:2])
+    planned, inflated = tightened(limits, obstacles, tube_m, a_max_mps2)
+    points = np.concatenate([start_m, targets_m.reshape(-1, start_m.shape[1])])
+    space = FreeSpace(inflated, planned.geofence_min_m, planned.geofence_max_m, points)
+    home = space.region(start_m)
+    region = space.region(targets_m.reshape(-1, start_m.shape[1])).reshape(targets_m.shape[:2])
     cut = (region[-1] != home) & (home > 0)
     if not cut.any():
         return None
     drones = np.flatnonzero(cut)
     i = int(drones[0])
     reached = np.flatnonzero(region[:, i] == home[i])
-    since = times[reached[-1] + 1] if reached.size else 0.0
+    since = times_s[reached[-1] + 1] if reached.size else times_s[0]
     spheres, fence = space.walls(int(home[i]), int(region[-1, i])) if region[-1, i] > 0 else ([], False)
     what = [f"obstacles[{k}]" for k in spheres] + ["the geofence"] * fence
-    inside = int(space.blocker(targets[-1, i : i + 1])[0])
+    inside = int(space.blocker(targets_m[-1, i : i + 1])[0])
     where = (
         f"inside obstacles[{inside}]'s keep-out"
         if region[-1, i] == 0 and inside >= 0
@@ -57,10 +59,10 @@ def unreachable_warning(scenario: Scenario) -> str | None:
     )
     more = f" (and drones {', '.join(map(str, drones[1:].tolist()))})" if drones.size > 1 else ""
     return (
-        f"reference: drone {i}{more} cannot reach its goal {_point(targets[-1, i])}: from t = {since:.3g} s "
-        f"its target lies {where}, with the planner's tightening (radius + clearance + "
-        f"{2.0 * rob.margin_m + scenario.limits.tracking_m:.3g} m); the run will end incomplete "
-        "(move the goal, the spheres or the fence)"
+        f"reference: drone {i}{more} cannot reach its goal {_point(targets_m[-1, i])}: from t = "
+        f"{since:.3g} s its target lies {where}, with the planner's tightening (radius + clearance + "
+        f"{2.0 * tube_m + limits.tracking_m:.3g} m); the run will end incomplete (move the goal, the "
+        "spheres or the fence)"
     )
 
 
@@ -68,5 +70,5 @@ def _listed(names: list[str]) -> str:
     return names[0] if len(names) == 1 else ", ".join(names[:-1]) + " and " + names[-1] if names else ""
 
 
-def _point(p: np.ndarray) -> str:
+def _point(p: Array) -> str:
     return "[" + ", ".join(f"{x:.3g}" for x in p) + "]"

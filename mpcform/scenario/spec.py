@@ -18,7 +18,7 @@ from mpcform.formation.state import FormationState
 from mpcform.formation.template import Template
 from mpcform.mpc.settings import MPCSettings
 from mpcform.reference.base import Reference
-from mpcform.scenario.reachability import unreachable_warning
+from mpcform.scenario.reachability import TIMES, unreachable_warning
 from mpcform.sim.plant_spec import IdealPlantSpec, PlantSpec, Robustness
 from mpcform.world.limits import PLATFORM_TRACKING_M, Limits, tightened
 from mpcform.world.obstacles import SphereObstacle, resolve_clearances
@@ -132,7 +132,7 @@ class Scenario:
             )
         if (controller or self.controller.kind) != "mpc":
             return old
-        lines = (self.spacing_warning(controller), self.speed_warning(), unreachable_warning(self))
+        lines = (self.spacing_warning(controller), self.speed_warning(), self.unreachable_warning())
         return old + [w for w in lines if w is not None]
 
     def goal_after_end(self) -> Array | None:
@@ -142,6 +142,16 @@ class Scenario:
         if end is None or end <= self.simulation.duration_s:
             return None
         return self.reference.targets(np.array([end]))[0][0]
+
+    def unreachable_warning(self) -> str | None:
+        """A line naming the drones whose final targets obstacles (and the fence) close off from
+        their starts, with the planner's tightening (:mod:`mpcform.scenario.reachability`)."""
+        rob, reference = self.robustness, self.reference
+        end = max(self.simulation.duration_s, getattr(reference, "duration_s", 0.0) or 0.0)
+        times = np.linspace(0.0, end, TIMES + 1)
+        targets = reference.targets(times)[0]
+        args = (rob.margin_m, rob.a_max_mps2, self.initial_positions_m, times, targets)
+        return unreachable_warning(self.limits, self.obstacles, *args)
 
     def speed_warning(self) -> str | None:
         """A line when ``limits.v_max`` exceeds the speed below which the quadrotor's margin holds

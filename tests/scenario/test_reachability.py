@@ -8,7 +8,6 @@ from typing import Any
 import pytest
 
 from mpcform.scenario.load import scenario_from_dict
-from mpcform.scenario.reachability import unreachable_warning
 
 GAP: dict[str, Any] = {  # three drones to the far side of two spheres that close a corridor
     "version": 1,
@@ -32,16 +31,16 @@ def changed(**tables: dict[str, Any]) -> dict[str, Any]:
 
 
 def test_a_closed_gap_names_the_drones_the_spheres_and_the_fence() -> None:
-    line = unreachable_warning(scenario_from_dict(GAP))
+    line = scenario_from_dict(GAP).unreachable_warning()
     assert line is not None and line.startswith("reference: drone 0 (and drones 1, 2) cannot reach")
     assert "from t = 0 s" in line and "obstacles[0], obstacles[1] and the geofence" in line
 
 
 def test_an_open_gap_or_a_way_around_is_not_reported() -> None:
     wide = [{"center": [0.0, -2.2], "radius": 1.5}, {"center": [0.0, 2.2], "radius": 1.5}]
-    assert unreachable_warning(scenario_from_dict(changed(obstacles=wide))) is None
+    assert scenario_from_dict(changed(obstacles=wide)).unreachable_warning() is None
     around = changed(limits={"geofence_min": [-8.0, -6.0], "geofence_max": [8.0, 6.0]})
-    assert unreachable_warning(scenario_from_dict(around)) is None
+    assert scenario_from_dict(around).unreachable_warning() is None
 
 
 def test_the_tracking_allowance_can_close_a_gap_the_ideal_plan_passes() -> None:
@@ -49,8 +48,8 @@ def test_the_tracking_allowance_can_close_a_gap_the_ideal_plan_passes() -> None:
     plan without allowance, closed by the flyable plan's 0.05 m on each sphere."""
     gap = [{"center": [0.0, -1.72], "radius": 1.5}, {"center": [0.0, 1.72], "radius": 1.5}]
     plain = scenario_from_dict(changed(obstacles=gap))
-    assert unreachable_warning(plain) is None
-    line = unreachable_warning(plain.flyable())
+    assert plain.unreachable_warning() is None
+    line = plain.flyable().unreachable_warning()
     assert line is not None and "radius + clearance + 0.05 m" in line
 
 
@@ -58,7 +57,7 @@ def test_a_mission_that_ends_in_a_closed_pocket_says_when() -> None:
     frames = [{"centroid": [-4.0, 2.0]}, {"centroid": [4.0, 0.0]}]
     sc = changed(reference={"kind": "mission", "keyframes": frames})
     sc["reference"].pop("centroid"), sc["reference"].pop("rotation")
-    line = unreachable_warning(scenario_from_dict(sc))
+    line = scenario_from_dict(sc).unreachable_warning()
     assert line is not None
     since = float(line.split("from t = ")[1].split(" s")[0])
     assert since > 1.0
@@ -70,4 +69,4 @@ def test_the_bundled_scenarios_with_obstacles_are_not_reported(name: str) -> Non
 
     from mpcform.scenario.load import load_scenario
 
-    assert unreachable_warning(load_scenario(SCENARIOS / f"{name}.toml")) is None
+    assert load_scenario(SCENARIOS / f"{name}.toml").unreachable_warning() is None
