@@ -223,6 +223,21 @@ def outcome(sc: dict[str, Any], tol_m: float = 0.1) -> dict[str, Any]:
     return out
 
 
+def _summary(sc: dict[str, Any]) -> dict[str, Any]:
+    out = outcome(sc)
+    out["finite_times"] = all(np.isfinite(info.solve_time_s) for info in out.pop("infos"))
+    return out
+
+
+def outcomes(scenarios: list[dict[str, Any]], workers: int = 2) -> list[dict[str, Any]]:
+    """:func:`outcome` of each scenario on ``workers`` processes, in order; each run's ``infos``
+    replaced by ``finite_times`` (whether every step's solve time is finite)."""
+    from concurrent.futures import ProcessPoolExecutor
+
+    with ProcessPoolExecutor(workers) as pool:
+        return list(pool.map(_summary, scenarios))
+
+
 def adversarial(rng: np.random.Generator, index: int) -> dict[str, Any]:
     """2-4 drones head-on or crossing, planar or spatial, with hard limits: ``a_max`` 0.2-2 m/s^2,
     ``v_max`` 0.5-8 m/s (a quadrotor's 0.3-1.5, below its valid speed), horizon 5-30 at dt

@@ -24,11 +24,27 @@ when the drone leaves conflict. While the drone stays stuck the turn sweeps on p
 turn (the wish points backwards to the right, then to the left) and round the full circle: a
 drone wedged in a pocket between two spheres, or between parked drones, backs out of it, and
 if any direction of motion is open to it, the sweep finds it. Once a drone is :data:`BACKOFF_M`
-farther from its target than at its first stall, its escalation starts afresh from the base
-angle with the rule's side switched (it heads for its target again from where it got to, now
-passing the blocking drones or spheres on the other side, the side it backed out on; a turn held
-for good would only orbit the target). The side is kept for the rest of the run.
+farther from its target than at its closest stalled step of the conflict, its escalation starts
+afresh from the base angle with the rule's side switched (it heads for its target again from where
+it got to, now passing the blocking drones or spheres on the other side, the side it backed out
+on; a turn held for good would only orbit the target). The side is kept for the rest of the run.
+The budget is the conflict's, not the side's: once the second side has spent it too, the drone's
+escalation stops (its wish turned by the base angle only) until it is back within the budget, so it
+waits or yields near its path and is never carried more than :data:`BACKOFF_M` beyond its closest
+stalled approach to its target in one conflict (a budget renewed per side let a drone walk
+away by a metre per switch, stalling and backing off again and again). The conflict ends, and
+the budget with it, when the drone's rollout no longer breaks a row.
 Safety is untouched: the turn only changes the cost's targets, every row stays in the QP.
+
+Yielding: a drone in conflict, farther than :data:`PROGRESS_M` from its target, that has not come
+:data:`PROGRESS_M` closer to it than its best of the conflict for :data:`WAIT_S` is *stuck*, moving
+or not (a pair circling each other with
+their turns escalated and kept, each orbiting its target at a constant distance, is never stalled
+and never backs off). Of two stuck drones whose rows conflict, the lower index *yields*: its wish
+is to hold where it is (``c = 0``: it brakes within ``a_max`` and waits) for :data:`WAIT_S`, while
+the other's escalation is reset (its wish turned by the base angle only, so it heads for its
+target instead of orbiting it); both start a new wait. A chain of stuck drones is resolved from
+the highest index down. The counter :attr:`yields` reports new yields.
 
 Blocked targets: a drone whose target lies within ``d_min`` of another drone's target, with the
 planner's limits (a plant's margin included), can never reach it; turning or backing off would
@@ -56,6 +72,8 @@ MOVING_FRACTION = 0.25  # with a_max, a drone whose step is this fraction of its
 ARRIVED_M = 1e-2  # a drone this close to its target is not stalled [m]
 FULL_TURN_RAD = 2.0 * np.pi
 BACKOFF_M = 1.0  # how much farther from its target than at its first stall a drone may back off [m]
+WAIT_S = 3.0  # a conflicted drone that has not progressed for this long is stuck; a yield lasts as long [s]
+PROGRESS_M = 0.1  # progress: this much closer to the target than the conflict's best [m]
 
 
 class TieBreak:
@@ -72,8 +90,13 @@ class TieBreak:
         self.last_m: Array | None = None  # positions (n, d) at the last step
         self.stall_distance_m = np.full(n, np.inf)  # distance to the target at the first stall
         self.sense = np.ones(n)  # +1: turn to the right, -1: to the left (after a back-off)
+        self.switched = np.zeros(n, dtype=bool)  # the side switched in the current conflict
         self.new_stalls = 0  # drones that started to stall at the last step
         self.resolved = 0  # escalated drones that left conflict at the last step
+        self.best_m = np.full(n, np.inf)  # the conflict's closest distance to the target
+        self.idle_s = np.zeros(n)  # time since the drone last progressed (:data:`PROGRESS_M`)
+        self.hold_s = np.zeros(n)  # what is left of a yielding drone's hold [s]
+        self.yields = 0  # drones that started to yield at the last step
 
     def reset(self) -> None:
         """A new run: every drone turns to the right again."""
@@ -83,13 +106,15 @@ class TieBreak:
     def clear(self) -> None:
         """No drone is in conflict (a step without conflict, or a new run)."""
         if self.last_m is None:  # cleared, and no turn since: nothing is stalled
-            self.resolved = self.new_stalls = 0
+            self.resolved = self.new_stalls = self.yields = 0
             return
+        self.best_m[:], self.idle_s[:], self.hold_s[:], self.yields = np.inf, 0.0, 0.0, 0
         self.resolved = int(np.count_nonzero(self.stalled))
         self.new_stalls = 0
         self.stalled[:] = 0
         self.last_m = None
         self.stall_distance_m[:] = np.inf
+        self.switched[:] = False
 
     @property
     def resolving(self) -> int:
@@ -106,13 +131,15 @@ class TieBreak:
         blocked: Array | None = None,
         speed_mps: Array | None = None,
         step_mps: float = 0.0,
+        pairs: Array | None = None,
     ) -> Array:
         """Targets ``c`` (H, n, d) with the ``conflicted`` (n,) drones' turned to the right;
         ``p0`` (n, d) the positions, ``to_target`` (n, d) the way to the targets ``p* - p0``,
         ``started``: whether any command was given; ``blocked`` (n,): drones whose target no
         plan can reach (module doc), never turned; with ``a_max``, ``speed_mps`` (n,) the drones'
         last commands' speeds and ``step_mps`` the most a command's speed changes in a step
-        (``sqrt(d) a_max dt``): what the stall test and the escalation measure against."""
+        (``sqrt(d) a_max dt``): what the stall test and the escalation measure against; ``pairs``
+        (m, 2): the drone pairs whose rows conflict, among which stuck drones yield (module doc)."""
         if self.angle_rad <= 0:
             return c
         if blocked is not None and blocked.any():
@@ -124,7 +151,27 @@ class TieBreak:
             np.divide(step_mps, turn_rad, out=growth, where=turn_rad > step_mps)
         moving = 0.0 if speed_mps is None else MOVING_FRACTION
         angles = self.angles(conflicted, wish, p0, to_target, started, growth, moving)
-        return np.where(conflicted[:, None], turn_about_z(c, -self.sense * angles), c)
+        turned = np.where(conflicted[:, None], turn_about_z(c, -self.sense * angles), c)
+        holding = self.arbitrate(conflicted, norms(to_target), pairs)
+        return np.where(holding[:, None], 0.0, turned)
+
+    def arbitrate(self, conflicted: Array, distance_m: Array, pairs: Array | None) -> Array:
+        """Drones (n,) that hold this step: the yields of stuck pairs (module docstring), given
+        each drone's distance to its target; counts a step of ``dt_s``."""
+        improved = distance_m < self.best_m - PROGRESS_M
+        self.best_m = np.where(conflicted, np.where(improved, distance_m, self.best_m), np.inf)
+        self.idle_s = np.where(conflicted & ~improved, self.idle_s + self.dt_s, 0.0)
+        self.hold_s = np.where(conflicted, np.maximum(self.hold_s - self.dt_s, 0.0), 0.0)
+        self.yields = 0
+        if pairs is not None and pairs.shape[0]:
+            stuck = (self.idle_s >= WAIT_S - 1e-9) & (distance_m > PROGRESS_M)  # arrived: not stuck
+            both = pairs[stuck[pairs[:, 0]] & stuck[pairs[:, 1]]]
+            low, high = both.min(axis=1), both.max(axis=1)
+            self.yields = int(np.count_nonzero(self.hold_s[np.unique(low)] == 0.0))
+            self.hold_s[low] = WAIT_S
+            self.stalled[high] = 0.0  # its turn back to the base angle: head for the target
+            self.idle_s[both.ravel()] = 0.0
+        return self.hold_s > 0.0
 
     def angles(
         self,
@@ -157,13 +204,13 @@ class TieBreak:
         self.new_stalls = int(np.count_nonzero(stalled & (self.stalled == 0)))
         self.resolved = int(np.count_nonzero(~conflicted & (self.stalled > 0)))
         self.stalled = np.where(conflicted, self.stalled + stalled * growth, 0.0)
-        first = np.where(self.stalled > 0, np.minimum(self.stall_distance_m, distance), np.inf)
-        kept = np.where(self.stalled > 0, self.stall_distance_m, np.inf)
-        self.stall_distance_m = np.where(stalled, first, kept)
-        backed_off = distance > self.stall_distance_m + BACKOFF_M  # the budget is spent: start afresh
-        self.stalled[backed_off] = 0
-        self.stall_distance_m[backed_off] = np.inf
-        self.sense[backed_off] *= -1.0
+        closest = np.where(stalled, np.minimum(self.stall_distance_m, distance), self.stall_distance_m)
+        self.stall_distance_m = np.where(conflicted, closest, np.inf)  # the conflict's closest stall
+        self.switched &= conflicted
+        backed_off = distance > self.stall_distance_m + BACKOFF_M  # the budget is spent
+        self.stalled[backed_off] = 0  # start afresh from the base angle, or wait there
+        self.sense[backed_off & ~self.switched] *= -1.0  # the other side, once per conflict
+        self.switched |= backed_off
         base = self.angle_rad
         if base >= 0.5 * np.pi:  # a base angle of a quarter turn or more is kept as it is
             return np.full(self.stalled.shape, base)

@@ -187,7 +187,7 @@ class MPCPlanner(Controller):
         if st.fast_path and not (off_limits | conflicted).any():
             return self._fast_path(nominal)
         blocked = sep.blocked_targets(targets[0]) if conflicted.any() else None
-        turned = conflicted
+        turned, pairs = conflicted, None
         if (self.loop is not None or self.braking is not None) and conflicted.any():
             # encounters: the single integrator's conflicts within the horizon (a stop point's
             # conflict is the QP's to brake for, not one to turn away from)
@@ -197,13 +197,17 @@ class MPCPlanner(Controller):
                 else sep.rows(p0, guess(self._plan, p0, horizon, self.braking), cand)
             )
             x_enc = x_nom if self.braking is None else np.concatenate([x_nom, x_nom[-1:]])
-            turned = conflicted & sep.conflicted(x_enc, plain, tail=False)
+            encounters, pairs = sep.conflicts(x_enc, plain, tail=False)
+            turned = conflicted & encounters
+        elif conflicted.any():
+            pairs = sep.conflicts(x_true, rows, values)[1]
         speed, step = None, 0.0  # with a_max: how fast the drones fly, how much that changes per step
         if self.limits.a_max_mps2 is not None:
             speed = np.sqrt(np.einsum("nd,nd->n", self._u_prev, self._u_prev))
             step = self.limits.a_max_mps2 * dt * np.sqrt(self.dim)
         to_target = targets[0] - p0
-        c = self._tie_break.turn(c, turned, p0, to_target, self._plan is not None, blocked, speed, step)
+        started = self._plan is not None
+        c = self._tie_break.turn(c, turned, p0, to_target, started, blocked, speed, step, pairs)
         bad = off_limits | conflicted
         linked = rows.pairs[rows.pair_on]
         solver = self._solver

@@ -122,6 +122,42 @@ def test_a_stuck_drone_sweeps_the_full_circle_and_backing_off_starts_afresh() ->
     assert BACKOFF_M < 2.0
 
 
+def test_the_back_off_budget_is_the_conflicts_so_a_drone_never_walks_away() -> None:
+    """A drone carried away from its target while in conflict (5 m in 100 steps) switches side
+    once, after BACKOFF_M; beyond the budget it stops escalating (the base angle only) instead of
+    renewing the budget at every switch; out of conflict the budget and the switch are cleared."""
+    tb = TieBreak(1, 0.5, dt_s=0.1)
+    angles = np.array([a[0] for a in stalls(tb, [True], [[-0.05, 0.0]], 100)])
+    assert tb.sense[0] == -1.0 and tb.switched[0]  # one switch, not one per metre
+    beyond = int(np.ceil(BACKOFF_M / 0.05)) + 2
+    np.testing.assert_array_equal(angles[beyond:], 0.5)  # waits: no escalation past the budget
+    tb.angles(np.array([False]), np.ones(1), np.zeros((1, 2)), np.array([[10.0, 0.0]]), started=True)
+    assert not tb.switched[0] and tb.stall_distance_m[0] == np.inf
+
+
+def test_of_two_stuck_drones_in_conflict_the_lower_index_holds_and_the_other_heads_home() -> None:
+    """Two drones orbiting their targets at a constant 2 m (moving, never stalled): after WAIT_S
+    without progress drone 0 holds (its wish zero) for WAIT_S and drone 1's escalation is reset;
+    a drone within PROGRESS_M of its target never yields, and out of conflict nothing holds."""
+    from mpcform.mpc.liveness import PROGRESS_M, WAIT_S
+
+    tb = TieBreak(3, 0.5, dt_s=0.1)
+    c = np.ones((4, 3, 2))
+    both, pairs = np.array([True, True, True]), np.array([[0, 1], [1, 2]])
+    to_target = np.array([[2.0, 0.0], [0.0, 2.0], [0.5 * PROGRESS_M, 0.0]])  # drone 2 has arrived
+    steps = round(WAIT_S / 0.1)
+    for j in range(steps + 1):  # the first step sets the best distance
+        p = np.array([[np.cos(j), np.sin(j)], [-np.cos(j), -np.sin(j)], [5.0, 5.0]])  # circling
+        tb.stalled[1] = 7.0  # drone 1's escalated turn
+        out = tb.turn(c, both, p, to_target, started=True, pairs=pairs)
+        assert (tb.yields == 1) == (j == steps)
+    np.testing.assert_array_equal(out[:, 0], 0.0)  # drone 0 holds
+    assert np.all(out[:, 1] != 0.0) and np.all(out[:, 2] != 0.0) and tb.stalled[1] == 0.0
+    assert tb.hold_s[0] == WAIT_S and tb.hold_s[2] == 0.0
+    tb.clear()
+    assert not tb.hold_s.any() and tb.yields == 0
+
+
 def test_arrived_or_first_steps_do_not_stall_and_zero_disables() -> None:
     tb = TieBreak(1, 0.5)
     p = np.zeros((1, 2))

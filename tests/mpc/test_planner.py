@@ -405,15 +405,15 @@ def test_every_run_of_the_random_families_completes_safely() -> None:
     """200 runs of ``tests/families.py`` (swaps, spheres, close starts): every drone ends within 0.1 m
     of its target, pairs that start d_min apart stay so along every segment, pairs that start
     closer never approach and end separated, and no drone enters a sphere's keep-out."""
-    from families import family, outcome
+    from families import family, outcomes
 
     bad, late = [], []
-    for sc in family(1, 200):
-        out = outcome(sc)
+    runs = list(family(1, 200))
+    for sc, out in zip(runs, outcomes(runs), strict=True):
         checks = ("separation_violations", "approached", "unseparated", "obstacle_violations")
         unsafe = any(out[k] for k in checks)
         if unsafe or (out["completion"] < 1.0 and sc["name"] not in OPEN_INCOMPLETE):
-            bad.append((sc["name"], {k: v for k, v in out.items() if k != "infos"}))
+            bad.append((sc["name"], out))
         elif out["completion"] < 1.0:
             late.append(sc["name"])
     assert not bad

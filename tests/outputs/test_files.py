@@ -51,7 +51,8 @@ METRIC_KEYS = {
     "stalled_drones",
     "time_to_complete",
     "stall_events",
-    "resolutions",  # the planner's liveness events
+    "resolutions",
+    "yields",  # the planner's liveness events
     "slack_steps",
     "lowered_first_rows",  # the separation guarantee's conditions (braking terminal condition)
 }

@@ -1,0 +1,71 @@
+"""Every run completes, on every plant (``tests/completion_family.py``), and the issue's two
+reproducers arrive within their durations."""
+
+from __future__ import annotations
+
+from collections import Counter
+from pathlib import Path
+
+import numpy as np
+import pytest
+from completion_family import PARTS, PLANTS, campaign, outcome, report, scenario
+from scipy.spatial.distance import pdist
+
+from mpcform.scenario.load import load_scenario, scenario_from_dict
+
+HERE = Path(__file__).resolve().parent
+
+OPEN_BREACHES = ("completion_14_formation_second_order",)
+"""Runs whose true path breaks d_min, each a known open failure. completion_14 (18 drones, second-order
+loop, horizon 7 at dt 0.05) comes to 0.476 m of its 0.547 m: the braking tail's rows hold on the
+chord from the horizon's end to where the loop comes to rest, and the underdamped loop's path to rest
+bends past that chord (it overshoots the rest point), so the shifted plan misses the next rows and
+the QP needs slack. The lag's path bends less (millimetres)."""
+
+
+def test_the_family_draws_what_it_promises() -> None:
+    """Its first draws cover every part and plant, keep targets ``d_min + 4 delta + 0.1 m`` apart
+    and give each run twice its straight-line travel at v_max, and a quadrotor a v_max below the
+    speed its margin holds for."""
+    seen = Counter()
+    for index in range(len(PARTS) * len(PLANTS)):
+        sc = scenario(np.random.default_rng([20261204, index]), index)
+        s = scenario_from_dict(sc)
+        seen[sc["name"].split("_", 2)[2]] += 1
+        goal = s.reference.targets(np.array([1e9]))[0][0]
+        gap = s.limits.d_min_m + 4.0 * s.robustness.margin_m + 0.1
+        assert pdist(goal).min() >= gap - 1e-9
+        travel = np.linalg.norm(goal - s.initial_positions_m, axis=1).max() / s.limits.v_max_mps
+        assert s.simulation.duration_s >= 2.0 * travel + getattr(s.reference, "duration_s", 0.0)
+        assert s.limits.v_max_mps <= s.robustness.valid_speed_mps
+    assert len(seen) == len(PARTS) * len(PLANTS)
+
+
+@pytest.mark.slow
+def test_every_run_of_the_completion_family_arrives_without_a_true_violation() -> None:
+    """150 runs (both couplings, both velocity sets, dt 0.05-0.1, horizons 6-10, n 2-21, every
+    plant): every drone ends within 0.1 m of its target, none breaks d_min, a sphere or the fence
+    along the dense true path, except the known open breaches."""
+    results = campaign(150)
+    groups = Counter((r["plant"], r["coupling"]) for r in results)
+    assert all(groups[(p, c)] >= 10 for p in PLANTS for c in ("joint", "decoupled")), groups
+    assert max(r["n"] for r in results) >= 20
+    print(report(results))
+    bad = [
+        r for r in results if r["completion"] < 1.0 or (r["violations"] and r["name"] not in OPEN_BREACHES)
+    ]
+    assert not bad, report(bad)
+    assert sorted(r["name"] for r in results if r["violations"]) == sorted(OPEN_BREACHES)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", ["fz_s8080_329", "fz_s9191_72"])
+def test_the_reproducers_complete_within_their_durations(name: str) -> None:
+    """A decoupled 13-drone permutation on the ideal plant and a 15-drone formation flown by the
+    quadrotor in gusts: once drifting away, now every drone arrives, with no true violation."""
+    import tomllib
+
+    doc = tomllib.loads((HERE / f"{name}.toml").read_text())
+    assert load_scenario(HERE / f"{name}.toml").name == name
+    out = outcome(doc)
+    assert out["completion"] == 1.0 and out["violations"] == 0, out
