@@ -73,7 +73,7 @@ def _run(args: argparse.Namespace) -> int:
             scenario = scenario.flyable()
         _check_overrides(args)
         check_memory(scenario, args.max_memory, args.controller)  # before anything large is allocated
-        check_work(scenario, args.max_work)
+        check_work(scenario, args.max_work, args.controller)
         cli_runner.check_run_options(args, scenario)  # e.g. --plot without matplotlib: fail before running
         out_dir = Path("results") / scenario.name if args.out is None else Path(args.out)
         check_output_dir("--out", out_dir)

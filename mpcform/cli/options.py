@@ -89,8 +89,9 @@ def add_max_work(cmd: argparse.ArgumentParser, per: str = "run") -> None:
         type=max_work,
         default=DEFAULT_MAX_WORK,
         metavar="N",
-        help=f"refuse a {per} whose plant takes more inner steps x drones than this "
-        f"(the quadrotor's rate x duration x n; default {DEFAULT_MAX_WORK:g})",
+        help=f"refuse a {per} whose plant takes more inner steps x drones than this (the "
+        f"quadrotor's rate x duration x n; default {DEFAULT_MAX_WORK:g}), or whose MPC's sparse QP "
+        "nonzeros x steps exceed twice it",
     )
 
 

@@ -203,7 +203,7 @@ def _check_size(
     if max_memory_gib is not None:
         check_memory(scenario, max_memory_gib, controller)
     if max_work is not None:
-        check_work(scenario, max_work)
+        check_work(scenario, max_work, controller)
 
 
 def _replace_table(doc: dict[str, Any], name: str, dim: int) -> bool:

@@ -21,7 +21,8 @@ per QP nonzero (the solver's factorisation included), 20 bytes per dense per-dro
 Two checks need no built scenario: :func:`check_drone_count` refuses, from the file's keys and
 before the template is built, drones whose time series alone exceed the limit, and
 :func:`check_work` bounds a plant's work (its inner steps times the drones: the quadrotor's
-``rate x duration``), which costs time rather than memory (``--max-work`` raises it).
+``rate x duration``) and the planner's (its sparse QP's nonzeros times the control steps, as if
+every step solved it), which cost time rather than memory (``--max-work`` raises both).
 """
 
 from __future__ import annotations
@@ -47,6 +48,11 @@ DEFAULT_MAX_WORK = 5e7
 """Runs whose plant takes more inner steps x drones than this are refused (``--max-work`` raises
 it): the quadrotor plant took 0.5 ms per inner step plus 2 us per drone (2-core machine), so the
 bound is 2-30 minutes of plant alone; the bundled quadrotor scenario takes 7.2e5."""
+QP_WORK_PER_WORK = 2.0
+"""The planner's work limit per unit of ``--max-work``: 1e8 QP nonzeros x steps at the default,
+about 12 minutes of joint QPs (PIQP with the default a_max took 7.5 us per nonzero: swap_spatial_20's
+51,000 in 386 ms per step); the bundled swaps need 8e5-6e6."""
+SECONDS_PER_NONZERO = 7.5e-6
 BYTES_PER_VALUE = {True: 240.0, False: 60.0}  # time series, with / without the output files
 BYTES_PER_STEP = {True: 1024.0, False: 400.0}  # step records (StepInfo, times, CSV rows)
 BYTES_PER_NONZERO = 300.0  # the sparse QP: planner arrays, the matrix and the solver's copy
@@ -185,9 +191,36 @@ def plant_work(scenario: Scenario) -> float:
     return 0.0 if rate is None else float(rate) * scenario.steps * scenario.simulation.dt_s * scenario.n
 
 
-def check_work(scenario: Scenario, max_work: float = DEFAULT_MAX_WORK) -> float:
+def planner_work(scenario: Scenario, controller: str | None = None) -> float:
+    """The planner's work: its sparse QP's nonzeros (:func:`estimate_memory`) times the control
+    steps, as if every step solved it (0 for per-drone solves and for other controllers, whose
+    steps cost little)."""
+    est = estimate_memory(scenario, controller, files=False)
+    if est.horizon is None or scenario.controller.mpc.solves_per_drone:
+        return 0.0
+    return (est.horizon_bytes + est.pair_bytes) / BYTES_PER_NONZERO * est.steps
+
+
+def check_work(
+    scenario: Scenario, max_work: float = DEFAULT_MAX_WORK, controller: str | None = None
+) -> float:
     """Return :func:`plant_work`, or raise :class:`ScenarioError` naming ``plant.rate`` when it is
-    above ``max_work`` (``--max-work`` raises the limit)."""
+    above ``max_work``, or the key that drives it when :func:`planner_work` is above
+    :data:`QP_WORK_PER_WORK` times ``max_work`` (``--max-work`` raises both limits)."""
+    qp_work, qp_limit = planner_work(scenario, controller), QP_WORK_PER_WORK * max_work
+    if qp_work > qp_limit:
+        est = estimate_memory(scenario, controller, files=False)
+        key = (
+            _drone_key(scenario.template.name) if est.pair_bytes > est.horizon_bytes else "controller.horizon"
+        )
+        raise ScenarioError(
+            key,
+            f"the MPC would solve QPs of about {qp_work / est.steps:,.3g} nonzeros ({est.pairs:,} drone "
+            f"pairs within reach, horizon {est.horizon}) over {est.steps:,} steps: {qp_work:.3g} nonzeros x "
+            f"steps, about {qp_work * SECONDS_PER_NONZERO / 3600:,.3g} h if every step solves it, above the "
+            f'limit of {qp_limit:.3g}: use fewer drones, coupling = "decoupled" (per-drone solves), a '
+            "shorter horizon or duration, or raise the limit with --max-work N",
+        )
     work = plant_work(scenario)
     if work <= max_work:
         return work

@@ -20,10 +20,12 @@ from mpcform.scenario.size import (
     DEFAULT_MAX_MEMORY_GIB,
     DEFAULT_MAX_WORK,
     GIB,
+    QP_WORK_PER_WORK,
     check_drone_count,
     check_memory,
     check_work,
     estimate_memory,
+    planner_work,
     plant_work,
 )
 
@@ -74,7 +76,9 @@ def test_the_per_drone_qps_grow_with_the_square_of_the_horizon() -> None:
 
 @pytest.mark.parametrize("path", sorted(SCENARIOS.glob("*.toml")), ids=lambda p: p.stem)
 def test_bundled_scenarios_stay_far_below_the_default_limit(path: Any) -> None:
-    assert estimate_memory(load_scenario(path)).total_gib < 0.05 * DEFAULT_MAX_MEMORY_GIB
+    scenario = load_scenario(path)
+    assert estimate_memory(scenario).total_gib < 0.05 * DEFAULT_MAX_MEMORY_GIB
+    assert planner_work(scenario) < 0.1 * QP_WORK_PER_WORK * DEFAULT_MAX_WORK
 
 
 @pytest.mark.parametrize(
@@ -174,3 +178,21 @@ def test_a_plant_rate_too_high_is_refused_naming_plant_rate() -> None:
         "plant.rate, shorten simulation.duration or use fewer drones, or raise the limit with --max-work N"
     )
     assert check_work(scenario, max_work=1.3e8) == pytest.approx(1.2e8)
+
+
+def test_a_joint_qp_too_large_for_its_steps_is_refused_before_the_run() -> None:
+    """400 drones packed inside one another's d_min (every pair within reach, 2.6 GiB: under the
+    memory limit) would take hours of joint QPs: refused in well under 5 s, naming the drones'
+    key, unless the limit is raised; solved per drone (decoupled) the planner's work is 0."""
+    packed = doc(n=400, radius=1.0, kind="mpc", coupling="joint")
+    packed["template"] = {"shape": "grid", "rows": 20, "cols": 20, "spacing": 0.01}
+    scenario = scenario_from_dict(packed)
+    start = time.perf_counter()
+    with pytest.raises(ScenarioError) as info:
+        check_work(scenario)
+    assert time.perf_counter() - start < 5.0
+    assert info.value.field == "template.rows" and "79,800 drone pairs within reach" in str(info.value)
+    assert "--max-work N" in str(info.value)
+    assert check_work(scenario, max_work=planner_work(scenario) / QP_WORK_PER_WORK) == 0.0
+    per_drone = scenario_from_dict(packed | {"controller": {"kind": "mpc", "coupling": "decoupled"}})
+    assert per_drone.controller.mpc.solves_per_drone and planner_work(per_drone) == 0.0
