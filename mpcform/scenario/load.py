@@ -145,7 +145,11 @@ def scenario_from_dict(
         source=source,
         source_sha256=source_sha256,
     )
-    if controller.kind == "mpc" and not np.isfinite(scenario.robustness.margin_m):
+    if controller.kind != "mpc":
+        return scenario
+    with as_scenario_error("limits"):  # e.g. limits.a_max = inf on a plant whose margin needs a bound
+        margin_m = scenario.robustness.margin_m
+    if not np.isfinite(margin_m):
         raise ScenarioError(  # only an unclipped gust makes it infinite
             "plant.wind.gust_bound",
             "an unclipped gust (inf) leaves the MPC no finite robust margin: give a bound "

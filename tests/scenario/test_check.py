@@ -132,6 +132,16 @@ def test_an_unknown_plant_kind_is_one_problem(tmp_path: Path) -> None:
     assert [p.field for p in problems] == ["plant.kind"]
 
 
+def test_an_unbounded_a_max_on_a_real_plant_is_a_problem_at_its_line(tmp_path: Path) -> None:
+    """``limits.a_max = inf`` on the quadrotor: refused at its own line (it lacked FILE:LINE)."""
+    text = (ROOT / "scenarios" / "swap_spatial_12_quadrotor_wind.toml").read_text()
+    text = text.replace("[limits]\n", "[limits]\na_max = inf\n")
+    path = write(tmp_path, text)
+    (problem,) = check_scenario_file(path).problems
+    line = text.splitlines().index("a_max = inf") + 1
+    assert problem.text(path).startswith(f"{path}:{line}: limits.a_max: inf (no bound) applies to the ideal")
+
+
 @pytest.mark.parametrize(
     ("field", "line"),
     [
