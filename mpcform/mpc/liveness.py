@@ -38,13 +38,12 @@ Safety is untouched: the turn only changes the cost's targets, every row stays i
 
 Yielding: a drone in conflict, farther than :data:`PROGRESS_M` from its target, that has not come
 :data:`PROGRESS_M` closer to it than its best of the conflict for :data:`WAIT_S` is *stuck*, moving
-or not (a pair circling each other with
-their turns escalated and kept, each orbiting its target at a constant distance, is never stalled
-and never backs off). Of two stuck drones whose rows conflict, the lower index *yields*: its wish
-is to hold where it is (``c = 0``: it brakes within ``a_max`` and waits) for :data:`WAIT_S`, while
-the other's escalation is reset (its wish turned by the base angle only, so it heads for its
-target instead of orbiting it); both start a new wait. A chain of stuck drones is resolved from
-the highest index down. The counter :attr:`yields` reports new yields.
+or not (a pair circling each other with their turns escalated and kept, each orbiting its target
+at a constant distance, is never stalled and never backs off). Of two stuck drones whose rows
+conflict, the lower index *yields*: its wish is to hold where it is (``c = 0``: it brakes within
+``a_max`` and waits) for :data:`WAIT_S`, while the other's escalation is reset (its wish turned by
+the base angle only, so it heads for its target instead of orbiting it); both start a new wait. A
+chain of stuck drones is resolved from the highest index down. :attr:`yields` counts new yields.
 
 Blocked targets: a drone whose target lies within ``d_min`` of another drone's target, with the
 planner's limits (a plant's margin included), can never reach it; turning or backing off would

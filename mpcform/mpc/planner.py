@@ -183,11 +183,11 @@ class MPCPlanner(Controller):
                 return self._fast_path(nominal)
             about = true_path
             rows, values = sep.rows(p0, about, cand, stops), None
-        conflicted = sep.conflicted(x_true, rows, values)
+        conflicted, pairs = sep.conflicts(x_true, rows, values)
         if st.fast_path and not (off_limits | conflicted).any():
             return self._fast_path(nominal)
         blocked = sep.blocked_targets(targets[0]) if conflicted.any() else None
-        turned, pairs = conflicted, None
+        turned = conflicted
         if (self.loop is not None or self.braking is not None) and conflicted.any():
             # encounters: the single integrator's conflicts within the horizon (a stop point's
             # conflict is the QP's to brake for, not one to turn away from)
@@ -199,8 +199,6 @@ class MPCPlanner(Controller):
             x_enc = x_nom if self.braking is None else np.concatenate([x_nom, x_nom[-1:]])
             encounters, pairs = sep.conflicts(x_enc, plain, tail=False)
             turned = conflicted & encounters
-        elif conflicted.any():
-            pairs = sep.conflicts(x_true, rows, values)[1]
         speed, step = None, 0.0  # with a_max: how fast the drones fly, how much that changes per step
         if self.limits.a_max_mps2 is not None:
             speed = np.sqrt(np.einsum("nd,nd->n", self._u_prev, self._u_prev))
