@@ -23,6 +23,7 @@ from collections.abc import Iterator
 from typing import Any
 
 import numpy as np
+from families import close_pairs
 from scipy.spatial.distance import pdist
 
 PARTS = ("swap_planar", "swap_spatial", "formation", "spheres", "mission", "close_start")
@@ -91,11 +92,7 @@ def _shape(rng: np.random.Generator, part: str, dim: int, n: int, gap: float, d_
         initial = {"centroid": [0.0] * dim, "rotation": _zero(dim), "scale": 1.0}
         return {"offsets": offsets, "initial": initial, "reference": {"kind": "mission", "keyframes": frames}}
     if part == "close_start":
-        start = offsets.copy()
-        movers = rng.choice(n, size=2 * min(int(rng.integers(1, 4)), n // 2), replace=False).reshape(-1, 2)
-        for i, k in movers:
-            direction = rng.normal(size=dim)
-            start[i] = start[k] + rng.uniform(0.2, 0.9) * d_min * direction / np.linalg.norm(direction)
+        start = close_pairs(rng, offsets, d_min)
         shift = rng.uniform(-3.0, 3.0, dim)
         ref = {"kind": "constant", "centroid": shift.tolist(), "rotation": _zero(dim), "scale": 1.0}
         return {"offsets": offsets, "initial": {"positions": start.tolist()}, "reference": ref}

@@ -110,16 +110,23 @@ def spheres(rng: np.random.Generator, index: int) -> dict[str, Any] | None:
     return _finish(sc, start, goal)
 
 
-def close_start(rng: np.random.Generator, index: int) -> dict[str, Any]:
-    """A formation (planar or spatial) whose start holds 1-3 pairs at 0.2-0.9 d_min."""
-    dim = int(rng.choice([2, 3]))
-    n, d_min = int(rng.integers(3, 13)), float(rng.uniform(0.3, 0.7))
-    offsets = _spread(rng, n, dim, d_min)
+def close_pairs(rng: np.random.Generator, offsets: np.ndarray, d_min: float) -> np.ndarray:
+    """Starts (n, d): ``offsets`` with 1-3 drones moved to 0.2-0.9 ``d_min`` from another."""
+    n, dim = offsets.shape
     start = offsets.copy()
     movers = rng.choice(n, size=2 * min(int(rng.integers(1, 4)), n // 2), replace=False).reshape(-1, 2)
     for i, k in movers:
         direction = rng.normal(size=dim)
         start[i] = start[k] + rng.uniform(0.2, 0.9) * d_min * direction / np.linalg.norm(direction)
+    return start
+
+
+def close_start(rng: np.random.Generator, index: int) -> dict[str, Any]:
+    """A formation (planar or spatial) whose start holds 1-3 pairs at 0.2-0.9 d_min."""
+    dim = int(rng.choice([2, 3]))
+    n, d_min = int(rng.integers(3, 13)), float(rng.uniform(0.3, 0.7))
+    offsets = _spread(rng, n, dim, d_min)
+    start = close_pairs(rng, offsets, d_min)
     shift = rng.uniform(-3.0, 3.0, dim)
     sc = _base(rng, f"close_start_{index}", dim, offsets, d_min)
     zero = 0.0 if dim == 2 else [0.0, 0.0, 0.0]
