@@ -36,14 +36,13 @@ away by a metre per switch, stalling and backing off again and again). The confl
 the budget with it, when the drone's rollout no longer breaks a row.
 Safety is untouched: the turn only changes the cost's targets, every row stays in the QP.
 
-Yielding: a drone in conflict, farther than :data:`PROGRESS_M` from its target, that has not come
-:data:`PROGRESS_M` closer to it than its best of the conflict for :data:`WAIT_S` is *stuck*, moving
-or not (a pair circling each other with their turns escalated and kept, each orbiting its target
-at a constant distance, is never stalled and never backs off). Of two stuck drones whose rows
-conflict, the lower index *yields*: its wish is to hold where it is (``c = 0``: it brakes within
-``a_max`` and waits) for :data:`WAIT_S`, while the other's escalation is reset (its wish turned by
-the base angle only, so it heads for its target instead of orbiting it); both start a new wait. A
-chain of stuck drones is resolved from the highest index down. :attr:`yields` counts new yields.
+Circling: a kept turn can also carry a drone round its target at a constant distance (two
+antipodal drones circling each other, their turns escalated and kept), never stalled (it moves)
+and never backing off (its distance stays). A conflicted drone that has flown :data:`CIRCLING_M`
+but not come :data:`PROGRESS_M` closer to its target than its best of the conflict for
+:data:`WAIT_S` is *circling*: its escalation is reset (its wish turned by the base angle only,
+so it heads for its target) and the count starts again. :attr:`unwound` counts the resets of
+the last step.
 
 Blocked targets: a drone whose target lies within ``d_min`` of another drone's target, with the
 planner's limits (a plant's margin included), can never reach it; turning or backing off would
@@ -71,8 +70,9 @@ MOVING_FRACTION = 0.25  # with a_max, a drone whose step is this fraction of its
 ARRIVED_M = 1e-2  # a drone this close to its target is not stalled [m]
 FULL_TURN_RAD = 2.0 * np.pi
 BACKOFF_M = 1.0  # how much farther from its target than at its first stall a drone may back off [m]
-WAIT_S = 3.0  # a conflicted drone that has not progressed for this long is stuck; a yield lasts as long [s]
+WAIT_S = 3.0  # how long a conflicted drone may fly without progress before its escalation is reset [s]
 PROGRESS_M = 0.1  # progress: this much closer to the target than the conflict's best [m]
+CIRCLING_M = 1.0  # a circling drone has flown at least this far without progress [m]
 
 
 class TieBreak:
@@ -94,8 +94,8 @@ class TieBreak:
         self.resolved = 0  # escalated drones that left conflict at the last step
         self.best_m = np.full(n, np.inf)  # the conflict's closest distance to the target
         self.idle_s = np.zeros(n)  # time since the drone last progressed (:data:`PROGRESS_M`)
-        self.hold_s = np.zeros(n)  # what is left of a yielding drone's hold [s]
-        self.yields = 0  # drones that started to yield at the last step
+        self.flown_m = np.zeros(n)  # how far it has flown since [m]
+        self.unwound = 0  # circling drones whose escalation was reset at the last step
 
     def reset(self) -> None:
         """A new run: every drone turns to the right again."""
@@ -105,9 +105,9 @@ class TieBreak:
     def clear(self) -> None:
         """No drone is in conflict (a step without conflict, or a new run)."""
         if self.last_m is None:  # cleared, and no turn since: nothing is stalled
-            self.resolved = self.new_stalls = self.yields = 0
+            self.resolved = self.new_stalls = self.unwound = 0
             return
-        self.best_m[:], self.idle_s[:], self.hold_s[:], self.yields = np.inf, 0.0, 0.0, 0
+        self.best_m[:], self.idle_s[:], self.flown_m[:], self.unwound = np.inf, 0.0, 0.0, 0
         self.resolved = int(np.count_nonzero(self.stalled))
         self.new_stalls = 0
         self.stalled[:] = 0
@@ -130,15 +130,13 @@ class TieBreak:
         blocked: Array | None = None,
         speed_mps: Array | None = None,
         step_mps: float = 0.0,
-        pairs: Array | None = None,
     ) -> Array:
         """Targets ``c`` (H, n, d) with the ``conflicted`` (n,) drones' turned to the right;
         ``p0`` (n, d) the positions, ``to_target`` (n, d) the way to the targets ``p* - p0``,
         ``started``: whether any command was given; ``blocked`` (n,): drones whose target no
         plan can reach (module doc), never turned; with ``a_max``, ``speed_mps`` (n,) the drones'
         last commands' speeds and ``step_mps`` the most a command's speed changes in a step
-        (``sqrt(d) a_max dt``): what the stall test and the escalation measure against; ``pairs``
-        (m, 2): the drone pairs whose rows conflict, among which stuck drones yield (module doc)."""
+        (``sqrt(d) a_max dt``): what the stall test and the escalation measure against."""
         if self.angle_rad <= 0:
             return c
         if blocked is not None and blocked.any():
@@ -150,27 +148,20 @@ class TieBreak:
             np.divide(step_mps, turn_rad, out=growth, where=turn_rad > step_mps)
         moving = 0.0 if speed_mps is None else MOVING_FRACTION
         angles = self.angles(conflicted, wish, p0, to_target, started, growth, moving)
-        turned = np.where(conflicted[:, None], turn_about_z(c, -self.sense * angles), c)
-        holding = self.arbitrate(conflicted, norms(to_target), pairs)
-        return np.where(holding[:, None], 0.0, turned)
+        return np.where(conflicted[:, None], turn_about_z(c, -self.sense * angles), c)
 
-    def arbitrate(self, conflicted: Array, distance_m: Array, pairs: Array | None) -> Array:
-        """Drones (n,) that hold this step: the yields of stuck pairs (module docstring), given
-        each drone's distance to its target; counts a step of ``dt_s``."""
+    def _unwind(self, conflicted: Array, distance_m: Array, flown_m: Array) -> None:
+        """Reset the escalation of circling drones (module docstring), given each drone's distance
+        to its target and how far it flew in the last step."""
         improved = distance_m < self.best_m - PROGRESS_M
         self.best_m = np.where(conflicted, np.where(improved, distance_m, self.best_m), np.inf)
-        self.idle_s = np.where(conflicted & ~improved, self.idle_s + self.dt_s, 0.0)
-        self.hold_s = np.where(conflicted, np.maximum(self.hold_s - self.dt_s, 0.0), 0.0)
-        self.yields = 0
-        if pairs is not None and pairs.shape[0]:
-            stuck = (self.idle_s >= WAIT_S - 1e-9) & (distance_m > PROGRESS_M)  # arrived: not stuck
-            both = pairs[stuck[pairs[:, 0]] & stuck[pairs[:, 1]]]
-            low, high = both.min(axis=1), both.max(axis=1)
-            self.yields = int(np.count_nonzero(self.hold_s[np.unique(low)] == 0.0))
-            self.hold_s[low] = WAIT_S
-            self.stalled[high] = 0.0  # its turn back to the base angle: head for the target
-            self.idle_s[both.ravel()] = 0.0
-        return self.hold_s > 0.0
+        idle = conflicted & ~improved
+        self.idle_s = np.where(idle, self.idle_s + self.dt_s, 0.0)
+        self.flown_m = np.where(idle, self.flown_m + flown_m, 0.0)
+        circling = (self.idle_s >= WAIT_S - 1e-9) & (self.flown_m >= CIRCLING_M) & (distance_m > PROGRESS_M)
+        self.unwound = int(np.count_nonzero(circling))
+        self.stalled[circling] = 0.0
+        self.idle_s[circling] = self.flown_m[circling] = 0.0
 
     def angles(
         self,
@@ -190,7 +181,9 @@ class TieBreak:
         back-off budget starts afresh. Counts this step (see the module docstring)."""
         distance = norms(to_target)
         stalled = conflicted & (distance > ARRIVED_M)
+        flown = np.zeros(distance.shape)
         if self.last_m is not None and started:
+            flown = norms(p0 - self.last_m)
             far = distance[:, None] > 0
             towards = np.divide(to_target, distance[:, None], out=np.zeros_like(p0), where=far)
             progress = np.einsum("nd,nd->n", p0 - self.last_m, towards)
@@ -210,6 +203,7 @@ class TieBreak:
         self.stalled[backed_off] = 0  # start afresh from the base angle, or wait there
         self.sense[backed_off & ~self.switched] *= -1.0  # the other side, once per conflict
         self.switched |= backed_off
+        self._unwind(conflicted, distance, flown)
         base = self.angle_rad
         if base >= 0.5 * np.pi:  # a base angle of a quarter turn or more is kept as it is
             return np.full(self.stalled.shape, base)

@@ -183,7 +183,7 @@ class MPCPlanner(Controller):
                 return self._fast_path(nominal)
             about = true_path
             rows, values = sep.rows(p0, about, cand, stops), None
-        conflicted, pairs = sep.conflicts(x_true, rows, values)
+        conflicted = sep.conflicted(x_true, rows, values)
         if st.fast_path and not (off_limits | conflicted).any():
             return self._fast_path(nominal)
         blocked = sep.blocked_targets(targets[0]) if conflicted.any() else None
@@ -197,15 +197,13 @@ class MPCPlanner(Controller):
                 else sep.rows(p0, guess(self._plan, p0, horizon, self.braking), cand)
             )
             x_enc = x_nom if self.braking is None else np.concatenate([x_nom, x_nom[-1:]])
-            encounters, pairs = sep.conflicts(x_enc, plain, tail=False)
-            turned = conflicted & encounters
+            turned = conflicted & sep.conflicted(x_enc, plain, tail=False)
         speed, step = None, 0.0  # with a_max: how fast the drones fly, how much that changes per step
         if self.limits.a_max_mps2 is not None:
             speed = np.sqrt(np.einsum("nd,nd->n", self._u_prev, self._u_prev))
             step = self.limits.a_max_mps2 * dt * np.sqrt(self.dim)
         to_target = targets[0] - p0
-        started = self._plan is not None
-        c = self._tie_break.turn(c, turned, p0, to_target, started, blocked, speed, step, pairs)
+        c = self._tie_break.turn(c, turned, p0, to_target, self._plan is not None, blocked, speed, step)
         bad = off_limits | conflicted
         linked = rows.pairs[rows.pair_on]
         solver = self._solver

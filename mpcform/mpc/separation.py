@@ -197,18 +197,11 @@ class Separation:
         names only its drone); ``values``: :meth:`single_values` when known; ``tail`` False: not
         counting the braking tail's rows (its last two) of drone pairs, only the horizon's (an
         obstacle's tail still counts: a drone turns early for a sphere it would have to brake for)."""
-        return self.conflicts(x, rows, values, tail)[0]
-
-    def conflicts(
-        self, x: Array, rows: SeparationRows, values: Array | None = None, tail: bool = True
-    ) -> tuple[Array, Array]:
-        """:meth:`conflicted`, and the drone pairs (m, 2), ``i < k``, whose rows ``x`` misses."""
         least, labels = self._least(x, rows, values, None if tail or self.braking is None else -2)
         labels = labels[least < 0.0]
         conflicted = np.zeros(x.shape[1], dtype=bool)
         conflicted[labels[labels >= 0]] = True
-        pairs = np.sort(labels[(labels >= 0).all(axis=1)], axis=1)
-        return conflicted, np.unique(pairs, axis=0)
+        return conflicted
 
     def _least(
         self, x: Array, rows: SeparationRows, values: Array | None, last: int | None = None

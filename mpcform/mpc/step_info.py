@@ -18,8 +18,8 @@ class MPCStepInfo(StepInfo):
     whose separation rows needed slack, and ``qp_drones``, how many drones the QP was solved for
     (the others' groups took the fast path). Liveness (:mod:`mpcform.mpc.liveness`): ``stalled``
     drones that started to stall at this step, ``resolving`` drones whose tie-break is escalated,
-    ``resolved`` escalations that ended at this step (the drone left conflict), ``yielded`` drones
-    that started to yield (hold) at this step. ``lowered``: with a
+    ``resolved`` escalations that ended at this step (the drone left conflict), ``unwound``
+    circling drones whose escalation was reset at this step. ``lowered``: with a
     velocity loop, whether a first separation row within reach was lowered to what braking reaches
     (:func:`mpcform.mpc.planner.hard_first_rows`)."""
 
@@ -32,7 +32,7 @@ class MPCStepInfo(StepInfo):
     stalled: int = 0
     resolving: int = 0
     resolved: int = 0
-    yielded: int = 0
+    unwound: int = 0
     lowered: bool = False
 
 
@@ -71,6 +71,6 @@ def solve_info(
         stalled=tie_break.new_stalls,
         resolving=tie_break.resolving,
         resolved=tie_break.resolved,
-        yielded=tie_break.yields,
+        unwound=tie_break.unwound,
         lowered=lowered,
     )

@@ -10,8 +10,9 @@ v_max), ``qp_solves``, ``fast_path_steps``, ``solver_failures``, ``max_slack`` [
 ``slack_steps`` (steps whose plan needed slack, or that start inside a required distance) and
 ``lowered_first_rows`` (steps whose first separation rows were lowered to what braking reaches,
 :func:`mpcform.mpc.planner.hard_first_rows`),
-``stall_events``, ``resolutions`` and ``yields`` (drones that started to stall, escalated
-tie-breaks that ended, and stuck drones that started to hold for another, :mod:`mpcform.mpc.liveness`), and
+``stall_events``, ``resolutions`` and ``circling_resets`` (drones that started to stall,
+escalated tie-breaks that ended, and circling drones whose escalation was reset,
+:mod:`mpcform.mpc.liveness`), and
 ``step_time_ms`` (median, p90 and max of the controller's wall-clock time per step mode). The
 figures draw the same series (:func:`tracking_errors_m`, :func:`min_separations_m`,
 :func:`command_speeds_mps`).
@@ -118,7 +119,7 @@ def run_metrics(
         "lowered_first_rows": int(sum(getattr(i, "lowered", False) for i in result.infos)),
         "stall_events": int(sum(getattr(i, "stalled", 0) for i in result.infos)),
         "resolutions": int(sum(getattr(i, "resolved", 0) for i in result.infos)),
-        "yields": int(sum(getattr(i, "yielded", 0) for i in result.infos)),
+        "circling_resets": int(sum(getattr(i, "unwound", 0) for i in result.infos)),
         "step_time_ms": {
             mode: _stats(1e3 * result.step_times_s[modes == mode]) for mode in sorted(set(modes.tolist()))
         },

@@ -135,27 +135,27 @@ def test_the_back_off_budget_is_the_conflicts_so_a_drone_never_walks_away() -> N
     assert not tb.switched[0] and tb.stall_distance_m[0] == np.inf
 
 
-def test_of_two_stuck_drones_in_conflict_the_lower_index_holds_and_the_other_heads_home() -> None:
-    """Two drones orbiting their targets at a constant 2 m (moving, never stalled): after WAIT_S
-    without progress drone 0 holds (its wish zero) for WAIT_S and drone 1's escalation is reset;
-    a drone within PROGRESS_M of its target never yields, and out of conflict nothing holds."""
+def test_a_drone_circling_its_target_has_its_escalation_reset_and_a_jammed_one_keeps_it() -> None:
+    """Drone 0 circles its target at a constant 2 m (0.35 m per step: never stalled), drone 1 barely
+    moves, drone 2 circles within PROGRESS_M of its target: after WAIT_S without progress only drone
+    0's escalated turn is reset (counted in ``unwound``), and out of conflict the counts are cleared."""
     from mpcform.mpc.liveness import PROGRESS_M, WAIT_S
 
     tb = TieBreak(3, 0.5, dt_s=0.1)
-    c = np.ones((4, 3, 2))
-    both, pairs = np.array([True, True, True]), np.array([[0, 1], [1, 2]])
-    to_target = np.array([[2.0, 0.0], [0.0, 2.0], [0.5 * PROGRESS_M, 0.0]])  # drone 2 has arrived
-    steps = round(WAIT_S / 0.1)
+    wish, steps = np.ones(3), round(WAIT_S / 0.1)
     for j in range(steps + 1):  # the first step sets the best distance
-        p = np.array([[np.cos(j), np.sin(j)], [-np.cos(j), -np.sin(j)], [5.0, 5.0]])  # circling
-        tb.stalled[1] = 7.0  # drone 1's escalated turn
-        out = tb.turn(c, both, p, to_target, started=True, pairs=pairs)
-        assert (tb.yields == 1) == (j == steps)
-    np.testing.assert_array_equal(out[:, 0], 0.0)  # drone 0 holds
-    assert np.all(out[:, 1] != 0.0) and np.all(out[:, 2] != 0.0) and tb.stalled[1] == 0.0
-    assert tb.hold_s[0] == WAIT_S and tb.hold_s[2] == 0.0
+        a = 0.35 * j / 2.0
+        p = np.array(
+            [[2.0 * np.cos(a), 2.0 * np.sin(a)], [1e-3 * j, 0.0], [0.05 * np.cos(a), 0.05 * np.sin(a)]]
+        )
+        tb.stalled[:] = 7.0  # escalated turns
+        target = np.array([[0.0, 0.0], [5.0, 0.0], [0.0, 0.0]])
+        tb.angles(np.array([True, True, True]), wish, p, target - p, started=True)
+        assert (tb.unwound == 1) == (j == steps), j
+    assert tb.stalled[0] == 0.0 and tb.stalled[1] > 0.0 and tb.stalled[2] > 0.0
+    assert 0.5 * PROGRESS_M < 0.06
     tb.clear()
-    assert not tb.hold_s.any() and tb.yields == 0
+    assert tb.unwound == 0 and not tb.idle_s.any() and np.isinf(tb.best_m).all()
 
 
 def test_arrived_or_first_steps_do_not_stall_and_zero_disables() -> None:

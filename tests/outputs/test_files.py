@@ -52,7 +52,7 @@ METRIC_KEYS = {
     "time_to_complete",
     "stall_events",
     "resolutions",
-    "yields",  # the planner's liveness events
+    "circling_resets",  # the planner's liveness events
     "slack_steps",
     "lowered_first_rows",  # the separation guarantee's conditions (braking terminal condition)
 }
