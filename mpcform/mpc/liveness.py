@@ -30,7 +30,7 @@ it got to, now passing the blocking drones or spheres on the other side, the sid
 on; a turn held for good would only orbit the target). The side is kept for the rest of the run.
 The budget is the conflict's, not the side's: once the second side has spent it too, the drone's
 escalation stops (its wish turned by the base angle only) until it is back within the budget, so it
-waits or yields near its path and is never carried more than :data:`BACKOFF_M` beyond its closest
+stays near its path and is never carried more than :data:`BACKOFF_M` beyond its closest
 stalled approach to its target in one conflict (a budget renewed per side let a drone walk
 away by a metre per switch, stalling and backing off again and again). The conflict ends, and
 the budget with it, when the drone's rollout no longer breaks a row.
