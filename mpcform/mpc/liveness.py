@@ -69,7 +69,7 @@ STALL_GROWTH = 0.2  # the tie-break angle grows by this fraction of itself per s
 MOVING_FRACTION = 0.25  # with a_max, a drone whose step is this fraction of its wish's is moving
 ARRIVED_M = 1e-2  # a drone this close to its target is not stalled [m]
 FULL_TURN_RAD = 2.0 * np.pi
-BACKOFF_M = 1.0  # how much farther from its target than at its first stall a drone may back off [m]
+BACKOFF_M = 1.0  # how much farther from its target than its closest stall of the conflict a drone may go [m]
 WAIT_S = 3.0  # how long a conflicted drone may fly without progress before its escalation is reset [s]
 PROGRESS_M = 0.1  # progress: this much closer to the target than the conflict's best [m]
 CIRCLING_M = 1.0  # a circling drone has flown at least this far without progress [m]
@@ -87,7 +87,7 @@ class TieBreak:
         self.dt_s = dt_s
         self.stalled = np.zeros(n)  # stalled steps in the current conflict, per drone (in growth steps)
         self.last_m: Array | None = None  # positions (n, d) at the last step
-        self.stall_distance_m = np.full(n, np.inf)  # distance to the target at the first stall
+        self.stall_distance_m = np.full(n, np.inf)  # the conflict's closest stalled distance to the target
         self.sense = np.ones(n)  # +1: turn to the right, -1: to the left (after a back-off)
         self.switched = np.zeros(n, dtype=bool)  # the side switched in the current conflict
         self.new_stalls = 0  # drones that started to stall at the last step

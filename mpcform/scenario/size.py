@@ -195,7 +195,11 @@ def planner_work(scenario: Scenario, controller: str | None = None) -> float:
     """The planner's work: its sparse QP's nonzeros (:func:`estimate_memory`) times the control
     steps, as if every step solved it (0 for per-drone solves and for other controllers, whose
     steps cost little)."""
-    est = estimate_memory(scenario, controller, files=False)
+    return _qp_work(scenario, estimate_memory(scenario, controller, files=False))
+
+
+def _qp_work(scenario: Scenario, est: MemoryEstimate) -> float:
+    """:func:`planner_work` from the run's memory estimate."""
     if est.horizon is None or scenario.controller.mpc.solves_per_drone:
         return 0.0
     return (est.horizon_bytes + est.pair_bytes) / BYTES_PER_NONZERO * est.steps
@@ -207,9 +211,9 @@ def check_work(
     """Return :func:`plant_work`, or raise :class:`ScenarioError` naming ``plant.rate`` when it is
     above ``max_work``, or the key that drives it when :func:`planner_work` is above
     :data:`QP_WORK_PER_WORK` times ``max_work`` (``--max-work`` raises both limits)."""
-    qp_work, qp_limit = planner_work(scenario, controller), QP_WORK_PER_WORK * max_work
+    est = estimate_memory(scenario, controller, files=False)
+    qp_work, qp_limit = _qp_work(scenario, est), QP_WORK_PER_WORK * max_work
     if qp_work > qp_limit:
-        est = estimate_memory(scenario, controller, files=False)
         key = (
             _drone_key(scenario.template.name) if est.pair_bytes > est.horizon_bytes else "controller.horizon"
         )

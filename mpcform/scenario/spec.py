@@ -146,6 +146,8 @@ class Scenario:
     def unreachable_warning(self) -> str | None:
         """A line naming the drones whose final targets obstacles (and the fence) close off from
         their starts, with the planner's tightening (:mod:`mpcform.scenario.reachability`)."""
+        if not self.obstacles:
+            return None
         rob, reference = self.robustness, self.reference
         end = max(self.simulation.duration_s, getattr(reference, "duration_s", 0.0) or 0.0)
         times = np.linspace(0.0, end, TIMES + 1)

@@ -19,7 +19,7 @@ import numpy as np
 from scipy import ndimage
 
 from mpcform._validate import Array
-from mpcform.world.obstacles import SphereObstacle
+from mpcform.world.obstacles import SphereObstacle, obstacle_arrays
 
 MAX_CELLS = 1 << 20  # the grid's size: about 1000 x 1000 planar, 100^3 spatial
 PAD_CELLS = 2  # free cells around everything when there is no fence (paths around the outside)
@@ -38,11 +38,9 @@ class FreeSpace:
         points_m: Array,
     ) -> None:
         dim = points_m.shape[1]
-        centers = np.array([o.center_m for o in obstacles]).reshape(-1, dim)
-        self.required_m = np.array([o.required_distance_m for o in obstacles])
-        extent = np.concatenate(
-            [points_m, centers - self.required_m[:, None], centers + self.required_m[:, None]]
-        )
+        centers, required = obstacle_arrays(obstacles)
+        centers = centers.reshape(-1, dim)
+        extent = np.concatenate([points_m, centers - required[:, None], centers + required[:, None]])
         low, high = extent.min(axis=0), extent.max(axis=0)
         if lo is not None and hi is not None:
             low, high = np.maximum(np.minimum(low, hi), lo), np.minimum(np.maximum(high, lo), hi)
@@ -60,7 +58,7 @@ class FreeSpace:
                 out = (x < lo[a] - 0.5 * self.cell_m) | (x > hi[a] + 0.5 * self.cell_m)
                 free[(slice(None),) * a + (out,)] = False
         self.blocked_by = np.full(shape, -1, dtype=np.intp)  # a sphere covering each cell
-        for k, (c, r) in enumerate(zip(centers, self.required_m - half_diagonal, strict=True)):
+        for k, (c, r) in enumerate(zip(centers, required - half_diagonal, strict=True)):
             if r <= 0.0:
                 continue
             box = tuple(self._span(x, c[a], r) for a, x in enumerate(axes))
@@ -69,7 +67,7 @@ class FreeSpace:
             self.blocked_by[box][inside] = k
             free[box] &= ~inside
         self.free = free
-        self.labels, self.regions = ndimage.label(free, structure=np.ones((3,) * dim, dtype=bool))
+        self.labels = ndimage.label(free, structure=np.ones((3,) * dim, dtype=bool))[0]
 
     def _span(self, axis_m: Array, center_m: float, radius_m: float) -> slice:
         """The cells of one axis within ``radius_m`` of ``center_m``."""
