@@ -24,6 +24,7 @@ LAYERS = (
     ("mpcform.control", "mpcform.solvers"),
     ("mpcform.mpc", "mpcform.sim"),
     ("mpcform.scenario",),
+    ("mpcform.online",),
     ("mpcform.outputs",),
     ("mpcform.run",),
     ("mpcform.bench",),

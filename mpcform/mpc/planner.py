@@ -34,6 +34,7 @@ certified fallback (:mod:`mpcform.mpc.prediction` gives the positions the rows a
 
 from __future__ import annotations
 
+import time
 from dataclasses import replace
 
 import numpy as np
@@ -132,6 +133,7 @@ class MPCPlanner(Controller):
         # drones at rest (no states without a loop); where the loop takes them by the next step
         self._loop_state = np.zeros((self.n, self.dim, 0)) if self.loop is None else self.loop.rest(self.n)
         self._predicted: Array | None = None
+        self._deadline: float | None = None  # this step's (settings.step_budget_s)
 
     @property
     def plan(self) -> Plan | None:
@@ -146,6 +148,8 @@ class MPCPlanner(Controller):
         (mode ``fast_path`` | ``qp`` | ``fallback``, solver status, slack and the pairs that needed it,
         liveness events). With none of the QP's rows active the command is exactly eq. 14."""
         p0 = self._check_positions(positions_m)
+        budget = self.settings.step_budget_s
+        self._deadline = None if budget is None else time.perf_counter() + budget
         if self.loop is None:
             return self._step(t_s, p0)
         if self._predicted is not None:  # the velocity offset of the last interval
@@ -223,8 +227,13 @@ class MPCPlanner(Controller):
         qp = StepQP(self.n, drones, p0[drones], c[:, drones], self._u_prev[drones], sub, cand.rebuilt, warm)
         if free is not None:
             qp = replace(qp, free_m=free[:, drones])
+        if self._deadline is not None:
+            qp = replace(qp, deadline_s=self._deadline)
         sol, active = solver.solve(qp)
-        if not sol.success and brake is not None and free is not None:  # wind left no plan in the fence
+        late = self._deadline is not None and time.perf_counter() > self._deadline
+        if late:  # the command had to be sent: the solution came too late
+            sol = replace(sol, success=False, status=f"{sol.status}; past the step's deadline")
+        elif not sol.success and brake is not None and free is not None:  # wind: no plan in the fence
             path = self._predict.points(self._loop_state, brake, dt * np.cumsum(brake, axis=0))
             wider = admitted(self._families, p0, free, path)
             if not np.array_equal(wider, free):
@@ -246,7 +255,7 @@ class MPCPlanner(Controller):
         info = solve_info(
             "fallback", sol, f"{status}; {note}", 0, 0, inside_m, inside, self._tie_break, relaxed
         )
-        return ControlStep(u[0].copy(), info)
+        return ControlStep(u[0].copy(), replace(info, deadline_missed=late))
 
     def _hard_first_rows(self, rows: SeparationRows) -> tuple[SeparationRows, bool, Array | None]:
         """With a loop, the QP's rows with every first row hard, lowered at most to where braking

@@ -27,7 +27,8 @@ class StepQP:
     renumbered 0..m-1), ``rebuilt`` whether the candidate set changed this step, ``warm`` (2, H, m, d)
     the primal warm start (inputs, relative positions), None for a solver that takes none;
     ``free_m`` (S, m, d): with a velocity loop, its free response at each position the geofence
-    bounds (steps 1..H, then the braking stop point), else None.
+    bounds (steps 1..H, then the braking stop point), else None; ``deadline_s``: the
+    ``time.perf_counter()`` after which no optional work (a split round) starts (None: none).
     """
 
     n: int
@@ -39,6 +40,7 @@ class StepQP:
     rebuilt: bool
     warm: Array | None
     free_m: Array | None = None
+    deadline_s: float | None = None
 
 
 class StepSolver(ABC):

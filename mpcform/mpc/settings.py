@@ -51,6 +51,10 @@ class MPCSettings:
       eq. 14 are unchanged. No effect on the ideal plant.
     - ``braking``: with a finite ``a_max``, end every plan where the drones can still stop
       (:mod:`mpcform.mpc.braking`).
+    - ``step_budget_s``: the deadline of one step [s] (online planning, :mod:`mpcform.online`):
+      no split round starts after it, and a step whose solve is not done by then returns the
+      certified braking fallback instead (reported as a deadline miss). None: no deadline, so
+      offline runs stay deterministic.
     """
 
     horizon: int = 10
@@ -68,6 +72,7 @@ class MPCSettings:
     fast_path: bool = True
     plant_model: bool = True
     braking: bool = True
+    step_budget_s: float | None = None
 
     @property
     def strategy(self) -> SolveStrategy:
@@ -107,6 +112,8 @@ class MPCSettings:
         positive("controller.tie_break", self.tie_break_rad, allow_zero=True)
         if not isinstance(self.braking, bool):
             raise ValidationError("controller.braking", f"expected true or false, got {self.braking!r}")
+        if self.step_budget_s is not None:
+            positive("controller.step_budget", self.step_budget_s)
         check_strategy(self.coupling, self.strategy)
 
 

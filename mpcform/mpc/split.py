@@ -128,6 +128,8 @@ class SplitQP(StepSolver):
         while rounds < self.iterations and direction is not None and np.isfinite(best.value):
             if self.budget_s is not None and time.perf_counter() - t0 >= self.budget_s:
                 break
+            if qp.deadline_s is not None and time.perf_counter() >= qp.deadline_s:
+                break
             newton, slope, longest = direction
             size = min(1.0, max(longest, 1.0 / bend))  # the model's minimiser, its curvature scaled
             trial = step_qp.solve(None, best.shift + size * newton, step_qp.inputs(best), best)

@@ -21,7 +21,8 @@ class MPCStepInfo(StepInfo):
     ``resolved`` escalations that ended at this step (the drone left conflict), ``unwound``
     circling drones whose escalation was reset at this step. ``lowered``: with a
     velocity loop, whether a first separation row within reach was lowered to what braking reaches
-    (:func:`mpcform.mpc.planner.hard_first_rows`)."""
+    (:func:`mpcform.mpc.planner.hard_first_rows`). ``deadline_missed``: the solve ended past the
+    step's deadline (``MPCSettings.step_budget_s``), so the command is the braking fallback."""
 
     iterations: int = 0
     solve_time_s: float = 0.0
@@ -34,6 +35,7 @@ class MPCStepInfo(StepInfo):
     resolved: int = 0
     unwound: int = 0
     lowered: bool = False
+    deadline_missed: bool = False
 
 
 FAST_PATH = MPCStepInfo("fast_path")

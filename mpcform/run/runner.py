@@ -67,7 +67,8 @@ def run_scenario(
         steps=result.commands_mps.shape[0],
         plant=plant_record(
             scenario, result.wind_clip_fraction, getattr(ctrl, "limits", None) if is_mpc else None
-        ),
+        )
+        | result.plant_events,
         tracking_m=limits.tracking_m if is_mpc else 0.0,
     )
     path = None if out_dir is None else write_outputs(Path(out_dir), result, summary)

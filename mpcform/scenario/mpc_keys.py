@@ -20,7 +20,12 @@ from mpcform.solvers.registry import DEFAULT_PER_DRONE_SOLVER, DEFAULT_SOLVER
 
 _MPC = ("mpc",)
 _MPC_DEFAULTS = {f.name: f.default for f in dataclasses.fields(MPCSettings)}
-MPC_FIELDS = {"gain": "gain_per_s", "margin": "margin_m", "tie_break": "tie_break_rad"}
+MPC_FIELDS = {
+    "gain": "gain_per_s",
+    "margin": "margin_m",
+    "tie_break": "tie_break_rad",
+    "step_budget": "step_budget_s",
+}
 """Scenario key -> MPCSettings field (the remaining mpc keys share their name with the field)."""
 _SPARSE, _PER_DRONE = SparseSolve(), PerDroneSolve()
 _SPARSE_ONLY, _PER_DRONE_ONLY = ("sparse",), ("per_drone",)
@@ -78,6 +83,10 @@ MPC_KEYS: tuple[Key, ...] = (
     _mpc_key("braking", "bool", "End every plan where the drones can still stop, braking within "
              "`limits.a_max` or its default (the plans' terminal condition: a horizon shorter "
              "than the braking keeps d_min; off with `limits.a_max = inf`)."),
+    _mpc_key("step_budget", "float", "Deadline of one step (online planning): no split round "
+             "starts after it, and a solve that ends later is replaced by the certified braking "
+             "fallback (counted in `deadline_misses`). Unset: none (deterministic runs).", "s",
+             bound="> 0"),
     Key("solve", "table", "`[controller.solve]`: how the QP is solved (below).", when=_MPC),
     _old_key("solver", "string"),
     _old_key("per_drone", "bool"),

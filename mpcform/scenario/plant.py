@@ -10,10 +10,18 @@ from typing import Any
 
 import numpy as np
 
+from mpcform.control.setpoints import ticks_per_interval
 from mpcform.errors import ScenarioError, ValidationError
 from mpcform.scenario.parse import as_scenario_error, parse_table
 from mpcform.scenario.spec import Scenario
-from mpcform.sim.plant_spec import PLANT_SPECS, PlantSpec, QuadrotorPlantSpec, plant_spec, scenario_key
+from mpcform.sim.plant_spec import (
+    PLANT_SPECS,
+    CrazyflowPlantSpec,
+    PlantSpec,
+    QuadrotorPlantSpec,
+    plant_spec,
+    scenario_key,
+)
 from mpcform.sim.wind import GUST_FIELDS, Wind
 
 WIND_KEYS = ("mean", "gust_std", "gust_time", "gust_bound", "gust_field")
@@ -37,9 +45,23 @@ def parse_plant(data: Mapping[str, Any], dim: int, dt_s: float) -> PlantSpec:
     values = {fields[key]: _wind(p[key], dim) if key == "wind" else p[key] for key in given if key != "kind"}
     with as_scenario_error("plant"):
         spec = plant_spec(p["kind"], **values)
+    check_plant_rates(spec, dt_s)
+    return spec
+
+
+def check_plant_rates(spec: PlantSpec, dt_s: float) -> None:
+    """A plant's inner rates must be whole multiples of the control rate ``1 / dt``."""
     if isinstance(spec, QuadrotorPlantSpec):
         check_rate(spec.rate_hz, dt_s)
-    return spec
+    if isinstance(spec, CrazyflowPlantSpec):
+        with as_scenario_error("plant"):
+            ticks_per_interval(dt_s, spec.control_rate_hz, "plant.control_rate")
+            if spec.physics_rate_hz % spec.control_rate_hz:
+                raise ValidationError(
+                    "plant.physics_rate",
+                    f"expected a multiple of plant.control_rate ({spec.control_rate_hz} Hz), "
+                    f"got {spec.physics_rate_hz}",
+                )
 
 
 def check_rate(rate_hz: float, dt_s: float) -> None:
@@ -60,8 +82,7 @@ def with_plant_kind(scenario: Scenario, kind: str) -> Scenario:
         plant = scenario.plant.with_kind(kind)
     except ValidationError as exc:
         raise ScenarioError("--plant", str(exc).removeprefix(f"{exc.field}: ")) from None
-    if isinstance(plant, QuadrotorPlantSpec):
-        check_rate(plant.rate_hz, scenario.simulation.dt_s)
+    check_plant_rates(plant, scenario.simulation.dt_s)
     return dataclasses.replace(scenario, plant=plant)
 
 

@@ -17,7 +17,9 @@ from mpcform.control.nullspace import OBJECTIVES, NullSpaceSettings
 from mpcform.reference.keyframes import DEFAULT_SPEED_FRACTION
 from mpcform.scenario.key_types import Key, Table, did_you_mean, listing
 from mpcform.scenario.mpc_keys import MPC_KEYS, SOLVE_TABLE
+from mpcform.sim.crazyflow import DRONES
 from mpcform.sim.plant_spec import (
+    CrazyflowPlantSpec,
     IdealPlantSpec,
     LagPlantSpec,
     PlantSpec,
@@ -233,7 +235,9 @@ SCHEMA: tuple[Table, ...] = (
         Key("kind", "string", "`ideal` (the exact single integrator the planner assumes), `lag` "
             "(first-order velocity loop), `second_order` (damped velocity loop per axis) or "
             "`quadrotor` (a Crazyflie model of drone-models under a firmware-like PID cascade; "
-            "`pip install mpcform[flight]`).", default=IdealPlantSpec.kind, choices=PLANT_KINDS),
+            "`pip install mpcform[flight]`) or `crazyflow` (crazyflow's Crazyflie simulator flying "
+            "the planner's full-state setpoints with the firmware's Mellinger controller; "
+            "`pip install mpcform[crazyflow]`).", default=IdealPlantSpec.kind, choices=PLANT_KINDS),
         Key("time_constant", "float", "Time constant of the velocity loop.", "s",
             LagPlantSpec.time_constant_s, when=("lag",), bound="> 0"),
         Key("damping", "float", "Damping ratio of the velocity loop.", "", SecondOrderPlantSpec.damping,
@@ -251,8 +255,20 @@ SCHEMA: tuple[Table, ...] = (
             choices=MODELS),
         Key("rate", "float", "Inner-loop rate: a multiple of the control rate 1 / dt.", "Hz",
             QuadrotorPlantSpec.rate_hz, when=("quadrotor",), bound="> 0"),
-        Key("altitude", "float", "Height a planar (dim = 2) flight holds with its thrust loop.", "m",
-            QuadrotorPlantSpec.altitude_m, when=("quadrotor",), bound=">= 0"),
+        Key("altitude", "float", "Height a planar (dim = 2) flight holds; with `crazyflow`, the "
+            "height of the scenario's origin above the floor, by which spatial flights are lifted "
+            "too (every drone must start two body radii up).", "m", QuadrotorPlantSpec.altitude_m,
+            when=("quadrotor", "crazyflow"), bound=">= 0 (crazyflow: > 0)"),
+        Key("drone", "string", "The Crazyflie model crazyflow simulates (first-principles "
+            "dynamics of drone-models).", default=CrazyflowPlantSpec.drone, when=("crazyflow",),
+            choices=DRONES),
+        Key("physics_rate", "int", "crazyflow's physics rate: a multiple of `control_rate`; the "
+            "true path is sampled at it.", "Hz", CrazyflowPlantSpec.physics_rate_hz,
+            when=("crazyflow",), bound=">= 1"),
+        Key("control_rate", "int", "Rate of the Mellinger controller and of the full-state "
+            "setpoints: a multiple of 1 / dt.", "Hz", CrazyflowPlantSpec.control_rate_hz,
+            when=("crazyflow",), bound=">= 1"),
+
         Key("measurement_noise", "float", "Std of seeded Gaussian noise on the positions the "
             "controller sees.", "m", PlantSpec.measurement_noise_m, bound=">= 0"),
         Key("margin", "float", "Robust margin per drone that tightens the MPC's rows (pairs by "

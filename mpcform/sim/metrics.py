@@ -12,7 +12,8 @@ v_max), ``qp_solves``, ``fast_path_steps``, ``solver_failures``, ``max_slack`` [
 :func:`mpcform.mpc.planner.hard_first_rows`),
 ``stall_events``, ``resolutions`` and ``circling_resets`` (drones that started to stall,
 escalated tie-breaks that ended, and circling drones whose escalation was reset,
-:mod:`mpcform.mpc.liveness`), and
+:mod:`mpcform.mpc.liveness`), ``deadline_misses`` (steps whose solve ended past
+``controller.step_budget``, which sent the braking fallback), and
 ``step_time_ms`` (median, p90 and max of the controller's wall-clock time per step mode). The
 figures draw the same series (:func:`tracking_errors_m`, :func:`min_separations_m`,
 :func:`command_speeds_mps`).
@@ -120,6 +121,7 @@ def run_metrics(
         "stall_events": int(sum(getattr(i, "stalled", 0) for i in result.infos)),
         "resolutions": int(sum(getattr(i, "resolved", 0) for i in result.infos)),
         "circling_resets": int(sum(getattr(i, "unwound", 0) for i in result.infos)),
+        "deadline_misses": int(sum(getattr(i, "deadline_missed", False) for i in result.infos)),
         "step_time_ms": {
             mode: _stats(1e3 * result.step_times_s[modes == mode]) for mode in sorted(set(modes.tolist()))
         },

@@ -25,6 +25,7 @@ import numpy as np
 
 from mpcform._validate import positive
 from mpcform.errors import ValidationError
+from mpcform.sim.crazyflow import DRONES, CrazyflowPlant
 from mpcform.sim.plants import KINDS, SAMPLES_PER_STEP, IdealPlant, Plant, lag_plant, second_order_plant
 from mpcform.sim.quadrotor import QuadrotorPlant, QuadrotorSpec
 from mpcform.sim.wind import Wind
@@ -228,8 +229,59 @@ class QuadrotorPlantSpec(PlantSpec):
         return QuadrotorPlant(n, dim, spec, **common)
 
 
+@dataclass(frozen=True)
+class CrazyflowPlantSpec(PlantSpec):
+    """crazyflow (:mod:`mpcform.sim.crazyflow`): the Crazyflie model ``drone``, its physics and
+    Mellinger controller rates ``physics_rate_hz`` and ``control_rate_hz`` [Hz] and the height
+    ``altitude_m`` [m] a planar flight holds. The planner models it, and sizes its margin, as the
+    quadrotor plant of the same platform (the hover linearisation of a Crazyflie's loop)."""
+
+    kind: ClassVar[str] = "crazyflow"
+    drone: str = "cf2x_L250"
+    physics_rate_hz: int = 500
+    control_rate_hz: int = 100
+    altitude_m: float = 1.0
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        if self.wind is not None:
+            raise ValidationError("plant.wind", "the crazyflow plant flies in calm air: remove [plant.wind]")
+        if self.drone not in DRONES:
+            raise ValidationError("plant.drone", f"expected one of {', '.join(DRONES)}, got {self.drone!r}")
+        for name in ("physics_rate_hz", "control_rate_hz"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+                raise ValidationError(
+                    f"plant.{scenario_key(name)}", f"expected an integer >= 1 [Hz], got {value!r}"
+                )
+        if not 0.0 < self.altitude_m < math.inf:
+            raise ValidationError(
+                "plant.altitude", f"expected a finite height > 0 [m], got {self.altitude_m!r}"
+            )
+
+    def robustness(
+        self, dim: int, dt_s: float, a_max_mps2: float | None, loop_modelled: bool = False
+    ) -> Robustness:
+        """The quadrotor plant's of the same platform (class docstring)."""
+        common = {f.name: getattr(self, f.name) for f in dataclasses.fields(PlantSpec)}
+        model = QuadrotorPlantSpec(platform=self.drone, altitude_m=self.altitude_m, **common)
+        return model.robustness(dim, dt_s, a_max_mps2, loop_modelled)
+
+    def _plant(self, n: int, dim: int, **common: Any) -> Plant:
+        return CrazyflowPlant(
+            n,
+            dim,
+            drone=self.drone,
+            physics_hz=self.physics_rate_hz,
+            control_hz=self.control_rate_hz,
+            altitude_m=self.altitude_m,
+            **common,
+        )
+
+
 PLANT_SPECS: dict[str, type[PlantSpec]] = {
-    cls.kind: cls for cls in (IdealPlantSpec, LagPlantSpec, SecondOrderPlantSpec, QuadrotorPlantSpec)
+    cls.kind: cls
+    for cls in (IdealPlantSpec, LagPlantSpec, SecondOrderPlantSpec, QuadrotorPlantSpec, CrazyflowPlantSpec)
 }
 """The spec class of every plant kind, in the order of :data:`mpcform.sim.plants.KINDS`."""
 

@@ -44,7 +44,7 @@ from mpcform.sim.wind import Wind, WindField
 
 DRAG_PER_S = 0.01471782 / 0.0319
 """Wind coupling k_drag / m [1/s] of the linear plants: cf2x_L250 (drone-models 0.1.0)."""
-KINDS = ("ideal", "lag", "second_order", "quadrotor")
+KINDS = ("ideal", "lag", "second_order", "quadrotor", "crazyflow")
 Loop = tuple[Array, Array, Array, Array, tuple[int, ...]]
 """A continuous velocity loop ``(A, B, E, C, axes)``: ``x' = A x + B u + E w``, ``v = C x``."""
 SAMPLES_PER_STEP = 10
@@ -160,6 +160,12 @@ class Plant(ABC):
         """Move every drone's true position by ``delta_m`` (n, d) [m], velocities kept: a process
         disturbance (the simulation's ``noise``) acting at the end of an interval."""
         self._displace(finite_array("plant.displacement", delta_m, (self.n, self.dim)))
+
+    @property
+    def events(self) -> dict[str, object]:
+        """What the plant saw happen to the drones, for the run's summary (crazyflow: contacts,
+        floor contacts, flips; :mod:`mpcform.sim.crazyflow`); empty for the others."""
+        return {}
 
     @property
     def wind_clip_fraction(self) -> float:

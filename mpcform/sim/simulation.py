@@ -33,12 +33,14 @@ class SimulationResult(Trajectory):
     T - 1 steps (fields ``t_s, positions_m, commands_mps, reference_m, infos, step_times_s,
     controller``, in this order; ``scale_estimates`` (T, n) of a consensus controller, row j the
     estimates at ``t_j``, those the step there uses); ``wind_clip_fraction``: the share of gust
-    samples the wind's bound clipped (0 without wind)."""
+    samples the wind's bound clipped (0 without wind); ``plant_events``: the plant's
+    :attr:`~mpcform.sim.plants.Plant.events`."""
 
     infos: tuple[StepInfo, ...]
     step_times_s: Array  # (T - 1,) wall-clock time of each controller call
     controller: str
     wind_clip_fraction: float = field(default=0.0, kw_only=True)
+    plant_events: dict = field(default_factory=dict, kw_only=True)
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -134,6 +136,7 @@ def simulate(
         true=true,
         scale_estimates=s_hat,
         wind_clip_fraction=plant.wind_clip_fraction,
+        plant_events=plant.events,
     )
 
 

@@ -53,6 +53,7 @@ METRIC_KEYS = {
     "stall_events",
     "resolutions",
     "circling_resets",  # the planner's liveness events
+    "deadline_misses",  # online planning (controller.step_budget)
     "slack_steps",
     "lowered_first_rows",  # the separation guarantee's conditions (braking terminal condition)
 }

@@ -1,0 +1,119 @@
+"""The planner online: measured positions in, full-state setpoints out, every step within a deadline.
+
+Every control period a swarm's loop calls :meth:`OnlineLoop.step` with the time and the positions
+motion capture measured; it gets back the certified command (``||u_i|| <= v_max``, each change
+within ``a_max dt``) and the interval's full-state setpoints at the setpoint rate
+(:func:`mpcform.control.setpoints.interval_setpoints`: the plan's own path from the measured
+positions), which a Crazyflie's ``cmdFullState`` takes as they are.
+
+The deadline is the planner's ``step_budget_s`` (:class:`mpcform.mpc.settings.MPCSettings`): no
+optional split round starts after it, and a step whose solve ends after it sends the certified
+braking fallback instead (the previous plan's tail, :mod:`mpcform.mpc.braking`), reported as
+``deadline_missed``. The check is cooperative: a solver call is bounded by its iteration cap
+(``controller.solve.max_iter``), not interrupted, so a step can end later than its budget by one
+solver call; :attr:`OnlineStep.wall_s` records it.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from mpcform._validate import Array, finite_array, positive
+from mpcform.control.base import StepInfo
+from mpcform.control.setpoints import FullState, interval_setpoints, ticks_per_interval
+from mpcform.errors import ValidationError
+from mpcform.mpc.planner import MPCPlanner
+from mpcform.scenario.build import build_controller
+from mpcform.scenario.spec import Scenario
+
+
+@dataclass(frozen=True, eq=False)
+class OnlineStep:
+    """One online step: the command (n, d) [m/s] held until the next step, its ``setpoints``, the
+    planner's step record, its wall and CPU time [s] and whether it missed its deadline (the
+    command is then the braking fallback)."""
+
+    t_s: float
+    command_mps: Array
+    setpoints: FullState
+    info: StepInfo
+    wall_s: float
+    cpu_s: float
+    deadline_missed: bool
+
+
+class OnlineLoop:
+    """An :class:`~mpcform.mpc.planner.MPCPlanner` stepped on measurements (module docstring);
+    setpoints at ``setpoint_rate_hz`` (a multiple of ``1 / dt``), planar plans at ``altitude_m``."""
+
+    def __init__(
+        self, planner: MPCPlanner, *, setpoint_rate_hz: float = 100.0, altitude_m: float = 1.0
+    ) -> None:
+        if not isinstance(planner, MPCPlanner):
+            raise ValidationError("planner", f"expected an MPCPlanner, got {type(planner).__name__}")
+        self.planner = planner
+        self.dt_s = planner.dt_s
+        self.setpoint_rate_hz = positive("setpoint_rate", setpoint_rate_hz)
+        ticks_per_interval(self.dt_s, self.setpoint_rate_hz)
+        self.altitude_m = positive("altitude", altitude_m)
+        self._started = False
+
+    @classmethod
+    def from_scenario(
+        cls, scenario: Scenario, *, step_budget_s: float | None = None, setpoint_rate_hz: float = 100.0
+    ) -> OnlineLoop:
+        """The loop of ``scenario``'s MPC planner (its plant's velocity loop modelled, as in
+        ``run``), with the deadline ``step_budget_s`` [s] (None: the scenario's
+        ``controller.step_budget``); planar plans fly at the plant's ``altitude`` (1 m without)."""
+        spec = scenario.controller
+        if spec.kind != "mpc" or spec.mpc is None:
+            raise ValidationError(
+                "controller.kind", f"online planning needs the mpc controller, got {spec.kind!r}"
+            )
+        if step_budget_s is not None:
+            mpc = dataclasses.replace(spec.mpc, step_budget_s=step_budget_s)
+            scenario = dataclasses.replace(scenario, controller=dataclasses.replace(spec, mpc=mpc))
+        planner = build_controller(scenario)
+        assert isinstance(planner, MPCPlanner)
+        altitude = float(getattr(scenario.plant, "altitude_m", 1.0))
+        return cls(planner, setpoint_rate_hz=setpoint_rate_hz, altitude_m=altitude)
+
+    def start(self, t_s: float, positions_m: ArrayLike) -> None:
+        """Begin a flight at ``t_s`` [s] from ``positions_m`` (n, d) (the planner forgets its plan)."""
+        p = finite_array("positions", positions_m, (self.planner.n, self.planner.dim))
+        self.planner.reset(float(t_s), p)
+        self._started = True
+
+    def step(self, t_s: float, positions_m: ArrayLike) -> OnlineStep:
+        """Plan from the measured ``positions_m`` (n, d) [m] at ``t_s`` [s]: the command to hold
+        until ``t_s + dt`` and its full-state setpoints (module docstring)."""
+        p = finite_array("positions", positions_m, (self.planner.n, self.planner.dim))
+        if not self._started:
+            self.start(t_s, p)
+        wall, cpu = time.perf_counter(), time.process_time()
+        out = self.planner.step(float(t_s), p.copy())
+        wall, cpu = time.perf_counter() - wall, time.process_time() - cpu
+        u = out.command_mps
+        setpoints = interval_setpoints(p, u, float(t_s), self.dt_s, self.setpoint_rate_hz, self.altitude_m)
+        missed = bool(getattr(out.info, "deadline_missed", False))
+        return OnlineStep(float(t_s), u, setpoints, out.info, wall, cpu, missed)
+
+
+def step_time_stats(steps: list[OnlineStep]) -> dict[str, float]:
+    """Median, p99 and max of the steps' wall and CPU times [s], and the share that missed its
+    deadline."""
+    wall = np.array([s.wall_s for s in steps])
+    cpu = np.array([s.cpu_s for s in steps])
+    out = {}
+    for name, arr in (("wall", wall), ("cpu", cpu)):
+        out |= {
+            f"{name}_p50_s": float(np.median(arr)),
+            f"{name}_p99_s": float(np.quantile(arr, 0.99)),
+            f"{name}_max_s": float(arr.max()),
+        }
+    return out | {"deadline_miss_share": float(np.mean([s.deadline_missed for s in steps]))}

@@ -1,0 +1,216 @@
+"""crazyflow as a plant: the planner's setpoints flown by the Crazyflie firmware's Mellinger controller.
+
+crazyflow (utiasDSL/learnsyslab, ``pip install -e ".[crazyflow]"``) simulates Crazyflie 2.x drones
+with the first-principles dynamics of drone-models at ``physics_hz`` (500 Hz) and the firmware's
+Mellinger state controller at ``control_hz`` (100 Hz). Every interval, each drone gets the
+full-state setpoints of :func:`mpcform.control.setpoints.interval_setpoints` from where it is at
+the interval's start: the same setpoints :class:`mpcform.online.loop.OnlineLoop` gives a real
+swarm. The true path is every physics step (dense samples: position, velocity, attitude).
+
+crazyflow runs in a worker process (:mod:`mpcform.sim.crazyflow_worker`: it needs
+``SCIPY_ARRAY_API=1`` before scipy loads); its simulator is built and compiled once per run, at
+:meth:`~mpcform.sim.plants.Plant.reset` (``setup_s`` records how long that took).
+
+The scenario's origin is ``altitude_m`` above crazyflow's floor: planar flights fly at that
+height, spatial ones are lifted by it (every drone must start at least two body radii up). The
+plant watches what a planner must never cause, on the dense 3-D path: **contacts** between two
+drones (centres closer than twice the body radius, the rotor tips' ``sqrt(2) L + prop_radius``
+of the drone-models parameters: 0.070 m for cf2x_L250),
+**floor contacts** (a centre below the body radius) and **flips** (the body's z axis pointing
+down). A drone that touched the floor or flipped is reported in :attr:`CrazyflowPlant.events`;
+the planner keeps planning for it as for the others (its setpoints are what a real swarm would
+keep sending until the operator lands it).
+
+The planner models a crazyflow drone by the quadrotor plant's hover linearisation of the same
+platform (:class:`mpcform.sim.plant_spec.CrazyflowPlantSpec`).
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import math
+import os
+import subprocess
+import sys
+import tempfile
+import tomllib
+import weakref
+from multiprocessing.connection import Connection
+from typing import Any
+
+import numpy as np
+
+from mpcform._validate import Array
+from mpcform.control.setpoints import interval_setpoints, ticks_per_interval
+from mpcform.errors import MPCFormError, ValidationError
+from mpcform.sim.plants import Plant
+from mpcform.sim.so_rpy import package_file
+
+DRONES = ("cf2x_L250", "cf2x_P250", "cf2x_T350", "cf21B_500")
+"""The Crazyflie 2.x models crazyflow simulates."""
+
+
+def body_radius_m(drone: str) -> float:
+    """The rotor tips' distance from the centre [m]: ``sqrt(2) L + prop_radius`` (drone-models'
+    ``data/params.toml``, read without importing drone-models)."""
+    with open(package_file("data/params.toml"), "rb") as fh:
+        params = tomllib.load(fh)[drone]
+    return math.sqrt(2.0) * float(params["L"]) + float(params["prop_radius"])
+
+
+class CrazyflowPlant(Plant):
+    """n Crazyflies in one crazyflow world (module docstring)."""
+
+    kind = "crazyflow"
+
+    def __init__(
+        self,
+        n: int,
+        dim: int,
+        *,
+        drone: str = "cf2x_L250",
+        physics_hz: int = 500,
+        control_hz: int = 100,
+        altitude_m: float = 1.0,
+        **kwargs: Any,
+    ) -> None:
+        super().__init__(n, dim, **kwargs)
+        if self.wind is not None:
+            raise ValidationError("plant.wind", "the crazyflow plant flies in calm air: remove [plant.wind]")
+        if drone not in DRONES:
+            raise ValidationError("plant.drone", f"expected one of {', '.join(DRONES)}, got {drone!r}")
+        if physics_hz % control_hz:
+            raise ValidationError(
+                "plant.physics_rate",
+                f"expected a multiple of plant.control_rate ({control_hz} Hz), got {physics_hz}",
+            )
+        self.drone, self.physics_hz, self.control_hz, self.altitude_m = (
+            drone,
+            physics_hz,
+            control_hz,
+            altitude_m,
+        )
+        self.radius_m = body_radius_m(drone)
+        self._worker: _Worker | None = None
+        self._p = np.zeros((n, 3))
+        self.setup_s = 0.0
+        self._events: dict[str, Any] = {}
+
+    # -- the worker --------------------------------------------------------------------------
+
+    def _start(self) -> _Worker:
+        if self._worker is None:
+            if importlib.util.find_spec("crazyflow") is None:  # fail here, with the fix
+                raise MPCFormError('the crazyflow plant needs crazyflow: pip install -e ".[crazyflow]"')
+            self._worker = _Worker()
+            weakref.finalize(self, self._worker.stop)
+        return self._worker
+
+    def _ask(self, *request: Any) -> tuple[Any, ...]:
+        return self._start().ask(request)
+
+    # -- the plant ---------------------------------------------------------------------------
+
+    def _reset(self, p: Array, v: Array) -> None:
+        if np.any(v != 0.0):
+            raise ValidationError("plant.velocities", "the crazyflow plant starts at rest (hover)")
+        self._p = self._world(p)
+        low = int(np.argmin(self._p[:, 2]))
+        if self._p[low, 2] < 2.0 * self.radius_m:
+            need = 2.0 * self.radius_m - self._p[low, 2] + self.altitude_m
+            raise ValidationError(
+                "plant.altitude",
+                f"drone {low} would start {self._p[low, 2]:.3g} m above the floor; the crazyflow plant "
+                f"starts drones hovering at least {2 * self.radius_m:.3g} m up: expected an altitude of at "
+                f"least {need:.3g} m, got {self.altitude_m:g}",
+            )
+        (self.setup_s,) = self._ask("reset", self._p.copy(), self.drone, self.physics_hz, self.control_hz)
+        self._events = {"drone_contacts": [], "floor_contacts": [], "flipped": [], "min_altitude_m": math.inf}
+
+    def _world(self, p: Array) -> Array:
+        """Scenario positions (n, d) in crazyflow's frame (n, 3): the origin ``altitude_m`` up."""
+        out = np.zeros((p.shape[0], 3))
+        out[:, : self.dim] = p
+        out[:, 2] += self.altitude_m
+        return out
+
+    def _displace(self, delta: Array) -> None:
+        raise ValidationError("simulation.noise", "the crazyflow plant takes no process noise")
+
+    def _advance(self, u: Array, dt: float, planned: Array | None) -> tuple[Array, Array, Array, dict]:
+        ticks_per_interval(dt, self.control_hz, "plant.control_rate")
+        sp = interval_setpoints(self._p[:, : self.dim], u, self.t_s, dt, self.control_hz, self.altitude_m)
+        pos, vel, quat = self._ask("fly", sp.state_control())
+        self._p = pos[-1].copy()
+        self._watch(pos, quat)
+        t = self.t_s + np.arange(pos.shape[0]) / self.physics_hz
+        pos[:, :, 2] -= self.altitude_m  # back in the scenario's frame
+        return t, pos[:, :, : self.dim], vel[:, :, : self.dim], {"quat_xyzw": quat}
+
+    def _watch(self, pos: Array, quat: Array) -> None:
+        """Record contacts, floor contacts and flips of the dense samples (module docstring)."""
+        ev = self._events
+        i, k = np.triu_indices(self.n, 1)
+        close = np.linalg.norm(pos[:, i] - pos[:, k], axis=-1).min(axis=0) < 2.0 * self.radius_m
+        for a, b in zip(i[close].tolist(), k[close].tolist(), strict=True):
+            if [a, b] not in ev["drone_contacts"]:
+                ev["drone_contacts"].append([a, b])
+        ev["min_altitude_m"] = min(ev["min_altitude_m"], float(pos[:, :, 2].min()))
+        floor = np.flatnonzero((pos[:, :, 2] < self.radius_m).any(axis=0))
+        up_z = 1.0 - 2.0 * (quat[..., 0] ** 2 + quat[..., 1] ** 2)  # the body z axis' world z
+        flipped = np.flatnonzero((up_z < 0.0).any(axis=0))
+        for key, drones in (("floor_contacts", floor), ("flipped", flipped)):
+            ev[key] = sorted(set(ev[key]) | set(drones.tolist()))
+
+    @property
+    def events(self) -> dict[str, Any]:
+        """Drone pairs in contact, drones that touched the floor or flipped, the lowest altitude
+        [m] and the simulator's build and compile time [s] (module docstring)."""
+        return self._events | {"setup_s": self.setup_s}
+
+    def velocity_loops(self) -> list:
+        return []
+
+
+class _Worker:
+    """The worker process (:mod:`mpcform.sim.crazyflow_worker`), spoken to over its stdin and
+    stdout; its stderr (crazyflow's and JAX's messages) goes to a file quoted when it fails."""
+
+    def __init__(self) -> None:
+        env = dict(os.environ, SCIPY_ARRAY_API="1")  # the worker's scipy, before it loads
+        self._log = tempfile.TemporaryFile()
+        cmd = [sys.executable, "-m", "mpcform.sim.crazyflow_worker"]
+        self._proc = subprocess.Popen(
+            cmd, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=self._log, env=env
+        )
+        assert self._proc.stdin is not None and self._proc.stdout is not None
+        self._send = Connection(os.dup(self._proc.stdin.fileno()), readable=False)
+        self._recv = Connection(os.dup(self._proc.stdout.fileno()), writable=False)
+
+    def ask(self, request: tuple[Any, ...]) -> tuple[Any, ...]:
+        try:
+            self._send.send(request)
+            answer = self._recv.recv()
+        except (OSError, EOFError):
+            self._proc.wait(timeout=10.0)
+            self._log.seek(0)
+            tail = self._log.read().decode(errors="replace").strip().splitlines()[-5:]
+            raise MPCFormError(
+                f"crazyflow: the worker exited with status {self._proc.returncode}: " + " / ".join(tail)
+            ) from None
+        if answer[0] == "error":
+            raise MPCFormError(f"crazyflow: {answer[1]}")
+        return answer[1:]
+
+    def stop(self) -> None:
+        try:
+            self._send.send(("stop",))
+            self._proc.wait(timeout=10.0)
+        except (OSError, subprocess.TimeoutExpired):
+            self._proc.kill()
+        for conn in (self._send, self._recv):
+            conn.close()
+        for pipe in (self._proc.stdin, self._proc.stdout):
+            if pipe is not None:
+                pipe.close()
+        self._log.close()

@@ -1,0 +1,89 @@
+"""crazyflow as a plant: the planner's setpoints flown by the firmware's Mellinger controller.
+
+The fast tests fly a few seconds; the slow ones fly bundled scenarios closed loop and require no
+contact, no floor contact, no flip, ``d_min`` on the 500 Hz true path and every drone arrived.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import importlib.util
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from mpcform.errors import ValidationError
+from mpcform.run.runner import run_scenario
+from mpcform.scenario.load import load_scenario
+from mpcform.scenario.plant import with_plant_kind
+from mpcform.sim.crazyflow import CrazyflowPlant, body_radius_m
+from mpcform.sim.plants import concat_samples
+
+if importlib.util.find_spec("crazyflow") is None:
+    pytest.skip('needs crazyflow (pip install -e ".[crazyflow]")', allow_module_level=True)
+
+SCENARIOS = Path(__file__).resolve().parents[2] / "scenarios"
+
+
+@pytest.fixture(scope="module")
+def pair() -> CrazyflowPlant:
+    """Two planar Crazyflies 1 m apart at 1 m: one build and compile for the module."""
+    plant = CrazyflowPlant(2, 2)
+    plant.reset(np.array([[0.0, 0.0], [1.0, 0.0]]))
+    return plant
+
+
+def test_body_radius_is_the_rotor_tips() -> None:
+    assert body_radius_m("cf2x_L250") == pytest.approx(np.sqrt(2) * 0.03253 + 0.02355)
+
+
+def test_hover_holds_and_a_command_is_flown(pair: CrazyflowPlant) -> None:
+    pair.reset(np.array([[0.0, 0.0], [1.0, 0.0]]))
+    hover = concat_samples([pair.advance(np.zeros((2, 2)), 0.1) for _ in range(5)])
+    assert hover.p_true_m.shape == (5 * 50 + 1, 2, 2)  # every 500 Hz physics step
+    np.testing.assert_allclose(hover.p_true_m[-1], [[0.0, 0.0], [1.0, 0.0]], atol=2e-3)
+    u = np.array([[0.3, 0.0], [0.0, -0.3]])
+    moved = concat_samples([pair.advance(u, 0.1) for _ in range(20)])
+    np.testing.assert_allclose(moved.v_true_mps[-1], u, atol=0.02)  # settled on the command
+    travelled = (moved.p_true_m[-1] - moved.p_true_m[0])[u != 0] / u[u != 0]
+    assert np.all((travelled > 1.6) & (travelled < 2.0))  # 2 s at the command, less a lag < 0.4 s
+    ev = pair.events
+    assert ev["drone_contacts"] == [] and ev["floor_contacts"] == [] and ev["flipped"] == []
+    assert ev["min_altitude_m"] > 0.95 and ev["setup_s"] > 0.0
+    assert moved.quat_xyzw is not None and moved.quat_xyzw.shape == (20 * 50 + 1, 2, 4)
+
+
+def test_contacts_are_seen(pair: CrazyflowPlant) -> None:
+    pair.reset(np.array([[0.0, 0.0], [0.6, 0.0]]))
+    for _ in range(15):
+        pair.advance(np.array([[0.5, 0.0], [-0.5, 0.0]]), 0.1)
+    assert pair.events["drone_contacts"] == [[0, 1]]
+
+
+def test_a_drone_below_the_floor_is_refused() -> None:
+    sc = with_plant_kind(load_scenario(SCENARIOS / "swap_spatial_12.toml"), "crazyflow")
+    with pytest.raises(ValidationError, match="plant.altitude: drone .* expected an altitude of at least"):
+        run_scenario(sc)
+
+
+def flown(name: str, altitude_m: float = 1.0) -> dict:
+    sc = with_plant_kind(load_scenario(SCENARIOS / f"{name}.toml"), "crazyflow")
+    sc = dataclasses.replace(sc, plant=dataclasses.replace(sc.plant, altitude_m=altitude_m))
+    summary = run_scenario(sc).summary
+    m, plant = summary["metrics"], summary["plant"]
+    shown = ("min_separation_true", "completion", "time_to_complete")
+    print(name, {k: m[k] for k in shown}, plant["setup_s"])
+    assert plant["drone_contacts"] == [] and plant["floor_contacts"] == [] and plant["flipped"] == []
+    assert m["separation_violations_true"] == 0 and m["min_separation_true"] >= sc.limits.d_min_m
+    assert m["completion"] == 1.0
+    return summary
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(
+    ("name", "altitude_m"),
+    [("swap_planar_8", 1.0), ("swap_spatial_12", 3.0), ("mission_planar", 1.0), ("formation_planar", 1.0)],
+)
+def test_bundled_scenarios_fly_in_crazyflow(name: str, altitude_m: float) -> None:
+    flown(name, altitude_m)
