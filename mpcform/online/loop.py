@@ -109,7 +109,7 @@ def step_time_stats(steps: list[OnlineStep]) -> dict[str, float]:
     deadline."""
     wall = np.array([s.wall_s for s in steps])
     cpu = np.array([s.cpu_s for s in steps])
-    out = {}
+    out: dict[str, float] = {}
     for name, arr in (("wall", wall), ("cpu", cpu)):
         out |= {
             f"{name}_p50_s": float(np.median(arr)),
