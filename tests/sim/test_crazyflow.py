@@ -83,7 +83,15 @@ def flown(name: str, altitude_m: float = 1.0) -> dict:
 @pytest.mark.slow
 @pytest.mark.parametrize(
     ("name", "altitude_m"),
-    [("swap_planar_8", 1.0), ("swap_spatial_12", 3.0), ("mission_planar", 1.0), ("formation_planar", 1.0)],
+    [
+        ("swap_planar_8", 1.0),
+        ("swap_spatial_12", 3.0),
+        ("swap_spatial_20", 3.0),
+        ("mission_spatial", 1.0),
+        ("mission_obstacle_gap", 1.0),
+        ("mission_template_switch", 1.0),
+        ("obstacles_planar", 1.0),
+    ],
 )
 def test_bundled_scenarios_fly_in_crazyflow(name: str, altitude_m: float) -> None:
     flown(name, altitude_m)
