@@ -148,8 +148,7 @@ class MPCPlanner(Controller):
         (mode ``fast_path`` | ``qp`` | ``fallback``, solver status, slack and the pairs that needed it,
         liveness events). With none of the QP's rows active the command is exactly eq. 14."""
         p0 = self._check_positions(positions_m)
-        budget = self.settings.step_budget_s
-        self._deadline = None if budget is None else time.perf_counter() + budget
+        self._deadline = None if (b := self.settings.step_budget_s) is None else time.perf_counter() + b
         if self.loop is None:
             return self._step(t_s, p0)
         if self._predicted is not None:  # the velocity offset of the last interval

@@ -96,8 +96,7 @@ class SplitQP(StepSolver):
     """The per-drone QPs with their pair rows' split points iterated towards the joint optimum.
 
     ``iterations``: rounds after the midpoint solve; ``budget_s``: wall time of a step's solve
-    after which no new round starts (None: none).
-    """
+    after which no new round starts (None: none), nor after the step's ``deadline_s``."""
 
     warm_starts = True
 
@@ -125,10 +124,9 @@ class SplitQP(StepSolver):
         finite = bool(np.isfinite(best.value))  # a drone whose midpoint solve failed: no rounds
         bend, direction, rounds = 1.0, step_qp.direction(best) if finite else None, 0
         frozen = np.zeros(best.shift.shape, dtype=bool)  # rows kept where they are until a step succeeds
+        stop_at = min(np.inf if self.budget_s is None else t0 + self.budget_s, qp.deadline_s or np.inf)
         while rounds < self.iterations and direction is not None and np.isfinite(best.value):
-            if self.budget_s is not None and time.perf_counter() - t0 >= self.budget_s:
-                break
-            if qp.deadline_s is not None and time.perf_counter() >= qp.deadline_s:
+            if time.perf_counter() >= stop_at:  # the split budget, or the step's deadline
                 break
             newton, slope, longest = direction
             size = min(1.0, max(longest, 1.0 / bend))  # the model's minimiser, its curvature scaled

@@ -258,7 +258,7 @@ SCHEMA: tuple[Table, ...] = (
         Key("altitude", "float", "Height a planar (dim = 2) flight holds; with `crazyflow`, the "
             "height of the scenario's origin above the floor, by which spatial flights are lifted "
             "too (every drone must start two body radii up).", "m", QuadrotorPlantSpec.altitude_m,
-            when=("quadrotor", "crazyflow"), bound=">= 0 (crazyflow: > 0)"),
+            when=("quadrotor", "crazyflow"), bound=">= 0"),
         Key("drone", "string", "The Crazyflie model crazyflow simulates (first-principles "
             "dynamics of drone-models).", default=CrazyflowPlantSpec.drone, when=("crazyflow",),
             choices=DRONES),

@@ -36,6 +36,7 @@ import tempfile
 import tomllib
 import weakref
 from multiprocessing.connection import Connection
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -178,10 +179,13 @@ class _Worker:
 
     def __init__(self) -> None:
         env = dict(os.environ, SCIPY_ARRAY_API="1")  # the worker's scipy, before it loads
-        self._log = tempfile.TemporaryFile()
+        package = str(Path(__file__).resolve().parents[2])  # mpcform, installed or not
+        env["PYTHONPATH"] = os.pathsep.join(filter(None, [package, os.environ.get("PYTHONPATH")]))
+        self._log, self._dir = tempfile.TemporaryFile(), tempfile.TemporaryDirectory()
         cmd = [sys.executable, "-m", "mpcform.sim.crazyflow_worker"]
+        pipe = subprocess.PIPE  # in a directory of its own: MuJoCo writes MUJOCO_LOG.TXT there
         self._proc = subprocess.Popen(
-            cmd, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=self._log, env=env
+            cmd, stdin=pipe, stdout=pipe, stderr=self._log, env=env, cwd=self._dir.name
         )
         assert self._proc.stdin is not None and self._proc.stdout is not None
         self._send = Connection(os.dup(self._proc.stdin.fileno()), readable=False)
@@ -214,3 +218,4 @@ class _Worker:
             if pipe is not None:
                 pipe.close()
         self._log.close()
+        self._dir.cleanup()

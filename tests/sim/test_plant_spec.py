@@ -79,6 +79,9 @@ def test_scenario_keys_drop_the_units() -> None:
         "model",
         "rate",
         "altitude",
+        "drone",
+        "physics_rate",
+        "control_rate",
     }
 
 
