@@ -16,6 +16,8 @@ from mpcform.scenario.size import DEFAULT_MAX_WORK
 from mpcform.solvers.registry import DEFAULT_SOLVER, PERSISTENT_SOLVERS
 
 PROBLEMS_OUT = "problems"  # problems export's default --out, relative to the working directory
+DEFAULT_ONLINE_N = (20, 100, 1000)  # bench online's crossings
+MAX_ONLINE_N = 5000  # the largest crossing bench online plans (as bench scale's largest case)
 PLANT_DT_S = 0.1  # bench plant's control interval: its shortest flight
 
 
@@ -104,6 +106,15 @@ def add_bench(sub: argparse._SubParsersAction) -> None:
     plant.add_argument("--repeats", type=int, default=3, help="runs (median and max are reported)")
     plant.add_argument("--no-wind", action="store_true", help="still air (default: gusts of 0.5 m/s)")
     plant.add_argument("--json", metavar="PATH", help="also write the rows as a JSON list of records")
+    online = kinds.add_parser(
+        "online", help="the online loop: step times and deadline fallbacks in a crossing"
+    )
+    online.set_defaults(func=_bench_online)
+    online.add_argument("--n", type=int, nargs="+", default=list(DEFAULT_ONLINE_N), help="drones per case")
+    online.add_argument("--steps", type=int, default=60, help="periods of 0.1 s per case")
+    online.add_argument("--budget", type=float, default=0.1, help="the step deadline [s]")
+    online.add_argument("--coupling", choices=("decoupled", "joint"), default="decoupled", help="the rows")
+    online.add_argument("--json", metavar="PATH", help="also write the rows as a JSON list of records")
     for choice in kinds._choices_actions:  # each benchmark's --help: what it measures, and the defaults
         parser = kinds.choices[choice.dest]
         parser.description, parser.formatter_class = choice.help, DefaultsFormatter
@@ -127,6 +138,19 @@ def _bench_plant(args: argparse.Namespace) -> int:
     check_plant_options(args)
     rows = bench_plant.run(args.n, args.duration, args.rate, args.repeats, wind=not args.no_wind)
     print_bench(bench_plant.markdown_table(rows), rows, args.json)
+    return 0
+
+
+def _bench_online(args: argparse.Namespace) -> int:
+    from mpcform.bench import online as bench_online
+
+    if min(args.n) < 2 or max(args.n) > MAX_ONLINE_N or args.steps < 1:
+        flag, value = ("--steps", args.steps) if args.steps < 1 else ("--n", args.n)
+        raise ValidationError(flag, f"expected --n in 2..{MAX_ONLINE_N} and --steps >= 1, got {value}")
+    if not 0.0 < args.budget < math.inf:
+        raise ValidationError("--budget", f"expected a finite deadline > 0 [s], got {args.budget:g}")
+    rows = bench_online.run(tuple(args.n), args.steps, args.budget, args.coupling)
+    print_bench(bench_online.markdown_table(rows), rows, args.json)
     return 0
 
 

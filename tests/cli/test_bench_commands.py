@@ -18,7 +18,7 @@ def _choices(parser: argparse.ArgumentParser) -> dict[str, argparse.ArgumentPars
 
 def test_bench_has_one_subcommand_per_family() -> None:
     bench = _choices(build_parser())["bench"]
-    assert list(_choices(bench)) == ["mpc", "solvers", "closed-loop", "scale", "split", "plant"]
+    assert list(_choices(bench)) == ["mpc", "solvers", "closed-loop", "scale", "split", "plant", "online"]
     problems = _choices(build_parser())["problems"]
     assert list(_choices(problems)) == ["export"]
 
@@ -105,3 +105,9 @@ def test_every_bench_help_says_what_it_measures_and_its_defaults() -> None:
     assert (
         "drones (default: 20)" in plant and "(default: None)" not in plant and "(default: False)" not in plant
     )
+
+
+def test_bench_online_refuses_bad_sizes(capsys) -> None:
+    for argv, flag in ((["--n", "1"], "--n"), (["--steps", "0"], "--steps"), (["--budget", "0"], "--budget")):
+        assert main(["bench", "online", *argv]) == 2
+        assert f"mpcform: error: {flag}" in capsys.readouterr().err

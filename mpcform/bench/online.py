@@ -1,0 +1,75 @@
+"""The online loop's deadline (``mpcform bench online``): step times and deadline fallbacks.
+
+Each case is a crossing of ``mpcform bench scale`` (two slabs flying head-on through each other;
+:mod:`mpcform.bench.scale_cases`) of n drones, planned online (:class:`~mpcform.online.loop.
+OnlineLoop`) with a deadline of ``budget_s`` (default one period, dt = 0.1 s) and the ideal plant
+as the measurement. Reported per n: wall and CPU p50 / p99 / max of the steps, the share that
+missed the deadline (and so sent the braking fallback), how far the latest step ran past the
+budget, the closest pair along the straight segments and the largest final tracking error.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from mpcform.bench.scale_cases import DT_S, LIMITS, crossing_case
+from mpcform.formation.geometry import min_segment_distance
+from mpcform.mpc.planner import MPCPlanner
+from mpcform.mpc.settings import MPCSettings
+from mpcform.online.loop import OnlineLoop, step_time_stats
+from mpcform.outputs import tables
+
+DEFAULT_N = (20, 100, 1000)
+DEFAULT_STEPS = 60  # 6 s: the slabs meet, cross and part
+
+COLUMNS = (
+    ("n", "drones", "{:.0f}"),
+    ("coupling", "coupling", "{}"),
+    ("wall_p50_ms", "wall p50 [ms]", "{:.2f}"),
+    ("wall_p99_ms", "wall p99 [ms]", "{:.1f}"),
+    ("wall_max_ms", "wall max [ms]", "{:.1f}"),
+    ("cpu_p50_ms", "CPU p50 [ms]", "{:.2f}"),
+    ("cpu_p99_ms", "CPU p99 [ms]", "{:.1f}"),
+    ("cpu_max_ms", "CPU max [ms]", "{:.1f}"),
+    ("deadline_miss_share", "deadline misses", "{:.1%}"),
+    ("overrun_max_ms", "max past budget [ms]", "{:.1f}"),
+    ("min_distance_m", "min distance [m]", "{:.3f}"),
+    ("final_error_m", "final error [m]", "{:.3f}"),
+)
+
+
+def bench_online(n: int, steps: int, budget_s: float, coupling: str = "decoupled") -> dict[str, Any]:
+    """One crossing of ``n`` drones planned online for ``steps`` periods (module docstring)."""
+    reference, p = crossing_case(n)
+    settings = MPCSettings(coupling=coupling, step_budget_s=budget_s)
+    loop = OnlineLoop(MPCPlanner(reference, DT_S, LIMITS, settings))
+    done, closest = [], np.inf
+    for k in range(steps):
+        step = loop.step(k * DT_S, p)
+        p_next = p + DT_S * step.command_mps
+        closest = min(closest, min_segment_distance(p, p_next))
+        p = p_next
+        done.append(step)
+    stats = step_time_stats(done)
+    error = np.linalg.norm(p - reference.targets(steps * DT_S)[0][0], axis=1).max()
+    row: dict[str, Any] = {"n": n, "coupling": coupling, "steps": steps, "budget_s": budget_s}
+    row |= {k.replace("_s", "_ms"): 1e3 * v for k, v in stats.items() if k.endswith("_s")}
+    row["deadline_miss_share"] = stats["deadline_miss_share"]
+    row["overrun_max_ms"] = 1e3 * max(0.0, max(s.wall_s for s in done) - budget_s)
+    return row | {"min_distance_m": float(closest), "final_error_m": float(error)}
+
+
+def run(
+    ns: tuple[int, ...], steps: int, budget_s: float, coupling: str = "decoupled"
+) -> list[dict[str, Any]]:
+    """:func:`bench_online` for every n of ``ns``."""
+    return [bench_online(n, steps, budget_s, coupling) for n in ns]
+
+
+def markdown_table(rows: list[dict[str, Any]]) -> str:
+    """The rows as a markdown table, then the largest n whose p99 met the budget with no miss."""
+    met = [r["n"] for r in rows if r["wall_p99_ms"] < 1e3 * r["budget_s"] and r["deadline_miss_share"] == 0]
+    line = f"largest n with wall p99 < budget and no deadline miss: {max(met) if met else 'none'}"
+    return tables.markdown_table(rows, COLUMNS) + "\n\n" + line
