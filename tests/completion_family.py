@@ -29,6 +29,7 @@ from scipy.spatial.distance import pdist
 PARTS = ("swap_planar", "swap_spatial", "formation", "spheres", "mission", "close_start")
 PLANTS = ("ideal", "lag", "second_order", "quadrotor")
 SEED = 20261204
+PLANT_EVENTS = ("drone_contacts", "floor_contacts", "flipped")  # crazyflow's (mpcform.sim.crazyflow)
 A_MAX_MPS2 = 1.7851  # the planner's default, for the duration's ramps
 
 
@@ -206,7 +207,9 @@ def outcome(sc: dict[str, Any]) -> dict[str, Any]:
         + (m.get(f"geofence_violations{true}") or 0),
         "min_separation": m[f"min_separation{true}"],
         "slack_steps": m["slack_steps"],
+        "deadline_misses": m["deadline_misses"],
         "cpu_s": time.process_time() - start,
+        "events": {k: v for k, v in run.summary["plant"].items() if k in PLANT_EVENTS and v},
     }
 
 

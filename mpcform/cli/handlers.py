@@ -17,7 +17,7 @@ from pathlib import Path
 from typing import Any
 
 from mpcform.cli.export_flags import EXPORT_FIELDS, add_export_options, export_options, report_export
-from mpcform.cli.options import option_errors
+from mpcform.cli.options import option_errors, progress
 from mpcform.cli.progress import ProgressBar
 from mpcform.errors import MPCFormError, ValidationError
 from mpcform.outputs.flight.export import check_tracked, export_run
@@ -56,7 +56,10 @@ def add_run_options(cmd: argparse.ArgumentParser) -> None:
 
 
 def progress_bar(scenario: Scenario) -> ProgressBar:
-    """The progress callback of a CLI run (draws on a terminal only, after half a second)."""
+    """The progress callback of a CLI run (draws on a terminal only, after half a second); a
+    crazyflow run says first that its simulator is being built and compiled."""
+    if scenario.plant.kind == "crazyflow":
+        progress("crazyflow: building and compiling the simulator (once per run, about 6 s)")
     return ProgressBar(f"{scenario.name}")
 
 

@@ -145,6 +145,8 @@ def scenario_from_dict(
         source=source,
         source_sha256=source_sha256,
     )
+    if plant.kind == "crazyflow":  # flown as a Crazyflie: room for its tracking error
+        scenario = scenario.flyable()
     if controller.kind != "mpc":
         return scenario
     with as_scenario_error("limits"):  # e.g. limits.a_max = inf on a plant whose margin needs a bound

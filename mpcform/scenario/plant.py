@@ -77,13 +77,15 @@ def check_rate(rate_hz: float, dt_s: float) -> None:
 
 def with_plant_kind(scenario: Scenario, kind: str) -> Scenario:
     """``scenario`` flown on a plant of another ``kind`` (``mpcform run --plant``), the table's other
-    keys kept (a wind on the ideal plant is an error)."""
+    keys kept (a wind on the ideal plant is an error); on crazyflow planned with the tracking
+    allowance (:meth:`~mpcform.scenario.spec.Scenario.flyable`)."""
     try:
         plant = scenario.plant.with_kind(kind)
     except ValidationError as exc:
         raise ScenarioError("--plant", str(exc).removeprefix(f"{exc.field}: ")) from None
     check_plant_rates(plant, scenario.simulation.dt_s)
-    return dataclasses.replace(scenario, plant=plant)
+    flown = dataclasses.replace(scenario, plant=plant)
+    return flown.flyable() if kind == "crazyflow" else flown  # room for a Crazyflie's tracking error
 
 
 def _wind(raw: Any, dim: int) -> Wind | None:
