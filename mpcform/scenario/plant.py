@@ -56,12 +56,6 @@ def check_plant_rates(spec: PlantSpec, dt_s: float) -> None:
     if isinstance(spec, CrazyflowPlantSpec):
         with as_scenario_error("plant"):
             ticks_per_interval(dt_s, spec.control_rate_hz, "plant.control_rate")
-            if spec.physics_rate_hz % spec.control_rate_hz:
-                raise ValidationError(
-                    "plant.physics_rate",
-                    f"expected a multiple of plant.control_rate ({spec.control_rate_hz} Hz), "
-                    f"got {spec.physics_rate_hz}",
-                )
 
 
 def check_rate(rate_hz: float, dt_s: float) -> None:

@@ -85,12 +85,8 @@ class CrazyflowPlant(Plant):
                 "plant.physics_rate",
                 f"expected a multiple of plant.control_rate ({control_hz} Hz), got {physics_hz}",
             )
-        self.drone, self.physics_hz, self.control_hz, self.altitude_m = (
-            drone,
-            physics_hz,
-            control_hz,
-            altitude_m,
-        )
+        self.drone, self.altitude_m = drone, altitude_m
+        self.physics_hz, self.control_hz = physics_hz, control_hz
         self.radius_m = body_radius_m(drone)
         self._worker: _Worker | None = None
         self._p = np.zeros((n, 3))

@@ -254,6 +254,12 @@ class CrazyflowPlantSpec(PlantSpec):
                 raise ValidationError(
                     f"plant.{scenario_key(name)}", f"expected an integer >= 1 [Hz], got {value!r}"
                 )
+        if self.physics_rate_hz % self.control_rate_hz:
+            raise ValidationError(
+                "plant.physics_rate",
+                f"expected a multiple of plant.control_rate ({self.control_rate_hz} Hz), "
+                f"got {self.physics_rate_hz}",
+            )
         if not 0.0 < self.altitude_m < math.inf:
             raise ValidationError(
                 "plant.altitude", f"expected a finite height > 0 [m], got {self.altitude_m!r}"

@@ -10,6 +10,7 @@ import pytest
 from mpcform.errors import ValidationError
 from mpcform.sim.plant_spec import (
     PLANT_SPECS,
+    CrazyflowPlantSpec,
     IdealPlantSpec,
     LagPlantSpec,
     PlantSpec,
@@ -135,3 +136,29 @@ def test_a_field_of_another_kind_is_refused(cls: type[PlantSpec], name: str) -> 
 def test_wind_of_the_wrong_dimension_is_refused_when_built() -> None:
     with pytest.raises(ValidationError, match="wind.mean"):
         LagPlantSpec(wind=Wind([1.0, 0.0, 0.0])).build(2, 2)
+
+
+@pytest.mark.parametrize(
+    ("fields", "match"),
+    [
+        ({"physics_rate_hz": 450}, "plant.physics_rate: expected a multiple of plant.control_rate"),
+        ({"control_rate_hz": 0}, "plant.control_rate: expected an integer >= 1"),
+        ({"drone": "cf3"}, "plant.drone: expected one of cf2x_L250"),
+        ({"altitude_m": 0.0}, "plant.altitude: expected a finite height > 0"),
+    ],
+)
+def test_crazyflow_spec_refuses_bad_fields(fields: dict, match: str) -> None:
+    with pytest.raises(ValidationError, match=match):
+        CrazyflowPlantSpec(**fields)
+
+
+def test_crazyflow_is_planned_as_the_quadrotor_of_its_platform() -> None:
+    crazy = CrazyflowPlantSpec(drone="cf2x_P250").robustness(3, 0.1, None, True)
+    quad = QuadrotorPlantSpec(platform="cf2x_P250").robustness(3, 0.1, None, True)
+    assert (crazy.margin_m, crazy.a_max_mps2, crazy.valid_speed_mps) == (
+        quad.margin_m,
+        quad.a_max_mps2,
+        quad.valid_speed_mps,
+    )
+    for (a, b, c, axes), (qa, qb, qc, qaxes) in zip(crazy.loop, quad.loop, strict=True):
+        assert axes == qaxes and np.array_equal(a, qa) and np.array_equal(b, qb) and np.array_equal(c, qc)
