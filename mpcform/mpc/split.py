@@ -19,14 +19,13 @@ curvature scaled by what the last trial showed (drones' active sets change along
 active-set Hessian underestimates it), but at least the distance to the first breakpoint (a row's
 slack or multiplier reaching zero: on that piece the model is exact, so it always decreases ``V``).
 The iteration stops after ``split_iterations`` rounds, when a round would start after
-``split_budget_s``, or at convergence, and returns the best iterate.
+``split_budget_s`` or end after the step's deadline, or at convergence; it returns the best iterate.
 
 A close start's hard no-approach first row stays at ``t = 0`` (its safety argument needs
 ``+-c0^T W x_1 >= 0`` per drone): the limit is the joint QP's optimum with those rows split so.
 With a velocity loop every first row is hard (:func:`mpcform.mpc.planner.hard_first_rows`), so
-none of them moves.
-The per-drone QP takes the hard optimum whenever it exists (:mod:`mpcform.mpc.per_drone`), so the
-limit is the joint optimum where the joint QP needs no slack.
+none of them moves. The per-drone QP takes the hard optimum whenever it exists
+(:mod:`mpcform.mpc.per_drone`), so the limit is the joint optimum where the joint QP needs no slack.
 """
 
 from __future__ import annotations
@@ -96,7 +95,7 @@ class SplitQP(StepSolver):
     """The per-drone QPs with their pair rows' split points iterated towards the joint optimum.
 
     ``iterations``: rounds after the midpoint solve; ``budget_s``: wall time of a step's solve
-    after which no new round starts (None: none), nor after the step's ``deadline_s``."""
+    after which no new round starts (None: none); see the module docstring for the deadline."""
 
     warm_starts = True
 
@@ -124,14 +123,15 @@ class SplitQP(StepSolver):
         finite = bool(np.isfinite(best.value))  # a drone whose midpoint solve failed: no rounds
         bend, direction, rounds = 1.0, step_qp.direction(best) if finite else None, 0
         frozen = np.zeros(best.shift.shape, dtype=bool)  # rows kept where they are until a step succeeds
-        stop_at = min(np.inf if self.budget_s is None else t0 + self.budget_s, qp.deadline_s or np.inf)
+        budget_end = np.inf if self.budget_s is None else t0 + self.budget_s
+        round_s, deadline = history[0][1], qp.deadline_s or np.inf  # a round takes about a solve
         while rounds < self.iterations and direction is not None and np.isfinite(best.value):
-            if time.perf_counter() >= stop_at:  # the split budget, or the step's deadline
-                break
+            if (now := time.perf_counter()) >= budget_end or now + round_s > deadline:
+                break  # the split budget spent, or a round would end past the step's deadline
             newton, slope, longest = direction
             size = min(1.0, max(longest, 1.0 / bend))  # the model's minimiser, its curvature scaled
             trial = step_qp.solve(None, best.shift + size * newton, step_qp.inputs(best), best)
-            rounds += 1
+            rounds, round_s = rounds + 1, max(round_s, time.perf_counter() - now)
             if record:
                 seen.append(step_qp.positions(trial))
             change = trial.value - best.value
