@@ -18,8 +18,8 @@ needs no more slack than the midpoint split. The step length is the model's mini
 curvature scaled by what the last trial showed (drones' active sets change along the way, so the
 active-set Hessian underestimates it), but at least the distance to the first breakpoint (a row's
 slack or multiplier reaching zero: on that piece the model is exact, so it always decreases ``V``).
-The iteration stops after ``split_iterations`` rounds, when a round would start after
-``split_budget_s`` or end after the step's deadline, or at convergence; it returns the best iterate.
+It stops after ``split_iterations`` rounds, past ``split_budget_s``, less than two rounds (the
+longest so far) before the step's deadline, or at convergence, and returns the best iterate.
 
 A close start's hard no-approach first row stays at ``t = 0`` (its safety argument needs
 ``+-c0^T W x_1 >= 0`` per drone): the limit is the joint QP's optimum with those rows split so.
@@ -126,8 +126,8 @@ class SplitQP(StepSolver):
         budget_end = np.inf if self.budget_s is None else t0 + self.budget_s
         round_s, deadline = history[0][1], qp.deadline_s or np.inf  # a round takes about a solve
         while rounds < self.iterations and direction is not None and np.isfinite(best.value):
-            if (now := time.perf_counter()) >= budget_end or now + round_s > deadline:
-                break  # the split budget spent, or a round would end past the step's deadline
+            if (now := time.perf_counter()) >= budget_end or now + 2.0 * round_s > deadline:
+                break  # the split budget spent, or no time for a round and what follows the solve
             newton, slope, longest = direction
             size = min(1.0, max(longest, 1.0 / bend))  # the model's minimiser, its curvature scaled
             trial = step_qp.solve(None, best.shift + size * newton, step_qp.inputs(best), best)
