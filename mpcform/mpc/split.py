@@ -21,11 +21,9 @@ slack or multiplier reaching zero: on that piece the model is exact, so it alway
 It stops after ``split_iterations`` rounds, past ``split_budget_s``, less than two rounds (the
 longest so far) before the step's deadline, or at convergence, and returns the best iterate.
 
-A close start's hard no-approach first row stays at ``t = 0`` (its safety argument needs
-``+-c0^T W x_1 >= 0`` per drone): the limit is the joint QP's optimum with those rows split so.
-With a velocity loop every first row is hard (:func:`mpcform.mpc.planner.hard_first_rows`), so
-none of them moves. The per-drone QP takes the hard optimum whenever it exists
-(:mod:`mpcform.mpc.per_drone`), so the limit is the joint optimum where the joint QP needs no slack.
+Hard first rows stay at ``t = 0``: a close start's no-approach row (its safety argument needs
+``+-c0^T W x_1 >= 0`` per drone) and, with a velocity loop, every first row. The per-drone QP takes
+the hard optimum whenever it exists, so the limit is the joint optimum where it needs no slack.
 """
 
 from __future__ import annotations
@@ -95,7 +93,7 @@ class SplitQP(StepSolver):
     """The per-drone QPs with their pair rows' split points iterated towards the joint optimum.
 
     ``iterations``: rounds after the midpoint solve; ``budget_s``: wall time of a step's solve
-    after which no new round starts (None: none); see the module docstring for the deadline."""
+    after which no new round starts (None: none)."""
 
     warm_starts = True
 
@@ -120,18 +118,19 @@ class SplitQP(StepSolver):
         best = step_qp.solve(np.arange(m), step_qp.midpoint(), warm, None)
         history = [(best.value, time.perf_counter() - t0, time.process_time() - c0)]
         seen = [step_qp.positions(best)] if record else []
-        finite = bool(np.isfinite(best.value))  # a drone whose midpoint solve failed: no rounds
-        bend, direction, rounds = 1.0, step_qp.direction(best) if finite else None, 0
+        bend, direction, rounds = 1.0, None, 0
         frozen = np.zeros(best.shift.shape, dtype=bool)  # rows kept where they are until a step succeeds
         budget_end = np.inf if self.budget_s is None else t0 + self.budget_s
         round_s, deadline = history[0][1], qp.deadline_s or np.inf  # a round takes about a solve
-        while rounds < self.iterations and direction is not None and np.isfinite(best.value):
+        while rounds < self.iterations and np.isfinite(best.value):  # (a failed midpoint: no rounds)
             if (now := time.perf_counter()) >= budget_end or now + 2.0 * round_s > deadline:
                 break  # the split budget spent, or no time for a round and what follows the solve
+            if (direction := step_qp.direction(best) if rounds == 0 else direction) is None:
+                break  # converged
             newton, slope, longest = direction
             size = min(1.0, max(longest, 1.0 / bend))  # the model's minimiser, its curvature scaled
             trial = step_qp.solve(None, best.shift + size * newton, step_qp.inputs(best), best)
-            rounds, round_s = rounds + 1, max(round_s, time.perf_counter() - now)
+            rounds += 1
             if record:
                 seen.append(step_qp.positions(trial))
             change = trial.value - best.value
@@ -148,6 +147,7 @@ class SplitQP(StepSolver):
                     break
                 frozen |= step_qp.rows_of(failed)
                 direction, bend = step_qp.direction(best, frozen), 1.0
+            round_s = max(round_s, time.perf_counter() - now)  # its solve and next direction
             history.append((best.value, time.perf_counter() - t0, time.process_time() - c0))
         sol, active = step_qp.solution(best)
         if sol.success and self.iterations:
