@@ -88,7 +88,7 @@ def flown(name: str, altitude_m: float = 1.0) -> dict:
     sc = online(dataclasses.replace(sc, plant=dataclasses.replace(sc.plant, altitude_m=altitude_m)))
     run = run_scenario(sc)
     m, plant, times = run.summary["metrics"], run.summary["plant"], run.simulation.step_times_s
-    shown = ("min_separation_true", "completion", "time_to_complete", "deadline_misses")
+    shown = ("min_separation_true", "completion", "time_to_complete", "deadline_misses", "max_speed_true")
     steps_ms = [f"{1e3 * q:.1f}" for q in (np.median(times), np.quantile(times, 0.99), times.max())]
     print(name, {k: m[k] for k in shown}, "step p50/p99/max [ms]", steps_ms, "setup", plant["setup_s"])
     assert plant["drone_contacts"] == [] and plant["floor_contacts"] == [] and plant["flipped"] == []
