@@ -6,8 +6,9 @@ process never sees it (its outputs are those of every other plant). :func:`serve
 requests on its pipe:
 
 - ``("reset", positions (n, 3), drone, physics_hz, control_hz)``: build the simulator (one world,
-  n drones of the first-principles model of ``drone``) at those positions, level, at rest, rotors
-  at hover speed, and compile its step once (the JIT); answers the build and compile time [s];
+  n drones of the first-principles model of ``drone``) and compile its step (the JIT), unless the
+  last reset built the same; place the drones at those positions, level, at rest, rotors at hover
+  speed; answers the time it took [s];
 - ``("fly", setpoints (k, n, 16))``: send setpoint row j at control tick j (``Sim.state_control``,
   the firmware's Mellinger controller) and step the physics ``physics_hz / control_hz`` times per
   tick, recording every physics step; answers positions, velocities (k m + 1, n, 3) and
@@ -31,15 +32,14 @@ import numpy as np
 
 
 class _Flight:
-    """One crazyflow simulation of n drones."""
+    """One crazyflow simulation of n drones, built and compiled once, placed at every reset."""
 
-    def __init__(self, positions: np.ndarray, drone: str, physics_hz: int, control_hz: int) -> None:
-        import jax.numpy as jnp
+    def __init__(self, n: int, drone: str, physics_hz: int, control_hz: int) -> None:
         from crazyflow.control import Control
         from crazyflow.sim import Sim
         from drone_models.core import load_params
 
-        n = positions.shape[0]
+        self.key = (n, drone, physics_hz, control_hz)
         self.sim = Sim(
             n_worlds=1,
             n_drones=n,
@@ -53,22 +53,29 @@ class _Flight:
         params = load_params("first_principles", drone)
         _, k1, k2 = (float(c) for c in params["rpm2thrust"])
         weight = float(params["mass"]) * 9.81 / 4.0  # per rotor
-        hover_rpm = (-k1 + np.sqrt(k1 * k1 + 4.0 * k2 * weight)) / (2.0 * k2)
+        self.hover_rpm = (-k1 + np.sqrt(k1 * k1 + 4.0 * k2 * weight)) / (2.0 * k2)
+        self.place(np.column_stack([np.arange(n), np.zeros(n), np.ones(n)]))
+        self.sim.step(1)  # compile the step as fly calls it (n_steps is static)
+
+    def place(self, positions: np.ndarray) -> None:
+        """Every drone level and at rest at ``positions`` (n, 3), rotors at hover speed, holding."""
+        import jax.numpy as jnp
+
         states = self.sim.data.states
-        self.sim.data = self.sim.data.replace(
+        self.sim.default_data = self.sim.default_data.replace(
             states=states.replace(
                 pos=jnp.asarray(positions[None], dtype=states.pos.dtype),
                 vel=jnp.zeros_like(states.vel),
-                rotor_vel=jnp.full(states.rotor_vel.shape, hover_rpm),
+                quat=jnp.zeros_like(states.quat).at[..., 3].set(1.0),
+                ang_vel=jnp.zeros_like(states.ang_vel),
+                rotor_vel=jnp.full(states.rotor_vel.shape, self.hover_rpm),
             )
         )
-        self.sim.default_data = self.sim.data  # a reset keeps these starts
-        hold = np.zeros((1, n, 16))
+        self.sim.reset()
+        hold = np.zeros((1, positions.shape[0], 16))
         hold[0, :, :3] = positions
         hold[0, :, 12] = 1.0  # quaternion (x, y, z, w): yaw 0
         self.sim.state_control(hold)
-        self.sim.step(self.per_tick)  # compile
-        self.sim.reset()
 
     def fly(self, setpoints: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         k, n = setpoints.shape[:2]
@@ -83,8 +90,8 @@ class _Flight:
         return pos, vel, quat
 
     def _state(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        st = self.sim.data.states
-        return np.asarray(st.pos[0]), np.asarray(st.vel[0]), np.asarray(st.quat[0])
+        st = self.sim.data.states  # whole arrays to numpy, then the world (no JAX op per index)
+        return np.asarray(st.pos)[0], np.asarray(st.vel)[0], np.asarray(st.quat)[0]
 
 
 def serve(requests: Connection, answers: Connection) -> None:
@@ -101,7 +108,10 @@ def serve(requests: Connection, answers: Connection) -> None:
                 return
             if request[0] == "reset":
                 start = time.perf_counter()
-                flight = _Flight(*request[1:])
+                positions, key = request[1], (request[1].shape[0], *request[2:])
+                if flight is None or flight.key != key:  # the same swarm is placed again
+                    flight = _Flight(*key)
+                flight.place(positions)
                 conn.send(("ok", time.perf_counter() - start))
             elif request[0] == "fly":
                 if flight is None:
