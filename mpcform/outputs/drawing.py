@@ -47,6 +47,16 @@ MEDIAN_COLOUR = "tab:blue"
 BAND_ALPHA = 0.25
 SNAPSHOTS = 4
 SNAPSHOT_LABEL = "snapshot-label"  # gid of the ``t = ... s`` text beside a snapshot
+FLOWN_GID = "flown"  # gid of what the drones really did (a plant run's dense true path)
+FLOWN_COLOUR = "tab:green"  # a swarm's flown speeds and separation (per drone: the drone's colour)
+DISPLAY_SAMPLES = 3000  # a dense true path drawn with at most about this many samples
+
+
+def display_rows(samples: int, limit: int = DISPLAY_SAMPLES) -> Array:
+    """Indices of at most about ``limit`` of ``samples`` evenly strided, the last included: what a
+    line is drawn through (peaks and minima are taken from every sample, not these)."""
+    idx = np.arange(0, samples, max(1, -(-samples // limit)))
+    return idx if idx[-1] == samples - 1 else np.append(idx, samples - 1)
 
 
 def skeleton_edges(run: RunData) -> list[tuple[int, int]]:

@@ -12,7 +12,9 @@ drones replace the per-drone lines):
   :mod:`mpcform.outputs.plan_views`;
 - ``tracking_error.png``: ``||p_i - p*_i||`` [m] over drones, log scale;
 - ``separation.png``: minimum distance between two drones [m], d_min, the closest moment marked;
-- ``speed.png``: command speeds ``||u_i||`` [m/s] (zero-order hold) with v_max;
+  for a plant run also the flown minimum over the dense true path, its lowest point marked;
+- ``speed.png``: command speeds ``||u_i||`` [m/s] (zero-order hold) with v_max; for a plant run
+  also the flown speeds ``||v_i||`` of the dense true path, their peak marked;
 - ``clearance.png`` (runs with obstacles): distance of the drones to each obstacle's surface
   along the segments [m] against the required clearance;
 - ``scale.png``: best-fit scale of the positions (Umeyama) and the reference's scale, drawn only
@@ -45,6 +47,7 @@ from mpcform.outputs.drawing import (
     envelope,
     per_drone_style,
 )
+from mpcform.outputs.flown import flown_separation, flown_speeds
 from mpcform.outputs.plan_views import new_figure, top_view, view_3d
 from mpcform.outputs.rundata import RunData
 from mpcform.sim.metrics import command_speeds_mps, min_separations_m, tracking_errors_m
@@ -60,7 +63,7 @@ FIGURE_FILES = (
     "scale.png",
 )
 LINESTYLES = ("-", "--", ":", "-.")  # runs of a comparison: overlapping curves stay visible
-LOG_FLOOR_M = 1e-14  # tracking errors below this (exact starts) are not drawn on the log axis
+LOG_FLOOR_M = 1e-6  # tracking errors below this (exact starts, rounding) are not drawn on the log axis
 AXIS_HEADROOM = 1.1  # a time-series axis ends at most 10 % above what it must show
 SHAPE_TOL = 0.2  # relative RMS residual above which the drones do not hold the template's shape
 SERIES_SIZE_IN = (8.0, 4.2)
@@ -97,6 +100,7 @@ def tracking_error(run: RunData) -> Figure:
     else:
         envelope(ax, t, err, MEDIAN_COLOUR, "tracking error")
     ax.set_yscale("log")
+    ax.set_ylim(bottom=max(ax.get_ylim()[0], LOG_FLOOR_M))  # rounding-level errors squash the rest
     _finish(ax, run, "Tracking error", "tracking error ||p_i - p*_i|| [m]")
     return fig
 
@@ -118,7 +122,8 @@ def separation(run: RunData) -> Figure:
         zorder=5,
         label=f"closest: drones {i}-{j}, {dist:.3g} m at t = {t[k]:.3g} s",
     )
-    ax.set_ylim(0.0, AXIS_HEADROOM * float(max(sep.max(), run.d_min_m or 0.0)))
+    highest = max(float(sep.max()), flown_separation(ax, run))  # a plant run's, dense
+    ax.set_ylim(0.0, AXIS_HEADROOM * max(highest, run.d_min_m or 0.0))
     _finish(ax, run, "Separation", "minimum separation [m]")
     return fig
 
@@ -132,7 +137,8 @@ def speeds(run: RunData) -> Figure:
             ax.stairs(speed[:, i], t, baseline=None, label=f"drone {i}", **per_drone_style(i))
     else:
         envelope(ax, t, speed, MEDIAN_COLOUR, "speed", stairs=True)
-    top = speed_axis_top(float(speed.max()), run.v_max_mps)
+    peak = max(float(speed.max()), flown_speeds(ax, run))  # a plant run's, dense
+    top = speed_axis_top(peak, run.v_max_mps)
     v_max = run.v_max_mps
     if v_max is not None and v_max <= top:
         ax.axhline(v_max, label=f"v_max = {v_max:g} m/s", **LIMIT_STYLE)
@@ -140,7 +146,7 @@ def speeds(run: RunData) -> Figure:
         ax.text(
             0.99,
             0.97,
-            f"v_max = {v_max:g} m/s (off scale: {v_max / speed.max():.3g}x the peak)",
+            f"v_max = {v_max:g} m/s (off scale: {v_max / peak:.3g}x the peak)",
             transform=ax.transAxes,
             ha="right",
             va="top",
@@ -148,7 +154,8 @@ def speeds(run: RunData) -> Figure:
             color="tab:red",
         )
     ax.set_ylim(0.0, top)
-    _finish(ax, run, "Command speeds", "speed ||u_i|| [m/s]")
+    flown_too = " (solid) and flown (dotted)" if run.flown is not None and run.n <= PER_DRONE_MAX else ""
+    _finish(ax, run, f"Command speeds{flown_too}", "speed ||u_i|| [m/s]")
     return fig
 
 

@@ -2,10 +2,11 @@
 ``view_3d.png`` as three projections (x-y, x-z, y-z), so that paths through the centre and the
 clearance between drones stay readable (a perspective 3-D plot hides both).
 
-Every plan shows the drone paths (one colour per drone up to six drones, else thin shades), the
-reference paths dashed on top, formation snapshots coloured by time (colour bar) and labelled
-``t = ... s``, start and end, obstacles with their required clearance, the closest pair at the
-moment of minimum separation, and for consensus runs the communication graph and the leaders.
+Every plan shows the drone paths (one colour per drone up to six drones, else thin shades), and
+for a plant run the flown (true, dense) paths dotted over them, the reference paths dashed on top,
+formation snapshots coloured by time (colour bar) and labelled ``t = ... s``, start and end,
+obstacles with their required clearance, the closest pair at the moment of minimum separation,
+and for consensus runs the communication graph and the leaders.
 """
 
 from __future__ import annotations
@@ -19,10 +20,12 @@ from matplotlib.cm import ScalarMappable
 from matplotlib.figure import Figure
 
 from mpcform.outputs.drawing import (
+    FLOWN_GID,
     PATH_GREY,
     PER_DRONE_MAX,
     REFERENCE_STYLE,
     closest_pair,
+    display_rows,
     draw_graph,
     draw_leaders,
     draw_obstacles,
@@ -98,6 +101,8 @@ def draw_plan(
     colours = drone_colours(run.n)
     for i in range(run.n):
         label = f"drone {i}" if few else ("drone paths" if i == 0 else None)
+        if label is not None and run.flown is not None:
+            label += " (control samples)"
         ax.plot(
             p[:, i, a],
             p[:, i, b],
@@ -107,6 +112,15 @@ def draw_plan(
             zorder=2,
             label=label,
         )
+    true = run.flown
+    if true is not None:  # a plant run: where the drones really flew, thin and dotted over the samples
+        q = true.positions_m[display_rows(true.t_s.shape[0])]
+        for i in range(run.n):
+            label = "flown path (true)" if i == 0 else None
+            colour = colours[i] if few else "k"
+            ax.plot(
+                q[:, i, a], q[:, i, b], color=colour, lw=0.8, ls=":", zorder=2.4, label=label, gid=FLOWN_GID
+            )
     if np.ptp(ref, axis=0).max() > 0:
         for i in range(run.n):
             ax.plot(ref[:, i, a], ref[:, i, b], label="reference path" if i == 0 else None, **REFERENCE_STYLE)

@@ -107,6 +107,13 @@ class RunData:
         return resolve_clearances(saved, self.d_min_m)
 
     @property
+    def flown(self) -> TrueTrajectory | None:
+        """The dense true motion of a run on a plant other than the ideal one (None otherwise: the
+        ideal plant flies the plan's own straight segments)."""
+        plant = (self.summary.get("plant") or {}).get("kind", "ideal")
+        return None if plant == "ideal" else self.trajectory.true
+
+    @property
     def label(self) -> str:
         """``<scenario> (<controller>[, <solver>])``, for titles and legends."""
         solver = self.summary.get("solver")
