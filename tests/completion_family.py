@@ -199,6 +199,7 @@ def outcome(sc: dict[str, Any]) -> dict[str, Any]:
         "coupling": sc["controller"]["coupling"],
         "n": len(sc["template"]["offsets"]),
         "duration": sc["simulation"]["duration"],
+        "dt": sc["simulation"]["dt"],
         "completion": m["completion"],
         "time_to_complete": m["time_to_complete"],
         "incomplete": list(zip(m["incomplete_drones"], m["incomplete_distances_m"], strict=True)),

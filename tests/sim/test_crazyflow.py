@@ -29,6 +29,7 @@ if importlib.util.find_spec("crazyflow") is None:
 
 SCENARIOS = Path(__file__).resolve().parents[2] / "scenarios"
 SWAP_SEED, SWAP_RUNS = 7, 8
+MISS_SHARE = 0.01  # steps past their deadline (each sends the certified braking fallback)
 
 
 @pytest.fixture(scope="module")
@@ -83,7 +84,7 @@ def online(sc: Scenario) -> Scenario:
 
 def flown(name: str, altitude_m: float = 1.0) -> dict:
     """Fly a bundled scenario online in crazyflow: no contact, floor contact or flip, d_min kept
-    on the 500 Hz true path, every drone arrived, every step within its deadline."""
+    on the 500 Hz true path, every drone arrived, at most 1 % of the steps past their deadline."""
     sc = with_plant_kind(load_scenario(SCENARIOS / f"{name}.toml"), "crazyflow")
     sc = online(dataclasses.replace(sc, plant=dataclasses.replace(sc.plant, altitude_m=altitude_m)))
     run = run_scenario(sc)
@@ -93,7 +94,7 @@ def flown(name: str, altitude_m: float = 1.0) -> dict:
     print(name, {k: m[k] for k in shown}, "step p50/p99/max [ms]", steps_ms, "setup", plant["setup_s"])
     assert plant["drone_contacts"] == [] and plant["floor_contacts"] == [] and plant["flipped"] == []
     assert m["separation_violations_true"] == 0 and m["min_separation_true"] >= sc.limits.d_min_m
-    assert m["completion"] == 1.0 and m["deadline_misses"] == 0
+    assert m["completion"] == 1.0 and m["deadline_misses"] <= MISS_SHARE * sc.steps
     return run.summary
 
 
@@ -126,9 +127,8 @@ def test_random_swaps_fly_in_crazyflow() -> None:
         print(
             r["name"], r["n"], f"{r['min_separation']:.3f}", r["completion"], r["deadline_misses"], r["cpu_s"]
         )
-    bad = [
-        r for r in results if r["violations"] or r["completion"] < 1.0 or r["events"] or r["deadline_misses"]
-    ]
+    bad = [r for r in results if r["violations"] or r["completion"] < 1.0 or r["events"]]
+    bad += [r for r in results if r["deadline_misses"] > MISS_SHARE * r["duration"] / r["dt"]]
     assert [r["name"] for r in bad] == []
 
 
