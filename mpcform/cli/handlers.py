@@ -90,9 +90,7 @@ def finish_run(args: argparse.Namespace, scenario: Scenario, run: RunResult) -> 
     write_formation_npz(run.out_dir, data.formation)
     _figures(data, run.out_dir / PLOTS_DIR, args.plot, args.animate, args.speed)
     if args.html:
-        lim = scenario.limits
-        fence = None if lim.geofence_min_m is None else (lim.geofence_min_m, lim.geofence_max_m)
-        print(f"wrote {write_view(data, run.out_dir / VIEWER_FILE, fence)}")
+        print(f"wrote {write_view(data, run.out_dir / VIEWER_FILE)}")
     if args.export:
         with option_errors(*EXPORT_FIELDS):
             report_export(export_run(data, run.out_dir / EXPORT_DIR, export_options(args)))
@@ -114,10 +112,11 @@ def _view(args: argparse.Namespace) -> int:
     return 0
 
 
-def write_view(data: RunData, path: Path, geofence: tuple[Any, Any] | None = None) -> Path:
-    """The interactive viewer of a run (:mod:`mpcform.outputs.viewer`): one self-contained HTML file."""
+def write_view(data: RunData, path: Path) -> Path:
+    """The interactive viewer of a run (:mod:`mpcform.outputs.viewer`): one self-contained HTML file
+    (``run --html`` and ``view`` both from the run's data, the geofence from ``formation.npz``)."""
     from mpcform.formation.geometry import formation_edges
-    from mpcform.outputs.viewer import viewer_curves, write_viewer_html
+    from mpcform.outputs.viewer import flown_curves, viewer_curves, write_viewer_html
 
     traj = data.trajectory
     return write_viewer_html(
@@ -128,12 +127,13 @@ def write_view(data: RunData, path: Path, geofence: tuple[Any, Any] | None = Non
         v_max_mps=data.v_max_mps,
         edges=formation_edges(data.formation.offsets_m),
         obstacles=data.formation.obstacles,
-        geofence=geofence,
+        geofence=None if data.formation.geofence_m is None else tuple(data.formation.geofence_m),
         reference_m=traj.reference_m,
         title=data.label,
         curves=viewer_curves(
             traj.t_s, traj.positions_m, reference_m=traj.reference_m, commands_mps=traj.commands_mps
-        ),
+        )
+        | ({} if data.flown is None else flown_curves(traj.t_s, data.flown)),
     )
 
 

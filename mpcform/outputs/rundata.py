@@ -6,8 +6,9 @@ the best-fit scale and the formation's edges), the reference's scale and the obs
 ``mpcform run --plot/--export`` takes them from the scenario in memory (:func:`formation_data`)
 and saves them as ``formation.npz`` beside the other files: ``offsets`` (n, d) [m],
 ``scale_ref`` (T,), ``obstacles`` (k, d + 2) [m] (centre, radius, clearance as resolved; a NaN
-clearance, as runs saved before the clearance was resolved on loading have it: d_min / 2), and
-for a consensus run ``graph_edges`` (m, 2) and ``leaders`` (k,) (the communication graph's links
+clearance, as runs saved before the clearance was resolved on loading have it: d_min / 2),
+``geofence`` (2, d) [m] when the run has one, and for a consensus run ``graph_edges`` (m, 2) and
+``leaders`` (k,) (the communication graph's links
 and the drones that see the commanded scale; absent otherwise).
 :func:`load_run` reads a directory back into the same :class:`RunData`; without
 ``formation.npz`` it falls back to the reference's start shape (scale then relative to the start).
@@ -46,14 +47,16 @@ class FormationData:
     ``formation.npz``, the reference's start shape ``s0 R0 r_i``); ``scale_ref`` (T,), the
     reference's scale, or None when unknown; ``obstacles`` (k, d + 2): centre, radius,
     clearance (NaN in older runs: d_min / 2, :attr:`RunData.obstacles`) of each sphere;
-    ``graph_edges`` (m, 2), the communication graph of a consensus run (None: no graph), and
-    ``leaders``, its drones that see the commanded scale."""
+    ``graph_edges`` (m, 2), the communication graph of a consensus run (None: no graph),
+    ``leaders``, its drones that see the commanded scale, and ``geofence_m`` (2, d), the box's
+    min and max corners (None: no fence)."""
 
     offsets_m: Array
     scale_ref: Array | None
     obstacles: Array
     graph_edges: Array | None = None
     leaders: tuple[int, ...] = ()
+    geofence_m: Array | None = None
 
     @property
     def scale_is_relative(self) -> bool:
@@ -136,7 +139,15 @@ def formation_data(scenario: Scenario, t_s: Array) -> FormationData:
         obstacles=obstacles,
         graph_edges=None if scenario.graph is None else np.array(scenario.graph.edges, dtype=int),
         leaders=() if consensus is None else tuple(int(i) for i in consensus.leaders),
+        geofence_m=_fence(scenario),
     )
+
+
+def _fence(scenario: Scenario) -> Array | None:
+    lim = scenario.limits
+    if lim.geofence_min_m is None or lim.geofence_max_m is None:
+        return None
+    return np.stack([lim.geofence_min_m, lim.geofence_max_m])
 
 
 def write_formation_npz(out_dir: str | Path, formation: FormationData) -> Path:
@@ -152,6 +163,8 @@ def write_formation_npz(out_dir: str | Path, formation: FormationData) -> Path:
     }
     if formation.graph_edges is not None:
         arrays |= {"graph_edges": formation.graph_edges, "leaders": np.array(formation.leaders, dtype=int)}
+    if formation.geofence_m is not None:
+        arrays["geofence"] = formation.geofence_m
     np.savez_compressed(path, **arrays)
     return path
 
@@ -194,7 +207,7 @@ def _load_formation(path: Path, trajectory: Trajectory) -> FormationData:
     if not path.exists():
         ref0 = trajectory.reference_m[0]
         return FormationData(ref0 - ref0.mean(axis=0), None, np.empty((0, d + 2)))
-    extra = _npz(path, ("offsets", "scale_ref", "obstacles"), optional=("graph_edges", "leaders"))
+    extra = _npz(path, ("offsets", "scale_ref", "obstacles"), optional=("graph_edges", "leaders", "geofence"))
     if extra["offsets"].shape != (n, d) or extra["scale_ref"].shape != trajectory.t_s.shape:
         shapes = f"offsets {extra['offsets'].shape} or scale_ref {extra['scale_ref'].shape}"
         raise RunDirError(str(path), f"{shapes} do not match p {trajectory.positions_m.shape}")
@@ -205,6 +218,7 @@ def _load_formation(path: Path, trajectory: Trajectory) -> FormationData:
         extra["obstacles"].reshape(-1, d + 2),
         graph_edges=None if graph is None else graph.astype(int).reshape(-1, 2),
         leaders=tuple(int(i) for i in extra.get("leaders", np.empty(0))),
+        geofence_m=None if "geofence" not in extra else extra["geofence"].reshape(2, d),
     )
 
 

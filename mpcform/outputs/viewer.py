@@ -30,10 +30,13 @@ from mpcform._validate import Array, finite_array, positive
 from mpcform.errors import ValidationError
 from mpcform.formation.geometry import min_pair_distances, pairs_within
 from mpcform.sim.metrics import REL_TOL
+from mpcform.sim.trajectory import TrueTrajectory
 
 SEPARATION_KEY = "min_separation_m"
 SPEED_KEY = "max_speed_mps"
 TRACKING_KEY = "max_tracking_error_m"
+FLOWN_SEPARATION_KEY = "flown_min_separation_m"  # a plant run's dense true path (flown_curves)
+FLOWN_SPEED_KEY = "flown_max_speed_mps"
 UNITS = {"_mps2": "m/s²", "_mps": "m/s", "_m": "m", "_s": "s", "_rad": "rad", "_deg": "°"}
 LOG_DECADES = 2.0  # positive curves spanning more decades than this get a log axis
 _PLACEHOLDER = re.compile(r"/\*@(CSS|JS|DATA)@\*/|@TITLE@")
@@ -101,6 +104,19 @@ def viewer_curves(
     if reference_m is not None:
         ref = _positions("reference_m", reference_m, t.shape[0], p.shape[1:])
         curves[TRACKING_KEY] = np.linalg.norm(p - ref, axis=-1).max(axis=1)
+    return curves
+
+
+def flown_curves(t_s: Array, true: TrueTrajectory) -> dict[str, Array]:
+    """A plant run's dense true path as curves (T,) on the control samples: over each interval
+    ``[t_k, t_k+1)`` the smallest distance between two drones and the largest true speed (the
+    last sample: its own), so the true extremes show at the viewer's rate."""
+    t = _times(t_s)
+    starts = np.searchsorted(true.t_s, t, side="left").clip(max=true.t_s.shape[0] - 1)
+    speed = np.linalg.norm(true.velocities_mps, axis=-1).max(axis=1)
+    curves = {FLOWN_SPEED_KEY: np.maximum.reduceat(speed, starts)}
+    if true.positions_m.shape[1] >= 2:
+        curves[FLOWN_SEPARATION_KEY] = np.minimum.reduceat(min_pair_distances(true.positions_m), starts)
     return curves
 
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 from importlib.util import find_spec
 from pathlib import Path
 
@@ -316,6 +317,16 @@ def test_run_html_and_view_write_the_viewer(tmp_path: Path, capsys: pytest.Captu
     assert main(["view", str(out), "--out", str(tmp_path / "again.html")]) == 0
     assert (tmp_path / "again.html").stat().st_size > 10_000
     assert "wrote" in capsys.readouterr().out
+    shown, again = _payload(out / "viewer.html"), _payload(tmp_path / "again.html")
+    assert shown == again and shown["fence"] == {"min_m": [-20.0, -4.0], "max_m": [20.0, 4.0]}
+
+
+def _payload(page: Path) -> dict:
+    found = re.search(
+        r'<script type="application/json" id="mpcform-data">(.*?)</script>', page.read_text(), re.S
+    )
+    assert found is not None
+    return json.loads(found.group(1))
 
 
 @pytest.mark.parametrize(

@@ -23,6 +23,7 @@ from mpcform.cli.handlers import write_view
 from mpcform.errors import ValidationError
 from mpcform.outputs import viewer
 from mpcform.outputs.rundata import RunData, load_run
+from mpcform.sim.trajectory import TrueTrajectory
 
 ROOT = Path(__file__).resolve().parents[2]
 MAX_BYTES = 8 * 2**20  # the 20-drone swap's page must stay below this (it is ~0.1 MB)
@@ -232,3 +233,16 @@ def test_browser_plays_the_run(browser: str, tmp_path: Path) -> None:
     )
     sample = re.search(r'<body[^>]*data-sample="(\d+)"', dom)
     assert sample is not None and int(sample.group(1)) > 0, re.findall(r"<body[^>]*>", dom)
+
+
+def test_flown_curves_keep_the_dense_extremes_of_each_interval() -> None:
+    t_true = np.linspace(0.0, 0.2, 21)  # 10 dense samples per control interval of 0.1 s
+    p = np.zeros((21, 2, 2))
+    p[:, 1, 0] = 1.0
+    p[7, 1, 0] = 0.3  # drone 1 dips towards drone 0 inside the first interval
+    v = np.zeros((21, 2, 2))
+    v[14, 0, 1] = 2.5  # a speed spike inside the second
+    true = TrueTrajectory(t_true, p, v, np.zeros_like(p))
+    curves = viewer.flown_curves(np.array([0.0, 0.1, 0.2]), true)
+    np.testing.assert_allclose(curves[viewer.FLOWN_SEPARATION_KEY], [0.3, 1.0, 1.0])
+    np.testing.assert_allclose(curves[viewer.FLOWN_SPEED_KEY], [0.0, 2.5, 0.0])
