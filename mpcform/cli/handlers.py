@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import shutil
 from importlib.util import find_spec
 from pathlib import Path
 from typing import Any
@@ -20,6 +21,7 @@ from mpcform.cli.export_flags import EXPORT_FIELDS, add_export_options, export_o
 from mpcform.cli.options import option_errors, progress
 from mpcform.cli.progress import ProgressBar
 from mpcform.errors import MPCFormError, ValidationError
+from mpcform.outputs.files import DPI_RANGE, FIGURE_DPI, FIGURE_FORMATS
 from mpcform.outputs.flight.export import check_tracked, export_run
 from mpcform.outputs.rundata import RunData, formation_data, load_run, write_formation_npz
 from mpcform.run.runner import RunResult
@@ -39,13 +41,8 @@ class PlotUnavailable(MPCFormError):
 # ---- run ----------------------------------------------------------------------------------
 def add_run_options(cmd: argparse.ArgumentParser) -> None:
     """``--plot``, ``--animate``, ``--export`` (with ``--altitude``, ``--tolerance``) of ``run``."""
-    cmd.add_argument("--plot", action="store_true", help="also write PNG figures into DIR/plots/")
-    cmd.add_argument(
-        "--animate",
-        action="store_true",
-        help="also write the flight as a video: DIR/plots/flight.mp4 with ffmpeg, else flight.gif",
-    )
-    _add_speed_option(cmd)
+    cmd.add_argument("--plot", action="store_true", help="also write the figures into DIR/plots/")
+    _add_figure_options(cmd)
     cmd.add_argument("--html", action="store_true", help="also write the interactive viewer, DIR/viewer.html")
     cmd.add_argument(
         "--export",
@@ -65,9 +62,7 @@ def progress_bar(scenario: Scenario) -> ProgressBar:
 
 def check_run_options(args: argparse.Namespace, scenario: Scenario) -> None:
     """Fail before simulating when a requested figure cannot be drawn or an option does not apply."""
-    if args.plot or args.animate:
-        require_plotting(gif=args.animate)
-    check_speed(args)
+    check_figure_options(args)
     with option_errors(*EXPORT_FIELDS):
         export_options(args)  # non-finite numbers, before the run
     if args.altitude is not None and not args.export:
@@ -88,7 +83,7 @@ def finish_run(args: argparse.Namespace, scenario: Scenario, run: RunResult) -> 
         return
     data = RunData(run.simulation, formation_data(scenario, run.simulation.t_s), run.summary, run.out_dir)
     write_formation_npz(run.out_dir, data.formation)
-    _figures(data, run.out_dir / PLOTS_DIR, args.plot, args.animate, args.speed)
+    _figures(data, run.out_dir / PLOTS_DIR, args)
     if args.html:
         print(f"wrote {write_view(data, run.out_dir / VIEWER_FILE)}")
     if args.export:
@@ -98,11 +93,11 @@ def finish_run(args: argparse.Namespace, scenario: Scenario, run: RunResult) -> 
 
 # ---- plot, compare, export ----------------------------------------------------------------
 def _plot(args: argparse.Namespace) -> int:
-    require_plotting(gif=args.animate)
-    check_speed(args)
+    args.plot = True
+    check_figure_options(args)
     data = load_run(args.dir)
     out = Path(args.dir) / PLOTS_DIR if args.out is None else Path(args.out)
-    _figures(data, out, True, args.animate, args.speed)
+    _figures(data, out, args)
     return 0
 
 
@@ -173,8 +168,7 @@ def add_commands(sub: Any) -> None:
     plot.set_defaults(func=_plot)
     plot.add_argument("dir", metavar="DIR", help="output directory of `mpcform run`")
     plot.add_argument("--out", metavar="OUT", help="figure directory (default: DIR/plots/)")
-    plot.add_argument("--animate", action="store_true", help="also write the flight as a video")
-    _add_speed_option(plot)
+    _add_figure_options(plot)
     view = sub.add_parser(
         "view",
         help="the interactive viewer of a saved run: one self-contained HTML file",
@@ -222,7 +216,15 @@ def require_plotting(gif: bool = False) -> None:
 
 
 # ---- helpers ------------------------------------------------------------------------------
-def _add_speed_option(cmd: argparse.ArgumentParser) -> None:
+def _add_figure_options(cmd: argparse.ArgumentParser) -> None:
+    cmd.add_argument(
+        "--animate",
+        nargs="?",
+        const="auto",
+        choices=("gif", "mp4", "auto"),
+        help="also write the flight as a video, DIR/plots/flight.gif or .mp4 (ffmpeg); "
+        "alone: mp4 when ffmpeg is installed, else gif",
+    )
     cmd.add_argument(
         "--speed",
         type=float,
@@ -230,30 +232,43 @@ def _add_speed_option(cmd: argparse.ArgumentParser) -> None:
         metavar="X",
         help="real-time factor of the video (default 1: as long as the flight)",
     )
+    cmd.add_argument("--format", choices=FIGURE_FORMATS, default="png", help="figure files (default png)")
+    cmd.add_argument("--dpi", type=int, default=FIGURE_DPI, help=f"figure resolution (default {FIGURE_DPI})")
 
 
-def check_speed(args: argparse.Namespace) -> None:
-    """``--speed`` is a positive real-time factor and applies only with ``--animate``."""
+def check_figure_options(args: argparse.Namespace) -> None:
+    """Before any work: plotting installed for what is asked, ``--speed`` a positive real-time
+    factor with ``--animate``, ``--dpi`` and ``--format`` with figures, an MP4 with ffmpeg."""
+    if args.plot or args.animate:
+        require_plotting(gif=args.animate in ("gif", "auto"))
     if not args.speed > 0 or args.speed == float("inf"):
         raise ValidationError("--speed", f"expected a positive real-time factor, got {args.speed}")
     if args.speed != 1.0 and not args.animate:
         raise ValidationError("--speed", "applies only with --animate")
+    if not DPI_RANGE[0] <= args.dpi <= DPI_RANGE[1]:
+        raise ValidationError(
+            "--dpi", f"expected an integer in {DPI_RANGE[0]}..{DPI_RANGE[1]}, got {args.dpi}"
+        )
+    if (args.format != "png" or args.dpi != FIGURE_DPI) and not args.plot:
+        raise ValidationError("--format" if args.format != "png" else "--dpi", "applies only with --plot")
+    if args.animate == "mp4" and shutil.which("ffmpeg") is None:
+        raise ValidationError("--animate", "an MP4 needs ffmpeg on the PATH; ask for --animate gif")
 
 
-def _figures(data: RunData, out: Path, plot: bool, animate: bool, speed: float = 1.0) -> None:
-    if not (plot or animate):
+def _figures(data: RunData, out: Path, args: argparse.Namespace) -> None:
+    if not (args.plot or args.animate):
         return
-    if plot:
+    if args.plot:
         from mpcform.outputs.figures import plot_run  # imported only when figures are asked for
 
-        paths = plot_run(data, out)
+        paths = plot_run(data, out, args.format, args.dpi)
         print(f"wrote {len(paths)} figures ({', '.join(p.name for p in paths)}) to {out}")
-    if animate:
+    if args.animate:
         from mpcform.outputs.animation import animate_run, animation_file
 
         bar = ProgressBar("animating")
         try:
-            path = animate_run(data, out / animation_file(), speed=speed, progress=bar)
+            path = animate_run(data, out / animation_file(args.animate), speed=args.speed, progress=bar)
         finally:
             bar.close()
         print(f"wrote {path}")

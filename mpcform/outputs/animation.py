@@ -44,9 +44,12 @@ AXIS_NAMES = ("x", "y", "z")
 Progress = Callable[[int, int], None]
 
 
-def animation_file() -> str:
-    """``flight.mp4`` when matplotlib finds ffmpeg, else ``flight.gif``."""
-    return MP4_FILE if FFMpegWriter.isAvailable() else ANIMATION_FILE
+def animation_file(kind: str = "auto") -> str:
+    """``flight.gif`` or ``flight.mp4`` for ``kind`` ``gif`` or ``mp4``; ``auto``: ``flight.mp4``
+    when matplotlib finds ffmpeg, else ``flight.gif``."""
+    if kind == "auto":
+        return MP4_FILE if FFMpegWriter.isAvailable() else ANIMATION_FILE
+    return {"gif": ANIMATION_FILE, "mp4": MP4_FILE}[kind]
 
 
 def frame_times(

@@ -36,6 +36,7 @@ from matplotlib import colormaps
 from matplotlib.figure import Figure
 
 from mpcform._validate import Array
+from mpcform.errors import ValidationError
 from mpcform.formation.kinematics import fit_formation
 from mpcform.formation.template import Template
 from mpcform.outputs.drawing import (
@@ -47,6 +48,7 @@ from mpcform.outputs.drawing import (
     envelope,
     per_drone_style,
 )
+from mpcform.outputs.files import FIGURE_DPI, FIGURE_FORMATS
 from mpcform.outputs.flown import flown_separation, flown_speeds
 from mpcform.outputs.plan_views import new_figure, top_view, view_3d
 from mpcform.outputs.rundata import RunData
@@ -71,11 +73,14 @@ ESTIMATE_GID = "scale-estimate"  # a drone's (or the median) scale estimate s_ha
 LEADER_GID = "scale-leader"  # a leader's scale estimate, starred
 LEADER_STARS = 9  # stars along a leader's estimate
 FIT_UNDER_ESTIMATES: dict[str, Any] = {"color": "0.55", "lw": 2.6, "alpha": 0.7, "zorder": 1.5}
-DPI = 110
+DPI = FIGURE_DPI
 
 
-def plot_run(run: RunData, out_dir: str | Path) -> list[Path]:
-    """Write the figures of ``run`` into ``out_dir`` (created); returns the paths written."""
+def plot_run(run: RunData, out_dir: str | Path, fmt: str = "png", dpi: int = DPI) -> list[Path]:
+    """Write the figures of ``run`` into ``out_dir`` (created) as ``fmt`` (:data:`FIGURE_FORMATS`)
+    at ``dpi``; returns the paths written."""
+    if fmt not in FIGURE_FORMATS:
+        raise ValidationError("format", f"expected one of {', '.join(FIGURE_FORMATS)}, got {fmt!r}")
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     figures: list[tuple[str, Figure]] = [("top_view.png", top_view(run))]
@@ -86,7 +91,7 @@ def plot_run(run: RunData, out_dir: str | Path) -> list[Path]:
         figures.append(("clearance.png", clearance(run)))
     if run.n >= 2:  # one drone has neither separation nor scale
         figures += [("separation.png", separation(run)), ("scale.png", scale(run))]
-    return [save_figure(fig, out / name, run) for name, fig in figures]
+    return [save_figure(fig, (out / name).with_suffix(f".{fmt}"), run, dpi) for name, fig in figures]
 
 
 # ---- single runs ------------------------------------------------------------------------
@@ -362,13 +367,15 @@ def _legend(ax: Any) -> None:
 
 
 def save_figure(fig: Figure, path: Path, run: RunData, dpi: int = DPI) -> Path:
-    """Write ``fig`` as a PNG with the run's provenance in its metadata."""
+    """Write ``fig`` in the format of ``path``'s suffix (PNG, PDF or SVG) with the run's provenance
+    in its metadata."""
     prov = run.summary.get("provenance") or {}
-    metadata = {
-        "Title": f"{path.stem}: {run.label}",
-        "Software": f"mpcform {prov.get('mpcform')}",
-        "Description": f"scenario {run.name}, sha256 {prov.get('scenario_sha256')}, seed {prov.get('seed')}",
-        "Source": str(run.directory),
-    }
+    software = f"mpcform {prov.get('mpcform')}"
+    described = f"scenario {run.name}, sha256 {prov.get('scenario_sha256')}, seed {prov.get('seed')}"
+    metadata = {"Title": f"{path.stem}: {run.label}"} | {  # each format's own keys
+        ".png": {"Software": software, "Description": described, "Source": str(run.directory)},
+        ".pdf": {"Creator": software, "Subject": described},
+        ".svg": {"Creator": software, "Description": described, "Source": str(run.directory)},
+    }[path.suffix]
     fig.savefig(path, dpi=dpi, bbox_inches="tight", metadata=metadata)  # nothing clipped
     return path

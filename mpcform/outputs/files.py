@@ -67,6 +67,9 @@ TRUE_ARRAYS = {
 }
 """Keys of ``trajectory.npz`` for the :class:`~mpcform.sim.trajectory.TrueTrajectory` fields."""
 SCALE_ESTIMATES = "scale_estimates"
+FIGURE_FORMATS = ("png", "pdf", "svg")  # what the figures are written as (mpcform.outputs.figures)
+FIGURE_DPI = 110  # their default resolution [dots per inch]
+DPI_RANGE = (20, 1200)
 """Key of ``trajectory.npz`` for the per-drone scale estimates (T, n), written only when recorded."""
 
 

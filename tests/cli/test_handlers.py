@@ -389,3 +389,37 @@ def test_a_truncated_trajectory_is_one_error_naming_the_file(
         capsys, main([command, str(cut), *extra]), f"{cut / 'trajectory.npz'}: cannot read it"
     )
     assert len(lines) == 1
+
+
+def test_figures_as_pdf_svg_or_png_at_a_dpi_and_a_gif_on_request(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    pil = pytest.importorskip("PIL.Image")
+    out = tmp_path / "run"
+    assert main(["run", short_copy(tmp_path), "--out", str(out), "--plot", "--dpi", "200"]) == 0
+    with pil.open(out / "plots" / "top_view.png") as im:
+        assert round(im.info["dpi"][0]) == 200
+    magic = {"pdf": b"%PDF", "svg": b"<?xml"}
+    for fmt, head in magic.items():
+        assert main(["plot", str(out), "--format", fmt, "--out", str(tmp_path / fmt)]) == 0
+        files = sorted((tmp_path / fmt).iterdir())
+        assert files and all(f.suffix == f".{fmt}" and f.read_bytes().startswith(head) for f in files)
+    assert main(["plot", str(out), "--animate", "gif", "--out", str(tmp_path / "video")]) == 0
+    assert (tmp_path / "video" / "flight.gif").read_bytes().startswith(b"GIF8")
+    capsys.readouterr()
+
+
+@pytest.mark.parametrize(
+    ("flags", "fragment"),
+    [
+        (["--plot", "--dpi", "5"], "--dpi: expected an integer in 20..1200, got 5"),
+        (["--format", "pdf"], "--format: applies only with --plot"),
+        (["--animate", "avi"], "invalid choice"),
+    ],
+)
+def test_bad_figure_options_are_refused_before_running(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], flags: list[str], fragment: str
+) -> None:
+    assert main(["run", short_copy(tmp_path), "--out", str(tmp_path / "r"), *flags]) == 2
+    assert fragment in capsys.readouterr().err
+    assert not (tmp_path / "r").exists()
