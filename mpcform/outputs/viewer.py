@@ -152,6 +152,7 @@ def viewer_payload(
         "d_min_m": d_min,
         "v_max_mps": v_max,
         "below": {},
+        "closest": _closest(p),
         "curves": [_curve(k, v, t.shape[0], d_min, v_max) for k, v in (curves or {}).items()],
     }
     if reference_m is not None:
@@ -245,6 +246,17 @@ def _geofence(geofence: tuple[Array, Array] | None, d: int) -> dict[str, list[fl
             f"got {lo.tolist()} and {hi.tolist()}",
         )
     return {"min_m": [_sig(v, 6) for v in lo], "max_m": [_sig(v, 6) for v in hi]}
+
+
+def _closest(p: Array) -> dict[str, Any] | None:
+    """The run's closest pair: its sample ``k``, the ``pair`` and their distance ``m`` [m]."""
+    if p.shape[1] < 2:
+        return None
+    k = int(np.argmin(min_pair_distances(p)))
+    i, j = np.triu_indices(p.shape[1], 1)
+    dist = np.linalg.norm(p[k, i] - p[k, j], axis=-1)
+    m = int(np.argmin(dist))
+    return {"k": k, "pair": [int(i[m]), int(j[m])], "m": _sig(float(dist[m]))}
 
 
 def _curve(key: str, values: Array, samples: int, d_min: float | None, v_max: float | None) -> dict[str, Any]:

@@ -63,6 +63,7 @@ def test_payload_is_rounded_and_marks_pairs_closer_than_d_min() -> None:
     assert data["p_mm"][:2] == [-2000, 150] and all(isinstance(v, int) for v in data["p_mm"])
     assert set(data["below"]) == {"19", "20", "21"} and data["below"]["20"] == [0, 1]  # 0.5 m at 18, 22
     assert data["obstacles"] == [[0.0, 2.0, 0.4, 0.25]]
+    assert data["closest"]["pair"] == [0, 1] and data["closest"]["m"] < 0.5  # its sample's distance
     assert data["fence"] == {"min_m": [-3.0, None], "max_m": [3.0, 2.8]}
     curves = {c["key"]: c for c in data["curves"]}
     assert curves["min_separation_m"]["limit"]["value"] == 0.5 and curves["min_separation_m"]["unit"] == "m"
@@ -223,6 +224,11 @@ def test_browser_draws_the_20_drone_swap(browser: str, swap20: RunData, tmp_path
     page = swap20_page(swap20, tmp_path / "swap_spatial_20.html")
     dom = check_page(browser, page, tmp_path, swap20.trajectory.t_s.shape[0], "#t=3")
     assert 'data-sample="30"' in dom and "20 drones · 3-D" in dom
+    closest = viewer.viewer_payload(t_s=swap20.trajectory.t_s, positions_m=swap20.trajectory.positions_m)[
+        "closest"
+    ]
+    pair = f"closest {closest['pair'][0]}-{closest['pair'][1]}: {closest['m']} m"  # marked with no violation
+    assert "no pair closer than d_min" in dom and pair in dom
 
 
 def test_browser_plays_the_run(browser: str, tmp_path: Path) -> None:

@@ -20,7 +20,7 @@
   const COL = {
     ink: "#222", axis: "#555", grid: "#ececec", frame: "#b5b5b5", drone: "#1f77b4", far: "#9cc2e2",
     droneEdge: "#0d3b66", bad: "#d62728", edge: "#4a4a4a", ref: "#8c8c8c", fence: "#2e7d32",
-    muted: "#777", curve: "#1f77b4",
+    muted: "#777", curve: "#1f77b4", closest: "#c2185b",
   };
   const TRAIL = ["#1f77b4", "#ff7f0e", "#2ca02c", "#9467bd", "#8c564b", "#e377c2", "#7f7f7f", "#bcbd22",
     "#17becf"];
@@ -282,6 +282,8 @@
     g.strokeStyle = COL.bad; g.lineWidth = 2.6;
     for (let j = 0; j < below.length; j += 2) seg(g, q[below[j]], q[below[j + 1]]);
     for (const i of bad) { circle(g, q[i][0], q[i][1], droneR * q[i][3] + 4); g.lineWidth = 2; g.stroke(); }
+    const C = D.closest; // the run's closest pair, at its sample: marked whether or not it is below d_min
+    if (C && k === C.k) { g.save(); g.setLineDash([5, 3]); g.strokeStyle = COL.closest; g.lineWidth = 2; seg(g, q[C.pair[0]], q[C.pair[1]]); g.restore(); }
     if (show.ids) for (let i = 0; i < n; i++) text(g, String(i), q[i][0] + droneR * q[i][3] + 2, q[i][1] - droneR * q[i][3], "left", "alphabetic", font(10), "#333");
     if (finish) { g.restore(); finish(); }
     return { k, below: below.length / 2 };
@@ -383,9 +385,13 @@
     const st = $("status");
     if (D.d_min_m === null) { st.textContent = ""; st.className = ""; }
     else if (info.below) { st.textContent = info.below + (info.below > 1 ? " pairs" : " pair") + " closer than d_min"; st.className = "bad"; }
-    else { st.textContent = "no pair closer than d_min"; st.className = "good"; }
+    else { st.textContent = "no pair closer than d_min" + closestText(); st.className = "good"; }
     body.dataset.sample = String(kn); body.dataset.below = String(info.below);
     return info;
+  }
+  function closestText() {
+    const C = D.closest;
+    return C ? "; closest " + C.pair[0] + "-" + C.pair[1] + ": " + C.m + " m at t = " + D.t_s[C.k] + " s" : "";
   }
   function seek(time) { state.time = Math.min(t1, Math.max(t0, time)); render(); }
   function setPlaying(on) {
