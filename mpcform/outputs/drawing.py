@@ -16,6 +16,7 @@ from matplotlib.axes import Axes
 from matplotlib.colors import ListedColormap, Normalize
 from matplotlib.patches import Circle
 from matplotlib.ticker import MaxNLocator
+from scipy.spatial import ConvexHull, QhullError
 from scipy.spatial.distance import pdist, squareform
 
 from mpcform._validate import Array
@@ -50,6 +51,24 @@ SNAPSHOT_LABEL = "snapshot-label"  # gid of the ``t = ... s`` text beside a snap
 FLOWN_GID = "flown"  # gid of what the drones really did (a plant run's dense true path)
 FLOWN_COLOUR = "tab:green"  # a swarm's flown speeds and separation (per drone: the drone's colour)
 DISPLAY_SAMPLES = 3000  # a dense true path drawn with at most about this many samples
+
+
+REFERENCE_PATHS_MAX = 8  # a swarm's reference paths: those of this many outline drones
+
+
+def reference_subset(run: RunData, plane: tuple[int, int]) -> Array:
+    """The drones whose reference paths a plan draws: all up to :data:`PER_DRONE_MAX`, else at most
+    :data:`REFERENCE_PATHS_MAX` spread along the outline (convex hull) of the template in ``plane``
+    (a hundred arcs would bury the formation's turn)."""
+    if run.n <= PER_DRONE_MAX:
+        return np.arange(run.n)
+    offsets = run.formation.offsets_m[:, list(plane)]
+    try:
+        outline = ConvexHull(offsets).vertices
+    except QhullError:  # a line of drones: its ends and the drones between
+        outline = np.arange(run.n)
+    pick = np.linspace(0, outline.shape[0], min(REFERENCE_PATHS_MAX, outline.shape[0]), endpoint=False)
+    return np.sort(outline[pick.astype(int)])
 
 
 def display_rows(samples: int, limit: int = DISPLAY_SAMPLES) -> Array:

@@ -3,7 +3,8 @@
 clearance between drones stay readable (a perspective 3-D plot hides both).
 
 Every plan shows the drone paths (one colour per drone up to six drones, else thin shades), and
-for a plant run the flown (true, dense) paths dotted over them, the reference paths dashed on top,
+for a plant run the flown (true, dense) paths dotted over them, the reference paths dashed on top
+(above six drones only those of eight drones on the formation's outline),
 formation snapshots coloured by time (colour bar) and labelled ``t = ... s``, start and end,
 obstacles with their required clearance, the closest pair at the moment of minimum separation,
 and for consensus runs the communication graph and the leaders.
@@ -34,6 +35,7 @@ from mpcform.outputs.drawing import (
     mark_closest_pair,
     marker_scale,
     plan_size,
+    reference_subset,
     skeleton_edges,
     snapshot_indices,
     time_colour,
@@ -122,8 +124,11 @@ def draw_plan(
                 q[:, i, a], q[:, i, b], color=colour, lw=0.8, ls=":", zorder=2.4, label=label, gid=FLOWN_GID
             )
     if np.ptp(ref, axis=0).max() > 0:
-        for i in range(run.n):
-            ax.plot(ref[:, i, a], ref[:, i, b], label="reference path" if i == 0 else None, **REFERENCE_STYLE)
+        shown = reference_subset(run, plane)
+        some = "" if shown.shape[0] == run.n else f" ({shown.shape[0]} of {run.n} drones, on the outline)"
+        for k, i in enumerate(shown.tolist()):
+            label = f"reference path{some}" if k == 0 else None
+            ax.plot(ref[:, i, a], ref[:, i, b], label=label, **REFERENCE_STYLE)
     else:  # a constant reference: its points, not paths
         ax.scatter(
             ref[0, :, a],

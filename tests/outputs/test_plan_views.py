@@ -13,7 +13,12 @@ pytest.importorskip("matplotlib")
 
 from matplotlib.colors import to_rgba  # noqa: E402
 
-from mpcform.outputs.drawing import SNAPSHOT_LABEL, snapshot_indices, time_colour  # noqa: E402
+from mpcform.outputs.drawing import (  # noqa: E402
+    REFERENCE_PATHS_MAX,
+    SNAPSHOT_LABEL,
+    snapshot_indices,
+    time_colour,
+)
 from mpcform.outputs.plan_views import top_view, view_3d  # noqa: E402
 from mpcform.outputs.rundata import load_run  # noqa: E402
 
@@ -62,3 +67,16 @@ def test_snapshots_span_the_motion_not_the_idle_tail(tmp_path: Path) -> None:
     assert idx[0] == 0 and len(idx) == 4 and idx[-1] < run.trajectory.t_s.shape[0] - 20
     speed = np.linalg.norm(run.trajectory.commands_mps, axis=-1).max(axis=1)
     assert speed[idx[-1] - 1] > 0.01 * speed.max() >= speed[idx[-1] + 1 :].max()
+
+
+def test_a_swarm_draws_the_reference_paths_of_its_outline_only(tmp_path: Path) -> None:
+    short_run("formation_flight_100", tmp_path, steps=20)
+    run = load_run(tmp_path)
+    ax = top_view(run).axes[0]
+    dashed = [line for line in ax.get_lines() if line.get_label().startswith("reference path")]
+    arcs = [line for line in ax.get_lines() if line.get_linestyle() == "--" and line.get_color() == "k"]
+    assert len(dashed) == 1 and "of 100 drones, on the outline" in dashed[0].get_label()
+    assert 1 <= len(arcs) <= REFERENCE_PATHS_MAX  # the 4 corners of the grid
+    ends = np.array([line.get_xydata()[0] for line in arcs])
+    outline = run.trajectory.reference_m[0]
+    assert all(np.abs(outline - end).sum(axis=1).min() < 1e-9 for end in ends)
