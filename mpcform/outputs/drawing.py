@@ -198,7 +198,9 @@ def closest_pair(positions_m: Array) -> tuple[int, int, int, float]:
 
 
 def mark_closest_pair(ax: Axes, run: RunData, axes: tuple[int, int] = (0, 1)) -> None:
-    """The two closest drones at the moment of minimum separation, joined by a red segment."""
+    """The two closest drones at the moment of minimum separation, joined by a red segment, with
+    circles that touch when they are d_min apart (in a projection: scaled with the pair's
+    projected distance, so projected circles overlap only for a pair really closer than d_min)."""
     if run.n < 2:
         return
     k, i, j, dist = closest_pair(run.trajectory.positions_m)
@@ -214,12 +216,15 @@ def mark_closest_pair(ax: Axes, run: RunData, axes: tuple[int, int] = (0, 1)) ->
         zorder=6,
         label=f"closest pair {i}-{j}: {dist:.2f} m at t = {t:.3g} s",
     )
-    if run.d_min_m is not None:  # touching circles of radius d_min / 2: the separation is kept
+    if run.d_min_m is not None:  # circles that overlap exactly when the pair is closer than d_min:
+        # radius d_min / 2, scaled in a projection of a spatial run as the pair's distance is
+        seen = float(np.linalg.norm(xy[1] - xy[0]))
+        radius = run.d_min_m / 2 * (seen / dist if dist > 0 else 1.0)
         for centre in xy:
             ax.add_patch(
                 Circle(
                     tuple(centre),
-                    run.d_min_m / 2,
+                    radius,
                     fill=False,
                     color=CLOSEST_COLOUR,
                     lw=0.9,

@@ -12,10 +12,12 @@ from saved_runs import short_run
 pytest.importorskip("matplotlib")
 
 from matplotlib.colors import to_rgba  # noqa: E402
+from matplotlib.patches import Circle  # noqa: E402
 
 from mpcform.outputs.drawing import (  # noqa: E402
     REFERENCE_PATHS_MAX,
     SNAPSHOT_LABEL,
+    closest_pair,
     snapshot_indices,
     time_colour,
 )
@@ -80,3 +82,18 @@ def test_a_swarm_draws_the_reference_paths_of_its_outline_only(tmp_path: Path) -
     ends = np.array([line.get_xydata()[0] for line in arcs])
     outline = run.trajectory.reference_m[0]
     assert all(np.abs(outline - end).sum(axis=1).min() < 1e-9 for end in ends)
+
+
+def test_projected_circles_of_the_closest_pair_overlap_only_for_a_breach(tmp_path: Path) -> None:
+    short_run("swap_spatial_12", tmp_path, steps=40)
+    run = load_run(tmp_path)
+    k, i, j, dist = closest_pair(run.trajectory.positions_m)
+    assert run.d_min_m is not None and dist >= run.d_min_m - 1e-9  # no breach
+    for ax, plane in zip(view_3d(run).axes[:3], ((0, 1), (0, 2), (1, 2)), strict=True):
+        circles = [patch for patch in ax.patches if isinstance(patch, Circle)]
+        assert len(circles) == 2
+        centres = np.array([c.center for c in circles])
+        seen = np.linalg.norm(centres[1] - centres[0])
+        np.testing.assert_allclose(centres, run.trajectory.positions_m[k][[i, j]][:, list(plane)])
+        assert circles[0].radius == pytest.approx(run.d_min_m / 2 * seen / dist)
+        assert 2 * circles[0].radius <= seen + 1e-12  # they touch at most: not read as a violation
