@@ -292,7 +292,7 @@
     const rows = [["drone", (x, y) => { circle(g, x + 9, y, droneR); g.fillStyle = COL.drone; g.fill(); g.strokeStyle = COL.droneEdge; g.lineWidth = 1; g.stroke(); }]];
     if (R && show.ref) rows.push(["reference p*ᵢ", (x, y) => { circle(g, x + 9, y, droneR + 2); g.strokeStyle = COL.ref; g.lineWidth = 1.1; g.stroke(); }]);
     if (D.edges.length) rows.push(["formation edge", (x, y) => { g.strokeStyle = COL.edge; g.lineWidth = 1.3; seg(g, [x, y], [x + 18, y]); }]);
-    if (show.trails) rows.push(["last " + TRAIL_S + " s of path", (x, y) => { g.strokeStyle = TRAIL[1]; g.lineWidth = 1.8; seg(g, [x, y], [x + 18, y]); }]);
+    if (show.trails) rows.push(["last " + TRAIL_S + " s of path (a colour per drone)", (x, y) => { g.lineWidth = 1.8; for (let c = 0; c < 3; c++) { g.strokeStyle = TRAIL[c]; seg(g, [x + 6 * c, y], [x + 6 * c + 6, y]); } }]);
     if (D.d_min_m !== null) rows.push(["pair closer than d_min", (x, y) => { g.strokeStyle = COL.bad; g.lineWidth = 2.6; seg(g, [x, y], [x + 18, y]); }]);
     if (D.obstacles.length) rows.push(["obstacle (dashed: + clearance)", (x, y) => sphere(g, [x + 9, y], 6, 9)]);
     if (D.fence) rows.push(["geofence", (x, y) => { g.save(); g.setLineDash([5, 3]); g.strokeStyle = COL.fence; g.lineWidth = 1.4; seg(g, [x, y], [x + 18, y]); g.restore(); }]);
