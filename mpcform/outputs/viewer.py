@@ -35,6 +35,7 @@ from mpcform.sim.trajectory import TrueTrajectory
 SEPARATION_KEY = "min_separation_m"
 SPEED_KEY = "max_speed_mps"
 TRACKING_KEY = "max_tracking_error_m"
+TRACKING_FLOOR_M = 1e-6  # tracking errors shown no smaller (rounding would stretch a log axis to 1e-13)
 FLOWN_SEPARATION_KEY = "flown_min_separation_m"  # a plant run's dense true path (flown_curves)
 FLOWN_SPEED_KEY = "flown_max_speed_mps"
 UNITS = {"_mps2": "m/s²", "_mps": "m/s", "_m": "m", "_s": "s", "_rad": "rad", "_deg": "°"}
@@ -84,7 +85,8 @@ def write_viewer_html(
 def viewer_curves(
     t_s: Array, positions_m: Array, *, reference_m: Array | None = None, commands_mps: Array | None = None
 ) -> dict[str, Array]:
-    """The standard curves (T,): min separation, max speed, max tracking error over drones.
+    """The standard curves (T,): min separation, max speed, max tracking error over drones (no
+    smaller than :data:`TRACKING_FLOOR_M`).
 
     The speed is that of the commands (T - 1, n, d) held over each step (NaN at the last
     sample), else of the positions' finite differences; separation needs two drones.
@@ -103,7 +105,7 @@ def viewer_curves(
     curves[SPEED_KEY] = np.append(speed, np.nan)
     if reference_m is not None:
         ref = _positions("reference_m", reference_m, t.shape[0], p.shape[1:])
-        curves[TRACKING_KEY] = np.linalg.norm(p - ref, axis=-1).max(axis=1)
+        curves[TRACKING_KEY] = np.maximum(np.linalg.norm(p - ref, axis=-1).max(axis=1), TRACKING_FLOOR_M)
     return curves
 
 

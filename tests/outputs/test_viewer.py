@@ -70,6 +70,7 @@ def test_payload_is_rounded_and_marks_pairs_closer_than_d_min() -> None:
     assert curves["max_speed_mps"]["limit"]["label"] == "v_max = 1.2 m/s"
     assert curves["max_speed_mps"]["y"][-1] is None and not curves["max_speed_mps"]["log"]
     assert curves["max_tracking_error_m"]["log"] and curves["max_tracking_error_m"]["limit"] is None
+    assert min(curves["max_tracking_error_m"]["y"]) >= viewer.TRACKING_FLOOR_M  # not 1e-13 at an exact start
 
 
 def test_viewer_curves() -> None:
@@ -229,6 +230,21 @@ def test_browser_draws_the_20_drone_swap(browser: str, swap20: RunData, tmp_path
     ]
     pair = f"closest {closest['pair'][0]}-{closest['pair'][1]}: {closest['m']} m"  # marked with no violation
     assert "no pair closer than d_min" in dom and pair in dom
+
+
+def test_browser_frames_a_planar_run_within_10_percent_of_its_data(browser: str, tmp_path: Path) -> None:
+    """A wide planar run (16 m by 2.6 m) is not drawn on a square of 16 m: the frame hugs the data."""
+    run = synthetic()
+    run["positions_m"] = run["positions_m"] * np.array([4.0, 1.0])
+    page = viewer.write_viewer_html(tmp_path / "wide.html", **{**run, "obstacles": None, "geofence": None})
+    dom, _ = chromium(browser, page, "--dump-dom", tmp_path / "profile", "#t=0")
+    found = re.search(r'data-extent="([-\d.,]+)"', dom)
+    assert found is not None, re.findall(r"<body[^>]*>", dom)
+    x0, x1, y0, y1 = (float(v) for v in found.group(1).split(","))
+    points = np.concatenate([run["positions_m"].reshape(-1, 2), run["reference_m"].reshape(-1, 2)])
+    span = points.max(axis=0) - points.min(axis=0)
+    assert x1 - x0 <= 1.1 * span[0] and y1 - y0 <= 1.1 * span[1]
+    assert x0 <= points[:, 0].min() and x1 >= points[:, 0].max()
 
 
 def test_browser_plays_the_run(browser: str, tmp_path: Path) -> None:

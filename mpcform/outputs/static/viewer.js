@@ -62,8 +62,9 @@
     }
   }
   S = Math.max(S < 0.01 ? 1 : 0, ...LO.map((l, a) => HI[a] - l));
-  for (let a = 0; a < dim; a++) { // pad, and give flat axes some depth
-    const mid = (LO[a] + HI[a]) / 2, half = Math.max((HI[a] - LO[a]) / 2, 0.1 * S) + 0.05 * S;
+  const depth = dim === 2 ? 0.01 : 0.1; // of the largest extent: flat axes (a 3-D box) keep some
+  for (let a = 0; a < dim; a++) { // pad by 5 % of the axis' own extent
+    const mid = (LO[a] + HI[a]) / 2, half = Math.max(0.525 * (HI[a] - LO[a]), depth * S);
     LO[a] = mid - half; HI[a] = mid + half;
   }
   const C = LO.map((l, a) => (l + HI[a]) / 2);
@@ -115,8 +116,11 @@
   // ---- projections: both map world points to [x, y, depth toward the viewer, size factor] ----
   function projector(w, h) {
     if (dim === 2) {
-      const m = { l: 64, r: 16, t: 14, b: 46 }, pw = w - m.l - m.r, ph = h - m.t - m.b;
-      const s = view.zoom * Math.min(pw / (HI[0] - LO[0]), ph / (HI[1] - LO[1]));
+      const m = { l: 64, r: 16, t: 14, b: 46 }, room = [w - m.l - m.r, h - m.t - m.b];
+      const fit = Math.min(room[0] / (HI[0] - LO[0]), room[1] / (HI[1] - LO[1]));
+      const pw = fit * (HI[0] - LO[0]), ph = fit * (HI[1] - LO[1]); // the frame hugs the data
+      m.l += (room[0] - pw) / 2; m.t += (room[1] - ph) / 2;
+      const s = view.zoom * fit;
       const cx = m.l + pw / 2 + view.panX, cy = m.t + ph / 2 + view.panY;
       const f = (x, y) => [cx + s * (x - C[0]), cy - s * (y - C[1]), 0, 1];
       return { f, s, m, pw, ph, cx, cy, centre: [m.l + pw / 2, m.t + ph / 2] };
@@ -135,11 +139,13 @@
   const at = (arr, i) => (dim === 2 ? [arr[i * 2], arr[i * 2 + 1]] : [arr[i * 3], arr[i * 3 + 1], arr[i * 3 + 2]]);
 
   // ---- the scene ---------------------------------------------------------------------------
+  let extent = null; // the 2-D frame's x0, x1, y0, y1 [m], published on the body for tests
   function drawAxes2d(g, pr) {
     const { m, pw, ph, cx, cy, s } = pr;
     const x0 = C[0] + (m.l - cx) / s, x1 = C[0] + (m.l + pw - cx) / s;
     const y0 = C[1] - (m.t + ph - cy) / s, y1 = C[1] - (m.t - cy) / s;
     const tx = ticks(x0, x1, pw / 90), ty = ticks(y0, y1, ph / 70);
+    extent = [x0, x1, y0, y1];
     g.lineWidth = 1; g.strokeStyle = COL.grid;
     for (const v of tx.values) seg(g, [pr.f(v, 0)[0], m.t], [pr.f(v, 0)[0], m.t + ph]);
     for (const v of ty.values) seg(g, [m.l, pr.f(0, v)[1]], [m.l + pw, pr.f(0, v)[1]]);
@@ -148,7 +154,7 @@
       for (const v of tx.values) text(g, tx.label(v), pr.f(v, 0)[0], m.t + ph + 16, "center", "alphabetic", font(11), COL.axis);
       for (const v of ty.values) text(g, ty.label(v), m.l - 6, pr.f(0, v)[1], "right", "middle", font(11), COL.axis);
       text(g, "x [m]", m.l + pw / 2, m.t + ph + 36, "center", "alphabetic", font(12), COL.ink);
-      g.save(); g.translate(16, m.t + ph / 2); g.rotate(-Math.PI / 2);
+      g.save(); g.translate(m.l - 48, m.t + ph / 2); g.rotate(-Math.PI / 2);
       text(g, "y [m]", 0, 0, "center", "middle", font(12), COL.ink); g.restore();
     };
   }
@@ -387,6 +393,7 @@
     else if (info.below) { st.textContent = info.below + (info.below > 1 ? " pairs" : " pair") + " closer than d_min"; st.className = "bad"; }
     else { st.textContent = "no pair closer than d_min" + closestText(); st.className = "good"; }
     body.dataset.sample = String(kn); body.dataset.below = String(info.below);
+    if (extent) body.dataset.extent = extent.map((v) => v.toFixed(3)).join(",");
     return info;
   }
   function closestText() {
