@@ -241,18 +241,9 @@ def scale(run: RunData) -> Figure:
         draw_scale_estimates(ax, traj.t_s, estimates, formation.leaders)
     elif estimates is not None:
         notes.append("estimates s_hat_i not drawn: they need the template's scale (formation.npz)")
-    if notes:
-        ax.text(
-            0.01,
-            0.02,
-            "\n".join(notes),
-            transform=ax.transAxes,
-            fontsize="small",
-            va="bottom",
-            color="0.25",
-            gid="scale-note",
-        )
     _finish(ax, run, "Scale", f"formation scale s{rel}")
+    if notes:  # under the time axis, off the curves
+        ax.set_xlabel("\n".join([ax.get_xlabel(), *notes]), gid="scale-note")
     return fig
 
 
