@@ -4,7 +4,9 @@ or ``flight.gif`` (pillow), drawn with :class:`matplotlib.animation.FuncAnimatio
 The video plays the flight at ``speed`` times real time (default 1: a 20 s flight lasts 20 s),
 with at most ``max_frames`` frames: a long flight gets fewer frames per second, never a shorter
 video. Every frame writes the flight time and the speed factor. A planar run is seen from above;
-a spatial run in two projections (x-y and x-z), which keep depth readable without a camera.
+a spatial run in two projections (x-y and x-z), which keep depth readable without a camera. Pairs
+closer than d_min are joined in red, drones carry their index (up to 20 drones), and a run on a
+plant other than the ideal one shows its dense true path (what the drones really did).
 ``progress(done, total)`` is called after each frame (the CLI draws a bar with it).
 
 Imported only when an animation is asked for, like :mod:`mpcform.outputs.figures`.
@@ -24,7 +26,9 @@ from matplotlib.figure import Figure
 
 from mpcform._validate import Array
 from mpcform.errors import ValidationError
+from mpcform.formation.geometry import pairs_within
 from mpcform.outputs.drawing import (
+    CLOSEST_COLOUR,
     PATH_GREY,
     PER_DRONE_MAX,
     draw_obstacles,
@@ -33,12 +37,14 @@ from mpcform.outputs.drawing import (
     skeleton_edges,
 )
 from mpcform.outputs.rundata import RunData
+from mpcform.sim.metrics import REL_TOL
 
 ANIMATION_FILE = "flight.gif"
 MP4_FILE = "flight.mp4"
 FPS_CHOICES = (20, 10, 5, 4, 2, 1)  # frame rates whose frame time is a whole number of 10 ms (GIF)
 MAX_FRAMES = 300
 TRAIL_S = 3.0
+IDS_MAX = 20  # drones up to this many carry their index
 AXIS_NAMES = ("x", "y", "z")
 
 Progress = Callable[[int, int], None]
@@ -87,7 +93,7 @@ def animate_run(
         raise ValidationError(str(path), "an MP4 needs ffmpeg on the PATH; write a .gif instead")
     t = run.trajectory.t_s
     times, rate = frame_times(float(t[0]), float(t[-1]), speed, fps, max_frames)
-    scene = _Scene(run, speed, dpi)
+    scene = FlightScene(run, speed, dpi)
     anim = FuncAnimation(
         scene.fig,
         scene.update,
@@ -141,7 +147,7 @@ class _FrameCanvas(FigureCanvasAgg):
         pass
 
 
-class _Scene:
+class FlightScene:
     """The figure of the animation and its moving artists; :meth:`update` draws flight time t."""
 
     def __init__(self, run: RunData, speed: float, dpi: int) -> None:
@@ -149,7 +155,9 @@ class _Scene:
         self.background: Any = None
         self.planes = ((0, 1),) if run.dim == 2 else ((0, 1), (0, 2))
         self.edges = skeleton_edges(run)
-        p, ref = run.trajectory.positions_m, run.trajectory.reference_m
+        path = run.flown or run.trajectory  # a plant run shows what the drones really did
+        self.path_t, self.path_p = path.t_s, path.positions_m
+        p, ref = self.path_p, run.trajectory.reference_m
         both = np.concatenate([p.reshape(-1, run.dim), ref.reshape(-1, run.dim)])
         span = np.maximum(both.max(axis=0) - both.min(axis=0), 1.0)
         ratio = max(span[b] / span[a] for a, b in self.planes)
@@ -162,6 +170,8 @@ class _Scene:
         colours = drone_colours(run.n) if few else ["tab:blue"] * run.n
         ms = 6.0 * float(np.sqrt(marker_scale(run.n)))
         self.artists: list[dict[str, Any]] = []
+        close_label = None if run.d_min_m is None else "closer than d_min"
+        ids = run.n if run.n <= IDS_MAX else 0
         for ax, (a, b) in zip(axes, self.planes, strict=True):
             draw_obstacles(ax, run, (a, b))
             both = np.concatenate([p[..., [a, b]].reshape(-1, 2), ref[..., [a, b]].reshape(-1, 2)])
@@ -204,6 +214,11 @@ class _Scene:
                         zorder=5,
                         label="leader" if run.formation.leaders else None,
                     )[0],
+                    "close": ax.plot([], [], color=CLOSEST_COLOUR, lw=2.2, zorder=4.5, label=close_label)[0],
+                    "ids": [
+                        ax.text(*p[0, i, [a, b]], str(i), fontsize=7, zorder=6, clip_on=True, in_layout=False)
+                        for i in range(ids)
+                    ],
                     "drones": ax.scatter(
                         p[0, :, a],
                         p[0, :, b],
@@ -231,16 +246,23 @@ class _Scene:
 
     def update(self, t_s: float) -> list[Any]:
         """Move every artist to flight time ``t_s`` (positions interpolated between samples)."""
-        traj = self.run.trajectory
-        p, ref = _at(traj.t_s, traj.positions_m, t_s), _at(traj.t_s, traj.reference_m, t_s)
-        window = (traj.t_s >= t_s - TRAIL_S) & (traj.t_s <= t_s)
+        traj, path_t, path_p = self.run.trajectory, self.path_t, self.path_p
+        p, ref = _at(path_t, path_p, t_s), _at(traj.t_s, traj.reference_m, t_s)
+        window = (path_t >= t_s - TRAIL_S) & (path_t <= t_s)
+        d_min = self.run.d_min_m
+        close = np.empty((0, 2), dtype=int) if d_min is None else pairs_within(p, d_min * (1.0 - REL_TOL))
         for art in self.artists:
             a, b = art["plane"]
             for i, line in enumerate(art["trails"]):
                 line.set_data(
-                    np.append(traj.positions_m[window, i, a], p[i, a]),
-                    np.append(traj.positions_m[window, i, b], p[i, b]),
+                    np.append(path_p[window, i, a], p[i, a]), np.append(path_p[window, i, b], p[i, b])
                 )
+            gaps = np.full((close.shape[0], 1), np.nan)  # one line, a NaN between the pairs
+            art["close"].set_data(
+                np.hstack([p[close, a], gaps]).ravel(), np.hstack([p[close, b], gaps]).ravel()
+            )
+            for i, label in enumerate(art["ids"]):
+                label.set_position((p[i, a], p[i, b]))
             for (i, j), line in zip(self.edges, art["links"], strict=True):
                 line.set_data(p[[i, j], a], p[[i, j], b])
             art["refs"].set_data(ref[:, a], ref[:, b])
@@ -255,7 +277,8 @@ class _Scene:
         """The artists that change from frame to frame."""
         arts = [self.clock]
         for art in self.artists:
-            arts += [*art["trails"], *art["links"], art["refs"], art["drones"], art["leaders"]]
+            arts += [*art["trails"], *art["links"], art["refs"], art["drones"], art["leaders"], art["close"]]
+            arts += art["ids"]
         return arts
 
     def render(self) -> Array:

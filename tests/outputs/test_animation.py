@@ -8,13 +8,15 @@ unless ``MPCFORM_REQUIRE_BROWSER=1`` (set by ``.ci/run``), where they fail.
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import shutil
 import subprocess
 from pathlib import Path
 
+import numpy as np
 import pytest
-from saved_runs import short_run
+from saved_runs import SCENARIOS, short_run, shortened
 
 pytest.importorskip("matplotlib")
 PIL = pytest.importorskip("PIL.Image")
@@ -25,11 +27,16 @@ from mpcform.errors import ValidationError  # noqa: E402
 from mpcform.outputs.animation import (  # noqa: E402
     ANIMATION_FILE,
     MP4_FILE,
+    FlightScene,
     animate_run,
     animation_file,
     frame_times,
 )
+from mpcform.outputs.drawing import closest_pair  # noqa: E402
 from mpcform.outputs.rundata import load_run  # noqa: E402
+from mpcform.run.runner import run_scenario  # noqa: E402
+from mpcform.scenario.load import load_scenario  # noqa: E402
+from mpcform.scenario.plant import with_plant_kind  # noqa: E402
 
 
 def gif_durations_ms(path: Path) -> list[int]:
@@ -159,3 +166,33 @@ def test_mp4_lasts_as_long_as_the_flight_at_the_chosen_speed(
     assert duration_s == pytest.approx(len(times) / fps, abs=1e-3)
     assert abs(duration_s - (t1 - t0) / speed) <= 1 / fps + 1e-3  # the flight, plus at most one frame
     assert calls[-1] == (len(times), len(times)) and len(calls) == len(times)
+
+
+def test_frames_join_pairs_closer_than_d_min_and_name_the_drones(tmp_path: Path) -> None:
+    scenario = shortened(load_scenario(SCENARIOS / "swap_planar_8.toml"), 60)
+    tracking = dataclasses.replace(
+        scenario, controller=dataclasses.replace(scenario.controller, kind="tracking")
+    )
+    run_scenario(tracking, tmp_path)  # eq. 14 alone: the antipodal drones meet in the centre
+    run = load_run(tmp_path)
+    scene = FlightScene(run, 1.0, 60)
+    k, _, _, dist = closest_pair(run.trajectory.positions_m)
+    assert run.d_min_m is not None and dist < run.d_min_m
+    scene.update(float(run.trajectory.t_s[k]))
+    art = scene.artists[0]
+    x, y = art["close"].get_data()
+    assert np.isfinite(np.asarray(x)).sum() >= 2  # at least one red segment
+    assert [t.get_text() for t in art["ids"]] == [str(i) for i in range(run.n)]
+    scene.update(0.0)
+    assert not np.isfinite(np.asarray(art["close"].get_data()[0])).any()  # the ring starts apart
+
+
+def test_a_plant_run_animates_its_flown_path(tmp_path: Path) -> None:
+    scenario = with_plant_kind(shortened(load_scenario(SCENARIOS / "swap_planar_8.toml"), 20), "lag")
+    run_scenario(scenario, tmp_path)
+    run = load_run(tmp_path)
+    scene = FlightScene(run, 1.0, 60)
+    assert run.flown is not None and scene.path_t is run.flown.t_s
+    t = float(run.flown.t_s[7])  # a dense sample between two control samples
+    scene.update(t)
+    np.testing.assert_allclose(scene.artists[0]["drones"].get_offsets(), run.flown.positions_m[7])
