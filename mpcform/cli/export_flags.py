@@ -86,6 +86,12 @@ def add_export_options(cmd: argparse.ArgumentParser) -> None:
         help="export a run planned without a tracking allowance (run it with --flyable instead)",
     )
     cmd.add_argument(
+        "--allow-unsafe",
+        action="store_true",
+        help="export a flight whose drones come closer than d_min (planned, retimed or flown); "
+        "recorded in provenance.json",
+    )
+    cmd.add_argument(
         "--no-flight-check",
         action="store_true",
         help="do not fly the export on the quadrotor plant (needs drone-models)",
@@ -111,6 +117,7 @@ def export_options(args: argparse.Namespace) -> ExportOptions:
         limits=limits,
         allow_limits=args.allow_limits,
         allow_untracked=args.allow_untracked,
+        allow_unsafe=args.allow_unsafe,
         fly=not args.no_flight_check,
     )
 

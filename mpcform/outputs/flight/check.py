@@ -14,11 +14,13 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from importlib import metadata
+from typing import Any
 
 import numpy as np
 
 from mpcform._validate import Array
 from mpcform.outputs.flight.polynomial import PiecewisePolynomial
+from mpcform.outputs.flight.safety import ClosestPair, closest_pair
 from mpcform.sim.plant_spec import QuadrotorPlantSpec
 
 INTERVAL_S = 0.02  # 10 inner steps of the 500 Hz plant (the plant records >= 10 samples per call)
@@ -35,6 +37,8 @@ class FlightCheck:
     min_separation_m: float
     plant_margin_m: float
     fit_tolerance_m: float
+    closest: ClosestPair | None = None
+    d_min_m: float | None = None
 
     @property
     def declared_tolerance_m(self) -> float:
@@ -42,14 +46,19 @@ class FlightCheck:
 
     @property
     def within_tolerance(self) -> bool:
-        return self.max_error_m <= self.declared_tolerance_m
+        """Tracked within the declared tolerance and no pair closer than d_min."""
+        apart = self.d_min_m is None or self.min_separation_m >= self.d_min_m
+        return self.max_error_m <= self.declared_tolerance_m and apart
 
-    def record(self) -> dict[str, float | int | bool]:
+    def record(self) -> dict[str, Any]:
         return {
             "max_tracking_error_m": self.max_error_m,
             "drone": self.error_drone,
             "t_s": self.error_t_s,
             "min_separation_m": self.min_separation_m,
+            "closest_pair": None if self.closest is None else list(self.closest.pair),
+            "closest_t_s": None if self.closest is None else self.closest.t_s,
+            "d_min_m": self.d_min_m,
             "plant_margin_m": self.plant_margin_m,
             "fit_tolerance_m": self.fit_tolerance_m,
             "declared_tolerance_m": self.declared_tolerance_m,
@@ -66,9 +75,15 @@ def drone_models_available() -> bool:
 
 
 def fly_export(
-    poly: PiecewisePolynomial, n: int, fit_tolerance_m: float, control_dt_s: float, a_max_mps2: float
+    poly: PiecewisePolynomial,
+    n: int,
+    fit_tolerance_m: float,
+    control_dt_s: float,
+    a_max_mps2: float,
+    d_min_m: float | None = None,
 ) -> FlightCheck | None:
-    """Fly ``n`` drones' pieces (series drone * 4 + x, y, z, yaw) on the quadrotor plant."""
+    """Fly ``n`` drones' pieces (series drone * 4 + x, y, z, yaw) on the quadrotor plant; the
+    closest true pair is checked against ``d_min_m``."""
     if not drone_models_available():
         return None
     spec = QuadrotorPlantSpec()
@@ -89,8 +104,8 @@ def fly_export(
     p_true = np.concatenate(true)
     err = np.linalg.norm(p_true - poly.evaluate(t).reshape(-1, n, 4)[..., :3], axis=-1)
     j, i = np.unravel_index(int(np.argmax(err)), err.shape)
-    sep = float("inf")
-    if n > 1:
-        iu = np.triu_indices(n, 1)
-        sep = float(np.linalg.norm(p_true[:, iu[0]] - p_true[:, iu[1]], axis=-1).min())
-    return FlightCheck(float(err[j, i]), int(i), float(t[j]), sep, float(margin), fit_tolerance_m)
+    closest = closest_pair(t, p_true)
+    sep = float("inf") if closest is None else closest.distance_m
+    return FlightCheck(
+        float(err[j, i]), int(i), float(t[j]), sep, float(margin), fit_tolerance_m, closest, d_min_m
+    )

@@ -11,7 +11,8 @@ For every drone of a run (:class:`~mpcform.outputs.rundata.RunData`, in memory a
    within ``tolerance_m`` of the float32 pieces;
 3. the pieces are checked: lowest point against ``floor_m`` (refused below it), speed,
    acceleration, jerk, body rate and thrust against :class:`FlightLimits` (refused unless
-   ``allow_limits``), and the pairwise separation against the run's ``d_min``;
+   ``allow_limits``), and the pairwise separation against the run's ``d_min``, as planned, as
+   retimed and as flown on the quadrotor plant (refused unless ``allow_unsafe``);
 4. files: ``droneNNN_poly7.csv`` (Crazyswarm ``uav_trajectories`` format: ``Duration,x^0..x^7,
    y^0..,z^0..,yaw^0..yaw^7``, ascending powers of the time since the piece's start; split into
    ``_partK`` files above the Crazyflie's 31 pieces), ``droneNNN_setpoints.csv`` (the pieces
@@ -55,6 +56,7 @@ from mpcform.outputs.flight.polynomial import (
     fit_positions,
 )
 from mpcform.outputs.flight.retime import Retiming, retime
+from mpcform.outputs.flight.safety import closest_pair, separation_breaches
 from mpcform.outputs.flight.yaw import formation_yaw
 from mpcform.outputs.rundata import RunData
 from mpcform.world.limits import PLATFORM_TRACKING_M
@@ -85,7 +87,8 @@ __all__ = [
 @dataclass(frozen=True)
 class ExportOptions:
     """How to export: planar altitude [m], offset [m], floor [m], fit tolerance [m], longest
-    piece [s], setpoint rate [Hz], yaw mode, limits (errors unless ``allow_limits``)."""
+    piece [s], setpoint rate [Hz], yaw mode, limits (errors unless ``allow_limits``); pairs closer
+    than d_min are errors unless ``allow_unsafe`` (:mod:`mpcform.outputs.flight.safety`)."""
 
     altitude_m: float | None = None
     offset_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
@@ -97,6 +100,7 @@ class ExportOptions:
     limits: FlightLimits = field(default_factory=FlightLimits)
     allow_limits: bool = False
     allow_untracked: bool = False  # export a run planned without a tracking allowance
+    allow_unsafe: bool = False  # export a flight whose drones come closer than d_min
     fly: bool = True  # fly the export on the quadrotor plant (skipped without drone-models)
 
     def __post_init__(self) -> None:
@@ -197,7 +201,21 @@ def export_run(
     state = flat_state(flown, t_check, n)
     _check_floor(state["pos"], t_check, opts.floor_m)
     env = envelope(t_check, state["vel"], state["acc"], state["jerk"], state["omega"])
-    warnings = _warnings(run, fit, env, opts, min_sep := _min_separation(state["pos"]))
+    warnings = _warnings(fit, env, opts)
+    dt = float(np.median(np.diff(t)))
+    flight = fly_export(flown, n, opts.tolerance_m, dt, lim.max_acc_mps2, run.d_min_m) if opts.fly else None
+    retimed = closest_pair(t_check, state["pos"])
+    breaches = separation_breaches(
+        run.d_min_m,
+        opts.tolerance_m,
+        closest_pair(dense, lines.reshape(dense.shape[0], n, 3)),
+        retimed,
+        None if flight is None else flight.closest,
+    )
+    if breaches and not opts.allow_unsafe:  # before any file is written
+        raise ValidationError("separation", f"{breaches[0]} (--allow-unsafe to export anyway)")
+    warnings += breaches
+    min_sep = float("inf") if retimed is None else retimed.distance_m
     chunks = [
         range(s, min(s + CRAZYFLIE_MAX_PIECES, poly.pieces))
         for s in range(0, poly.pieces, CRAZYFLIE_MAX_PIECES)
@@ -229,9 +247,7 @@ def export_run(
             )
     start = state["pos"][0]
     files += crazyswarm.write_files(out, stems, start, float(flown.duration_s))
-    dt = float(np.median(np.diff(t)))
-    flight = fly_export(flown, n, opts.tolerance_m, dt, lim.max_acc_mps2) if opts.fly else None
-    if flight is not None and not flight.within_tolerance:
+    if flight is not None and flight.max_error_m > flight.declared_tolerance_m:
         warnings.append(
             f"flown on the quadrotor plant, drone {flight.error_drone} is {flight.max_error_m:.3g} m off "
             f"at t = {flight.error_t_s:.2f} s, beyond the declared {flight.declared_tolerance_m:.3g} m"
@@ -298,34 +314,12 @@ def _check_floor(pos: Array, t_s: Array, floor_m: float) -> None:
         )
 
 
-def _min_separation(pos: Array) -> float:
-    n = pos.shape[1]
-    if n < 2:
-        return float("inf")
-    iu = np.triu_indices(n, 1)
-    return float(np.linalg.norm(pos[:, iu[0]] - pos[:, iu[1]], axis=-1).min())
-
-
-def _warnings(
-    run: RunData, fit: PolynomialFit, env: FlightEnvelope, opts: ExportOptions, min_sep: float
-) -> list[str]:
+def _warnings(fit: PolynomialFit, env: FlightEnvelope, opts: ExportOptions) -> list[str]:
     warnings: list[str] = []
     if not fit.within_tolerance:
         warnings.append(
             f"the polynomial pieces miss the planned positions by up to {fit.max_error_m:.3g} m "
             f"(tolerance {opts.tolerance_m:g} m)"
-        )
-    metrics = run.summary.get("metrics") or {}
-    if metrics.get("separation_violations"):
-        warnings.append(
-            f"the planned flight itself brings drones closer than d_min = {run.d_min_m:g} m "
-            f"({metrics['separation_violations']} sample pairs, down to "
-            f"{metrics.get('min_separation_segments') or 0.0:.3g} m): do not fly it"
-        )
-    elif run.d_min_m is not None and min_sep < run.d_min_m - 2.0 * opts.tolerance_m:
-        warnings.append(
-            f"the retimed pieces bring two drones to {min_sep:.3g} m, closer than d_min = "
-            f"{run.d_min_m:g} m less twice the tolerance: lower --tolerance"
         )
     problems = env.violations(opts.limits)
     if problems and not opts.allow_limits:
@@ -391,7 +385,10 @@ def _record(
         "limits": {k: v for k, v in vars(opts.limits).items()},
         "peaks": peak,
         "min_separation_m": min_sep,
-        "planned_min_separation_m": _min_separation(positions_3d(run, opts)),
+        "planned_min_separation_m": getattr(
+            closest_pair(run.trajectory.t_s, positions_3d(run, opts)), "distance_m", None
+        ),
         "d_min_m": run.d_min_m,
+        "allow_unsafe": opts.allow_unsafe,
         "warnings": warnings,
     }

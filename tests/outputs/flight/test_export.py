@@ -239,11 +239,18 @@ def test_limits_are_errors_unless_allowed(tmp_path: Path) -> None:
     assert slow.envelope.speed.value <= 0.3 and slow.retiming.duration_s > result.retiming.duration_s
 
 
-def test_a_colliding_plan_is_flagged(tmp_path: Path) -> None:
+def test_a_colliding_plan_is_refused_unless_overridden(tmp_path: Path) -> None:
     scenario = shortened(load_scenario(SCENARIOS / "swap_planar_8.toml"), 40)
     run_scenario(scenario, tmp_path, controller="tracking")  # no separation rows: they meet at the centre
-    result = export_run(load_run(tmp_path), tmp_path / "export", fly=False, allow_untracked=True)
-    assert any("closer than d_min = 0.5 m" in w and "do not fly it" in w for w in result.warnings)
+    run = load_run(tmp_path)
+    pattern = r"separation: the planned flight brings drones \d and \d [\d.e-]+ m apart at t = [\d.]+ s"
+    with pytest.raises(ValidationError, match=pattern):
+        export_run(run, tmp_path / "export", fly=False, allow_untracked=True)
+    assert not (tmp_path / "export").exists()  # refused before any file is written
+    result = export_run(run, tmp_path / "export", fly=False, allow_untracked=True, allow_unsafe=True)
+    assert any("(d_min = 0.5 m): do not fly it" in w for w in result.warnings)
+    record = json.loads((tmp_path / "export" / "provenance.json").read_text())
+    assert record["allow_unsafe"] is True and any("do not fly it" in w for w in record["warnings"])
 
 
 @pytest.mark.parametrize("floor", [float("nan"), float("inf"), -float("inf")])
