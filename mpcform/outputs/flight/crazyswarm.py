@@ -50,8 +50,15 @@ DURATION_S = {duration:.4f}
 def main():
     trajectories = {{}}
     for name, (filename, _) in ROBOTS.items():
+        path = HERE / filename
+        if not path.exists():
+            parts = sorted(p.name for p in HERE.glob(path.stem + "_part*.csv"))
+            if parts:
+                sys.exit(f"{{filename}} is split into {{len(parts)}} files ({{', '.join(parts)}}); "
+                         f"the Crazyflie holds {{MAX_PIECES}} pieces: export again with a larger --tolerance")
+            sys.exit(f"{{filename}} is missing: export again into this directory")
         traj = Trajectory()
-        traj.loadcsv(HERE / filename)
+        traj.loadcsv(path)
         if traj.n_pieces() > MAX_PIECES:
             sys.exit(f"{{filename}} has {{traj.n_pieces()}} pieces; the Crazyflie holds {{MAX_PIECES}}: "
                      "export again with a larger --tolerance")

@@ -116,3 +116,21 @@ def test_crazyflies_yaml_snippet() -> None:
     assert "    enabled: true" in lines and "    type: cf21" in lines
     assert "    initial_position: [0.5000, -1.0000, 0.0]" in lines  # on the floor below the start
     assert sum(line.strip().startswith("uri: radio://") for line in lines) == 2
+
+
+def test_fly_script_refuses_a_split_export(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    fly = _export(tmp_path, 3)
+    for i in range(2):  # what export writes above 31 pieces: parts, no whole file
+        whole = tmp_path / f"drone{i:03d}_poly7.csv"
+        for part in (1, 2):
+            (tmp_path / f"drone{i:03d}_poly7_part{part}.csv").write_text(whole.read_text())
+        whole.unlink()
+    calls: list[tuple] = []
+    for name, module in _fake_crazyflie_py(calls).items():
+        monkeypatch.setitem(sys.modules, name, module)
+    message = (
+        r"drone000_poly7.csv is split into 2 files \(drone000_poly7_part1.csv, drone000_poly7_part2.csv\)"
+    )
+    with pytest.raises(SystemExit, match=message):
+        runpy.run_path(str(fly), run_name="__main__")
+    assert calls == []  # nothing flew
