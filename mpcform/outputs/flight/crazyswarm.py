@@ -16,6 +16,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
+
 from mpcform._validate import Array
 
 CRAZYFLIE_MAX_PIECES = 31
@@ -92,12 +94,13 @@ def robot_name(i: int) -> str:
 def crazyflies_yaml(start_m: Array) -> str:
     """The ``robots`` section for drones starting at ``start_m`` (n, 3): on the floor below it."""
     lines = ["# mpcform export: one robot per drone; edit each uri (radio address) before flying", "robots:"]
-    for i, p in enumerate(start_m.tolist()):
+    for i, p in enumerate(np.round(start_m, 4).tolist()):
+        x, y = p[0] + 0.0, p[1] + 0.0  # rounded first, + 0.0: no "-0.0000"
         lines += [
             f"  {robot_name(i)}:",
             "    enabled: true",
             f"    uri: radio://0/80/2M/E7E7E7E7{i + 1:02X}  # placeholder",
-            f"    initial_position: [{p[0]:.4f}, {p[1]:.4f}, 0.0]",
+            f"    initial_position: [{x:.4f}, {y:.4f}, 0.0]",
             f"    type: {ROBOT_TYPE}",
         ]
     return "\n".join(lines) + "\n"

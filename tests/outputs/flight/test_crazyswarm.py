@@ -134,3 +134,8 @@ def test_fly_script_refuses_a_split_export(tmp_path: Path, monkeypatch: pytest.M
     with pytest.raises(SystemExit, match=message):
         runpy.run_path(str(fly), run_name="__main__")
     assert calls == []  # nothing flew
+
+
+def test_crazyflies_yaml_prints_no_negative_zero() -> None:
+    text = crazyflies_yaml(np.array([[-0.0, -0.00001, 1.0], [-1e-9, 2.0, 1.0]]))
+    assert "-0.0000" not in text and "    initial_position: [0.0000, 0.0000, 0.0]" in text
