@@ -121,7 +121,7 @@ class SplitQP(StepSolver):
         bend, direction, rounds = 1.0, None, 0
         frozen = np.zeros(best.shift.shape, dtype=bool)  # rows kept where they are until a step succeeds
         budget_end = np.inf if self.budget_s is None else t0 + self.budget_s
-        round_s, deadline = history[0][1], qp.deadline_s or np.inf  # a round takes about a solve
+        round_s, deadline = 2.0 * history[0][1], qp.deadline_s or np.inf  # a solve and a direction
         while rounds < self.iterations and np.isfinite(best.value):  # (a failed midpoint: no rounds)
             if (now := time.perf_counter()) >= budget_end or now + 2.0 * round_s > deadline:
                 break  # the split budget spent, or no time for a round and what follows the solve

@@ -29,7 +29,6 @@ if importlib.util.find_spec("crazyflow") is None:
 
 SCENARIOS = Path(__file__).resolve().parents[2] / "scenarios"
 SWAP_SEED, SWAP_RUNS = 7, 8
-MISS_SHARE = 0.05  # steps past their deadline (each sends the certified fallback; 0 on an idle machine)
 
 
 @pytest.fixture(scope="module")
@@ -75,17 +74,16 @@ def test_a_drone_below_the_floor_is_refused() -> None:
 
 
 def online(sc: Scenario) -> Scenario:
-    """``sc`` planned as a swarm flies it online: decoupled, a deadline of one period."""
-    mpc = dataclasses.replace(
-        sc.controller.mpc, coupling="decoupled", solve=None, step_budget_s=sc.simulation.dt_s
-    )
+    """``sc`` planned as the README advises online (decoupled); no deadline, so that the flight is
+    reproducible (a deadline makes the plans depend on the machine's speed: bench online and
+    tests/online measure it)."""
+    mpc = dataclasses.replace(sc.controller.mpc, coupling="decoupled", solve=None)
     return dataclasses.replace(sc, controller=dataclasses.replace(sc.controller, mpc=mpc))
 
 
 def flown(name: str, altitude_m: float = 1.0) -> dict:
-    """Fly a bundled scenario online in crazyflow: no contact, floor contact or flip, d_min kept
-    on the 500 Hz true path, every drone arrived, at most 5 % of the steps past their deadline
-    (a deadline depends on the machine: 0 here when idle, some under load)."""
+    """Fly a bundled scenario in crazyflow: no contact, floor contact or flip, d_min kept on the
+    500 Hz true path, every drone arrived; the step times printed."""
     sc = with_plant_kind(load_scenario(SCENARIOS / f"{name}.toml"), "crazyflow")
     sc = online(dataclasses.replace(sc, plant=dataclasses.replace(sc.plant, altitude_m=altitude_m)))
     run = run_scenario(sc)
@@ -95,14 +93,14 @@ def flown(name: str, altitude_m: float = 1.0) -> dict:
     print(name, {k: m[k] for k in shown}, "step p50/p99/max [ms]", steps_ms, "setup", plant["setup_s"])
     assert plant["drone_contacts"] == [] and plant["floor_contacts"] == [] and plant["flipped"] == []
     assert m["separation_violations_true"] == 0 and m["min_separation_true"] >= sc.limits.d_min_m
-    assert m["completion"] == 1.0 and m["deadline_misses"] <= MISS_SHARE * sc.steps
+    assert m["completion"] == 1.0
     return run.summary
 
 
 def swaps(count: int, seed: int = SWAP_SEED) -> Iterator[dict]:
     """Planar and spatial swaps of the completion family (n <= 20, v_max 0.5-2 m/s, d_min
-    0.3-0.7 m, dt 0.05-0.1 s, horizons 6-10), flown online in crazyflow (spatial ones lifted half
-    a metre above their lowest start or goal)."""
+    0.3-0.7 m, dt 0.05-0.1 s, horizons 6-10), decoupled, flown in crazyflow (spatial ones lifted
+    half a metre above their lowest start or goal)."""
     index = 0
     while count:
         sc = completion_family.scenario(np.random.default_rng([seed, index]), index)
@@ -112,7 +110,7 @@ def swaps(count: int, seed: int = SWAP_SEED) -> Iterator[dict]:
         if len(sc["template"]["offsets"]) > 20:
             continue
         sc["plant"] = {"kind": "crazyflow"}
-        sc["controller"] |= {"coupling": "decoupled", "step_budget": sc["simulation"]["dt"]}  # online
+        sc["controller"]["coupling"] = "decoupled"  # as online (no deadline: reproducible)
         if sc["dim"] == 3:
             built = scenario_from_dict(sc)
             ends = np.concatenate([built.initial_positions_m, built.reference.targets(np.array([1e9]))[0][0]])
@@ -129,7 +127,6 @@ def test_random_swaps_fly_in_crazyflow() -> None:
             r["name"], r["n"], f"{r['min_separation']:.3f}", r["completion"], r["deadline_misses"], r["cpu_s"]
         )
     bad = [r for r in results if r["violations"] or r["completion"] < 1.0 or r["events"]]
-    bad += [r for r in results if r["deadline_misses"] > MISS_SHARE * r["duration"] / r["dt"]]
     assert [r["name"] for r in bad] == []
 
 
