@@ -75,6 +75,16 @@ def min_pair_distances(path: Array) -> Array:
     return np.concatenate(mins) if mins else np.empty(0)
 
 
+def closest_pair(path: Array) -> tuple[int, int, int, float]:
+    """``(sample, i, j, distance [m])`` of the closest two drones, ``i < j``, over the samples of
+    ``path`` (T, n, d) with n >= 2 (:func:`min_pair_distances`, then that sample's pairs)."""
+    sep = min_pair_distances(path)
+    k = int(np.argmin(sep))
+    dist = squareform(pdist(path[k])) + np.diag(np.full(path.shape[1], np.inf))
+    i, j = np.unravel_index(int(np.argmin(dist)), dist.shape)
+    return k, int(min(i, j)), int(max(i, j)), float(sep[k])
+
+
 def pairs_within(points: Array, radius: float, sort: bool = True) -> Array:
     """Index pairs (m, 2), i < j, of rows of ``points`` closer than ``radius`` (sorted unless
     ``sort`` is false: in the tree's order for more than :data:`BRUTE_FORCE_MAX_N` points)."""

@@ -133,7 +133,6 @@ class MPCPlanner(Controller):
         # drones at rest (no states without a loop); where the loop takes them by the next step
         self._loop_state = np.zeros((self.n, self.dim, 0)) if self.loop is None else self.loop.rest(self.n)
         self._predicted: Array | None = None
-        self._deadline: float | None = None  # this step's (settings.step_budget_s)
 
     @property
     def plan(self) -> Plan | None:
@@ -148,18 +147,20 @@ class MPCPlanner(Controller):
         (mode ``fast_path`` | ``qp`` | ``fallback``, solver status, slack and the pairs that needed it,
         liveness events). With none of the QP's rows active the command is exactly eq. 14."""
         p0 = self._check_positions(positions_m)
-        self._deadline = None if (b := self.settings.step_budget_s) is None else time.perf_counter() + b
+        deadline = None if (b := self.settings.step_budget_s) is None else time.perf_counter() + b
         if self.loop is None:
-            return self._step(t_s, p0)
+            return self._step(t_s, p0, deadline)
         if self._predicted is not None:  # the velocity offset of the last interval
             self._loop_state = self.loop.observe(self._loop_state, p0 - self._predicted)
-        out = self._step(t_s, p0)
+        out = self._step(t_s, p0, deadline)
         u0 = out.command_mps
         self._predicted = p0 + self.dt_s * u0 + self.loop.first(self._loop_state, u0)
         self._loop_state = self.loop.advance(self._loop_state, u0)
         return out
 
-    def _step(self, t_s: float, p0: Array) -> ControlStep:
+    def _step(self, t_s: float, p0: Array, deadline: float | None) -> ControlStep:
+        """The step of :meth:`step` from ``p0``, done by ``time.perf_counter() == deadline`` (None:
+        no deadline, ``MPCSettings.step_budget_s``)."""
         st, sep = self.settings, self._separation
         k, dt, horizon = st.gain_per_s, self.dt_s, st.horizon
         targets, ff = feedforward_targets(self.reference, t_s, dt, horizon, st.feedforward)
@@ -226,10 +227,10 @@ class MPCPlanner(Controller):
         qp = StepQP(self.n, drones, p0[drones], c[:, drones], self._u_prev[drones], sub, cand.rebuilt, warm)
         if free is not None:
             qp = replace(qp, free_m=free[:, drones])
-        if self._deadline is not None:
-            qp = replace(qp, deadline_s=self._deadline)
+        if deadline is not None:
+            qp = replace(qp, deadline_s=deadline)
         sol, active = solver.solve(qp)
-        late = self._deadline is not None and time.perf_counter() > self._deadline
+        late = deadline is not None and time.perf_counter() > deadline
         if late:  # the command had to be sent: the solution came too late
             sol = replace(sol, success=False, status=f"{sol.status}; past the step's deadline")
         elif not sol.success and brake is not None and free is not None:  # wind: no plan in the fence

@@ -24,7 +24,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from mpcform._validate import Array, finite_array, positive
-from mpcform.control.base import StepInfo
+from mpcform.control.base import Controller, StepInfo
 from mpcform.control.setpoints import FullState, interval_setpoints, ticks_per_interval
 from mpcform.errors import ValidationError
 from mpcform.mpc.planner import MPCPlanner
@@ -52,7 +52,7 @@ class OnlineLoop:
     setpoints at ``setpoint_rate_hz`` (a multiple of ``1 / dt``), planar plans at ``altitude_m``."""
 
     def __init__(
-        self, planner: MPCPlanner, *, setpoint_rate_hz: float = 100.0, altitude_m: float = 1.0
+        self, planner: Controller, *, setpoint_rate_hz: float = 100.0, altitude_m: float = 1.0
     ) -> None:
         if not isinstance(planner, MPCPlanner):
             raise ValidationError("planner", f"expected an MPCPlanner, got {type(planner).__name__}")
@@ -79,7 +79,6 @@ class OnlineLoop:
             mpc = dataclasses.replace(spec.mpc, step_budget_s=step_budget_s)
             scenario = dataclasses.replace(scenario, controller=dataclasses.replace(spec, mpc=mpc))
         planner = build_controller(scenario)
-        assert isinstance(planner, MPCPlanner)
         altitude = float(getattr(scenario.plant, "altitude_m", 1.0))
         return cls(planner, setpoint_rate_hz=setpoint_rate_hz, altitude_m=altitude)
 

@@ -17,10 +17,9 @@ from matplotlib.colors import ListedColormap, Normalize
 from matplotlib.patches import Circle
 from matplotlib.ticker import MaxNLocator
 from scipy.spatial import ConvexHull, QhullError
-from scipy.spatial.distance import pdist, squareform
 
 from mpcform._validate import Array
-from mpcform.formation.geometry import formation_edges, min_pair_distances
+from mpcform.formation.geometry import closest_pair, formation_edges
 from mpcform.outputs.rundata import RunData
 
 # ---- the one style of every figure ---------------------------------------------------------
@@ -186,15 +185,6 @@ def envelope(ax: Axes, t_s: Array, values: Array, colour: Any, label: str, *, st
         label=f"{label}: median",
         drawstyle="steps-post" if stairs else "default",
     )
-
-
-def closest_pair(positions_m: Array) -> tuple[int, int, int, float]:
-    """``(sample, i, j, distance [m])`` of the closest two drones over the samples."""
-    sep = min_pair_distances(positions_m)
-    k = int(np.argmin(sep))
-    dist = squareform(pdist(positions_m[k])) + np.diag(np.full(positions_m.shape[1], np.inf))
-    i, j = np.unravel_index(int(np.argmin(dist)), dist.shape)
-    return k, int(min(i, j)), int(max(i, j)), float(sep[k])
 
 
 def mark_closest_pair(ax: Axes, run: RunData, axes: tuple[int, int] = (0, 1)) -> None:

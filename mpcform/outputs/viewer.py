@@ -28,7 +28,7 @@ import numpy as np
 
 from mpcform._validate import Array, finite_array, positive
 from mpcform.errors import ValidationError
-from mpcform.formation.geometry import min_pair_distances, pairs_within
+from mpcform.formation.geometry import closest_pair, min_pair_distances, pairs_within
 from mpcform.sim.metrics import REL_TOL
 from mpcform.sim.trajectory import TrueTrajectory
 
@@ -254,11 +254,8 @@ def _closest(p: Array) -> dict[str, Any] | None:
     """The run's closest pair: its sample ``k``, the ``pair`` and their distance ``m`` [m]."""
     if p.shape[1] < 2:
         return None
-    k = int(np.argmin(min_pair_distances(p)))
-    i, j = np.triu_indices(p.shape[1], 1)
-    dist = np.linalg.norm(p[k, i] - p[k, j], axis=-1)
-    m = int(np.argmin(dist))
-    return {"k": k, "pair": [int(i[m]), int(j[m])], "m": _sig(float(dist[m]))}
+    k, i, j, dist = closest_pair(p)
+    return {"k": k, "pair": [i, j], "m": _sig(dist)}
 
 
 def _curve(key: str, values: Array, samples: int, d_min: float | None, v_max: float | None) -> dict[str, Any]:

@@ -34,7 +34,7 @@ from mpcform.reference.mission import MissionReference
 from mpcform.scenario.mpc_keys import DEPRECATED, MPC_FIELDS, MPC_KEYS
 from mpcform.scenario.parse import as_scenario_error, parse_keys, parse_table, parse_top_level
 from mpcform.scenario.placement import check_distinct, check_extent, check_goal, check_start
-from mpcform.scenario.plant import parse_plant
+from mpcform.scenario.plant import parse_plant, planned_for_its_plant
 from mpcform.scenario.schema import CONSENSUS_FIELDS, NULLSPACE_FIELDS, TABLES
 from mpcform.scenario.size import MAX_STEPS, REFERENCE_SAMPLES, check_drone_count
 from mpcform.scenario.solve import solve_strategy
@@ -145,8 +145,7 @@ def scenario_from_dict(
         source=source,
         source_sha256=source_sha256,
     )
-    if plant.kind == "crazyflow":  # flown as a Crazyflie: room for its tracking error
-        scenario = scenario.flyable()
+    scenario = planned_for_its_plant(scenario)
     if controller.kind != "mpc":
         return scenario
     with as_scenario_error("limits"):  # e.g. limits.a_max = inf on a plant whose margin needs a bound

@@ -78,8 +78,13 @@ def with_plant_kind(scenario: Scenario, kind: str) -> Scenario:
     except ValidationError as exc:
         raise ScenarioError("--plant", str(exc).removeprefix(f"{exc.field}: ")) from None
     check_plant_rates(plant, scenario.simulation.dt_s)
-    flown = dataclasses.replace(scenario, plant=plant)
-    return flown.flyable() if kind == "crazyflow" else flown  # room for a Crazyflie's tracking error
+    return planned_for_its_plant(dataclasses.replace(scenario, plant=plant))
+
+
+def planned_for_its_plant(scenario: Scenario) -> Scenario:
+    """``scenario`` as its plant needs it planned: on crazyflow, which flies the plan as a
+    Crazyflie's setpoints, with the tracking allowance (:meth:`~mpcform.scenario.spec.Scenario.flyable`)."""
+    return scenario.flyable() if scenario.plant.kind == "crazyflow" else scenario
 
 
 def _wind(raw: Any, dim: int) -> Wind | None:

@@ -59,6 +59,24 @@ def body_radius_m(drone: str) -> float:
     return math.sqrt(2.0) * float(params["L"]) + float(params["prop_radius"])
 
 
+def check_settings(drone: str, physics_hz: int, control_hz: int, altitude_m: float, windy: bool) -> None:
+    """The crazyflow plant's settings (errors name the scenario's ``[plant]`` keys)."""
+    if windy:
+        raise ValidationError("plant.wind", "the crazyflow plant flies in calm air: remove [plant.wind]")
+    if drone not in DRONES:
+        raise ValidationError("plant.drone", f"expected one of {', '.join(DRONES)}, got {drone!r}")
+    for key, rate in (("physics_rate", physics_hz), ("control_rate", control_hz)):
+        if isinstance(rate, bool) or not isinstance(rate, int) or rate < 1:
+            raise ValidationError(f"plant.{key}", f"expected an integer >= 1 [Hz], got {rate!r}")
+    if physics_hz % control_hz:
+        raise ValidationError(
+            "plant.physics_rate",
+            f"expected a multiple of plant.control_rate ({control_hz} Hz), got {physics_hz}",
+        )
+    if not 0.0 < altitude_m < math.inf:
+        raise ValidationError("plant.altitude", f"expected a finite height > 0 [m], got {altitude_m!r}")
+
+
 class CrazyflowPlant(Plant):
     """n Crazyflies in one crazyflow world (module docstring)."""
 
@@ -76,15 +94,7 @@ class CrazyflowPlant(Plant):
         **kwargs: Any,
     ) -> None:
         super().__init__(n, dim, **kwargs)
-        if self.wind is not None:
-            raise ValidationError("plant.wind", "the crazyflow plant flies in calm air: remove [plant.wind]")
-        if drone not in DRONES:
-            raise ValidationError("plant.drone", f"expected one of {', '.join(DRONES)}, got {drone!r}")
-        if physics_hz % control_hz:
-            raise ValidationError(
-                "plant.physics_rate",
-                f"expected a multiple of plant.control_rate ({control_hz} Hz), got {physics_hz}",
-            )
+        check_settings(drone, physics_hz, control_hz, altitude_m, self.wind is not None)
         self.drone, self.altitude_m = drone, altitude_m
         self.physics_hz, self.control_hz = physics_hz, control_hz
         self.radius_m = body_radius_m(drone)
@@ -183,7 +193,8 @@ class _Worker:
         self._proc = subprocess.Popen(
             cmd, stdin=pipe, stdout=pipe, stderr=self._log, env=env, cwd=self._dir.name
         )
-        assert self._proc.stdin is not None and self._proc.stdout is not None
+        if self._proc.stdin is None or self._proc.stdout is None:  # PIPE was asked for both
+            raise MPCFormError("crazyflow: the worker process started without its pipes")
         self._send = Connection(os.dup(self._proc.stdin.fileno()), readable=False)
         self._recv = Connection(os.dup(self._proc.stdout.fileno()), writable=False)
 

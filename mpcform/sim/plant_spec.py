@@ -25,7 +25,7 @@ import numpy as np
 
 from mpcform._validate import positive
 from mpcform.errors import ValidationError
-from mpcform.sim.crazyflow import DRONES, CrazyflowPlant
+from mpcform.sim.crazyflow import CrazyflowPlant, check_settings
 from mpcform.sim.plants import KINDS, SAMPLES_PER_STEP, IdealPlant, Plant, lag_plant, second_order_plant
 from mpcform.sim.quadrotor import QuadrotorPlant, QuadrotorSpec
 from mpcform.sim.wind import Wind
@@ -244,26 +244,9 @@ class CrazyflowPlantSpec(PlantSpec):
 
     def __post_init__(self) -> None:
         super().__post_init__()
-        if self.wind is not None:
-            raise ValidationError("plant.wind", "the crazyflow plant flies in calm air: remove [plant.wind]")
-        if self.drone not in DRONES:
-            raise ValidationError("plant.drone", f"expected one of {', '.join(DRONES)}, got {self.drone!r}")
-        for name in ("physics_rate_hz", "control_rate_hz"):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, int) or value < 1:
-                raise ValidationError(
-                    f"plant.{scenario_key(name)}", f"expected an integer >= 1 [Hz], got {value!r}"
-                )
-        if self.physics_rate_hz % self.control_rate_hz:
-            raise ValidationError(
-                "plant.physics_rate",
-                f"expected a multiple of plant.control_rate ({self.control_rate_hz} Hz), "
-                f"got {self.physics_rate_hz}",
-            )
-        if not 0.0 < self.altitude_m < math.inf:
-            raise ValidationError(
-                "plant.altitude", f"expected a finite height > 0 [m], got {self.altitude_m!r}"
-            )
+        check_settings(
+            self.drone, self.physics_rate_hz, self.control_rate_hz, self.altitude_m, self.wind is not None
+        )
 
     def robustness(
         self, dim: int, dt_s: float, a_max_mps2: float | None, loop_modelled: bool = False

@@ -28,17 +28,21 @@ INTERVAL_S = 0.02  # 10 inner steps of the 500 Hz plant (the plant records >= 10
 
 @dataclass(frozen=True)
 class FlightCheck:
-    """True tracking error [m] (worst drone, time), true minimum separation [m] and the declared
-    tracking tolerance [m] = plant margin + fit tolerance."""
+    """True tracking error [m] (worst drone, time), the declared tracking tolerance [m] = plant
+    margin + fit tolerance, the closest true pair (None for one drone) and the run's d_min [m]."""
 
     max_error_m: float
     error_drone: int
     error_t_s: float
-    min_separation_m: float
     plant_margin_m: float
     fit_tolerance_m: float
     closest: ClosestPair | None = None
     d_min_m: float | None = None
+
+    @property
+    def min_separation_m(self) -> float:
+        """The true minimum separation [m] (inf for one drone)."""
+        return float("inf") if self.closest is None else self.closest.distance_m
 
     @property
     def declared_tolerance_m(self) -> float:
@@ -105,7 +109,6 @@ def fly_export(
     err = np.linalg.norm(p_true - poly.evaluate(t).reshape(-1, n, 4)[..., :3], axis=-1)
     j, i = np.unravel_index(int(np.argmax(err)), err.shape)
     closest = closest_pair(t, p_true)
-    sep = float("inf") if closest is None else closest.distance_m
     return FlightCheck(
-        float(err[j, i]), int(i), float(t[j]), sep, float(margin), fit_tolerance_m, closest, d_min_m
+        float(err[j, i]), int(i), float(t[j]), float(margin), fit_tolerance_m, closest, d_min_m
     )

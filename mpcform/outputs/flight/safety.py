@@ -11,9 +11,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import numpy as np
-
 from mpcform._validate import Array
+from mpcform.formation import geometry
 
 
 @dataclass(frozen=True)
@@ -31,13 +30,10 @@ class ClosestPair:
 
 def closest_pair(t_s: Array, positions_m: Array) -> ClosestPair | None:
     """The closest pair over the samples ``t_s`` (K,) of ``positions_m`` (K, n, d); None for one drone."""
-    n = positions_m.shape[1]
-    if n < 2:
+    if positions_m.shape[1] < 2:
         return None
-    i, j = np.triu_indices(n, 1)
-    gaps = np.linalg.norm(positions_m[:, i] - positions_m[:, j], axis=-1)  # (K, pairs)
-    k, m = np.unravel_index(int(np.argmin(gaps)), gaps.shape)
-    return ClosestPair(float(gaps[k, m]), float(t_s[k]), (int(i[m]), int(j[m])))
+    k, i, j, dist = geometry.closest_pair(positions_m)
+    return ClosestPair(dist, float(t_s[k]), (i, j))
 
 
 def separation_breaches(

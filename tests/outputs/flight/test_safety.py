@@ -33,7 +33,7 @@ def test_one_line_per_breach() -> None:
 
 
 def test_a_flight_check_below_d_min_is_not_within_tolerance() -> None:
-    ok = FlightCheck(0.01, 0, 1.0, 0.55, 0.02, 0.01, ClosestPair(0.55, 2.0, (0, 1)), 0.5)
+    ok = FlightCheck(0.01, 0, 1.0, 0.02, 0.01, ClosestPair(0.55, 2.0, (0, 1)), 0.5)
     assert ok.within_tolerance and ok.record()["closest_pair"] == [0, 1]
-    close = FlightCheck(0.01, 0, 1.0, 0.455, 0.02, 0.01, ClosestPair(0.455, 2.0, (0, 1)), 0.5)
+    close = FlightCheck(0.01, 0, 1.0, 0.02, 0.01, ClosestPair(0.455, 2.0, (0, 1)), 0.5)
     assert not close.within_tolerance and close.record()["within_tolerance"] is False
