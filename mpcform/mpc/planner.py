@@ -159,8 +159,7 @@ class MPCPlanner(Controller):
         return out
 
     def _step(self, t_s: float, p0: Array, deadline: float | None) -> ControlStep:
-        """The step of :meth:`step` from ``p0``, done by ``time.perf_counter() == deadline`` (None:
-        no deadline, ``MPCSettings.step_budget_s``)."""
+        """:meth:`step` from ``p0``, due at ``time.perf_counter() == deadline`` (None: no deadline)."""
         st, sep = self.settings, self._separation
         k, dt, horizon = st.gain_per_s, self.dt_s, st.horizon
         targets, ff = feedforward_targets(self.reference, t_s, dt, horizon, st.feedforward)
