@@ -25,7 +25,7 @@ from mpcform.cli import handlers as cli_runner
 from mpcform.cli.options import add_max_memory, add_max_work, solver_help
 from mpcform.cli.paths import check_output_dir, check_output_paths, clear_outputs
 from mpcform.errors import MPCFormError, ScenarioError, ValidationError
-from mpcform.outputs.files import OUTPUT_FILES, format_summary, incomplete_warning
+from mpcform.outputs.files import OUTPUT_FILES, format_summary, incomplete_warning, plant_events
 from mpcform.outputs.rundata import FORMATION_NPZ
 from mpcform.run.heap import keep_heap
 from mpcform.run.runner import describe, run_scenario
@@ -93,6 +93,8 @@ def _run(args: argparse.Namespace) -> int:
     print(format_summary(run.summary))
     if (incomplete := incomplete_warning(run.summary)) is not None:
         print(f"mpcform: warning: {incomplete}", file=sys.stderr)
+    if (events := plant_events(run.summary.get("plant") or {})) is not None:
+        print(f"mpcform: warning: the plant reports {events}", file=sys.stderr)
     print(f"wrote {', '.join(OUTPUT_FILES)} to {run.out_dir}")
     cli_runner.finish_run(args, scenario, run)  # --plot, --animate, --export
     return 0

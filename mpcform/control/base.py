@@ -58,6 +58,17 @@ class Controller(ABC):
     def step(self, t_s: float, positions_m: Array) -> ControlStep:
         """The command for ``[t_s, t_s + dt)`` given the measured positions (n, d)."""
 
+    def lose(self, drones: Array, positions_m: Array) -> Controller:
+        """The controller that stops planning for ``drones`` (lost: flipped or on the floor), the
+        drones at ``positions_m`` (n, d) now: the planner's (:mod:`mpcform.mpc.survivors`); this
+        one itself for the others, which keep commanding every drone."""
+        return self
+
+    @property
+    def lost_drones(self) -> Array:
+        """The drones this controller no longer plans for (sorted)."""
+        return np.zeros(0, dtype=int)
+
     def _check_positions(self, positions_m: Array) -> Array:
         tpl = self.reference.template
         return finite_array("positions", positions_m, (tpl.n, tpl.dim))

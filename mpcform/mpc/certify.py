@@ -57,7 +57,7 @@ class Certifier:
         """With a velocity loop: where a command takes the drones beyond ``dt u`` in the interval."""
         self.floor_command: Array | None = None
         """With a velocity loop: the braking command (n, d) whose chord sets the floor (the one the
-        QP's first rows are lowered to, :func:`mpcform.mpc.planner.hard_first_rows`; None: the hold)."""
+        QP's first rows are lowered to, :func:`mpcform.mpc.first_rows.hard_first_rows`; None: the hold)."""
 
     def certify(self, p0: Array, u: Array, cand: Candidates, u_prev: Array | None = None) -> Array | None:
         """The command ``u`` (n, d) scaled into the ball (with ``u_prev`` and ``a_max``, first moved

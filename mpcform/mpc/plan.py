@@ -90,3 +90,15 @@ def warm_start(
     u = braking.shifted(plan.inputs_mps)
     x = np.concatenate([plan.positions_m[2:], plan.positions_m[-1:] + braking.dt_s * u[-1:]]) - p0
     return np.stack([u, x])
+
+
+def merge(drones: Array, z: Array, u_nom: Array, x_nom: Array) -> tuple[Array, Array]:
+    """Inputs and relative positions (H, n, d): the QP solution ``z``'s for ``drones`` (its first
+    variables: the inputs, then the positions, each (H, len(drones), d)), the rollout's for the
+    others."""
+    horizon, m, dim = u_nom.shape[0], drones.shape[0], u_nom.shape[2]
+    nud = horizon * m * dim
+    u, x = u_nom.copy(), x_nom.copy()
+    u[:, drones] = z[:nud].reshape(horizon, m, dim)
+    x[:, drones] = z[nud : 2 * nud].reshape(horizon, m, dim)
+    return u, x

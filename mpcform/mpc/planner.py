@@ -46,10 +46,11 @@ from mpcform.errors import ValidationError
 from mpcform.mpc.braking import Braking
 from mpcform.mpc.candidates import CandidateSelector, qp_drones
 from mpcform.mpc.certify import Certifier
+from mpcform.mpc.first_rows import hard_first_rows
 from mpcform.mpc.limit_families import admitted, limit_rows, violators
 from mpcform.mpc.liveness import TieBreak
 from mpcform.mpc.loop import VelocityLoop
-from mpcform.mpc.plan import Plan, guess, rollout, warm_start
+from mpcform.mpc.plan import Plan, guess, merge, rollout, warm_start
 from mpcform.mpc.prediction import Prediction
 from mpcform.mpc.problem import StepQP
 from mpcform.mpc.separation import Separation, SeparationRows
@@ -58,13 +59,14 @@ from mpcform.mpc.split import SplitQP
 from mpcform.mpc.step_info import FAST_PATH, MPCStepInfo, solve_info
 from mpcform.mpc.step_solvers import build_step_solvers
 from mpcform.mpc.strategy import with_backend
+from mpcform.mpc.survivors import Survivors, lost_spheres, split_lost
 from mpcform.reference.base import Reference
-from mpcform.solvers.base import QPBackend, QPSolution
+from mpcform.reference.subset import SubsetReference
+from mpcform.solvers.base import QPBackend
 from mpcform.world.limits import Limits, planning_limits, tightened
 from mpcform.world.obstacles import SphereObstacle, resolve_clearances
 
 SLACK_REPORT_M = 1e-6  # slack above this is reported
-LOWERED_TOL_M = 1e-9  # a first row lowered by more than this is reported
 
 
 class MPCPlanner(Controller):
@@ -92,7 +94,7 @@ class MPCPlanner(Controller):
         settings = settings or MPCSettings()
         if solver is not None:  # the sparse strategy's backend replaced (a per-drone one refuses)
             settings = replace(settings, solve=with_backend(settings.strategy, solver, "controller.solver"))
-        self.settings = settings
+        self.settings, self._solver_given = settings, solver
         check_gain_dt(settings.gain_per_s, dt_s)
         self.n, self.dim = reference.template.n, reference.template.dim
         obstacles = resolve_clearances(tuple(obstacles), limits.d_min_m)  # unset: d_min / 2
@@ -138,6 +140,24 @@ class MPCPlanner(Controller):
     def plan(self) -> Plan | None:
         """The plan of the last step (None before the first)."""
         return self._plan
+
+    def lose(self, drones: Array, positions_m: Array) -> Controller:
+        """Stop planning for ``drones`` (:mod:`mpcform.mpc.survivors`): the planner of the others,
+        which keep ``d_min`` from where the lost drones are (``positions_m`` (n, d)) and go on
+        from this planner's plan."""
+        lost, keep = split_lost(drones, self.n)
+        if lost.size == 0 or keep.size == 0:
+            return self if lost.size == 0 else Survivors(self, lost, None, len(self.obstacles))
+        spheres = lost_spheres(self._check_positions(positions_m)[lost], self.limits.d_min_m)
+        ref, obstacles = SubsetReference(self.reference, keep), self.obstacles + spheres
+        inner = MPCPlanner(
+            ref, self.dt_s, self.limits, self.settings, obstacles, self._solver_given, self.loop
+        )
+        inner._u_prev, inner._loop_state = self._u_prev[keep], self._loop_state[keep]
+        inner._predicted = None if self._predicted is None else self._predicted[keep]
+        if self._plan is not None:
+            inner._plan = Plan(self._plan.inputs_mps[:, keep], self._plan.positions_m[:, keep])
+        return Survivors(self, lost, inner, len(self.obstacles))
 
     # ---- one step -------------------------------------------------------------------------
     def step(self, t_s: float, positions_m: Array) -> ControlStep:
@@ -240,13 +260,18 @@ class MPCPlanner(Controller):
         status, solved = sol.status, None
         inside_m, inside = sep.start_shortfall(p0, rows)  # items that start too close
         if sol.success and sol.x is not None:
-            u, x = self._merge(drones, sol.x, u_nom, x_nom)
+            u, x = merge(drones, sol.x, u_nom, x_nom)
             u0 = self._certifier.certify(p0, u[0], cand, self._u_prev)
             if u0 is not None:
                 self._accept(p0, u, x)
                 self._u_prev = u0.copy()  # the command sent (the solver's tolerance off)
                 x_true = self._predict.points(self._loop_state, u, x)
-                info = self._qp_info(sol, sol.x, active, drones, x_true, rows, inside_m, inside, relaxed)
+                slack_m, items = slack_report(
+                    sep, sol.x, drones, x_true, rows, (inside_m, inside), relaxed, horizon
+                )
+                info = solve_info(
+                    "qp", sol, sol.status, active, len(drones), slack_m, items, self._tie_break, relaxed
+                )
                 return ControlStep(u0, info)
             status, solved = status + "; command failed certification", u[0]
         u, x, note = self._certifier.fallback(self._plan, p0, cand, horizon, solved, self._u_prev)
@@ -277,42 +302,6 @@ class MPCPlanner(Controller):
         resolved = self._tie_break.resolved
         info = MPCStepInfo("fast_path", resolved=resolved) if resolved else FAST_PATH
         return ControlStep(nominal.inputs_mps[0].copy(), info)
-
-    def _merge(self, drones: Array, z: Array, u_nom: Array, x_nom: Array) -> tuple[Array, Array]:
-        """Inputs and relative positions (H, n, d): the solution ``z``'s for ``drones``, the
-        rollout's for the others."""
-        horizon, m = self.settings.horizon, drones.shape[0]
-        nud = horizon * m * self.dim
-        u, x = u_nom.copy(), x_nom.copy()
-        u[:, drones] = z[:nud].reshape(horizon, m, self.dim)
-        x[:, drones] = z[nud : 2 * nud].reshape(horizon, m, self.dim)
-        return u, x
-
-    def _qp_info(
-        self,
-        sol: QPSolution,
-        z: Array,
-        active: int,
-        drones: Array,
-        x: Array,
-        rows: SeparationRows,
-        inside_m: float,
-        inside: Array,
-        relaxed: bool = False,
-    ) -> MPCStepInfo:
-        """What a certified solve ``z`` reports: its solver figures and the slack it needed (the
-        items whose rows positions ``x`` (H, n, d) miss, and the items ``inside`` that start
-        ``inside_m`` inside their required distance)."""
-        nud = self.settings.horizon * drones.shape[0] * self.dim
-        slack = z[2 * nud : 2 * nud + self.settings.horizon * drones.shape[0]]
-        shortfall, missed = inside_m, inside
-        if relaxed or slack.max(initial=0.0) > SLACK_REPORT_M / 2:
-            planned, missed = self._separation.shortfall(x, rows, SLACK_REPORT_M)
-            shortfall, missed = max(shortfall, planned), np.concatenate([inside, missed])
-        shortfall = max(shortfall, 0.0)
-        return solve_info(
-            "qp", sol, sol.status, active, drones.shape[0], shortfall, missed, self._tie_break, relaxed
-        )
 
     def _accept(self, p0: Array, u: Array, x: Array) -> None:
         self._plan = Plan.from_relative(p0, u, x)
@@ -354,37 +343,23 @@ def _check_limits(
         )
 
 
-def hard_first_rows(rows: SeparationRows, first_m: Array) -> tuple[SeparationRows, bool, int]:
-    """``rows`` with every item's first row hard (no slack), its bound lowered to the row's value
-    at the best of ``first_m`` (k, n, d) (or (n, d)) where that is lower, whether a bound was
-    (of an item within reach), and the best's index.
-
-    With a loop the first interval is mostly the free response: a slack there (one per drone and
-    step) would let a drone approach one partner as far as another forces it to, and fail the
-    certification. ``first_m`` are where feasible first commands take the drones (``x_1 + G_10
-    u_0``: braking, the previous plan's next input); the best is the one that needs the least
-    lowering, and every row is lowered to that same one, so it meets them all and the rows stay
-    feasible (a row-wise best of several would not be met by any one of them).
-    """
-    first_m = first_m.reshape((-1,) + first_m.shape[-2:])
-    i, k = rows.pairs.T
-    at_p = np.einsum("pd,kpd->kp", rows.pair_coeffs[:, 0], first_m[:, i] - first_m[:, k])
-    at_s = np.einsum("sd,ksd->ks", rows.single_coeffs[:, 0], first_m[:, rows.singles])
-    short = np.maximum(rows.pair_lower[:, 0] - at_p, 0.0).sum(axis=1)
-    short += np.maximum(rows.single_lower[:, 0] - at_s, 0.0).sum(axis=1)
-    best = int(np.argmin(short))
-    lower_p, lower_s = rows.pair_lower.copy(), rows.single_lower.copy()
-    np.minimum(lower_p[:, 0], at_p[best], out=lower_p[:, 0])
-    np.minimum(lower_s[:, 0], at_s[best], out=lower_s[:, 0])
-    relaxed = bool(  # (by more than rounding)
-        np.any((lower_p[:, 0] < rows.pair_lower[:, 0] - LOWERED_TOL_M) & rows.pair_on)
-        or np.any((lower_s[:, 0] < rows.single_lower[:, 0] - LOWERED_TOL_M) & rows.single_on)
-    )
-    hard = replace(
-        rows,
-        pair_lower=lower_p,
-        single_lower=lower_s,
-        pair_hard=np.ones_like(rows.pair_hard),
-        single_hard=np.ones_like(rows.single_hard),
-    )
-    return hard, relaxed, best
+def slack_report(
+    sep: Separation,
+    z: Array,
+    drones: Array,
+    x: Array,
+    rows: SeparationRows,
+    start: tuple[float, Array],
+    relaxed: bool,
+    horizon: int,
+) -> tuple[float, Array]:
+    """The slack a certified solve ``z`` of ``drones`` over ``horizon`` steps needed [m] and its
+    items (m, 2): those whose rows the positions ``x`` (H or H + 1, n, d) miss, and the items
+    that ``start`` (shortfall [m], items) inside their required distance."""
+    nud = horizon * drones.shape[0] * x.shape[2]
+    slack = z[2 * nud : 2 * nud + horizon * drones.shape[0]]
+    shortfall, missed = start
+    if relaxed or slack.max(initial=0.0) > SLACK_REPORT_M / 2:
+        planned, late = sep.shortfall(x, rows, SLACK_REPORT_M)
+        shortfall, missed = max(shortfall, planned), np.concatenate([missed, late])
+    return max(shortfall, 0.0), missed

@@ -21,7 +21,7 @@ class MPCStepInfo(StepInfo):
     ``resolved`` escalations that ended at this step (the drone left conflict), ``unwound``
     circling drones whose escalation was reset at this step. ``lowered``: with a
     velocity loop, whether a first separation row within reach was lowered to what braking reaches
-    (:func:`mpcform.mpc.planner.hard_first_rows`). ``deadline_missed``: the solve ended past the
+    (:func:`mpcform.mpc.first_rows.hard_first_rows`). ``deadline_missed``: the solve ended past the
     step's deadline (``MPCSettings.step_budget_s``), so the command is the braking fallback."""
 
     iterations: int = 0

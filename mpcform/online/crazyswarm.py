@@ -27,7 +27,7 @@ def fly_online(
     stops early when Crazyswarm2 shuts down."""
     allcfs, clock = swarm.allcfs, swarm.timeHelper
     cfs = allcfs.crazyflies if names is None else [allcfs.crazyfliesByName[name] for name in names]
-    n, dim = loop.planner.n, loop.planner.dim
+    n, dim = loop.n, loop.dim
     if len(cfs) != n:
         raise ValidationError("names", f"expected {n} Crazyflies (one per drone of the plan), got {len(cfs)}")
     steps: list[OnlineStep] = []

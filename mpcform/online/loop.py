@@ -12,6 +12,11 @@ braking fallback instead (the previous plan's tail, :mod:`mpcform.mpc.braking`),
 ``deadline_missed``. The check is cooperative: a solver call is bounded by its iteration cap
 (``controller.solve.max_iter``), not interrupted, so a step can end later than its budget by one
 solver call; :attr:`OnlineStep.wall_s` records it.
+
+A drone that can no longer follow its setpoints (flipped, on the floor: the Crazyflie's
+supervisor reports it tumbled) is given up with :meth:`OnlineLoop.lose`: the planner stops
+planning for it, the others keep ``d_min`` from where it lies (:mod:`mpcform.mpc.survivors`),
+and its command is zero from then on (its setpoints hold it where it is: stop or land it).
 """
 
 from __future__ import annotations
@@ -56,7 +61,9 @@ class OnlineLoop:
     ) -> None:
         if not isinstance(planner, MPCPlanner):
             raise ValidationError("planner", f"expected an MPCPlanner, got {type(planner).__name__}")
-        self.planner = planner
+        self._full = planner
+        self.planner: Controller = planner  # after lose: the planner of the drones still flying
+        self.n, self.dim = planner.n, planner.dim
         self.dt_s = planner.dt_s
         self.setpoint_rate_hz = positive("setpoint_rate", setpoint_rate_hz)
         ticks_per_interval(self.dt_s, self.setpoint_rate_hz)
@@ -83,15 +90,17 @@ class OnlineLoop:
         return cls(planner, setpoint_rate_hz=setpoint_rate_hz, altitude_m=altitude)
 
     def start(self, t_s: float, positions_m: ArrayLike) -> None:
-        """Begin a flight at ``t_s`` [s] from ``positions_m`` (n, d) (the planner forgets its plan)."""
-        p = finite_array("positions", positions_m, (self.planner.n, self.planner.dim))
+        """Begin a flight at ``t_s`` [s] from ``positions_m`` (n, d): the planner of every drone,
+        its plan forgotten."""
+        p = finite_array("positions", positions_m, (self.n, self.dim))
+        self.planner = self._full
         self.planner.reset(float(t_s), p)
         self._started = True
 
     def step(self, t_s: float, positions_m: ArrayLike) -> OnlineStep:
         """Plan from the measured ``positions_m`` (n, d) [m] at ``t_s`` [s]: the command to hold
         until ``t_s + dt`` and its full-state setpoints (module docstring)."""
-        p = finite_array("positions", positions_m, (self.planner.n, self.planner.dim))
+        p = finite_array("positions", positions_m, (self.n, self.dim))
         if not self._started:
             self.start(t_s, p)
         wall, cpu = time.perf_counter(), time.process_time()
@@ -101,6 +110,17 @@ class OnlineLoop:
         setpoints = interval_setpoints(p, u, float(t_s), self.dt_s, self.setpoint_rate_hz, self.altitude_m)
         missed = bool(getattr(out.info, "deadline_missed", False))
         return OnlineStep(float(t_s), u, setpoints, out.info, wall, cpu, missed)
+
+    def lose(self, drones: ArrayLike, positions_m: ArrayLike) -> None:
+        """Stop planning for ``drones`` (lost: flipped, on the floor), the swarm at
+        ``positions_m`` (n, d) [m] now (module docstring)."""
+        p = finite_array("positions", positions_m, (self.n, self.dim))
+        self.planner = self.planner.lose(np.asarray(drones, dtype=int), p)
+
+    @property
+    def lost_drones(self) -> Array:
+        """The drones the loop no longer plans for (sorted)."""
+        return self.planner.lost_drones
 
 
 def step_time_stats(steps: list[OnlineStep]) -> dict[str, float]:

@@ -197,6 +197,25 @@ def incomplete_warning(summary: dict[str, Any]) -> str | None:
     )
 
 
+def plant_events(plant: dict[str, Any]) -> str | None:
+    """One line of what a plant saw happen (crazyflow: contacts, floor contacts, flips, and when
+    planning stopped for a lost drone); None when nothing did."""
+    said = [
+        f"{what}: {', '.join(str(x) for x in plant[key])}"
+        for key, what in (
+            ("drone_contacts", "drone contacts"),
+            ("floor_contacts", "on the floor"),
+            ("flipped", "flipped"),
+        )
+        if plant.get(key)
+    ]
+    if stopped := plant.get("planning_stopped_s"):
+        said.append(
+            "planning stopped for " + ", ".join(f"drone {i} at {t:.3g} s" for i, t in stopped.items())
+        )
+    return "; ".join(said) or None
+
+
 def _away(m: dict[str, Any]) -> str:
     """``drones 2, 5 (0.65 m, 8.9 m away)``, the first eight listed."""
     ids, dist = m["incomplete_drones"], m["incomplete_distances_m"]
@@ -258,6 +277,8 @@ def format_summary(summary: dict[str, Any]) -> str:
                 f"violations, max speed {_m(m['max_speed_true'], 'm/s')}",
             )
         )
+    if plant is not None and (events := plant_events(plant)) is not None:
+        rows.append(("plant events", events))
     for mode, st in m["step_time_ms"].items():
         rows.append(
             (

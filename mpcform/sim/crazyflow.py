@@ -17,9 +17,10 @@ plant watches what a planner must never cause, on the dense 3-D path: **contacts
 drones (centres closer than twice the body radius, the rotor tips' ``sqrt(2) L + prop_radius``
 of the drone-models parameters: 0.070 m for cf2x_L250),
 **floor contacts** (a centre below the body radius) and **flips** (the body's z axis pointing
-down). A drone that touched the floor or flipped is reported in :attr:`CrazyflowPlant.events`;
-the planner keeps planning for it as for the others (its setpoints are what a real swarm would
-keep sending until the operator lands it).
+down). A drone that touched the floor or flipped is reported in :attr:`CrazyflowPlant.events`
+and is lost (:attr:`CrazyflowPlant.lost_drones`): the simulation stops planning for it (its
+setpoints then hold it where it is, zero velocity, as a ground station would until the operator
+cuts its motors).
 
 The planner models a crazyflow drone by the quadrotor plant's hover linearisation of the same
 platform (:class:`mpcform.sim.plant_spec.CrazyflowPlantSpec`).
@@ -174,6 +175,12 @@ class CrazyflowPlant(Plant):
         """Drone pairs in contact, drones that touched the floor or flipped, the lowest altitude
         [m] and the simulator's build and compile time [s] (module docstring)."""
         return self._events | {"setup_s": self.setup_s}
+
+    @property
+    def lost_drones(self) -> Array:
+        """Drones that touched the floor or flipped (sorted)."""
+        ev = self._events
+        return np.array(sorted(set(ev.get("floor_contacts", ())) | set(ev.get("flipped", ()))), dtype=int)
 
     def velocity_loops(self) -> list:
         return []

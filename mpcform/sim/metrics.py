@@ -9,7 +9,7 @@ drone), ``max_speed`` (largest ``||u_i||`` [m/s]), ``separation_violations`` (co
 v_max), ``qp_solves``, ``fast_path_steps``, ``solver_failures``, ``max_slack`` [m],
 ``slack_steps`` (steps whose plan needed slack, or that start inside a required distance) and
 ``lowered_first_rows`` (steps whose first separation rows were lowered to what braking reaches,
-:func:`mpcform.mpc.planner.hard_first_rows`),
+:func:`mpcform.mpc.first_rows.hard_first_rows`),
 ``stall_events``, ``resolutions`` and ``circling_resets`` (drones that started to stall,
 escalated tie-breaks that ended, and circling drones whose escalation was reset,
 :mod:`mpcform.mpc.liveness`), ``deadline_misses`` (steps whose solve ended past

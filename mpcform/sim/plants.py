@@ -168,6 +168,12 @@ class Plant(ABC):
         return {}
 
     @property
+    def lost_drones(self) -> Array:
+        """Drones that can no longer follow commands (sorted): crazyflow's on the floor or flipped;
+        none for the others. The simulation stops planning for them (:meth:`Controller.lose`)."""
+        return np.zeros(0, dtype=int)
+
+    @property
     def wind_clip_fraction(self) -> float:
         """Fraction of gust samples so far that the wind's bound clipped (0 without wind)."""
         return 0.0 if self._field is None else self._field.clip_fraction

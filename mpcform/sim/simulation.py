@@ -34,7 +34,9 @@ class SimulationResult(Trajectory):
     controller``, in this order; ``scale_estimates`` (T, n) of a consensus controller, row j the
     estimates at ``t_j``, those the step there uses); ``wind_clip_fraction``: the share of gust
     samples the wind's bound clipped (0 without wind); ``plant_events``: the plant's
-    :attr:`~mpcform.sim.plants.Plant.events`."""
+    :attr:`~mpcform.sim.plants.Plant.events`, with ``planning_stopped_s``, the time [s] the
+    controller stopped planning for each lost drone (:attr:`~mpcform.sim.plants.Plant.lost_drones`)
+    when it did."""
 
     infos: tuple[StepInfo, ...]
     step_times_s: Array  # (T - 1,) wall-clock time of each controller call
@@ -92,9 +94,10 @@ def simulate(
     plant.reset(p, t0_s=t0_s)
     controller.reset(t0_s, p.copy())
     s_hat = _estimates_record(controller, steps)
+    active, stopped = controller, dict[int, float]()  # the controller of the drones it plans for
     for j in range(steps):
         start = time.perf_counter()
-        out = controller.step(float(t[j]), p.copy())
+        out = active.step(float(t[j]), p.copy())
         times[j] = time.perf_counter() - start
         u = out.command_mps
         if u.shape != p.shape or not np.all(np.isfinite(u)):
@@ -109,6 +112,9 @@ def simulate(
         part.t_s[:] = t[j] + (part.t_s - part.t_s[0])  # the control samples exactly among the times
         part.t_s[-1] = t[j + 1]
         pos[j + 1], cmd[j] = p, u
+        if (lost := plant.lost_drones).size > len(stopped):  # stop planning for them
+            active = active.lose(lost, p.copy())
+            stopped |= {int(i): float(t[j + 1]) for i in lost if int(i) not in stopped}
         if s_hat is not None:
             s_hat[j + 1] = controller.scale_estimates
         infos.append(out.info)
@@ -136,7 +142,7 @@ def simulate(
         true=true,
         scale_estimates=s_hat,
         wind_clip_fraction=plant.wind_clip_fraction,
-        plant_events=plant.events,
+        plant_events=plant.events | ({"planning_stopped_s": stopped} if active.lost_drones.size else {}),
     )
 
 

@@ -71,3 +71,20 @@ def test_online_planning_needs_the_mpc() -> None:
         OnlineLoop.from_scenario(tracking)
     with pytest.raises(ValidationError, match="setpoint_rate"):
         OnlineLoop.from_scenario(sc, setpoint_rate_hz=15.0)
+
+
+def test_a_lost_drone_is_commanded_zero_and_a_new_flight_plans_for_every_drone() -> None:
+    sc = load_scenario(SCENARIOS / "swap_planar_8.toml")
+    loop = OnlineLoop.from_scenario(sc)
+    p = sc.initial_positions_m.copy()
+    for s in _fly(loop, p, 10):
+        p = p + loop.dt_s * s.command_mps
+    loop.lose([3], p)
+    assert loop.lost_drones.tolist() == [3]
+    after = loop.step(10 * loop.dt_s, p)
+    assert np.all(after.command_mps[3] == 0.0) and np.linalg.norm(after.command_mps[[2, 4]]) > 0.5
+    np.testing.assert_array_equal(after.setpoints.pos_m[:, 3, :2], np.broadcast_to(p[3], (10, 2)))
+    with pytest.raises(ValidationError, match="drones"):
+        loop.lose([8], p)
+    loop.start(0.0, sc.initial_positions_m)
+    assert loop.lost_drones.size == 0 and np.linalg.norm(loop.step(0.0, p).command_mps[3]) > 0.0

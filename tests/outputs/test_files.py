@@ -19,6 +19,7 @@ from mpcform.outputs.files import (
     csv_header,
     format_summary,
     json_safe,
+    plant_events,
     write_summary_json,
 )
 from mpcform.run.runner import RunResult, run_scenario
@@ -179,3 +180,15 @@ def test_json_safe_replaces_nan_and_inf(tmp_path: Path) -> None:
     assert json_safe(value) == {"a": None, "b": [None, 1.5, 3], "c": [None, "x"]}
     write_summary_json(tmp_path / "s.json", value)
     assert strict_json(tmp_path / "s.json")["b"] == [None, 1.5, 3]
+
+
+def test_plant_events_are_one_line_or_none() -> None:
+    assert plant_events({"kind": "lag"}) is None
+    assert plant_events({"drone_contacts": [], "floor_contacts": [], "flipped": []}) is None
+    line = plant_events(
+        {"drone_contacts": [[0, 3]], "floor_contacts": [0, 2], "planning_stopped_s": {"0": 0.6, "2": 1.25}}
+    )
+    said = (
+        "drone contacts: [0, 3]; on the floor: 0, 2; planning stopped for drone 0 at 0.6 s, drone 2 at 1.25 s"
+    )
+    assert line == said

@@ -145,3 +145,33 @@ def test_random_swaps_fly_in_crazyflow() -> None:
 )
 def test_bundled_scenarios_fly_in_crazyflow(name: str, altitude_m: float) -> None:
     flown(name, altitude_m)
+
+
+@pytest.mark.slow
+def test_planning_stops_for_a_drone_on_the_floor() -> None:
+    """Drone 0's goal lies below crazyflow's floor: it lands on it, the planner stops planning for
+    it (commands zero) and the others arrive, clear of it."""
+    sc = scenario_from_dict(
+        {
+            "version": 1,
+            "name": "one_drone_to_the_floor",
+            "dim": 3,
+            "template": {
+                "shape": "explicit",
+                "offsets": [[0.0, 0.0, -1.0], [1.0, 0.0, 0.5], [-1.0, 0.0, 0.5]],
+            },
+            "initial": {"centroid": [0.0, 0.0, 0.0]},
+            "reference": {"kind": "constant", "centroid": [2.0, 0.0, -0.4]},
+            "limits": {"v_max": 1.0, "d_min": 0.5},
+            "controller": {"kind": "mpc", "coupling": "decoupled"},
+            "simulation": {"dt": 0.1, "duration": 8.0},
+            "plant": {"kind": "crazyflow", "altitude": 1.3},
+        }
+    )
+    run = run_scenario(sc)
+    plant, m = run.summary["plant"], run.summary["metrics"]
+    assert plant["floor_contacts"] == [0] and plant["drone_contacts"] == [] and plant["flipped"] == []
+    stopped = plant["planning_stopped_s"]["0"]  # JSON keys
+    k = int(round(stopped / 0.1))
+    assert 0.2 < stopped < 2.0 and np.all(run.simulation.commands_mps[k:, 0] == 0.0)
+    assert m["incomplete_drones"] == [0] and m["separation_violations_true"] == 0

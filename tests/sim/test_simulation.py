@@ -9,12 +9,16 @@ from mpcform.control.graph import Graph
 from mpcform.control.laws import go_to_goal_closed_form, go_to_goal_discrete
 from mpcform.control.tracking import ProportionalController
 from mpcform.errors import MPCFormError, ValidationError
+from mpcform.formation.geometry import min_segment_distance
 from mpcform.formation.state import FormationState
 from mpcform.formation.template import Template
+from mpcform.mpc.planner import MPCPlanner
 from mpcform.reference.base import ConstantReference
 from mpcform.sim.plant_spec import LagPlantSpec
+from mpcform.sim.plants import IdealPlant
 from mpcform.sim.simulation import SimulationResult, simulate
 from mpcform.sim.trajectory import Trajectory
+from mpcform.world.limits import Limits
 
 P0, GOAL, GAIN = np.array([1.0, -2.0, 0.5]), np.array([4.0, 2.0, -1.0]), 1.5
 SINGLE = Template(np.zeros((1, 3)))
@@ -189,3 +193,31 @@ def test_bad_simulation_input_is_rejected(kwargs, match):
     args = {"initial_positions_m": P0[None, :], "duration_s": 1.0} | kwargs
     with pytest.raises(ValidationError, match=match):
         simulate(ProportionalController(GOAL_REFERENCE, GAIN, 0.1), **args)
+
+
+class _DroneZeroFalls(IdealPlant):
+    """The exact single integrator whose drone 0 stops for good at 1.8 s (it fell): lost."""
+
+    def _advance(self, u, dt, planned):
+        if self.t_s >= 1.8 - 1e-9:
+            u = u.copy()
+            u[0] = 0.0
+        return super()._advance(u, dt, planned)
+
+    @property
+    def lost_drones(self):
+        return np.array([0] if self.t_s >= 1.8 - 1e-9 else [], dtype=int)
+
+
+def test_the_planner_stops_planning_for_a_drone_the_plant_lost() -> None:
+    tpl = Template.polygon(6, 2.0)
+    ref = ConstantReference(tpl, FormationState.from_param([0.0, 0.0]))
+    planner = MPCPlanner(ref, 0.1, Limits(v_max_mps=1.0, d_min_m=0.5))
+    res = simulate(planner, -tpl.offsets, 30.0, plant=_DroneZeroFalls(6, 2))
+    assert res.plant_events["planning_stopped_s"] == {0: pytest.approx(1.8)}
+    assert np.all(res.commands_mps[18:, 0] == 0.0)  # commanded zero after the step that saw it lost
+    pos = res.positions_m
+    assert min(min_segment_distance(a, b) for a, b in zip(pos[:-1], pos[1:], strict=True)) >= 0.5 - 1e-6
+    np.testing.assert_allclose(pos[-1, 1:], tpl.offsets[1:], atol=0.05)
+    kept = simulate(ProportionalController(ref, 0.1, 1.0), -tpl.offsets, 1.0, plant=_DroneZeroFalls(6, 2))
+    assert "planning_stopped_s" not in kept.plant_events  # a law keeps commanding every drone
