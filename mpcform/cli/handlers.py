@@ -129,6 +129,7 @@ def write_view(data: RunData, path: Path) -> Path:
             traj.t_s, traj.positions_m, reference_m=traj.reference_m, commands_mps=traj.commands_mps
         )
         | ({} if data.flown is None else flown_curves(traj.t_s, data.flown)),
+        flown=data.flown,
     )
 
 

@@ -3,7 +3,8 @@
 :func:`write_viewer_html` writes a page that plays the drones' flight in 2-D (top view) or 3-D
 (orbit, zoom, pan) with a time slider, play/pause at real time (0.25x to 8x), the formation's
 edges, the obstacles, the geofence and the pairs closer than d_min (red), beside the metric
-curves (see :func:`viewer_curves`) with a cursor linked to the time. The page is drawn with
+curves (see :func:`viewer_curves`; a plant run's :func:`flown_curves`, and its flown path
+dotted) with a cursor linked to the time. The page is drawn with
 the browser's Canvas 2D API by ``static/viewer.js``; the data is embedded as compact JSON
 (positions in integer millimetres, curves to 4 significant digits), so a 20-drone run of a
 few hundred samples is ~0.1 MB. Open ``<file>#t=5.2`` to start at t = 5.2 s.
@@ -38,6 +39,7 @@ TRACKING_KEY = "max_tracking_error_m"
 TRACKING_FLOOR_M = 1e-6  # tracking errors shown no smaller (rounding would stretch a log axis to 1e-13)
 FLOWN_SEPARATION_KEY = "flown_min_separation_m"  # a plant run's dense true path (flown_curves)
 FLOWN_SPEED_KEY = "flown_max_speed_mps"
+FLOWN_PER_STEP = 5  # flown path samples drawn per control interval (50 Hz at dt 0.1 s)
 UNITS = {"_mps2": "m/s²", "_mps": "m/s", "_m": "m", "_s": "s", "_rad": "rad", "_deg": "°"}
 LOG_DECADES = 2.0  # positive curves spanning more decades than this get a log axis
 _PLACEHOLDER = re.compile(r"/\*@(CSS|JS|DATA)@\*/|@TITLE@")
@@ -56,13 +58,16 @@ def write_viewer_html(
     reference_m: Array | None = None,
     title: str = "mpcform run",
     curves: Mapping[str, Array] | None = None,
+    flown: TrueTrajectory | None = None,
 ) -> Path:
     """Write the viewer of a run to ``path`` (parents created); returns the path.
 
     ``t_s`` (T,) increasing; ``positions_m`` and ``reference_m`` (T, n, d), d = 2 or 3;
     ``edges`` (E, 2) drone index pairs; ``obstacles`` (k, d + 1 or d + 2): centre, radius
     and clearance from the surface (missing or NaN: d_min / 2); ``geofence``: (min, max)
-    corners (d,) of a box, +-inf for open sides; ``curves``: name -> (T,) values (NaN: none).
+    corners (d,) of a box, +-inf for open sides; ``curves``: name -> (T,) values (NaN: none);
+    ``flown``: a plant run's dense true path, drawn dotted (at most :data:`FLOWN_PER_STEP`
+    samples per control interval: :func:`flown_samples`).
     """
     data = viewer_payload(
         t_s=t_s,
@@ -75,6 +80,7 @@ def write_viewer_html(
         reference_m=reference_m,
         title=title,
         curves=curves,
+        flown=flown,
     )
     out = Path(path)
     out.parent.mkdir(parents=True, exist_ok=True)
@@ -122,6 +128,15 @@ def flown_curves(t_s: Array, true: TrueTrajectory) -> dict[str, Array]:
     return curves
 
 
+def flown_samples(t_true_s: Array, samples: int) -> Array:
+    """Indices of a dense true path's times ``t_true_s`` (K,) for display: every ``stride``-th,
+    so at most :data:`FLOWN_PER_STEP` per interval of a run of ``samples`` control samples, and the
+    last (the peaks and minima come from the full path: :func:`flown_curves`)."""
+    k = t_true_s.shape[0]
+    stride = max(1, math.ceil((k - 1) / (FLOWN_PER_STEP * max(1, samples - 1))))
+    return np.unique(np.append(np.arange(0, k, stride), k - 1))
+
+
 def viewer_payload(
     *,
     t_s: Array,
@@ -134,6 +149,7 @@ def viewer_payload(
     reference_m: Array | None = None,
     title: str = "mpcform run",
     curves: Mapping[str, Array] | None = None,
+    flown: TrueTrajectory | None = None,
 ) -> dict[str, Any]:
     """The checked, rounded JSON object that the page reads (see :func:`write_viewer_html`)."""
     t = _times(t_s)
@@ -156,7 +172,14 @@ def viewer_payload(
         "below": {},
         "closest": _closest(p),
         "curves": [_curve(k, v, t.shape[0], d_min, v_max) for k, v in (curves or {}).items()],
+        "flown": None,
     }
+    if flown is not None:
+        keep = flown_samples(flown.t_s, t.shape[0])
+        payload["flown"] = {
+            "t_s": [_sig(x, 9) for x in flown.t_s[keep]],
+            "p_mm": _millimetres(_positions("flown", flown.positions_m[keep], keep.shape[0], (n, d))),
+        }
     if reference_m is not None:
         payload["ref_mm"] = _millimetres(_positions("reference_m", reference_m, t.shape[0], (n, d)))
     if d_min is not None:

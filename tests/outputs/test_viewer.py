@@ -268,3 +268,33 @@ def test_flown_curves_keep_the_dense_extremes_of_each_interval() -> None:
     curves = viewer.flown_curves(np.array([0.0, 0.1, 0.2]), true)
     np.testing.assert_allclose(curves[viewer.FLOWN_SEPARATION_KEY], [0.3, 1.0, 1.0])
     np.testing.assert_allclose(curves[viewer.FLOWN_SPEED_KEY], [0.0, 2.5, 0.0])
+
+
+def flown_synthetic() -> tuple[dict, TrueTrajectory]:
+    """The synthetic run with a dense true path at 500 Hz that overshoots drone 0's by 0.2 m in y."""
+    run = synthetic()
+    t = np.round(np.arange(2001) * 0.002, 10)
+    p = np.stack(
+        [np.interp(t, run["t_s"], run["positions_m"][:, i, a]) for i in range(4) for a in range(2)], -1
+    )
+    p = p.reshape(-1, 4, 2)
+    p[:, 0, 1] += 0.2 * np.sin(np.pi * t / 4.0)
+    v = np.gradient(p, t, axis=0)
+    return run, TrueTrajectory(t, p, v, np.zeros_like(p))
+
+
+def test_a_plant_runs_flown_path_is_downsampled_for_display() -> None:
+    run, true = flown_synthetic()
+    keep = viewer.flown_samples(true.t_s, 41)
+    assert keep[0] == 0 and keep[-1] == 2000 and keep.shape[0] <= viewer.FLOWN_PER_STEP * 40 + 1
+    data = viewer.viewer_payload(**run, flown=true)
+    assert data["flown"]["t_s"][:3] == [0.0, 0.02, 0.04] and len(data["flown"]["p_mm"]) == keep.shape[0] * 8
+    assert data["flown"]["p_mm"][1] == 150 and max(data["flown"]["p_mm"][1::8]) == 350  # drone 0's y
+    assert viewer.viewer_payload(**run)["flown"] is None
+
+
+def test_browser_draws_the_flown_path(browser: str, tmp_path: Path) -> None:
+    run, true = flown_synthetic()
+    page = viewer.write_viewer_html(tmp_path / "flown.html", **run, flown=true)
+    dom = check_page(browser, page, tmp_path, 41, "#t=2")
+    assert 'data-flown="101"' in dom  # the flown samples up to t = 2 s (every 20 ms)

@@ -13,6 +13,8 @@
   const n = D.n, dim = D.dim, ts = D.t_s, T = ts.length, stride = n * dim;
   const P = Float64Array.from(D.p_mm, (v) => v / 1000);
   const R = D.ref_mm ? Float64Array.from(D.ref_mm, (v) => v / 1000) : null;
+  const F = D.flown ? Float64Array.from(D.flown.p_mm, (v) => v / 1000) : null; // dense true path
+  const fts = D.flown ? D.flown.t_s : [];
   const t0 = ts[0], t1 = ts[T - 1], span_t = t1 - t0 || 1;
   const dtMean = T > 1 ? span_t / (T - 1) : 1;
   const TIME_DEC = Math.min(4, Math.max(1, Math.ceil(-Math.log10(dtMean)) + 1));
@@ -48,7 +50,7 @@
   // ---- scene extent (data, reference, obstacles, geofence sides near the flight) -----------
   const LO = new Array(dim).fill(Infinity), HI = new Array(dim).fill(-Infinity);
   const grow = (a, v) => { LO[a] = Math.min(LO[a], v); HI[a] = Math.max(HI[a], v); };
-  for (const arr of [P, R]) if (arr) for (let j = 0; j < arr.length; j++) grow(j % dim, arr[j]);
+  for (const arr of [P, R, F]) if (arr) for (let j = 0; j < arr.length; j++) grow(j % dim, arr[j]);
   for (const ob of D.obstacles) {
     const r = ob[dim] + (ob[dim + 1] || 0);
     for (let a = 0; a < dim; a++) { grow(a, ob[a] - r); grow(a, ob[a] + r); }
@@ -107,7 +109,7 @@
   const $ = (id) => document.getElementById(id);
   const canvas = $("view"), slider = $("slider"), playBtn = $("play");
   const state = { time: t0, playing: false, speed: 1, last: 0 };
-  const show = { paths: true, trails: true, ref: !!R, ids: false };
+  const show = { paths: true, trails: true, ref: !!R, flown: !!F, ids: false };
   const HOME = { az: -Math.PI / 3, el: 0.45, zoom: 1, panX: 0, panY: 0 };
   const view = Object.assign({}, HOME);
   const pos = new Float64Array(stride), ref = new Float64Array(stride);
@@ -239,6 +241,17 @@
       g.globalAlpha = 1;
     }
   }
+  function drawFlown(g, pr, time) { // each drone's true path so far: dotted, in its trail colour
+    let m = 0; while (m < fts.length - 1 && fts[m + 1] <= time) m++;
+    g.save(); g.setLineDash([2, 3]); g.lineWidth = 1.3; g.globalAlpha = 0.8;
+    for (let i = 0; i < n; i++) {
+      g.strokeStyle = TRAIL[i % TRAIL.length]; g.beginPath();
+      for (let j = 0; j <= m; j++) { const q = pr.f(...at(F.subarray(j * stride), i)); j ? g.lineTo(q[0], q[1]) : g.moveTo(q[0], q[1]); }
+      g.stroke();
+    }
+    g.restore();
+    return m + 1;
+  }
   function sphere(g, q, rp, clearPx) {
     const grad = g.createRadialGradient(q[0] - 0.35 * rp, q[1] - 0.4 * rp, 0.05 * rp, q[0], q[1], rp);
     grad.addColorStop(0, dim === 3 ? "rgba(238,240,243,0.9)" : "rgba(190,195,201,0.75)");
@@ -261,6 +274,7 @@
     } else drawAxes3d(g, pr);
     drawFence(g, pr);
     drawPaths(g, pr, sampleAt(time), time);
+    const flown = F && show.flown ? drawFlown(g, pr, time) : 0;
     const q = []; for (let i = 0; i < n; i++) q.push(pr.f(...at(pos, i)));
     const items = []; // painter's algorithm: far first
     for (const ob of D.obstacles) {
@@ -292,13 +306,14 @@
     if (C && k === C.k) { g.save(); g.setLineDash([5, 3]); g.strokeStyle = COL.closest; g.lineWidth = 2; seg(g, q[C.pair[0]], q[C.pair[1]]); g.restore(); }
     if (show.ids) for (let i = 0; i < n; i++) text(g, String(i), q[i][0] + droneR * q[i][3] + 2, q[i][1] - droneR * q[i][3], "left", "alphabetic", font(10), "#333");
     if (finish) { g.restore(); finish(); }
-    return { k, below: below.length / 2 };
+    return { k, below: below.length / 2, flown };
   }
   function drawLegend(g) {
     const rows = [["drone", (x, y) => { circle(g, x + 9, y, droneR); g.fillStyle = COL.drone; g.fill(); g.strokeStyle = COL.droneEdge; g.lineWidth = 1; g.stroke(); }]];
     if (R && show.ref) rows.push(["reference p*ᵢ", (x, y) => { circle(g, x + 9, y, droneR + 2); g.strokeStyle = COL.ref; g.lineWidth = 1.1; g.stroke(); }]);
     if (D.edges.length) rows.push(["formation edge", (x, y) => { g.strokeStyle = COL.edge; g.lineWidth = 1.3; seg(g, [x, y], [x + 18, y]); }]);
     if (show.trails) rows.push(["last " + TRAIL_S + " s of path (a colour per drone)", (x, y) => { g.lineWidth = 1.8; for (let c = 0; c < 3; c++) { g.strokeStyle = TRAIL[c]; seg(g, [x + 6 * c, y], [x + 6 * c + 6, y]); } }]);
+    if (F && show.flown) rows.push(["flown path (the plant's true motion)", (x, y) => { g.save(); g.setLineDash([2, 3]); g.lineWidth = 1.3; g.strokeStyle = TRAIL[0]; seg(g, [x, y], [x + 18, y]); g.restore(); }]);
     if (D.d_min_m !== null) rows.push(["pair closer than d_min", (x, y) => { g.strokeStyle = COL.bad; g.lineWidth = 2.6; seg(g, [x, y], [x + 18, y]); }]);
     if (D.obstacles.length) rows.push(["obstacle (dashed: + clearance)", (x, y) => sphere(g, [x + 9, y], 6, 9)]);
     if (D.fence) rows.push(["geofence", (x, y) => { g.save(); g.setLineDash([5, 3]); g.strokeStyle = COL.fence; g.lineWidth = 1.4; seg(g, [x, y], [x + 18, y]); g.restore(); }]);
@@ -392,7 +407,7 @@
     if (D.d_min_m === null) { st.textContent = ""; st.className = ""; }
     else if (info.below) { st.textContent = info.below + (info.below > 1 ? " pairs" : " pair") + " closer than d_min"; st.className = "bad"; }
     else { st.textContent = "no pair closer than d_min" + closestText(); st.className = "good"; }
-    body.dataset.sample = String(kn); body.dataset.below = String(info.below);
+    body.dataset.sample = String(kn); body.dataset.below = String(info.below); body.dataset.flown = String(info.flown);
     if (extent) body.dataset.extent = extent.map((v) => v.toFixed(3)).join(",");
     return info;
   }
@@ -419,9 +434,9 @@
   slider.addEventListener("input", () => { setPlaying(false); seek(parseFloat(slider.value)); });
   playBtn.addEventListener("click", () => { setPlaying(!state.playing); playBtn.blur(); });
   $("speed").addEventListener("change", (e) => { state.speed = parseFloat(e.target.value); });
-  for (const key of ["paths", "trails", "ref", "ids"]) {
+  for (const key of ["paths", "trails", "ref", "flown", "ids"]) {
     const box = $("show-" + key); box.checked = show[key];
-    if (key === "ref" && !R) box.parentElement.style.display = "none";
+    if ((key === "ref" && !R) || (key === "flown" && !F)) box.parentElement.style.display = "none";
     box.addEventListener("change", () => { show[key] = box.checked; render(); });
   }
   $("reset").addEventListener("click", () => { Object.assign(view, HOME); render(); });
