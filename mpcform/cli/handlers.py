@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import shutil
 from importlib.util import find_spec
 from pathlib import Path
@@ -146,9 +147,16 @@ def _compare(args: argparse.Namespace) -> int:
     if not args.no_figure:
         from mpcform.outputs.figures import compare_runs
 
-        path = compare_runs(runs, args.figure, run_labels(runs))
+        figure = args.figure or default_compare_figure(args.dirs)
+        path = compare_runs(runs, figure, run_labels(runs))
         print(f"wrote {path}")
     return 0
+
+
+def default_compare_figure(dirs: list[str]) -> Path:
+    """``compare.png`` in the runs' common parent directory (not the current one)."""
+    parents = [str(Path(d).resolve().parent) for d in dirs]
+    return Path(os.path.commonpath(parents)) / "compare.png"
 
 
 def _export(args: argparse.Namespace) -> int:
@@ -190,7 +198,9 @@ def add_commands(sub: Any) -> None:
     compare.set_defaults(func=_compare)
     compare.add_argument("dirs", nargs="+", metavar="DIR", help="output directories of `mpcform run`")
     compare.add_argument(
-        "--figure", default="compare.png", metavar="PNG", help="figure path (default: compare.png)"
+        "--figure",
+        metavar="PNG",
+        help="figure path (default: compare.png beside the runs, in their common parent directory)",
     )
     compare.add_argument("--no-figure", action="store_true", help="print the table only")
     compare.add_argument("--json", metavar="PATH", help="also write the rows as a JSON list of records")

@@ -237,6 +237,17 @@ def test_compare_table_only_and_bad_directory(tmp_path: Path, capsys: pytest.Cap
     error_lines(capsys, main(["compare", str(tmp_path / "a"), str(tmp_path / "zz"), "--no-figure"]), "zz")
 
 
+def test_compare_draws_its_figure_beside_the_runs(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    pytest.importorskip("matplotlib")
+    short_run("worked_example", tmp_path / "runs" / "a", steps=5)
+    short_run("worked_example", tmp_path / "runs" / "b", steps=5)
+    (tmp_path / "elsewhere").mkdir()
+    monkeypatch.chdir(tmp_path / "elsewhere")
+    assert main(["compare", "../runs/a", str(tmp_path / "runs" / "b")]) == 0
+    assert (tmp_path / "runs" / "compare.png").stat().st_size > 5_000
+    assert list((tmp_path / "elsewhere").iterdir()) == []  # nothing dropped in the current directory
+
+
 def test_export_command(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     short_run("swap_planar_8", tmp_path, steps=40, flyable=True)
     argv = ["export", str(tmp_path), "--altitude", "1.2", "--tolerance", "0.01", "--rate", "50"]
