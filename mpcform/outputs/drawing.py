@@ -29,7 +29,8 @@ DRONE_LINESTYLES = ("-", (0, (5, 2)), "-.", (0, (1, 1.5)), (0, (8, 2, 1, 2)), (0
 PER_DRONE_MAX = len(DRONE_COLOURS)  # up to this many drones: one line per drone, else envelopes
 TIME_CMAP = ListedColormap(colormaps["plasma"](np.linspace(0.0, 0.82, 256)), name="time")
 """Snapshots coloured by time: dark blue (start) to orange (end); no pale yellow on white."""
-PATH_GREY = "0.55"  # paths of a swarm above PER_DRONE_MAX drones
+PATH_GREY = "0.55"  # paths of a swarm above PATH_COLOURS_MAX drones
+PATH_COLOURS_MAX = 20  # up to this many drones a plan's paths get a colour each (tab20): no grey tangle
 REFERENCE_STYLE: dict[str, Any] = {
     "color": "k",
     "lw": 0.9,
@@ -96,6 +97,16 @@ def drone_colours(n: int) -> list[Any]:
     if n <= len(DRONE_COLOURS):
         return list(DRONE_COLOURS[:n])
     return [colormaps["viridis"](0.1 + 0.8 * i / max(1, n - 1)) for i in range(n)]
+
+
+def path_colours(n: int) -> list[Any]:
+    """A plan view's path colours: :func:`drone_colours` up to :data:`PER_DRONE_MAX` drones, tab20's
+    up to :data:`PATH_COLOURS_MAX` (twenty grey paths of a 3-D swap tangle), else one grey."""
+    if n <= PER_DRONE_MAX:
+        return drone_colours(n)
+    if n <= PATH_COLOURS_MAX:
+        return [colormaps["tab20"](i) for i in range(n)]
+    return [PATH_GREY] * n
 
 
 def marker_scale(n: int) -> float:

@@ -22,7 +22,7 @@ from matplotlib.figure import Figure
 
 from mpcform.outputs.drawing import (
     FLOWN_GID,
-    PATH_GREY,
+    PATH_COLOURS_MAX,
     PER_DRONE_MAX,
     REFERENCE_STYLE,
     closest_pair,
@@ -31,9 +31,9 @@ from mpcform.outputs.drawing import (
     draw_leaders,
     draw_obstacles,
     draw_snapshot,
-    drone_colours,
     mark_closest_pair,
     marker_scale,
+    path_colours,
     plan_size,
     reference_subset,
     skeleton_edges,
@@ -99,18 +99,19 @@ def draw_plan(
     a, b = plane
     p, ref, t = run.trajectory.positions_m, run.trajectory.reference_m, run.trajectory.t_s
     draw_obstacles(ax, run, plane)
-    few = run.n <= PER_DRONE_MAX
-    colours = drone_colours(run.n)
+    few, coloured = run.n <= PER_DRONE_MAX, run.n <= PATH_COLOURS_MAX
+    colours = path_colours(run.n)
+    paths = "drone paths (a colour per drone)" if coloured else "drone paths"
     for i in range(run.n):
-        label = f"drone {i}" if few else ("drone paths" if i == 0 else None)
+        label = f"drone {i}" if few else (paths if i == 0 else None)
         if label is not None and run.flown is not None:
             label += " (control samples)"
         ax.plot(
             p[:, i, a],
             p[:, i, b],
-            color=colours[i] if few else PATH_GREY,
-            lw=2.4 if few else 0.7,
-            alpha=0.7 if few else 0.6,
+            color=colours[i],
+            lw=2.4 if few else 0.9 if coloured else 0.7,
+            alpha=0.7 if few else 0.8 if coloured else 0.6,
             zorder=2,
             label=label,
         )
@@ -119,7 +120,7 @@ def draw_plan(
         q = true.positions_m[display_rows(true.t_s.shape[0])]
         for i in range(run.n):
             label = "flown path (true)" if i == 0 else None
-            colour = colours[i] if few else "k"
+            colour = colours[i] if coloured else "k"
             ax.plot(
                 q[:, i, a], q[:, i, b], color=colour, lw=0.8, ls=":", zorder=2.4, label=label, gid=FLOWN_GID
             )

@@ -19,6 +19,7 @@ from mpcform.outputs.drawing import (  # noqa: E402
     drone_colours,
     envelope,
     marker_scale,
+    path_colours,
 )
 
 
@@ -81,3 +82,11 @@ def test_envelope_is_a_band_and_a_median() -> None:
 def test_closest_pair() -> None:
     p = np.array([[[0.0, 0.0], [3.0, 0.0], [0.0, 4.0]], [[0.0, 0.0], [3.0, 0.0], [2.5, 0.0]]])
     assert closest_pair(p) == (1, 1, 2, pytest.approx(0.5))
+
+
+@pytest.mark.parametrize(
+    ("n", "distinct"), [(4, 4), (PER_DRONE_MAX + 1, PER_DRONE_MAX + 1), (20, 20), (21, 1)]
+)
+def test_plan_paths_get_a_colour_each_up_to_twenty_drones(n: int, distinct: int) -> None:
+    colours = path_colours(n)
+    assert len(colours) == n and len({str(c) for c in colours}) == distinct
