@@ -131,6 +131,7 @@ def write_view(data: RunData, path: Path) -> Path:
         )
         | ({} if data.flown is None else flown_curves(traj.t_s, data.flown)),
         flown=data.flown,
+        wind=data.wind,
     )
 
 

@@ -32,6 +32,7 @@ from mpcform.outputs.drawing import (
     PATH_GREY,
     PER_DRONE_MAX,
     draw_obstacles,
+    draw_wind,
     drone_colours,
     marker_scale,
     skeleton_edges,
@@ -174,6 +175,7 @@ class FlightScene:
         ids = run.n if run.n <= IDS_MAX else 0
         for ax, (a, b) in zip(axes, self.planes, strict=True):
             draw_obstacles(ax, run, (a, b))
+            draw_wind(ax, run, (a, b))
             both = np.concatenate([p[..., [a, b]].reshape(-1, 2), ref[..., [a, b]].reshape(-1, 2)])
             lo, hi = both.min(axis=0), both.max(axis=0)
             pad = 0.06 * float((hi - lo).max()) + 0.3

@@ -16,6 +16,7 @@ from matplotlib.axes import Axes
 from matplotlib.colors import ListedColormap, Normalize
 from matplotlib.patches import Circle
 from matplotlib.ticker import MaxNLocator
+from matplotlib.transforms import offset_copy
 from scipy.spatial import ConvexHull, QhullError
 
 from mpcform._validate import Array
@@ -49,6 +50,8 @@ BAND_ALPHA = 0.25
 SNAPSHOTS = 4
 SNAPSHOT_LABEL = "snapshot-label"  # gid of the ``t = ... s`` text beside a snapshot
 FLOWN_GID = "flown"  # gid of what the drones really did (a plant run's dense true path)
+WIND_GID = "wind"  # gid of the plant's mean wind arrow and its label
+WIND_COLOUR = "tab:cyan"
 FLOWN_COLOUR = "tab:green"  # a swarm's flown speeds and separation (per drone: the drone's colour)
 DISPLAY_SAMPLES = 3000  # a dense true path drawn with at most about this many samples
 
@@ -195,6 +198,30 @@ def envelope(ax: Axes, t_s: Array, values: Array, colour: Any, label: str, *, st
         lw=1.4,
         label=f"{label}: median",
         drawstyle="steps-post" if stairs else "default",
+    )
+
+
+def draw_wind(ax: Axes, run: RunData, plane: tuple[int, int] = (0, 1)) -> None:
+    """The plant's mean wind as an arrow in the upper right of ``ax`` (its projection on
+    ``plane``, 28 points long whatever its speed), labelled with the speed and the gusts' std;
+    nothing without wind."""
+    if run.wind is None:
+        return
+    mean, std = run.wind
+    label = f"wind {np.linalg.norm(mean):.2g} m/s" + (f", gusts {std:.2g} m/s std" if std > 0 else "")
+    w = mean[list(plane)]
+    anchor, fig = (0.9, 0.92), ax.figure
+    if np.linalg.norm(w) > 1e-6 * max(float(np.linalg.norm(mean)), 1e-12):
+        u = 14.0 * w / np.linalg.norm(w)
+        head = offset_copy(ax.transAxes, fig=fig, x=u[0], y=u[1], units="points")
+        tail = offset_copy(ax.transAxes, fig=fig, x=-u[0], y=-u[1], units="points")
+        style = {"arrowstyle": "-|>", "color": WIND_COLOUR, "lw": 1.8, "mutation_scale": 12}
+        ax.annotate("", anchor, anchor, head, tail, arrowprops=style, zorder=6, gid=WIND_GID)
+    else:
+        label += " (across this view)"
+    below = offset_copy(ax.transAxes, fig=fig, y=-18.0, units="points")
+    ax.text(
+        0.98, anchor[1], label, transform=below, ha="right", va="top", fontsize="x-small", color=WIND_COLOUR
     )
 
 

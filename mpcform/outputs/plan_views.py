@@ -31,6 +31,7 @@ from mpcform.outputs.drawing import (
     draw_leaders,
     draw_obstacles,
     draw_snapshot,
+    draw_wind,
     mark_closest_pair,
     marker_scale,
     path_colours,
@@ -101,7 +102,7 @@ def draw_plan(
     draw_obstacles(ax, run, plane)
     few, coloured = run.n <= PER_DRONE_MAX, run.n <= PATH_COLOURS_MAX
     colours = path_colours(run.n)
-    paths = "drone paths (a colour per drone)" if coloured else "drone paths"
+    paths = "drone paths, a colour per drone" if coloured else "drone paths"
     for i in range(run.n):
         label = f"drone {i}" if few else (paths if i == 0 else None)
         if label is not None and run.flown is not None:
@@ -155,6 +156,7 @@ def draw_plan(
     ax.scatter(end[:, 0], end[:, 1], marker="s", s=26 * size, label="end", **hollow)
     draw_leaders(ax, end, run)
     mark_closest_pair(ax, run, plane)
+    draw_wind(ax, run, plane)
     ax.set(xlabel=f"{AXIS_NAMES[a]} [m]", ylabel=f"{AXIS_NAMES[b]} [m]")
     ax.set_aspect("equal", adjustable="datalim")
     ax.grid(True, alpha=0.3)

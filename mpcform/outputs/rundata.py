@@ -117,6 +117,15 @@ class RunData:
         return None if plant == "ideal" else self.trajectory.true
 
     @property
+    def wind(self) -> tuple[Array, float] | None:
+        """The plant's mean wind [m/s] (d,) and its gusts' std [m/s] (None without wind, or a run
+        saved before the wind was recorded)."""
+        wind = (self.summary.get("plant") or {}).get("wind")
+        if not wind:
+            return None
+        return np.asarray(wind["mean_mps"], dtype=float), float(wind.get("gust_std_mps") or 0.0)
+
+    @property
     def label(self) -> str:
         """``<scenario> (<controller>[, <solver>])``, for titles and legends."""
         solver = self.summary.get("solver")

@@ -59,6 +59,7 @@ def write_viewer_html(
     title: str = "mpcform run",
     curves: Mapping[str, Array] | None = None,
     flown: TrueTrajectory | None = None,
+    wind: tuple[Array, float] | None = None,
 ) -> Path:
     """Write the viewer of a run to ``path`` (parents created); returns the path.
 
@@ -67,7 +68,8 @@ def write_viewer_html(
     and clearance from the surface (missing or NaN: d_min / 2); ``geofence``: (min, max)
     corners (d,) of a box, +-inf for open sides; ``curves``: name -> (T,) values (NaN: none);
     ``flown``: a plant run's dense true path, drawn dotted (at most :data:`FLOWN_PER_STEP`
-    samples per control interval: :func:`flown_samples`).
+    samples per control interval: :func:`flown_samples`); ``wind``: the plant's mean wind [m/s]
+    (d,) and gust std [m/s], drawn as an arrow in the legend.
     """
     data = viewer_payload(
         t_s=t_s,
@@ -81,6 +83,7 @@ def write_viewer_html(
         title=title,
         curves=curves,
         flown=flown,
+        wind=wind,
     )
     out = Path(path)
     out.parent.mkdir(parents=True, exist_ok=True)
@@ -150,6 +153,7 @@ def viewer_payload(
     title: str = "mpcform run",
     curves: Mapping[str, Array] | None = None,
     flown: TrueTrajectory | None = None,
+    wind: tuple[Array, float] | None = None,
 ) -> dict[str, Any]:
     """The checked, rounded JSON object that the page reads (see :func:`write_viewer_html`)."""
     t = _times(t_s)
@@ -173,7 +177,14 @@ def viewer_payload(
         "closest": _closest(p),
         "curves": [_curve(k, v, t.shape[0], d_min, v_max) for k, v in (curves or {}).items()],
         "flown": None,
+        "wind": None,
     }
+    if wind is not None:
+        mean = finite_array("wind", wind[0], (d,))
+        payload["wind"] = {
+            "mean_mps": [_sig(x) for x in mean],
+            "gust_std_mps": _sig(positive("gust_std", wind[1], allow_zero=True)),
+        }
     if flown is not None:
         keep = flown_samples(flown.t_s, t.shape[0])
         payload["flown"] = {

@@ -7,11 +7,14 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from mpcform.outputs.files import build_summary, write_outputs
 from mpcform.scenario.build import build_controller
 from mpcform.scenario.spec import Scenario
 from mpcform.sim.metrics import run_metrics
 from mpcform.sim.simulation import SimulationResult, simulate
+from mpcform.sim.wind import Wind
 from mpcform.solvers.base import QPBackend
 from mpcform.world.limits import Limits
 
@@ -81,7 +84,8 @@ def plant_record(
     """``summary.json``'s ``plant``: kind, robust margin [m] per drone, the acceleration bound
     [m/s^2] the margin assumes (``planned``: the MPC's, its default included; None: none), the speed
     it is valid below [m/s], the share of clipped gust samples, and
-    whether the MPC's rows model the plant's velocity loop (``controller.plant_model``)."""
+    whether the MPC's rows model the plant's velocity loop (``controller.plant_model``); with a
+    wind, its :func:`wind_record`."""
     rob, spec = scenario.robustness, scenario.controller
     return {
         "kind": scenario.plant.kind,
@@ -90,6 +94,17 @@ def plant_record(
         "margin_valid_below_speed": rob.valid_speed_mps,
         "wind_clip_fraction": wind_clip_fraction,
         "velocity_loop_modelled": bool(rob.loop) and spec.kind == "mpc" and spec.mpc.plant_model,
+    } | ({} if (wind := getattr(scenario.plant, "wind", None)) is None else {"wind": wind_record(wind)})
+
+
+def wind_record(wind: Wind) -> dict[str, Any]:
+    """``plant.wind`` of ``summary.json``: the mean [m/s] (d,), the gusts' std [m/s], their bound
+    [m/s] per axis and the field (figures and the viewer draw the mean as an arrow)."""
+    return {
+        "mean_mps": wind.mean_mps.tolist(),
+        "gust_std_mps": wind.gust_std_mps,
+        "gust_bound_mps": np.asarray(wind.gust_bound_mps, dtype=float).tolist(),
+        "gust_field": wind.gust_field,
     }
 
 

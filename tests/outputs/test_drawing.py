@@ -2,8 +2,11 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
+from saved_runs import short_run
 
 pytest.importorskip("matplotlib")
 
@@ -14,13 +17,16 @@ from mpcform.formation.template import Template  # noqa: E402
 from mpcform.outputs.drawing import (  # noqa: E402
     PER_DRONE_MAX,
     SNAPSHOT_LABEL,
+    WIND_GID,
     closest_pair,
     draw_snapshot,
+    draw_wind,
     drone_colours,
     envelope,
     marker_scale,
     path_colours,
 )
+from mpcform.outputs.rundata import load_run  # noqa: E402
 
 
 @pytest.mark.parametrize("n", [3, 4, 8, 12])
@@ -90,3 +96,32 @@ def test_closest_pair() -> None:
 def test_plan_paths_get_a_colour_each_up_to_twenty_drones(n: int, distinct: int) -> None:
     colours = path_colours(n)
     assert len(colours) == n and len({str(c) for c in colours}) == distinct
+
+
+def test_the_wind_is_an_arrow_along_its_projection(tmp_path: Path) -> None:
+    short_run("swap_spatial_12_quadrotor_wind", tmp_path, steps=3)
+    run = load_run(tmp_path)
+    assert run.wind is not None
+    mean, std = run.wind
+    for plane in ((0, 1), (0, 2), (1, 2)):
+        ax = Figure().subplots()
+        draw_wind(ax, run, plane)
+        arrows = [c for c in ax.get_children() if c.get_gid() == WIND_GID]
+        label = next(t.get_text() for t in ax.texts if t.get_text().startswith("wind"))
+        assert label.startswith(f"wind {np.linalg.norm(mean):.2g} m/s, gusts {std:.2g} m/s std")
+        w = mean[list(plane)]
+        across = np.linalg.norm(w) == 0.0
+        assert len(arrows) == (0 if across else 1) and label.endswith("(across this view)") == across
+        if arrows:  # tail to head in display points: along the projected wind, 28 points long
+            head = arrows[0].xycoords.transform(arrows[0].xy)
+            tail = arrows[0].anncoords.transform(arrows[0].xyann)
+            step = (head - tail) * 72.0 / ax.figure.dpi
+            np.testing.assert_allclose(step, 28.0 * w / np.linalg.norm(w), atol=1e-9)
+    ax = Figure().subplots()
+    draw_wind(ax, load_run(short_run_dir(tmp_path)), (0, 1))
+    assert len(ax.texts) == 0  # no wind, nothing drawn
+
+
+def short_run_dir(tmp_path: Path) -> Path:
+    short_run("swap_planar_8", tmp_path / "calm", steps=2)
+    return tmp_path / "calm"

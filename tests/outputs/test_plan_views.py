@@ -62,7 +62,7 @@ def test_spatial_run_in_three_projections(tmp_path: Path) -> None:
     assert len(snapshot_labels) == 3 and all(label.startswith("snapshot t = ") for label in snapshot_labels)
     paths = [line for line in fig.axes[0].get_lines() if line.get_xydata().shape[0] == 41]  # one per drone
     assert len(paths) == 12 and len({to_rgba(line.get_color()) for line in paths}) == 12  # no grey tangle
-    assert "drone paths (a colour per drone)" in fig.axes[0].get_legend_handles_labels()[1]
+    assert "drone paths, a colour per drone" in fig.axes[0].get_legend_handles_labels()[1]
 
 
 def test_snapshots_span_the_motion_not_the_idle_tail(tmp_path: Path) -> None:

@@ -293,8 +293,20 @@ def test_a_plant_runs_flown_path_is_downsampled_for_display() -> None:
     assert viewer.viewer_payload(**run)["flown"] is None
 
 
-def test_browser_draws_the_flown_path(browser: str, tmp_path: Path) -> None:
+def test_browser_draws_the_flown_path_and_the_wind(browser: str, tmp_path: Path) -> None:
     run, true = flown_synthetic()
-    page = viewer.write_viewer_html(tmp_path / "flown.html", **run, flown=true)
+    page = viewer.write_viewer_html(
+        tmp_path / "flown.html", **run, flown=true, wind=(np.array([0.0, 1.5]), 0.5)
+    )
     dom = check_page(browser, page, tmp_path, 41, "#t=2")
     assert 'data-flown="101"' in dom  # the flown samples up to t = 2 s (every 20 ms)
+    assert 'data-wind="0.00,-1.00"' in dom  # +y on the screen is up: the canvas' -y
+
+
+def test_the_wind_is_in_the_payload() -> None:
+    run = synthetic()
+    data = viewer.viewer_payload(**run, wind=(np.array([1.0, -0.25]), 0.3))
+    assert data["wind"] == {"mean_mps": [1.0, -0.25], "gust_std_mps": 0.3}
+    assert viewer.viewer_payload(**run)["wind"] is None
+    with pytest.raises(ValidationError, match="wind"):
+        viewer.viewer_payload(**run, wind=(np.array([1.0, 0.0, 0.0]), 0.3))

@@ -124,3 +124,17 @@ def test_describe_names_drones_template_reference_controller_and_steps() -> None
         "worked_example: 3 drones, planar polygon template, ExponentialReference, "
         "tracking controller, 500 steps of 0.02 s"
     )
+
+
+def test_the_summary_records_the_plants_wind(tmp_path: Path) -> None:
+    from mpcform.outputs.rundata import load_run
+
+    sc = shortened(load_scenario(SCENARIOS / "swap_spatial_12_quadrotor_wind.toml"), 3)
+    wind = run_scenario(sc, tmp_path).summary["plant"]["wind"]
+    assert wind["mean_mps"] == sc.plant.wind.mean_mps.tolist() and wind["gust_std_mps"] == 0.5
+    assert wind["gust_bound_mps"] == [1.5, 1.5, 1.5] and wind["gust_field"] == sc.plant.wind.gust_field
+    saved = load_run(tmp_path).wind
+    assert saved is not None and saved[1] == 0.5
+    np.testing.assert_array_equal(saved[0], sc.plant.wind.mean_mps)
+    calm = run_scenario(shortened(load_scenario(SCENARIOS / "swap_planar_8.toml"), 2)).summary["plant"]
+    assert "wind" not in calm

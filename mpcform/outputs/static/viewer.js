@@ -22,7 +22,7 @@
   const COL = {
     ink: "#222", axis: "#555", grid: "#ececec", frame: "#b5b5b5", drone: "#1f77b4", far: "#9cc2e2",
     droneEdge: "#0d3b66", bad: "#d62728", edge: "#4a4a4a", ref: "#8c8c8c", fence: "#2e7d32",
-    muted: "#777", curve: "#1f77b4", closest: "#c2185b",
+    muted: "#777", curve: "#1f77b4", closest: "#c2185b", wind: "#17becf",
   };
   const TRAIL = ["#1f77b4", "#ff7f0e", "#2ca02c", "#9467bd", "#8c564b", "#e377c2", "#7f7f7f", "#bcbd22",
     "#17becf"];
@@ -275,6 +275,11 @@
     drawFence(g, pr);
     drawPaths(g, pr, sampleAt(time), time);
     const flown = F && show.flown ? drawFlown(g, pr, time) : 0;
+    if (D.wind) { // the mean wind's direction on the screen, for the legend's arrow
+      const c = LO.map((l, a) => (l + HI[a]) / 2), a0 = pr.f(...c), a1 = pr.f(...c.map((v, a) => v + D.wind.mean_mps[a] * S));
+      const dx = a1[0] - a0[0], dy = a1[1] - a0[1], len = Math.hypot(dx, dy);
+      windDir = len > 1e-6 ? [dx / len, dy / len] : null;
+    }
     const q = []; for (let i = 0; i < n; i++) q.push(pr.f(...at(pos, i)));
     const items = []; // painter's algorithm: far first
     for (const ob of D.obstacles) {
@@ -308,6 +313,14 @@
     if (finish) { g.restore(); finish(); }
     return { k, below: below.length / 2, flown };
   }
+  let windDir = null; // set by drawScene
+  function arrow(g, x, y, u) {
+    const a = [x + 9 - 8 * u[0], y - 8 * u[1]], b = [x + 9 + 8 * u[0], y + 8 * u[1]];
+    g.strokeStyle = g.fillStyle = COL.wind; g.lineWidth = 2; seg(g, a, b);
+    g.beginPath(); g.moveTo(b[0], b[1]);
+    g.lineTo(b[0] - 6 * u[0] + 3.5 * u[1], b[1] - 6 * u[1] - 3.5 * u[0]); g.lineTo(b[0] - 6 * u[0] - 3.5 * u[1], b[1] - 6 * u[1] + 3.5 * u[0]);
+    g.closePath(); g.fill();
+  }
   function drawLegend(g) {
     const rows = [["drone", (x, y) => { circle(g, x + 9, y, droneR); g.fillStyle = COL.drone; g.fill(); g.strokeStyle = COL.droneEdge; g.lineWidth = 1; g.stroke(); }]];
     if (R && show.ref) rows.push(["reference p*ᵢ", (x, y) => { circle(g, x + 9, y, droneR + 2); g.strokeStyle = COL.ref; g.lineWidth = 1.1; g.stroke(); }]);
@@ -316,6 +329,10 @@
     if (F && show.flown) rows.push(["flown path (the plant's true motion)", (x, y) => { g.save(); g.setLineDash([2, 3]); g.lineWidth = 1.3; g.strokeStyle = TRAIL[0]; seg(g, [x, y], [x + 18, y]); g.restore(); }]);
     if (D.d_min_m !== null) rows.push(["pair closer than d_min", (x, y) => { g.strokeStyle = COL.bad; g.lineWidth = 2.6; seg(g, [x, y], [x + 18, y]); }]);
     if (D.obstacles.length) rows.push(["obstacle (dashed: + clearance)", (x, y) => sphere(g, [x + 9, y], 6, 9)]);
+    if (D.wind) {
+      const w = D.wind, speed = Math.hypot(...w.mean_mps), gusts = w.gust_std_mps > 0 ? ", gusts " + fmtValue(w.gust_std_mps) + " m/s std" : "";
+      rows.push(["wind " + fmtValue(speed) + " m/s" + gusts + (windDir ? "" : " (across this view)"), (x, y) => { if (windDir) arrow(g, x, y, windDir); }]);
+    }
     if (D.fence) rows.push(["geofence", (x, y) => { g.save(); g.setLineDash([5, 3]); g.strokeStyle = COL.fence; g.lineWidth = 1.4; seg(g, [x, y], [x + 18, y]); g.restore(); }]);
     const x0 = dim === 2 ? 74 : 10, y0 = dim === 2 ? 24 : 10, lh = 18;
     g.font = font(12);
@@ -408,6 +425,7 @@
     else if (info.below) { st.textContent = info.below + (info.below > 1 ? " pairs" : " pair") + " closer than d_min"; st.className = "bad"; }
     else { st.textContent = "no pair closer than d_min" + closestText(); st.className = "good"; }
     body.dataset.sample = String(kn); body.dataset.below = String(info.below); body.dataset.flown = String(info.flown);
+    if (D.wind) body.dataset.wind = windDir ? windDir.map((v) => v.toFixed(2)).join(",") : "across";
     if (extent) body.dataset.extent = extent.map((v) => v.toFixed(3)).join(",");
     return info;
   }
