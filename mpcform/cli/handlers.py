@@ -22,7 +22,7 @@ from mpcform.cli.export_flags import EXPORT_FIELDS, add_export_options, export_o
 from mpcform.cli.options import option_errors, progress
 from mpcform.cli.progress import ProgressBar
 from mpcform.errors import MPCFormError, ValidationError
-from mpcform.outputs.files import DPI_RANGE, FIGURE_DPI, FIGURE_FORMATS
+from mpcform.outputs.files import DPI_RANGE, FIGURE_DPI, FIGURE_FORMATS, plant_events
 from mpcform.outputs.flight.export import check_tracked, export_run
 from mpcform.outputs.rundata import RunData, formation_data, load_run, write_formation_npz
 from mpcform.run.runner import RunResult
@@ -132,6 +132,7 @@ def write_view(data: RunData, path: Path) -> Path:
         | ({} if data.flown is None else flown_curves(traj.t_s, data.flown)),
         flown=data.flown,
         wind=data.wind,
+        events=plant_events(data.summary.get("plant") or {}),
     )
 
 

@@ -21,6 +21,7 @@ from scipy.spatial import ConvexHull, QhullError
 
 from mpcform._validate import Array
 from mpcform.formation.geometry import closest_pair, formation_edges
+from mpcform.outputs.files import plant_events
 from mpcform.outputs.rundata import RunData
 
 # ---- the one style of every figure ---------------------------------------------------------
@@ -52,6 +53,7 @@ SNAPSHOT_LABEL = "snapshot-label"  # gid of the ``t = ... s`` text beside a snap
 FLOWN_GID = "flown"  # gid of what the drones really did (a plant run's dense true path)
 WIND_GID = "wind"  # gid of the plant's mean wind arrow and its label
 WIND_COLOUR = "tab:cyan"
+EVENTS_GID = "plant-events"  # gid of the note of what the plant reported (contacts, floor, flips)
 FLOWN_COLOUR = "tab:green"  # a swarm's flown speeds and separation (per drone: the drone's colour)
 DISPLAY_SAMPLES = 3000  # a dense true path drawn with at most about this many samples
 
@@ -223,6 +225,16 @@ def draw_wind(ax: Axes, run: RunData, plane: tuple[int, int] = (0, 1)) -> None:
     ax.text(
         0.98, anchor[1], label, transform=below, ha="right", va="top", fontsize="x-small", color=WIND_COLOUR
     )
+
+
+def note_plant_events(ax: Axes, run: RunData) -> None:
+    """What the plant reported (crazyflow: drone contacts, drones on the floor or flipped, and
+    when planning stopped for them), in red in the lower left of ``ax``; nothing if none."""
+    events = plant_events(run.summary.get("plant") or {})
+    if events is not None:
+        ax.text(
+            0.02, 0.02, events, transform=ax.transAxes, fontsize="x-small", color="tab:red", gid=EVENTS_GID
+        )
 
 
 def mark_closest_pair(ax: Axes, run: RunData, axes: tuple[int, int] = (0, 1)) -> None:

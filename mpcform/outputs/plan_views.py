@@ -34,6 +34,7 @@ from mpcform.outputs.drawing import (
     draw_wind,
     mark_closest_pair,
     marker_scale,
+    note_plant_events,
     path_colours,
     plan_size,
     reference_subset,
@@ -157,6 +158,7 @@ def draw_plan(
     draw_leaders(ax, end, run)
     mark_closest_pair(ax, run, plane)
     draw_wind(ax, run, plane)
+    note_plant_events(ax, run)
     ax.set(xlabel=f"{AXIS_NAMES[a]} [m]", ylabel=f"{AXIS_NAMES[b]} [m]")
     ax.set_aspect("equal", adjustable="datalim")
     ax.grid(True, alpha=0.3)

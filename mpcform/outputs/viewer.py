@@ -60,6 +60,7 @@ def write_viewer_html(
     curves: Mapping[str, Array] | None = None,
     flown: TrueTrajectory | None = None,
     wind: tuple[Array, float] | None = None,
+    events: str | None = None,
 ) -> Path:
     """Write the viewer of a run to ``path`` (parents created); returns the path.
 
@@ -69,7 +70,8 @@ def write_viewer_html(
     corners (d,) of a box, +-inf for open sides; ``curves``: name -> (T,) values (NaN: none);
     ``flown``: a plant run's dense true path, drawn dotted (at most :data:`FLOWN_PER_STEP`
     samples per control interval: :func:`flown_samples`); ``wind``: the plant's mean wind [m/s]
-    (d,) and gust std [m/s], drawn as an arrow in the legend.
+    (d,) and gust std [m/s], drawn as an arrow in the legend; ``events``: what the plant reported
+    (:func:`mpcform.outputs.files.plant_events`), in red under the title.
     """
     data = viewer_payload(
         t_s=t_s,
@@ -84,6 +86,7 @@ def write_viewer_html(
         curves=curves,
         flown=flown,
         wind=wind,
+        events=events,
     )
     out = Path(path)
     out.parent.mkdir(parents=True, exist_ok=True)
@@ -154,6 +157,7 @@ def viewer_payload(
     curves: Mapping[str, Array] | None = None,
     flown: TrueTrajectory | None = None,
     wind: tuple[Array, float] | None = None,
+    events: str | None = None,
 ) -> dict[str, Any]:
     """The checked, rounded JSON object that the page reads (see :func:`write_viewer_html`)."""
     t = _times(t_s)
@@ -178,6 +182,7 @@ def viewer_payload(
         "curves": [_curve(k, v, t.shape[0], d_min, v_max) for k, v in (curves or {}).items()],
         "flown": None,
         "wind": None,
+        "events": None if events is None else str(events),
     }
     if wind is not None:
         mean = finite_array("wind", wind[0], (d,))

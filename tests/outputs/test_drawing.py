@@ -15,6 +15,7 @@ from matplotlib.figure import Figure  # noqa: E402
 from mpcform.formation.geometry import formation_edges
 from mpcform.formation.template import Template  # noqa: E402
 from mpcform.outputs.drawing import (  # noqa: E402
+    EVENTS_GID,
     PER_DRONE_MAX,
     SNAPSHOT_LABEL,
     WIND_GID,
@@ -24,6 +25,7 @@ from mpcform.outputs.drawing import (  # noqa: E402
     drone_colours,
     envelope,
     marker_scale,
+    note_plant_events,
     path_colours,
 )
 from mpcform.outputs.rundata import load_run  # noqa: E402
@@ -125,3 +127,21 @@ def test_the_wind_is_an_arrow_along_its_projection(tmp_path: Path) -> None:
 def short_run_dir(tmp_path: Path) -> Path:
     short_run("swap_planar_8", tmp_path / "calm", steps=2)
     return tmp_path / "calm"
+
+
+def test_what_the_plant_reported_is_noted_in_red(tmp_path: Path) -> None:
+    import json
+
+    short_run("swap_planar_8", tmp_path, steps=2)
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    ax = Figure().subplots()
+    note_plant_events(ax, load_run(tmp_path))
+    assert len(ax.texts) == 0  # the ideal plant reports nothing
+    summary["plant"] |= {"floor_contacts": [3], "planning_stopped_s": {"3": 0.7}}
+    (tmp_path / "summary.json").write_text(json.dumps(summary))
+    note_plant_events(ax, load_run(tmp_path))
+    (note,) = [t for t in ax.texts if t.get_gid() == EVENTS_GID]
+    assert (
+        note.get_text() == "on the floor: 3; planning stopped for drone 3 at 0.7 s"
+        and note.get_color() == "tab:red"
+    )

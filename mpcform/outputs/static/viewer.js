@@ -507,6 +507,7 @@
   if (D.obstacles.length) meta.push(D.obstacles.length + (D.obstacles.length === 1 ? " obstacle" : " obstacles"));
   if (D.fence) meta.push("geofence");
   $("meta").textContent = meta.join(" · ");
+  if (D.events) { const ev = document.createElement("span"); ev.className = "events"; ev.textContent = " · plant: " + D.events; $("meta").appendChild(ev); }
   const hash = /(?:^#|&)t=([-0-9.eE+]+)/.exec(window.location.hash);
   const info = (state.time = hash ? Math.min(t1, Math.max(t0, parseFloat(hash[1]) || t0)) : t0, render());
   const px = canvas.getContext("2d").getImageData(0, 0, canvas.width, canvas.height).data;
