@@ -228,8 +228,10 @@ def _sweep(
 ) -> None:
     """Call ``parse`` until it passes, reporting each offending key and setting it aside.
 
-    A bad required number or vector is replaced by a neutral placeholder (so the later build
-    can go on) and its table is marked ``tainted``; other bad keys are removed (defaults apply). A
+    A bad key without a default marks its table ``tainted`` (a build error there, such as the
+    alternative key then missing, is its consequence); a bad number or vector of that kind is
+    replaced by a neutral placeholder (so the later build can go on), other bad keys are removed
+    (defaults apply). A
     bad selector (``plant.kind``) ends the table's sweep: which of its keys apply is unknown.
     """
     for _ in range(MAX_ROUNDS):
@@ -246,9 +248,10 @@ def _sweep(
                 return
             key = next((k for k in table.keys if k.name == name), None)
             placeholder = None
-            if key is not None and key.default is None and key.type in ("vector", "float"):
-                placeholder = [0.0] * dim if key.type == "vector" else 1.0
-                tainted.add(_table_of(exc.field))
+            if key is not None and key.default is None:  # no default takes its place
+                tainted.add(_table_of(exc.field))  # the build's errors in its table follow from it
+                if key.type in ("vector", "float"):
+                    placeholder = [0.0] * dim if key.type == "vector" else 1.0
             if not _remove(doc, exc.field, placeholder):
                 return
 

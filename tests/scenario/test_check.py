@@ -118,6 +118,17 @@ def test_consequences_are_not_reported(tmp_path: Path) -> None:
     assert [p.field for p in problems] == ["templates"]  # not: missing [template], unknown shape, ...
 
 
+def test_bad_start_positions_are_one_problem(tmp_path: Path) -> None:
+    """Not also "initial.centroid: missing" once the bad positions are set aside."""
+    text = (ROOT / "scenarios" / "worked_example.toml").read_text()
+    start = text[text.index("[initial]") : text.index("[reference]")]
+    far = "[1e300, 0.0], [-1e300, 0.0], [0.0, 1e300]"  # its three drones
+    problems = check_scenario_file(
+        write(tmp_path, text.replace(start, f"[initial]\npositions = [{far}]\n\n"))
+    ).problems
+    assert [p.field for p in problems] == ["initial.positions"] and "magnitude" in problems[0].message
+
+
 def test_every_missing_table_at_once(tmp_path: Path) -> None:
     problems = check_scenario_file(write(tmp_path, "version = 1\ndim = 2\n")).problems
     assert [p.field for p in problems] == ["template", "initial", "reference", "controller", "simulation"]
