@@ -145,6 +145,27 @@ def test_swap20_page_is_small(swap20: RunData, tmp_path: Path) -> None:
     assert path.stat().st_size <= MAX_BYTES, f"{path.stat().st_size} bytes"
 
 
+@pytest.mark.slow
+def test_a_100_drone_plant_runs_page_stays_within_5_mb(tmp_path: Path) -> None:
+    """formation_flight_100 on the lag plant (25 s, a 100 Hz true path): the flown path drawn at 5
+    samples per interval, its extremes from the whole path."""
+    from mpcform.run.runner import run_scenario
+    from mpcform.scenario.load import load_scenario
+    from mpcform.scenario.plant import with_plant_kind
+
+    sc = with_plant_kind(load_scenario(ROOT / "scenarios" / "formation_flight_100.toml"), "lag")
+    run_scenario(sc, tmp_path / "run")
+    data = load_run(tmp_path / "run")
+    assert data.flown is not None and data.flown.t_s.shape[0] > 9 * data.trajectory.t_s.shape[0]
+    path = write_view(data, tmp_path / "ff100.html")
+    assert path.stat().st_size <= 5 * 2**20, f"{path.stat().st_size} bytes"
+    payload = json.loads(re.search(r'id="mpcform-data">(.*?)</script>', path.read_text(), re.S).group(1))
+    assert len(payload["flown"]["t_s"]) <= viewer.FLOWN_PER_STEP * (data.trajectory.t_s.shape[0] - 1) + 1
+    speeds = next(c for c in payload["curves"] if c["key"] == viewer.FLOWN_SPEED_KEY)["y"]
+    true_peak = np.linalg.norm(data.flown.velocities_mps, axis=-1).max()
+    assert max(v for v in speeds if v is not None) == pytest.approx(true_peak, rel=1e-3)  # the whole path's
+
+
 # ---- headless Chromium ------------------------------------------------------------------------
 @pytest.fixture(scope="module")
 def browser() -> str:
