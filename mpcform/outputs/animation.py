@@ -162,14 +162,14 @@ class FlightScene:
         both = np.concatenate([p.reshape(-1, run.dim), ref.reshape(-1, run.dim)])
         span = np.maximum(both.max(axis=0) - both.min(axis=0), 1.0)
         ratio = max(span[b] / span[a] for a, b in self.planes)
-        panel_in = 6.4 if run.dim == 2 else 5.0
+        panel_in = (6.4 if ratio >= 0.6 else 9.0) if run.dim == 2 else 5.0  # a wide flight: a wide frame
         height = float(np.clip(panel_in * ratio + 1.6, 3.2, 7.5))
         self.fig = Figure(figsize=(panel_in * len(self.planes), height), dpi=dpi, layout="constrained")
         _FrameCanvas(self.fig)
         axes = self.fig.subplots(1, len(self.planes), squeeze=False)[0]
         few = run.n <= PER_DRONE_MAX
         colours = drone_colours(run.n) if few else ["tab:blue"] * run.n
-        ms = 6.0 * float(np.sqrt(marker_scale(run.n)))
+        ms = max(4.5, 6.0 * float(np.sqrt(marker_scale(run.n))))  # points: 5 px or more at 80 dpi
         self.artists: list[dict[str, Any]] = []
         close_label = None if run.d_min_m is None else "closer than d_min"
         ids = run.n if run.n <= IDS_MAX else 0
