@@ -16,7 +16,9 @@ from mpcform.outputs.flight.export import (
 from mpcform.outputs.flight.limits import FlightLimits, platform_thrust_acc_mps2
 from mpcform.outputs.flight.polynomial import DEFAULT_TOLERANCE_M
 
-EXPORT_FIELDS = "altitude offset floor tolerance rate max_speed max_acc max_jerk max_body_rate".split()
+EXPORT_FIELDS = (
+    "altitude offset floor tolerance rate max_speed max_acc max_jerk max_body_rate crazyflow".split()
+)
 """The library's fields that are export flags (their errors name ``--max-speed``, not ``max_speed``)."""
 
 
@@ -96,6 +98,12 @@ def add_export_options(cmd: argparse.ArgumentParser) -> None:
         action="store_true",
         help="do not fly the export on the quadrotor plant (needs drone-models)",
     )
+    cmd.add_argument(
+        "--crazyflow",
+        action="store_true",
+        help='also fly the export open loop in crazyflow (pip install -e ".[crazyflow]"): '
+        "contacts or pairs closer than d_min refuse it",
+    )
 
 
 def export_options(args: argparse.Namespace) -> ExportOptions:
@@ -119,6 +127,7 @@ def export_options(args: argparse.Namespace) -> ExportOptions:
         allow_untracked=args.allow_untracked,
         allow_unsafe=args.allow_unsafe,
         fly=not args.no_flight_check,
+        crazyflow=args.crazyflow,
     )
 
 
@@ -135,12 +144,13 @@ def _offset(text: str) -> tuple[float, float, float]:
 
 def report_export(result: ExportResult) -> None:
     fit, rec, env = result.fit, result.record, result.envelope
-    n = sum(p.name.endswith("_setpoints.csv") for p in result.files)
+    n = result.phases.positions_m.shape[1]
+    phases = ", ".join(f"{name} {p['duration_s']:.3g} s" for name, p in rec["phases"].items())
     print(
-        f"exported {n} drone{'s' * (n != 1)} to {result.directory}: rest to rest in "
-        f"{result.retiming.duration_s:.2f} s (planned {rec['planned_duration_s']:.2f} s), "
-        f"{fit.polynomial.pieces} polynomial pieces of {fit.polynomial.durations_s[0]:.3g} s each "
-        f"({result.files_per_drone} file{'s' * (result.files_per_drone != 1)} per drone, at most "
+        f"exported {n} drone{'s' * (n != 1)} to {result.directory}: ground to ground in "
+        f"{rec['flight_duration_s']:.2f} s ({phases}; the mission was planned for "
+        f"{rec['planned_duration_s']:.2f} s); the mission in {fit.polynomial.pieces} polynomial pieces "
+        f"({result.files_per_drone} file{'s' * (result.files_per_drone != 1)} per drone and phase, at most "
         f"{CRAZYFLIE_MAX_PIECES} pieces each), max fit error {fit.max_error_m:.2g} m "
         f"(tolerance {fit.tolerance_m:g} m)"
     )
@@ -150,6 +160,11 @@ def report_export(result: ExportResult) -> None:
         f"{result.min_separation_m:.3g} m; setpoints at {rec['setpoint_rate_hz']:g} Hz; Crazyswarm2: "
         "crazyflies.yaml, fly.py"
     )
+    if (cf := rec.get("crazyflow_flight")) is not None:
+        print(
+            f"  flown open loop in crazyflow: true tracking error {cf['max_tracking_error_m']:.3g} m, "
+            f"true min separation {cf['min_separation_m']:.3g} m, no contact"
+        )
     if result.flight is not None:
         f = result.flight
         print(

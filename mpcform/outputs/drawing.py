@@ -8,12 +8,13 @@ Imported only when plots are asked for, like :mod:`mpcform.outputs.figures` and
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 from matplotlib import colormaps
 from matplotlib.axes import Axes
 from matplotlib.colors import ListedColormap, Normalize
+from matplotlib.figure import Figure
 from matplotlib.patches import Circle
 from matplotlib.ticker import MaxNLocator
 from matplotlib.transforms import offset_copy
@@ -212,7 +213,7 @@ def draw_wind(ax: Axes, run: RunData, plane: tuple[int, int] = (0, 1)) -> None:
     mean, std = run.wind
     label = f"wind {np.linalg.norm(mean):.2g} m/s" + (f", gusts {std:.2g} m/s std" if std > 0 else "")
     w = mean[list(plane)]
-    anchor, fig = (0.9, 0.92), ax.figure
+    anchor, fig = (0.9, 0.92), cast(Figure, ax.figure)  # a plan's axes sit on a Figure
     if np.linalg.norm(w) > 1e-6 * max(float(np.linalg.norm(mean)), 1e-12):
         u = 14.0 * w / np.linalg.norm(w)
         head = offset_copy(ax.transAxes, fig=fig, x=u[0], y=u[1], units="points")

@@ -43,7 +43,7 @@ from typing import Any
 import numpy as np
 
 from mpcform._validate import Array
-from mpcform.control.setpoints import interval_setpoints, ticks_per_interval
+from mpcform.control.setpoints import FullState, interval_setpoints, ticks_per_interval
 from mpcform.errors import MPCFormError, ValidationError
 from mpcform.sim.plants import Plant
 from mpcform.sim.so_rpy import package_file
@@ -169,6 +169,18 @@ class CrazyflowPlant(Plant):
         flipped = np.flatnonzero((up_z < 0.0).any(axis=0))
         for key, drones in (("floor_contacts", floor), ("flipped", flipped)):
             ev[key] = sorted(set(ev[key]) | set(drones.tolist()))
+
+    def fly_full_state(self, start_m: Array, setpoints: FullState) -> tuple[Array, Array]:
+        """Fly world-frame full-state ``setpoints``, a row per control tick, from the drones
+        hovering at ``start_m`` (n, 3) [m, world frame] (a spatial plant): the times [s] and true
+        positions (K, n, 3) of every physics step (contacts, floor contacts and flips recorded in
+        :attr:`events`). An export's pieces are flown this way, open loop."""
+        if self.dim != 3:
+            raise ValidationError("plant", "full-state setpoints fly a spatial (dim = 3) crazyflow plant")
+        self.reset(start_m - np.array([0.0, 0.0, self.altitude_m]))
+        pos, _, quat = self._ask("fly", setpoints.state_control())
+        self._watch(pos, quat)
+        return np.arange(pos.shape[0]) / self.physics_hz, pos
 
     @property
     def events(self) -> dict[str, Any]:

@@ -254,7 +254,7 @@ def test_export_command(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> N
     argv.append("--no-flight-check")
     assert main(argv) == 0
     out = capsys.readouterr().out
-    assert "exported 8 drones" in out and "tolerance 0.01 m" in out and "rest to rest in" in out
+    assert "exported 8 drones" in out and "tolerance 0.01 m" in out and "ground to ground in" in out
     setpoints = np.loadtxt(tmp_path / "export" / "drone007_setpoints.csv", delimiter=",", skiprows=1)
     assert setpoints.shape[1] == 14 and np.allclose(setpoints[:, 3], 1.2, atol=1e-5)
     assert np.allclose(np.diff(setpoints[:-1, 0]), 0.02)

@@ -1,4 +1,5 @@
-"""Fly an export on the quadrotor plant: the true tracking error and separation of the swarm.
+"""Fly an export on the quadrotor plant (and, if asked, open loop in crazyflow): the true
+tracking error and separation of the swarm.
 
 Every drone starts at rest at the start of its pieces on a :class:`~mpcform.sim.quadrotor.
 QuadrotorPlant` (drone-models' Crazyflie model flown by a PID cascade at 500 Hz). Every
@@ -8,10 +9,17 @@ feedforward). The report: the largest distance between the true and the exported
 smallest true pairwise distance, and the declared tolerance they are held to: the plant's robust
 margin (``QuadrotorPlantSpec().robustness``, one control interval of the run at the export's
 acceleration limit) plus the fit tolerance. Without drone-models the check is skipped (None).
+
+:func:`fly_export_crazyflow` flies the pieces' full state (position, velocity, acceleration, yaw
+and body rates at 100 Hz, what ``cmdFullState`` takes) open loop through crazyflow's Mellinger
+controller (:meth:`mpcform.sim.crazyflow.CrazyflowPlant.fly_full_state`), the drones hovering at
+the start; its declared tolerance is a Crazyflie's tracking allowance plus the fit tolerance,
+and its contacts, floor contacts and flips are reported.
 """
 
 from __future__ import annotations
 
+import importlib.util
 from dataclasses import dataclass
 from importlib import metadata
 from typing import Any
@@ -19,11 +27,16 @@ from typing import Any
 import numpy as np
 
 from mpcform._validate import Array
+from mpcform.control.setpoints import FullState
+from mpcform.outputs.flight.limits import flat_state
 from mpcform.outputs.flight.polynomial import PiecewisePolynomial
 from mpcform.outputs.flight.safety import ClosestPair, closest_pair
+from mpcform.sim.crazyflow import CrazyflowPlant
 from mpcform.sim.plant_spec import QuadrotorPlantSpec
+from mpcform.world.limits import PLATFORM_TRACKING_M
 
 INTERVAL_S = 0.02  # 10 inner steps of the 500 Hz plant (the plant records >= 10 samples per call)
+CONTACT_EVENTS = ("drone_contacts", "floor_contacts", "flipped")
 
 
 @dataclass(frozen=True)
@@ -38,6 +51,7 @@ class FlightCheck:
     fit_tolerance_m: float
     closest: ClosestPair | None = None
     d_min_m: float | None = None
+    events: dict[str, Any] | None = None  # crazyflow's contacts, floor contacts and flips
 
     @property
     def min_separation_m(self) -> float:
@@ -52,7 +66,20 @@ class FlightCheck:
     def within_tolerance(self) -> bool:
         """Tracked within the declared tolerance and no pair closer than d_min."""
         apart = self.d_min_m is None or self.min_separation_m >= self.d_min_m
-        return self.max_error_m <= self.declared_tolerance_m and apart
+        calm = not self.events or not any(self.events.get(k) for k in CONTACT_EVENTS)
+        return self.max_error_m <= self.declared_tolerance_m and apart and calm
+
+    def describe(self) -> str:
+        """What broke the tolerance: contacts, a pair closer than d_min, or the tracking error."""
+        said = [f"{k.replace('_', ' ')}: {v}" for k, v in (self.events or {}).items() if v]
+        if self.d_min_m is not None and self.closest is not None and self.min_separation_m < self.d_min_m:
+            said.append(f"{self.closest.describe()}, closer than d_min = {self.d_min_m:g} m")
+        if self.max_error_m > self.declared_tolerance_m:
+            said.append(
+                f"drone {self.error_drone} {self.max_error_m:.3g} m off at t = {self.error_t_s:.2f} s, "
+                f"beyond {self.declared_tolerance_m:.3g} m"
+            )
+        return "; ".join(said) or "within tolerance"
 
     def record(self) -> dict[str, Any]:
         return {
@@ -67,7 +94,7 @@ class FlightCheck:
             "fit_tolerance_m": self.fit_tolerance_m,
             "declared_tolerance_m": self.declared_tolerance_m,
             "within_tolerance": self.within_tolerance,
-        }
+        } | ({} if self.events is None else {"events": self.events})
 
 
 def drone_models_available() -> bool:
@@ -111,4 +138,31 @@ def fly_export(
     closest = closest_pair(t, p_true)
     return FlightCheck(
         float(err[j, i]), int(i), float(t[j]), float(margin), fit_tolerance_m, closest, d_min_m
+    )
+
+
+def fly_export_crazyflow(
+    poly: PiecewisePolynomial, n: int, fit_tolerance_m: float, d_min_m: float | None = None
+) -> FlightCheck | None:
+    """Fly ``n`` drones' pieces open loop in crazyflow (module docstring); None without it."""
+    if importlib.util.find_spec("crazyflow") is None:
+        return None
+    plant = CrazyflowPlant(n, 3)
+    t = np.arange(0.0, poly.duration_s, 1.0 / plant.control_hz)
+    st = flat_state(poly, t, n)
+    setpoints = FullState(t, st["pos"], st["vel"], st["acc"], st["yaw"], st["omega"])
+    t_true, p_true = plant.fly_full_state(st["pos"][0], setpoints)
+    err = np.linalg.norm(p_true - poly.evaluate(t_true).reshape(-1, n, 4)[..., :3], axis=-1)
+    j, i = np.unravel_index(int(np.argmax(err)), err.shape)
+    events = {k: v for k, v in plant.events.items() if k in CONTACT_EVENTS}
+    closest = closest_pair(t_true, p_true)
+    return FlightCheck(
+        float(err[j, i]),
+        int(i),
+        float(t_true[j]),
+        PLATFORM_TRACKING_M,
+        fit_tolerance_m,
+        closest,
+        d_min_m,
+        events,
     )

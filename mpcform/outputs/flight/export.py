@@ -27,6 +27,7 @@ Yaw is 0, or with ``yaw="formation"`` the formation's rotation about z (:mod:`mp
 from __future__ import annotations
 
 import json
+import math
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -37,40 +38,36 @@ from mpcform._validate import Array, positive
 from mpcform.errors import ValidationError
 from mpcform.outputs.files import json_safe, provenance
 from mpcform.outputs.flight import crazyswarm
-from mpcform.outputs.flight.check import FlightCheck, fly_export
+from mpcform.outputs.flight.check import FlightCheck, fly_export, fly_export_crazyflow
 from mpcform.outputs.flight.files import (
     POLY_HEADER,
     SETPOINT_COLUMNS,
     read_poly,
     read_setpoints,
-    write_poly,
-    write_setpoints,
+    write_phase,
 )
-from mpcform.outputs.flight.limits import FlightEnvelope, FlightLimits, body_rates, envelope
+from mpcform.outputs.flight.limits import FlightEnvelope, FlightLimits, envelope, flat_state
+from mpcform.outputs.flight.phases import Flight, phase_record, whole_flight
+from mpcform.outputs.flight.pieces import (
+    CHECK_RATE_HZ,
+    DEFAULT_RATE_HZ,
+    check_samples,
+    join,
+    phase_pieces,
+)
 from mpcform.outputs.flight.polynomial import (
     DEFAULT_TOLERANCE_M,
     MAX_PIECE_S,
-    PiecewisePolynomial,
     PolynomialFit,
-    fit_piecewise_polynomial,
-    fit_positions,
 )
-from mpcform.outputs.flight.retime import Retiming, retime
+from mpcform.outputs.flight.retime import Retiming
 from mpcform.outputs.flight.safety import closest_pair, separation_breaches
 from mpcform.outputs.flight.yaw import formation_yaw
 from mpcform.outputs.rundata import RunData
-from mpcform.world.limits import PLATFORM_TRACKING_M
+from mpcform.world.limits import PLATFORM_TRACKING_M, Limits
 
 CRAZYFLIE_MAX_PIECES = crazyswarm.CRAZYFLIE_MAX_PIECES
 DEFAULT_ALTITUDE_M = 1.0
-DEFAULT_RATE_HZ = 100.0
-PATH_SAMPLES = 10  # per planned interval: the path is fitted to the planned positions joined by lines
-FIT_RATE_HZ = 50.0  # samples of the retimed reference per second, besides the planned samples
-CHECK_RATE_HZ = 500.0  # sampling of the pieces for limits, floor and separation
-LIMIT_SLACK = 0.9  # the retiming aims at this fraction of each limit (the fit adds a little)
-MAX_SAMPLES = 7e6
-"""The most samples x drones an export takes (checks at 500 Hz and setpoints at ``rate_hz``): each
-took about 560 bytes and 34 us (setpoint CSVs written), so about 4 GiB and 4 minutes."""
 PROVENANCE_JSON = "provenance.json"
 YAW_MODES = ("zero", "formation")
 __all__ = [
@@ -102,6 +99,7 @@ class ExportOptions:
     allow_untracked: bool = False  # export a run planned without a tracking allowance
     allow_unsafe: bool = False  # export a flight whose drones come closer than d_min
     fly: bool = True  # fly the export on the quadrotor plant (skipped without drone-models)
+    crazyflow: bool = False  # also fly it open loop in crazyflow (needs the extra)
 
     def __post_init__(self) -> None:
         positive("tolerance", self.tolerance_m)
@@ -131,6 +129,7 @@ class ExportResult:
     min_separation_m: float
     record: dict[str, Any]
     flight: FlightCheck | None
+    phases: Flight
 
 
 def positions_3d(run: RunData, options: ExportOptions) -> Array:
@@ -153,112 +152,91 @@ def export_run(
 ) -> ExportResult:
     """Retime, fit, check and write every drone's files (``fields`` override ``options``)."""
     opts = replace(options or ExportOptions(), **fields)
+    lim = opts.limits
     if not opts.allow_untracked:
         check_tracked(run.d_min_m, run.n, run.tracking_m)
     out = Path(out_dir)
-    t = run.trajectory.t_s - run.trajectory.t_s[0]
-    planned = positions_3d(run, opts)
+    dt = float(np.median(np.diff(run.trajectory.t_s)))
+    phase_limits = Limits(run.v_max_mps or lim.max_speed_mps, run.d_min_m, tracking_m=run.tracking_m)
+    flight = whole_flight(positions_3d(run, opts), dt, phase_limits, lim, opts.floor_m)
     n = run.n
-    lim = opts.limits
-    half = 0.5 * opts.tolerance_m
-    dense = np.linspace(
-        0.0, t[-1], PATH_SAMPLES * (t.shape[0] - 1) + 1
-    )  # held commands: linear between samples
-    lines = np.stack([np.interp(dense, t, x) for x in planned.reshape(t.shape[0], -1).T], axis=-1)
-    path = fit_positions(dense, lines.reshape(dense.shape[0], n, 3), half, opts.max_piece_s).polynomial
-    timing = retime(
-        path,
-        LIMIT_SLACK * lim.max_speed_mps,
-        LIMIT_SLACK * lim.max_acc_mps2,
-        LIMIT_SLACK * lim.max_jerk_mps3,
-        max_duration_s=MAX_SAMPLES / (n * (CHECK_RATE_HZ + DEFAULT_RATE_HZ)),
-    )
-    _check_samples(timing.duration_s, n, opts.rate_hz)
-    t_planned = timing.new_time(t)
-    grid = np.linspace(0.0, timing.duration_s, int(np.ceil(FIT_RATE_HZ * timing.duration_s)) + 1)
-    t_fit = np.unique(np.concatenate([grid, t_planned]))
-    fit = fit_positions(t_fit, timing.positions(t_fit), half, opts.max_piece_s, rest_ends=True)
-    poly = fit.polynomial
-    yaw = (
-        np.zeros(t.shape)
-        if opts.yaw == "zero"
-        else formation_yaw(run.trajectory.positions_m, run.formation.offsets_m)
-    )
-    yaw_poly = fit_piecewise_polynomial(
-        t_fit, np.interp(t_fit, t_planned, yaw)[:, None], poly.pieces, rest_ends=True
-    )
-    coef = np.concatenate(
-        [
-            poly.coefficients.reshape(poly.pieces, n, 3, -1),
-            np.repeat(yaw_poly.coefficients[:, None], n, axis=1),
-        ],
-        axis=2,
-    )
-    flown = PiecewisePolynomial(0.0, poly.durations_s, coef.reshape(poly.pieces, n * 4, -1)).as_float32()
-    err = flown.evaluate(t_planned).reshape(t.shape[0], n, 4)[..., :3] - planned
-    fit = PolynomialFit(poly, float(np.linalg.norm(err, axis=-1).max()), opts.tolerance_m)
+    yaw: Array = np.zeros(flight.positions_m.shape[0])
+    mission = dict(flight.phases)["mission"]
+    if opts.yaw == "formation":  # held through the ascent and the descent
+        samples = np.arange(mission.start, mission.stop)
+        mission_yaw = formation_yaw(run.trajectory.positions_m, run.formation.offsets_m)
+        yaw = np.interp(np.arange(yaw.shape[0]), samples, mission_yaw)
+    parts = [
+        phase_pieces(
+            name, flight.positions_m[k], dt, yaw[k], lim, opts.tolerance_m, opts.max_piece_s, opts.rate_hz
+        )
+        for name, k in flight.phases
+    ]
+    main = next(p for p in parts if p.name == "mission")
+    fit, timing = main.fit, main.timing
+    flown = join(parts)
+    check_samples(flown.duration_s, n, opts.rate_hz)
     t_check = np.linspace(0.0, flown.duration_s, int(np.ceil(CHECK_RATE_HZ * flown.duration_s)) + 1)
     state = flat_state(flown, t_check, n)
     _check_floor(state["pos"], t_check, opts.floor_m)
     env = envelope(t_check, state["vel"], state["acc"], state["jerk"], state["omega"])
-    warnings = _warnings(fit, env, opts)
-    dt = float(np.median(np.diff(t)))
-    flight = fly_export(flown, n, opts.tolerance_m, dt, lim.max_acc_mps2, run.d_min_m) if opts.fly else None
+    worst = max(parts, key=lambda p: p.fit.max_error_m).fit
+    warnings = _warnings(worst, env, opts)
+    check = fly_export(flown, n, opts.tolerance_m, dt, lim.max_acc_mps2, run.d_min_m) if opts.fly else None
+    cf = fly_export_crazyflow(flown, n, opts.tolerance_m, run.d_min_m) if opts.crazyflow else None
+    if opts.crazyflow and cf is None:
+        raise ValidationError(
+            "crazyflow", 'flying an export in crazyflow needs it: pip install -e ".[crazyflow]"'
+        )
     retimed = closest_pair(t_check, state["pos"])
+    planned = [closest_pair(p.dense_t_s, p.dense_m) for p in parts]
     breaches = separation_breaches(
         run.d_min_m,
         opts.tolerance_m,
-        closest_pair(dense, lines.reshape(dense.shape[0], n, 3)),
+        min((c for c in planned if c is not None), key=lambda c: c.distance_m, default=None),
         retimed,
-        None if flight is None else flight.closest,
+        None if check is None else check.closest,
     )
+    if cf is not None and not cf.within_tolerance:
+        breaches += [f"flown open loop in crazyflow: {cf.describe()}"]
     if breaches and not opts.allow_unsafe:  # before any file is written
         raise ValidationError("separation", f"{breaches[0]} (--allow-unsafe to export anyway)")
     warnings += breaches
     min_sep = float("inf") if retimed is None else retimed.distance_m
-    chunks = [
-        range(s, min(s + CRAZYFLIE_MAX_PIECES, poly.pieces))
-        for s in range(0, poly.pieces, CRAZYFLIE_MAX_PIECES)
-    ]
-    if len(chunks) > 1:
+    split = [p for p in parts if p.flown.pieces > CRAZYFLIE_MAX_PIECES]
+    per_drone = max(math.ceil(p.flown.pieces / CRAZYFLIE_MAX_PIECES) for p in parts)  # files per phase
+    if split:
         warnings.append(
-            f"{poly.pieces} pieces per drone exceed the Crazyflie's {CRAZYFLIE_MAX_PIECES}: split into "
-            f"{len(chunks)} files per drone (fly.py refuses them), or raise --tolerance"
+            ", ".join(f"the {p.name}'s {p.flown.pieces} pieces" for p in split)
+            + f" per drone exceed the Crazyflie's {CRAZYFLIE_MAX_PIECES}: split into files per "
+            "drone (fly.py refuses them), or raise --tolerance"
         )
     out.mkdir(parents=True, exist_ok=True)
     for stale in [*out.glob("drone*_setpoints.csv"), *out.glob("drone*_poly7*.csv")]:
         stale.unlink()  # an earlier export (perhaps split into more parts) of this directory
     width = max(3, len(str(n - 1)))
-    files: list[Path] = []
-    t_sp = np.arange(0.0, flown.duration_s, 1.0 / opts.rate_hz)
-    t_sp = np.append(t_sp, flown.duration_s)
-    sp = flat_state(flown, t_sp, n) | {"t": t_sp}
     stems = [f"drone{i:0{width}d}" for i in range(n)]
-    for i, stem in enumerate(stems):
-        files.append(write_setpoints(out / f"{stem}_setpoints.csv", sp, i))
-        for part, chunk in enumerate(chunks, start=1):
-            suffix = "" if len(chunks) == 1 else f"_part{part}"
-            files.append(
-                write_poly(
-                    out / f"{stem}_poly7{suffix}.csv",
-                    flown.durations_s[list(chunk)],
-                    flown.coefficients.reshape(poly.pieces, n, 4, -1)[list(chunk), i],
-                )
-            )
-    start = state["pos"][0]
-    files += crazyswarm.write_files(out, stems, start, float(flown.duration_s))
-    if flight is not None and flight.max_error_m > flight.declared_tolerance_m:
+    files: list[Path] = []
+    for part in parts:
+        files += write_phase(out, stems, part, opts.rate_hz)
+    files += crazyswarm.write_files(out, stems, flight, [(p.name, p.flown.duration_s) for p in parts])
+    if check is not None and check.max_error_m > check.declared_tolerance_m:
         warnings.append(
-            f"flown on the quadrotor plant, drone {flight.error_drone} is {flight.max_error_m:.3g} m off "
-            f"at t = {flight.error_t_s:.2f} s, beyond the declared {flight.declared_tolerance_m:.3g} m"
+            f"flown on the quadrotor plant, drone {check.error_drone} is {check.max_error_m:.3g} m off "
+            f"at t = {check.error_t_s:.2f} s, beyond the declared {check.declared_tolerance_m:.3g} m"
         )
-    record = _record(run, opts, fit, timing, env, min_sep, len(chunks), warnings)
-    record["quadrotor_flight"] = None if flight is None else flight.record()
+    record = _record(run, opts, fit, timing, env, min_sep, per_drone, warnings)
+    record["max_fit_error_m"] = worst.max_error_m  # of every phase
+    record["phases"] = phase_record(flight, parts)
+    record["duration_s"] = flown.duration_s  # the trajectories: ascent, mission, descent
+    record["flight_duration_s"] = sum(p["duration_s"] for p in record["phases"].values())  # with the legs
+    record["quadrotor_flight"] = None if check is None else check.record()
+    record["crazyflow_flight"] = None if cf is None else cf.record()
     prov = out / PROVENANCE_JSON
     prov.write_text(json.dumps(json_safe(record), indent=2, allow_nan=False) + "\n")
     files.append(prov)
     return ExportResult(
-        out, tuple(files), fit, len(chunks), tuple(warnings), timing, env, min_sep, record, flight
+        out, tuple(files), fit, per_drone, tuple(warnings), timing, env, min_sep, record, check, flight
     )
 
 
@@ -273,34 +251,6 @@ def check_tracked(d_min_m: float | None, n: int, tracking_m: float) -> None:
             f"Crazyflie off its setpoints by up to {PLATFORM_TRACKING_M:g} m may come closer than "
             f"d_min = {d_min_m:g} m: run it with --flyable (or set limits.tracking), or pass "
             "--allow-untracked to export it anyway",
-        )
-
-
-def flat_state(poly: PiecewisePolynomial, t_s: Array, n: int) -> dict[str, Array]:
-    """Position, velocity, acceleration, jerk (T, n, 3), yaw, yaw rate (T, n) and body rates
-    omega (T, n, 3) of ``n`` drones' pieces (series drone * 4 + x, y, z, yaw) at ``t_s``."""
-    d = [poly.evaluate(t_s, r).reshape(t_s.shape[0], n, 4) for r in range(4)]
-    state = {
-        "pos": d[0][..., :3],
-        "vel": d[1][..., :3],
-        "acc": d[2][..., :3],
-        "jerk": d[3][..., :3],
-        "yaw": d[0][..., 3],
-        "yaw_rate": d[1][..., 3],
-    }
-    state["omega"] = body_rates(state["acc"], state["jerk"], state["yaw"], state["yaw_rate"])
-    return state
-
-
-def _check_samples(duration_s: float, n: int, rate_hz: float) -> None:
-    """Refuse, naming ``rate``, an export of more than :data:`MAX_SAMPLES` samples x drones."""
-    samples = duration_s * (CHECK_RATE_HZ + rate_hz) * n
-    if samples > MAX_SAMPLES:
-        raise ValidationError(
-            "rate",
-            f"the export would take {samples:.3g} samples x drones ({duration_s:.3g} s x ({rate_hz:g} Hz of "
-            f"setpoints + {CHECK_RATE_HZ:g} Hz of checks) x {n:,} drones), above the limit of "
-            f"{MAX_SAMPLES:.3g} (about 4 GiB): lower it",
         )
 
 
@@ -374,7 +324,7 @@ def _record(
         "yaw": opts.yaw,
         "setpoint_rate_hz": opts.rate_hz,
         "planned_duration_s": float(run.trajectory.t_s[-1] - run.trajectory.t_s[0]),
-        "duration_s": timing.duration_s,
+        "mission_duration_s": timing.duration_s,
         "time_scaling_limits": dict(zip(("ds_dt", "d2s_dt2", "d3s_dt3"), timing.scaling_limits, strict=True)),
         "pieces": fit.polynomial.pieces,
         "piece_duration_s": float(fit.polynomial.durations_s[0]),

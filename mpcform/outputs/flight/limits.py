@@ -29,6 +29,7 @@ import numpy as np
 
 from mpcform._validate import Array, positive
 from mpcform.errors import MPCFormError, ValidationError
+from mpcform.outputs.flight.polynomial import PiecewisePolynomial
 
 GRAVITY_MPS2 = 9.81
 DEFAULT_MAX_SPEED_MPS = 1.0
@@ -130,3 +131,19 @@ def envelope(t_s: Array, vel: Array, acc: Array, jerk: Array, omega: Array) -> F
         return Peak(int(i), float(t_s[j]), float(norm[j, i]))
 
     return FlightEnvelope(peak(vel), peak(acc), peak(jerk), peak(omega), peak(thrust))
+
+
+def flat_state(poly: PiecewisePolynomial, t_s: Array, n: int) -> dict[str, Array]:
+    """Position, velocity, acceleration, jerk (T, n, 3), yaw, yaw rate (T, n) and body rates
+    omega (T, n, 3) of ``n`` drones' pieces (series drone * 4 + x, y, z, yaw) at ``t_s``."""
+    d = [poly.evaluate(t_s, r).reshape(t_s.shape[0], n, 4) for r in range(4)]
+    state = {
+        "pos": d[0][..., :3],
+        "vel": d[1][..., :3],
+        "acc": d[2][..., :3],
+        "jerk": d[3][..., :3],
+        "yaw": d[0][..., 3],
+        "yaw_rate": d[1][..., 3],
+    }
+    state["omega"] = body_rates(state["acc"], state["jerk"], state["yaw"], state["yaw_rate"])
+    return state

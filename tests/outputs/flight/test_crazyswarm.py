@@ -13,6 +13,7 @@ import pytest
 
 from mpcform.outputs.flight.crazyswarm import CRAZYFLIE_MAX_PIECES, FLY_PY, crazyflies_yaml, write_files
 from mpcform.outputs.flight.files import POLY_HEADER
+from mpcform.outputs.flight.phases import Flight
 
 
 def _poly_file(path: Path, pieces: int, start: list[float]) -> None:
@@ -74,10 +75,16 @@ def _fake_crazyflie_py(calls: list[tuple]) -> dict[str, types.ModuleType]:
 
 
 def _export(tmp_path: Path, pieces: int) -> Path:
-    start = np.array([[0.0, 0.0, 1.0], [1.0, 0.5, 1.5]])
+    """Two drones taking off from (0, 0) and (1, 0.5) on a floor at z = 0.1 to 0.4 m, then an
+    ascent of 3 s and a mission of 12.5 s."""
+    ground = np.array([[0.0, 0.0], [1.0, 0.5]])
+    start = np.column_stack([ground, [0.4, 0.4]])
     for i in range(2):
-        _poly_file(tmp_path / f"drone{i:03d}_poly7.csv", pieces, start[i].tolist())
-    write_files(tmp_path, ["drone000", "drone001"], start, 12.5)
+        for tag in ("_ascent", ""):
+            _poly_file(tmp_path / f"drone{i:03d}{tag}_poly7.csv", pieces, start[i].tolist())
+    phases = (("ascent", slice(0, 1)), ("mission", slice(0, 1)))
+    flight = Flight(start[None], 0.1, phases, ground, ground + 1.0, 0.1, 0.4, 1.7, 1.9)
+    write_files(tmp_path, ["drone000", "drone001"], flight, [("ascent", 3.0), ("mission", 12.5)])
     return tmp_path / FLY_PY
 
 
@@ -85,18 +92,21 @@ def test_fly_script_parses_and_flies_the_sequence(tmp_path: Path, monkeypatch: p
     fly = _export(tmp_path, 3)
     tree = ast.parse(fly.read_text())
     names = {n.attr for n in ast.walk(tree) if isinstance(n, ast.Attribute)}
-    assert {"uploadTrajectory", "startTrajectory", "takeoff", "goTo", "land", "loadcsv"} <= names
+    assert {"uploadTrajectory", "startTrajectory", "takeoff", "land", "loadcsv"} <= names
+    assert "goTo" not in names  # every move is planned: no unchecked goTo
     calls: list[tuple] = []
     for name, module in _fake_crazyflie_py(calls).items():
         monkeypatch.setitem(sys.modules, name, module)
     runpy.run_path(str(fly), run_name="__main__")
     kinds = [c[0] for c in calls if c[0] != "sleep"]
-    assert kinds == ["upload", "upload", "takeoff", "goTo", "goTo", "startTrajectory", "land"]
+    flown = ["upload", "upload", "takeoff", "startTrajectory", "upload", "upload", "startTrajectory", "land"]
+    assert kinds == flown  # each phase uploaded while they hover, then started together
     assert calls[0] == ("upload", "cf1", 0, 0, 3)
-    assert ("takeoff", 1.0, 2.5) in calls
-    assert ("goTo", "cf2", [1.0, 0.5, 1.5], 0.0, 3.0, False) in calls
+    assert ("takeoff", pytest.approx(0.3), 1.7) in calls  # to the hover, 0.3 m above the floor
     assert ("startTrajectory", 0, 1.0, False, False) in calls  # absolute positions
-    assert any(c[0] == "sleep" and c[1] >= 12.5 for c in calls)
+    assert ("land", 0.04, 1.9) in calls
+    sleeps = [c[1] for c in calls if c[0] == "sleep"]
+    assert sleeps == [pytest.approx(2.2), pytest.approx(3.5), pytest.approx(13.0), pytest.approx(2.4)]
 
 
 def test_fly_script_refuses_more_than_31_pieces(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
@@ -104,32 +114,33 @@ def test_fly_script_refuses_more_than_31_pieces(tmp_path: Path, monkeypatch: pyt
     calls: list[tuple] = []
     for name, module in _fake_crazyflie_py(calls).items():
         monkeypatch.setitem(sys.modules, name, module)
-    with pytest.raises(SystemExit, match="drone000_poly7.csv has 32 pieces; the Crazyflie holds 31"):
+    with pytest.raises(SystemExit, match="drone000_ascent_poly7.csv has 32 pieces; the Crazyflie holds 31"):
         runpy.run_path(str(fly), run_name="__main__")
     assert calls == []  # nothing flew
 
 
 def test_crazyflies_yaml_snippet() -> None:
-    text = crazyflies_yaml(np.array([[0.5, -1.0, 1.2], [2.0, 0.0, 1.0]]))
+    text = crazyflies_yaml(np.array([[0.5, -1.0, 0.0], [2.0, 0.0, 0.0]]))
     lines = text.splitlines()
     assert "robots:" in lines and "  cf1:" in lines and "  cf2:" in lines
     assert "    enabled: true" in lines and "    type: cf21" in lines
-    assert "    initial_position: [0.5000, -1.0000, 0.0]" in lines  # on the floor below the start
+    assert "    initial_position: [0.5000, -1.0000, 0.0000]" in lines  # its place on the floor
     assert sum(line.strip().startswith("uri: radio://") for line in lines) == 2
 
 
 def test_fly_script_refuses_a_split_export(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     fly = _export(tmp_path, 3)
     for i in range(2):  # what export writes above 31 pieces: parts, no whole file
-        whole = tmp_path / f"drone{i:03d}_poly7.csv"
+        whole = tmp_path / f"drone{i:03d}_ascent_poly7.csv"
         for part in (1, 2):
-            (tmp_path / f"drone{i:03d}_poly7_part{part}.csv").write_text(whole.read_text())
+            (tmp_path / f"drone{i:03d}_ascent_poly7_part{part}.csv").write_text(whole.read_text())
         whole.unlink()
     calls: list[tuple] = []
     for name, module in _fake_crazyflie_py(calls).items():
         monkeypatch.setitem(sys.modules, name, module)
     message = (
-        r"drone000_poly7.csv is split into 2 files \(drone000_poly7_part1.csv, drone000_poly7_part2.csv\)"
+        r"drone000_ascent_poly7.csv is split into 2 files "
+        r"\(drone000_ascent_poly7_part1.csv, drone000_ascent_poly7_part2.csv\)"
     )
     with pytest.raises(SystemExit, match=message):
         runpy.run_path(str(fly), run_name="__main__")
@@ -137,5 +148,5 @@ def test_fly_script_refuses_a_split_export(tmp_path: Path, monkeypatch: pytest.M
 
 
 def test_crazyflies_yaml_prints_no_negative_zero() -> None:
-    text = crazyflies_yaml(np.array([[-0.0, -0.00001, 1.0], [-1e-9, 2.0, 1.0]]))
-    assert "-0.0000" not in text and "    initial_position: [0.0000, 0.0000, 0.0]" in text
+    text = crazyflies_yaml(np.array([[-0.0, -0.00001, -0.0], [-1e-9, 2.0, 0.0]]))
+    assert "-0.0000" not in text and "    initial_position: [0.0000, 0.0000, 0.0000]" in text

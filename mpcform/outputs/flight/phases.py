@@ -1,0 +1,184 @@
+"""The whole flight, ground to ground: takeoff, a planned ascent, the mission, a planned descent,
+landing.
+
+Every drone takes off straight up from its place on the ground to ``hover_m`` (Crazyswarm2's
+``takeoff``: the firmware's 7th-order rest-to-rest polynomial, :func:`vertical_leg_s` long so that
+it keeps the speed, acceleration and jerk limits), flies the ascent, the mission and the descent
+as one exported trajectory, and lands straight down. The ascent and the descent are planned by
+the mission's own planner (:class:`mpcform.mpc.planner.MPCPlanner`, decoupled, on the exact single
+integrator): from the takeoff layout at ``hover_m`` to the mission's first positions, and from its
+last positions to the landing layout, keeping the run's ``d_min`` and tracking allowance. The
+vertical legs keep them because each layout's drones are that far apart horizontally.
+
+A layout is the projection on the floor of the mission's first (takeoff) or last (landing)
+positions when its drones are far enough apart there (:data:`LAYOUT_SPACING` times the distance
+the planner keeps, so that it can reach them), else a square grid of that spacing
+centred below them, each drone given the grid point that makes the total squared distance least
+(``scipy.optimize.linear_sum_assignment``): drones stacked in z in a 3-D start do not take off
+from one spot.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from scipy.optimize import linear_sum_assignment
+
+from mpcform._validate import Array
+from mpcform.errors import ValidationError
+from mpcform.formation.geometry import min_pair_distances
+from mpcform.formation.state import FormationState
+from mpcform.formation.template import Template
+from mpcform.mpc.planner import MPCPlanner
+from mpcform.mpc.settings import MPCSettings
+from mpcform.outputs.flight.limits import FlightLimits, flat_state
+from mpcform.outputs.flight.pieces import CHECK_RATE_HZ, PhasePieces
+from mpcform.reference.base import ConstantReference
+from mpcform.sim.simulation import simulate
+from mpcform.world.limits import Limits
+
+HOVER_M = 0.3  # takeoff and landing height above the floor [m]
+ARRIVED_M = 0.002  # a phase ends once every drone is this close to its goal (then the goal itself)
+PHASE_GAIN_PER_S = 2.0  # eq. 14's k in the ascent and descent
+LAYOUT_SPACING = 1.25  # a grid layout's spacing per distance the planner keeps (so it can reach it)
+LEG_MIN_S = 1.5  # the shortest takeoff or landing [s]
+_SEPTIC = np.polynomial.Polynomial([0, 0, 0, 0, 35, -84, 70, -20])  # rest to rest, zero jerk at both ends
+_S = np.linspace(0.0, 1.0, 2001)
+LEG_PEAKS = tuple(float(np.abs(_SEPTIC.deriv(r)(_S)).max()) for r in (1, 2, 3))
+"""Peak speed, acceleration and jerk of the septic leg over a height h in a time T, per ``h / T^r``
+(2.19, 7.51 and 52.5)."""
+
+
+@dataclass(frozen=True, eq=False)
+class Flight:
+    """The planned path (T, n, 3) [m] at the mission's ``dt_s``: the ascent, the mission and the
+    descent, each a ``phases`` entry (name, its samples; an ascent or descent without motion is
+    left out); the layouts (n, 2) [m] on the floor at ``floor_m``, the hover height [m] and the
+    vertical legs' durations [s]."""
+
+    positions_m: Array
+    dt_s: float
+    phases: tuple[tuple[str, slice], ...]
+    takeoff_xy_m: Array
+    landing_xy_m: Array
+    floor_m: float
+    hover_m: float
+    takeoff_s: float
+    land_s: float
+
+
+def ground_layout(xy_m: Array, spacing_m: float) -> Array:
+    """Positions (n, 2) on the floor: ``xy_m`` when its drones are ``spacing_m`` apart, else the
+    nearest assignment to a square grid of that spacing centred below them (module docstring)."""
+    n = xy_m.shape[0]
+    if n < 2 or min_pair_distances(xy_m[None])[0] >= spacing_m:
+        return xy_m.copy()
+    side = math.ceil(math.sqrt(n))
+    grid = spacing_m * np.stack(np.meshgrid(np.arange(side), np.arange(side)), -1).reshape(-1, 2)
+    grid += xy_m.mean(axis=0) - grid.mean(axis=0)
+    rows, cols = linear_sum_assignment(((xy_m[:, None] - grid[None]) ** 2).sum(-1))
+    return grid[cols[np.argsort(rows)]]
+
+
+def vertical_leg_s(height_m: float, limits: FlightLimits, slack: float = 0.9) -> float:
+    """The shortest septic takeoff or landing over ``height_m`` within ``slack`` of the speed,
+    acceleration and jerk limits (at least :data:`LEG_MIN_S`)."""
+    v, a, j = LEG_PEAKS
+    h = abs(height_m)
+    lim = (limits.max_speed_mps, limits.max_acc_mps2, limits.max_jerk_mps3)
+    need = (
+        v * h / (slack * lim[0]),
+        math.sqrt(a * h / (slack * lim[1])),
+        (j * h / (slack * lim[2])) ** (1 / 3),
+    )
+    return max(LEG_MIN_S, *need)
+
+
+def plan_phase(start_m: Array, goal_m: Array, dt_s: float, limits: Limits, name: str) -> Array:
+    """The planner's path (T, n, 3) from ``start_m`` to ``goal_m`` (n, 3), until every drone is
+    within :data:`ARRIVED_M` of its goal, the last sample the goal itself."""
+    travel = float(np.linalg.norm(goal_m - start_m, axis=-1).max())
+    if travel <= ARRIVED_M:  # no motion: the goal alone
+        return goal_m[None].copy()
+    tpl, centre = Template.centred(goal_m)
+    reference = ConstantReference(tpl, FormationState.from_param(centre))
+    settings = MPCSettings(coupling="decoupled", gain_per_s=PHASE_GAIN_PER_S)
+    planner = MPCPlanner(reference, dt_s, limits, settings)
+    speed = limits.v_max_mps / math.sqrt(3.0) if limits.v_max_mps else 1.0  # the box's slowest
+    duration = 3.0 * travel / speed + 20.0
+    path = simulate(planner, start_m, duration).positions_m
+    away = np.linalg.norm(path - goal_m, axis=-1).max(axis=1)
+    late = np.flatnonzero(away > ARRIVED_M)
+    if late.size and late[-1] == path.shape[0] - 1:
+        far = np.flatnonzero(np.linalg.norm(path[-1] - goal_m, axis=-1) > ARRIVED_M)
+        raise ValidationError(
+            "flight",
+            f"the planned {name} left drone{'s' * (far.size > 1)} {', '.join(map(str, far[:8]))} more than "
+            f"{ARRIVED_M:g} m from {'its' if far.size == 1 else 'their'} goal after {duration:.3g} s",
+        )
+    end = 0 if not late.size else late[-1] + 1
+    out = path[: end + 1].copy()
+    out[-1] = goal_m
+    return out
+
+
+def whole_flight(
+    mission_m: Array, dt_s: float, limits: Limits, flight_limits: FlightLimits, floor_m: float = 0.0
+) -> Flight:
+    """The flight from the ground to ``mission_m`` (T, n, 3) [m] and back (module docstring):
+    ``limits`` the run's (v_max, d_min, tracking allowance)."""
+    first, last = mission_m[0], mission_m[-1]
+    hover = floor_m + HOVER_M
+    spacing = 0.0 if limits.d_min_m is None else LAYOUT_SPACING * (limits.d_min_m + 2.0 * limits.tracking_m)
+    up, down = ground_layout(first[:, :2], spacing), ground_layout(last[:, :2], spacing)
+    lift = np.column_stack([up, np.full(up.shape[0], hover)])
+    land = np.column_stack([down, np.full(down.shape[0], hover)])
+    ascent = plan_phase(lift, first, dt_s, limits, "ascent")
+    descent = plan_phase(last, land, dt_s, limits, "descent")
+    path = np.concatenate([ascent[:-1], mission_m, descent[1:]])
+    a, b = ascent.shape[0] - 1, ascent.shape[0] - 2 + mission_m.shape[0]  # the mission's first, last
+    phases = [("ascent", slice(0, a + 1))] if a else []
+    phases.append(("mission", slice(a, b + 1)))
+    if descent.shape[0] > 1 and np.any(descent[-1] != descent[0]):
+        phases.append(("descent", slice(b, path.shape[0])))
+    takeoff_s = vertical_leg_s(hover - floor_m, flight_limits)
+    return Flight(path, dt_s, tuple(phases), up, down, floor_m, hover, takeoff_s, takeoff_s)
+
+
+def phase_record(flight: Flight, parts: list[PhasePieces]) -> dict[str, Any]:
+    """Per phase (takeoff, the exported ``parts``, landing): duration [s], peak speed [m/s],
+    acceleration [m/s^2] and jerk [m/s^3], and the closest two drones [m] of its pieces."""
+    h = flight.hover_m - flight.floor_m
+    out: dict[str, Any] = {"takeoff": _leg(flight.takeoff_s, h, flight.takeoff_xy_m)}
+    for part in parts:
+        poly = part.flown
+        t = np.linspace(0.0, poly.duration_s, int(np.ceil(CHECK_RATE_HZ * poly.duration_s)) + 1)
+        state = flat_state(poly, t, flight.positions_m.shape[1])
+        peaks = {key: float(np.linalg.norm(state[s], axis=-1).max()) for key, s in _PEAKS}
+        sep = float(min_pair_distances(state["pos"]).min()) if state["pos"].shape[1] > 1 else None
+        out[part.name] = {
+            "duration_s": poly.duration_s,
+            "pieces": poly.pieces,
+            **peaks,
+            "min_separation_m": sep,
+        }
+    return out | {"landing": _leg(flight.land_s, h, flight.landing_xy_m)}
+
+
+_PEAKS = (("max_speed_mps", "vel"), ("max_acc_mps2", "acc"), ("max_jerk_mps3", "jerk"))
+
+
+def _leg(duration_s: float, height_m: float, xy_m: Array) -> dict[str, Any]:
+    """A vertical leg's record: duration, the septic profile's peaks, the layout's closest pair."""
+    v, a, j = (p * height_m / duration_s**r for r, p in enumerate(LEG_PEAKS, start=1))
+    sep = float(min_pair_distances(xy_m[None])[0]) if xy_m.shape[0] > 1 else None
+    return {
+        "duration_s": duration_s,
+        "max_speed_mps": v,
+        "max_acc_mps2": a,
+        "max_jerk_mps3": j,
+        "min_separation_m": sep,
+    }

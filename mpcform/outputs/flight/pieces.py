@@ -1,0 +1,121 @@
+"""One phase of an exported flight as flyable pieces: retimed from rest to rest, fitted, float32.
+
+A phase's planned samples (the ascent's, the mission's or the descent's,
+:mod:`mpcform.outputs.flight.phases`) are joined by lines (the held commands), fitted by degree-7
+pieces within half the tolerance, retimed within the speed, acceleration and jerk limits from rest
+to rest (:mod:`mpcform.outputs.flight.retime`), fitted again at the new times with the yaw, and
+rounded to float32 as the Crazyflie stores them. Every phase ends at rest, so the phases join into
+one flight (:func:`join`) whose derivatives are continuous.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from mpcform._validate import Array
+from mpcform.errors import ValidationError
+from mpcform.outputs.flight.limits import FlightLimits
+from mpcform.outputs.flight.polynomial import (
+    PiecewisePolynomial,
+    PolynomialFit,
+    fit_piecewise_polynomial,
+    fit_positions,
+)
+from mpcform.outputs.flight.retime import Retiming, retime
+
+DEFAULT_RATE_HZ = 100.0
+PATH_SAMPLES = 10  # per planned interval: the path is fitted to the planned positions joined by lines
+FIT_RATE_HZ = 50.0  # samples of the retimed reference per second, besides the planned samples
+CHECK_RATE_HZ = 500.0  # sampling of the pieces for limits, floor and separation
+LIMIT_SLACK = 0.9  # the retiming aims at this fraction of each limit (the fit adds a little)
+MAX_SAMPLES = 7e6
+"""The most samples x drones an export takes (checks at 500 Hz and setpoints at ``rate_hz``): each
+took about 560 bytes and 34 us (setpoint CSVs written), so about 4 GiB and 4 minutes."""
+
+
+@dataclass(frozen=True, eq=False)
+class PhasePieces:
+    """A phase ``name``: its planned samples (T, n, 3) [m] and the lines joining them
+    (``dense_t_s`` (D,), ``dense_m`` (D, n, 3)), its retiming, the fit (error against the planned
+    samples at ``t_planned_s``, their retimed times) and the float32 pieces ``flown`` (series
+    drone * 4 + x, y, z, yaw)."""
+
+    name: str
+    planned_m: Array
+    dense_t_s: Array
+    dense_m: Array
+    timing: Retiming
+    fit: PolynomialFit
+    flown: PiecewisePolynomial
+    t_planned_s: Array
+
+
+def phase_pieces(
+    name: str,
+    planned_m: Array,
+    dt_s: float,
+    yaw_rad: Array,
+    limits: FlightLimits,
+    tolerance_m: float,
+    max_piece_s: float,
+    rate_hz: float,
+) -> PhasePieces:
+    """The pieces of one phase (module docstring): ``planned_m`` (T, n, 3) every ``dt_s``, the
+    yaw (T,) [rad] at its samples."""
+    n = planned_m.shape[1]
+    t = dt_s * np.arange(planned_m.shape[0])
+    half = 0.5 * tolerance_m
+    dense = np.linspace(0.0, t[-1], PATH_SAMPLES * (t.shape[0] - 1) + 1)  # held commands: lines
+    lines = np.stack([np.interp(dense, t, x) for x in planned_m.reshape(t.shape[0], -1).T], axis=-1)
+    lines = lines.reshape(dense.shape[0], n, 3)
+    path = fit_positions(dense, lines, half, max_piece_s).polynomial
+    timing = retime(
+        path,
+        LIMIT_SLACK * limits.max_speed_mps,
+        LIMIT_SLACK * limits.max_acc_mps2,
+        LIMIT_SLACK * limits.max_jerk_mps3,
+        max_duration_s=MAX_SAMPLES / (n * (CHECK_RATE_HZ + DEFAULT_RATE_HZ)),
+    )
+    check_samples(timing.duration_s, n, rate_hz)
+    t_planned = timing.new_time(t)
+    grid = np.linspace(0.0, timing.duration_s, int(np.ceil(FIT_RATE_HZ * timing.duration_s)) + 1)
+    t_fit = np.unique(np.concatenate([grid, t_planned]))
+    poly = fit_positions(t_fit, timing.positions(t_fit), half, max_piece_s, rest_ends=True).polynomial
+    yaw_poly = fit_piecewise_polynomial(
+        t_fit, np.interp(t_fit, t_planned, yaw_rad)[:, None], poly.pieces, rest_ends=True
+    )
+    coef = np.concatenate(
+        [
+            poly.coefficients.reshape(poly.pieces, n, 3, -1),
+            np.repeat(yaw_poly.coefficients[:, None], n, axis=1),
+        ],
+        axis=2,
+    )
+    flown = PiecewisePolynomial(0.0, poly.durations_s, coef.reshape(poly.pieces, n * 4, -1)).as_float32()
+    err = flown.evaluate(t_planned).reshape(t.shape[0], n, 4)[..., :3] - planned_m
+    fit = PolynomialFit(poly, float(np.linalg.norm(err, axis=-1).max()), tolerance_m)
+    return PhasePieces(name, planned_m, dense, lines, timing, fit, flown, t_planned)
+
+
+def join(parts: list[PhasePieces]) -> PiecewisePolynomial:
+    """The phases' pieces one after the other, from t = 0 (each ends at rest, where the next
+    starts)."""
+    return PiecewisePolynomial(
+        0.0,
+        np.concatenate([p.flown.durations_s for p in parts]),
+        np.concatenate([p.flown.coefficients for p in parts]),
+    )
+
+
+def check_samples(duration_s: float, n: int, rate_hz: float) -> None:
+    """Refuse, naming ``rate``, an export of more than :data:`MAX_SAMPLES` samples x drones."""
+    samples = duration_s * (CHECK_RATE_HZ + rate_hz) * n
+    if samples > MAX_SAMPLES:
+        raise ValidationError(
+            "rate",
+            f"the export would take {samples:.3g} samples x drones ({duration_s:.3g} s x ({rate_hz:g} Hz of "
+            f"setpoints + {CHECK_RATE_HZ:g} Hz of checks) x {n:,} drones), above the limit of "
+            f"{MAX_SAMPLES:.3g} (about 4 GiB): lower it",
+        )
