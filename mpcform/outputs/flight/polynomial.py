@@ -88,8 +88,9 @@ def fit_piecewise_polynomial(
     """Least-squares fit of ``values`` (T, m) at ``t_s`` (T,) by ``pieces`` uniform degree-7 pieces.
 
     ``rest_ends``: the fit starts and ends exactly at the first and last value with zero
-    velocity and acceleration (the first and last three B-spline coefficients are set to the end
-    values: a clamped spline's value, velocity and acceleration at an end depend on those only).
+    velocity, acceleration and jerk, so a drone leaves hover without a jerk step (the first and
+    last four B-spline coefficients are set to the end values: a clamped spline's value and first
+    three derivatives at an end depend on those only).
     """
     t = np.asarray(t_s, dtype=float)
     y = np.asarray(values, dtype=float).reshape(t.shape[0], -1)
@@ -103,7 +104,7 @@ def fit_piecewise_polynomial(
         ) from exc
     c = spline.c.copy()
     if rest_ends:
-        c[:3], c[-3:] = y[0], y[-1]
+        c[:4], c[-4:] = y[0], y[-1]
     return from_spline(BSpline(spline.t, c, POLY_DEGREE))
 
 

@@ -76,6 +76,7 @@ def test_rest_ends_start_and_stop_at_rest_exactly() -> None:
     for end, value in ((t[0], y[0]), (t[-1], y[-1])):
         assert np.allclose(poly.evaluate(end)[0], value, atol=1e-12)
         assert np.abs(poly.evaluate(end, 1)).max() < 1e-9 and np.abs(poly.evaluate(end, 2)).max() < 1e-9
+        assert np.abs(poly.evaluate(end, 3)).max() < 1e-8  # no jerk step from (or into) hover
 
 
 def test_same_as_scipy_lsq_spline() -> None:
