@@ -7,7 +7,8 @@ it keeps the speed, acceleration and jerk limits), flies the ascent, the mission
 as one exported trajectory, and lands straight down. The ascent and the descent are planned by
 the mission's own planner (:class:`mpcform.mpc.planner.MPCPlanner`, decoupled, on the exact single
 integrator): from the takeoff layout at ``hover_m`` to the mission's first positions, and from its
-last positions to the landing layout, keeping the run's ``d_min`` and tracking allowance. The
+last positions to the landing layout, keeping the run's ``d_min`` and tracking allowance and
+:data:`FLOOR_CLEARANCE_M` above the floor (a geofence: separation may push a drone down). The
 vertical legs keep them because each layout's drones are that far apart horizontally.
 
 A layout is the projection on the floor of the mission's first (takeoff) or last (landing)
@@ -21,7 +22,7 @@ from one spot.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -41,6 +42,7 @@ from mpcform.sim.simulation import simulate
 from mpcform.world.limits import Limits
 
 HOVER_M = 0.3  # takeoff and landing height above the floor [m]
+FLOOR_CLEARANCE_M = 0.15  # the ascent and the descent keep this far above the floor (a geofence)
 ARRIVED_M = 0.002  # a phase ends once every drone is this close to its goal (then the goal itself)
 PHASE_GAIN_PER_S = 2.0  # eq. 14's k in the ascent and descent
 LAYOUT_SPACING = 1.25  # a grid layout's spacing per distance the planner keeps (so it can reach it)
@@ -132,6 +134,8 @@ def whole_flight(
     ``limits`` the run's (v_max, d_min, tracking allowance)."""
     first, last = mission_m[0], mission_m[-1]
     hover = floor_m + HOVER_M
+    lo, hi = np.array([-np.inf, -np.inf, floor_m + FLOOR_CLEARANCE_M]), np.full(3, np.inf)
+    limits = replace(limits, geofence_min_m=lo, geofence_max_m=hi)  # the floor: no drone pushed into it
     spacing = 0.0 if limits.d_min_m is None else LAYOUT_SPACING * (limits.d_min_m + 2.0 * limits.tracking_m)
     up, down = ground_layout(first[:, :2], spacing), ground_layout(last[:, :2], spacing)
     lift = np.column_stack([up, np.full(up.shape[0], hover)])

@@ -271,3 +271,60 @@ def test_an_export_of_too_many_samples_is_refused_naming_the_rate(tmp_path: Path
     slow = ExportOptions(limits=FlightLimits(max_speed_mps=1e-6), fly=False)
     with pytest.raises(ValidationError, match=r"^max_speed: at this limit the retimed flight would last"):
         export_run(data, tmp_path / "export", slow)
+
+
+def test_the_whole_flight_is_planned_from_the_ground_and_back(tmp_path: Path) -> None:
+    """swap_spatial_20 starts with drones stacked in z (0.37 m apart on the floor): it takes off
+    from a grid, climbs and descends as planned, and every phase keeps d_min and the limits."""
+    short_run("swap_spatial_20", tmp_path / "run", steps=30, flyable=True)
+    run = load_run(tmp_path / "run")
+    result = export_run(run, tmp_path / "export", offset_m=(0.0, 0.0, 2.5), fly=False)
+    flight, record = result.phases, result.record
+    spacing = 1.25 * (run.d_min_m + 2 * run.tracking_m)
+    for xy in (flight.takeoff_xy_m, flight.landing_xy_m):
+        gaps = np.linalg.norm(xy[:, None] - xy[None], axis=-1) + np.eye(run.n) * 1e9
+        assert gaps.min() >= spacing - 1e-9  # the vertical legs keep d_min
+    assert [name for name, _ in flight.phases] == ["ascent", "mission", "descent"]
+    assert list(record["phases"]) == ["takeoff", "ascent", "mission", "descent", "landing"]
+    lim = FlightLimits()
+    for name, phase in record["phases"].items():
+        assert phase["max_speed_mps"] <= lim.max_speed_mps and phase["max_acc_mps2"] <= lim.max_acc_mps2
+        assert phase["max_jerk_mps3"] <= lim.max_jerk_mps3, name
+        assert phase["min_separation_m"] >= run.d_min_m, name
+    assert record["flight_duration_s"] == pytest.approx(
+        sum(p["duration_s"] for p in record["phases"].values())
+    )
+    names = {p.name for p in result.files}
+    assert {"drone000_ascent_poly7.csv", "drone000_poly7.csv", "drone000_descent_poly7.csv"} <= names
+    yaml = (tmp_path / "export" / "crazyflies.yaml").read_text()
+    x, y = flight.takeoff_xy_m[0]
+    assert f"initial_position: [{round(x, 4) + 0.0:.4f}, {round(y, 4) + 0.0:.4f}, 0.0000]" in yaml
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(
+    ("name", "offset"),
+    [
+        ("swap_planar_8", (0.0, 0.0, 0.0)),
+        ("swap_spatial_12", (0.0, 0.0, 2.5)),
+        ("mission_obstacle_gap", (0.0,) * 3),
+    ],
+)
+def test_exports_fly_ground_to_ground_in_crazyflow(tmp_path: Path, name: str, offset: tuple) -> None:
+    """A bundled scenario planned --flyable, exported ground to ground and flown open loop in
+    crazyflow and on the quadrotor plant: every phase within the limits and d_min, no contact."""
+    pytest.importorskip("crazyflow")
+    run_scenario(load_scenario(SCENARIOS / f"{name}.toml").flyable(), tmp_path / "run")
+    run = load_run(tmp_path / "run")
+    result = export_run(run, tmp_path / "export", offset_m=offset, crazyflow=True)
+    record, lim = result.record, FlightLimits()
+    for phase in record["phases"].values():
+        assert phase["max_speed_mps"] <= lim.max_speed_mps and phase["max_acc_mps2"] <= lim.max_acc_mps2
+        assert phase["max_jerk_mps3"] <= lim.max_jerk_mps3 and phase["min_separation_m"] >= run.d_min_m
+    cf = record["crazyflow_flight"]
+    assert cf["within_tolerance"] and cf["min_separation_m"] >= run.d_min_m
+    assert not any(cf["events"].values())
+    assert result.flight is None or result.flight.within_tolerance
+    print(
+        name, {k: round(v["duration_s"], 2) for k, v in record["phases"].items()}, cf["max_tracking_error_m"]
+    )
