@@ -158,7 +158,9 @@ def export_run(
     out = Path(out_dir)
     dt = float(np.median(np.diff(run.trajectory.t_s)))
     phase_limits = Limits(run.v_max_mps or lim.max_speed_mps, run.d_min_m, tracking_m=run.tracking_m)
-    flight = whole_flight(positions_3d(run, opts), dt, phase_limits, lim, opts.floor_m)
+    mission_m = positions_3d(run, opts)
+    _check_floor(mission_m, run.trajectory.t_s - run.trajectory.t_s[0], opts.floor_m)  # as planned
+    flight = whole_flight(mission_m, dt, phase_limits, lim, opts.floor_m)
     n = run.n
     yaw: Array = np.zeros(flight.positions_m.shape[0])
     mission = dict(flight.phases)["mission"]

@@ -8,7 +8,8 @@ as one exported trajectory, and lands straight down. The ascent and the descent 
 the mission's own planner (:class:`mpcform.mpc.planner.MPCPlanner`, decoupled, on the exact single
 integrator): from the takeoff layout at ``hover_m`` to the mission's first positions, and from its
 last positions to the landing layout, keeping the run's ``d_min`` and tracking allowance and
-:data:`FLOOR_CLEARANCE_M` above the floor (a geofence: separation may push a drone down). The
+:data:`FLOOR_CLEARANCE_M` above the floor (a geofence, lower if the mission starts or ends lower:
+separation may push a drone down). The
 vertical legs keep them because each layout's drones are that far apart horizontally.
 
 A layout is the projection on the floor of the mission's first (takeoff) or last (landing)
@@ -134,7 +135,8 @@ def whole_flight(
     ``limits`` the run's (v_max, d_min, tracking allowance)."""
     first, last = mission_m[0], mission_m[-1]
     hover = floor_m + HOVER_M
-    lo, hi = np.array([-np.inf, -np.inf, floor_m + FLOOR_CLEARANCE_M]), np.full(3, np.inf)
+    bottom = min(floor_m + FLOOR_CLEARANCE_M, float(first[:, 2].min()), float(last[:, 2].min()))
+    lo, hi = np.array([-np.inf, -np.inf, bottom]), np.full(3, np.inf)
     limits = replace(limits, geofence_min_m=lo, geofence_max_m=hi)  # the floor: no drone pushed into it
     spacing = 0.0 if limits.d_min_m is None else LAYOUT_SPACING * (limits.d_min_m + 2.0 * limits.tracking_m)
     up, down = ground_layout(first[:, :2], spacing), ground_layout(last[:, :2], spacing)
