@@ -55,10 +55,11 @@ class Survivors(Controller):
 
     def lose(self, drones: Array, positions_m: Array) -> Controller:
         """Stop planning for ``drones`` too (swarm numbering; ``positions_m`` (n, d) where all are)."""
-        drones = np.setdiff1d(np.asarray(drones, dtype=int), self.lost)
+        p = self._check_positions(positions_m)
+        drones = np.setdiff1d(split_lost(drones, self.n)[0], self.lost)
         if self.inner is None or drones.size == 0:
             return self
-        inner = self.inner.lose(np.searchsorted(self.keep, drones), np.asarray(positions_m)[self.keep])
+        inner = self.inner.lose(np.searchsorted(self.keep, drones), p[self.keep])
         return Survivors(self._full, self.lost, inner, self._obstacles)
 
     @property

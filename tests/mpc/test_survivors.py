@@ -84,5 +84,9 @@ def test_a_planner_without_d_min_needs_no_spheres_and_bad_ids_are_refused() -> N
     assert lost.tolist() == [1, 3] and keep.tolist() == [0, 2, 4]
     planner, p0 = _planner()
     for bad in ([6], [-1]):
-        with pytest.raises(ValidationError, match="drones"):
+        with pytest.raises(ValidationError, match=r"drones: expected drone indices in 0\.\.5"):
             planner.lose(bad, p0)
+        with pytest.raises(ValidationError, match=r"drones: expected drone indices in 0\.\.5"):
+            planner.lose([1], p0).lose(bad, p0)  # in the swarm's numbering, not the survivors'
+    with pytest.raises(ValidationError, match="positions"):
+        planner.lose([1], p0).lose([2], p0[:3])
