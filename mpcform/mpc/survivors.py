@@ -34,7 +34,6 @@ class Survivors(Controller):
     def __init__(self, full: Controller, lost: Array, inner: Controller | None, obstacles: int) -> None:
         self._full = full
         self.name, self.reference, self.dt_s = full.name, full.reference, full.dt_s
-        self.solver_name = getattr(full, "solver_name", None)
         self.n, self.dim = full.reference.template.n, full.reference.template.dim
         self.lost = np.asarray(lost, dtype=int)
         self.keep = np.setdiff1d(np.arange(self.n), self.lost)

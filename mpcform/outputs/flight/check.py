@@ -133,12 +133,7 @@ def fly_export(
         true.append(samples.p_true_m[1:])
     t = np.concatenate(times)
     p_true = np.concatenate(true)
-    err = np.linalg.norm(p_true - poly.evaluate(t).reshape(-1, n, 4)[..., :3], axis=-1)
-    j, i = np.unravel_index(int(np.argmax(err)), err.shape)
-    closest = closest_pair(t, p_true)
-    return FlightCheck(
-        float(err[j, i]), int(i), float(t[j]), float(margin), fit_tolerance_m, closest, d_min_m
-    )
+    return _flight_check(poly, n, t, p_true, float(margin), fit_tolerance_m, d_min_m)
 
 
 def fly_export_crazyflow(
@@ -152,17 +147,25 @@ def fly_export_crazyflow(
     st = flat_state(poly, t, n)
     setpoints = FullState(t, st["pos"], st["vel"], st["acc"], st["yaw"], st["omega"])
     t_true, p_true = plant.fly_full_state(st["pos"][0], setpoints)
-    err = np.linalg.norm(p_true - poly.evaluate(t_true).reshape(-1, n, 4)[..., :3], axis=-1)
-    j, i = np.unravel_index(int(np.argmax(err)), err.shape)
     events = {k: v for k, v in plant.events.items() if k in CONTACT_EVENTS}
-    closest = closest_pair(t_true, p_true)
+    return _flight_check(poly, n, t_true, p_true, PLATFORM_TRACKING_M, fit_tolerance_m, d_min_m, events)
+
+
+def _flight_check(
+    poly: PiecewisePolynomial,
+    n: int,
+    t_s: Array,
+    p_true_m: Array,
+    margin_m: float,
+    fit_tolerance_m: float,
+    d_min_m: float | None,
+    events: dict[str, Any] | None = None,
+) -> FlightCheck:
+    """The check of true positions ``p_true_m`` (K, n, 3) at ``t_s`` (K,) against the pieces: the
+    worst tracking error and the closest true pair."""
+    err = np.linalg.norm(p_true_m - poly.evaluate(t_s).reshape(-1, n, 4)[..., :3], axis=-1)
+    j, i = np.unravel_index(int(np.argmax(err)), err.shape)
+    closest = closest_pair(t_s, p_true_m)
     return FlightCheck(
-        float(err[j, i]),
-        int(i),
-        float(t_true[j]),
-        PLATFORM_TRACKING_M,
-        fit_tolerance_m,
-        closest,
-        d_min_m,
-        events,
+        float(err[j, i]), int(i), float(t_s[j]), margin_m, fit_tolerance_m, closest, d_min_m, events
     )

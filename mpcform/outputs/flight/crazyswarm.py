@@ -4,14 +4,15 @@
 Crazyswarm2's format (``enabled``, ``uri``, ``initial_position``, ``type``); the radio
 addresses are placeholders to edit; each robot's ``initial_position`` is its place on the floor
 in the takeoff layout (:mod:`mpcform.outputs.flight.phases`). ``fly.py`` uses Crazyswarm2's Python
-API (``crazyflie_py``): upload each drone's ``droneNNN_poly7.csv`` as trajectory 0
-(``uploadTrajectory(0, 0, traj)``), take off straight up to the hover height (within the limits:
-the planned ascent starts there), start the trajectories together with ``startTrajectory(0,
-timescale=1.0, relative=False)`` (the files hold absolute positions; Crazyswarm2's default
-``relative=True`` would shift them to the current setpoint): the ascent, the mission and the
-descent to the landing layout; then land straight down. No move is left unplanned. The
-Crazyflie holds at most 31 pieces (``TRAJECTORY_MEMORY_SIZE`` 4096 B / 132 B per piece in
-crazyflie-firmware): ``fly.py`` refuses a drone whose trajectory has more, before anything flies.
+API (``crazyflie_py``): it checks every phase's file of every drone, then for each phase (the
+ascent, the mission, the descent) uploads each drone's trajectory as trajectory 0
+(``uploadTrajectory(0, 0, traj)``: the memory holds one phase) while the drones hover, takes off
+straight up to the hover height before the first, and starts them together with
+``startTrajectory(0, timescale=1.0, relative=False)`` (the files hold absolute positions;
+Crazyswarm2's default ``relative=True`` would shift them to the current setpoint); after the last
+it lands straight down. No move is left unplanned. The Crazyflie holds at most 31 pieces
+(:data:`~mpcform.outputs.flight.files.CRAZYFLIE_MAX_PIECES`): ``fly.py`` refuses a drone whose
+trajectory has more, before anything flies.
 """
 
 from __future__ import annotations

@@ -40,6 +40,7 @@ from mpcform.outputs.files import json_safe, provenance
 from mpcform.outputs.flight import crazyswarm
 from mpcform.outputs.flight.check import FlightCheck, fly_export, fly_export_crazyflow
 from mpcform.outputs.flight.files import (
+    CRAZYFLIE_MAX_PIECES,
     POLY_HEADER,
     SETPOINT_COLUMNS,
     read_poly,
@@ -66,7 +67,6 @@ from mpcform.outputs.flight.yaw import formation_yaw
 from mpcform.outputs.rundata import RunData
 from mpcform.world.limits import PLATFORM_TRACKING_M, Limits
 
-CRAZYFLIE_MAX_PIECES = crazyswarm.CRAZYFLIE_MAX_PIECES
 DEFAULT_ALTITUDE_M = 1.0
 PROVENANCE_JSON = "provenance.json"
 YAW_MODES = ("zero", "formation")
