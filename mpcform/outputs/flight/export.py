@@ -227,9 +227,9 @@ def export_run(
             f"flown on the quadrotor plant, drone {check.error_drone} is {check.max_error_m:.3g} m off "
             f"at t = {check.error_t_s:.2f} s, beyond the declared {check.declared_tolerance_m:.3g} m"
         )
-    record = _record(run, opts, fit, timing, env, min_sep, per_drone, warnings)
+    record = _record(run, opts, fit, timing, main.min_time_s, env, min_sep, per_drone, warnings)
     record["max_fit_error_m"] = worst.max_error_m  # of every phase
-    record["phases"] = phase_record(flight, parts)
+    record["phases"] = phase_record(flight, parts, lim)
     record["duration_s"] = flown.duration_s  # the trajectories: ascent, mission, descent
     record["flight_duration_s"] = sum(p["duration_s"] for p in record["phases"].values())  # with the legs
     record["quadrotor_flight"] = None if check is None else check.record()
@@ -285,6 +285,7 @@ def _record(
     opts: ExportOptions,
     fit: PolynomialFit,
     timing: Retiming,
+    min_time_s: float,
     env: FlightEnvelope,
     min_sep: float,
     parts: int,
@@ -327,7 +328,7 @@ def _record(
         "setpoint_rate_hz": opts.rate_hz,
         "planned_duration_s": float(run.trajectory.t_s[-1] - run.trajectory.t_s[0]),
         "mission_duration_s": timing.duration_s,
-        "time_scaling_limits": dict(zip(("ds_dt", "d2s_dt2", "d3s_dt3"), timing.scaling_limits, strict=True)),
+        "mission_min_time_s": min_time_s,
         "pieces": fit.polynomial.pieces,
         "piece_duration_s": float(fit.polynomial.durations_s[0]),
         "files_per_drone": parts,

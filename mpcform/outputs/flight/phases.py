@@ -48,6 +48,7 @@ ARRIVED_M = 0.002  # a phase ends once every drone is this close to its goal (th
 PHASE_GAIN_PER_S = 2.0  # eq. 14's k in the ascent and descent
 LAYOUT_SPACING = 1.25  # a grid layout's spacing per distance the planner keeps (so it can reach it)
 LEG_MIN_S = 1.5  # the shortest takeoff or landing [s]
+SLOW_SHARE = 0.05  # a retimed phase may end below this share of the speed limit for 0.5 s at most
 _SEPTIC = np.polynomial.Polynomial([0, 0, 0, 0, 35, -84, 70, -20])  # rest to rest, zero jerk at both ends
 _S = np.linspace(0.0, 1.0, 2001)
 LEG_PEAKS = tuple(float(np.abs(_SEPTIC.deriv(r)(_S)).max()) for r in (1, 2, 3))
@@ -154,9 +155,11 @@ def whole_flight(
     return Flight(path, dt_s, tuple(phases), up, down, floor_m, hover, takeoff_s, takeoff_s)
 
 
-def phase_record(flight: Flight, parts: list[PhasePieces]) -> dict[str, Any]:
+def phase_record(flight: Flight, parts: list[PhasePieces], limits: FlightLimits) -> dict[str, Any]:
     """Per phase (takeoff, the exported ``parts``, landing): duration [s], peak speed [m/s],
-    acceleration [m/s^2] and jerk [m/s^3], and the closest two drones [m] of its pieces."""
+    acceleration [m/s^2] and jerk [m/s^3], and the closest two drones [m] of its pieces; for the
+    retimed ones the minimum duration under speed and acceleration alone and ``slow_end_s``, how
+    long the phase ends with every drone below :data:`SLOW_SHARE` of the speed limit."""
     h = flight.hover_m - flight.floor_m
     out: dict[str, Any] = {"takeoff": _leg(flight.takeoff_s, h, flight.takeoff_xy_m)}
     for part in parts:
@@ -165,8 +168,13 @@ def phase_record(flight: Flight, parts: list[PhasePieces]) -> dict[str, Any]:
         state = flat_state(poly, t, flight.positions_m.shape[1])
         peaks = {key: float(np.linalg.norm(state[s], axis=-1).max()) for key, s in _PEAKS}
         sep = float(min_pair_distances(state["pos"]).min()) if state["pos"].shape[1] > 1 else None
+        fast = np.nonzero(
+            np.linalg.norm(state["vel"], axis=-1).max(axis=1) >= SLOW_SHARE * limits.max_speed_mps
+        )[0]
         out[part.name] = {
             "duration_s": poly.duration_s,
+            "min_time_s": part.min_time_s,
+            "slow_end_s": float(t[-1] - t[fast[-1]]) if fast.size else poly.duration_s,
             "pieces": poly.pieces,
             **peaks,
             "min_separation_m": sep,

@@ -16,20 +16,24 @@ import numpy as np
 
 from mpcform._validate import Array
 from mpcform.errors import ValidationError
-from mpcform.outputs.flight.limits import FlightLimits
+from mpcform.outputs.flight.limits import FlightLimits, envelope, flat_state
 from mpcform.outputs.flight.polynomial import (
     PiecewisePolynomial,
     PolynomialFit,
     fit_piecewise_polynomial,
     fit_positions,
 )
-from mpcform.outputs.flight.retime import Retiming, retime
+from mpcform.outputs.flight.retime import Retiming, minimum_time_s, retime
 
 DEFAULT_RATE_HZ = 100.0
 PATH_SAMPLES = 10  # per planned interval: the path is fitted to the planned positions joined by lines
 FIT_RATE_HZ = 50.0  # samples of the retimed reference per second, besides the planned samples
 CHECK_RATE_HZ = 500.0  # sampling of the pieces for limits, floor and separation
-LIMIT_SLACK = 0.9  # the retiming aims at this fraction of each limit (the fit adds a little)
+LIMIT_SLACK = 0.95  # the retiming aims at this share of each limit (the fit adds a little)
+REFITS = 4
+"""A fit within the tolerance can add acceleration and jerk: pieces that exceed a limit by a
+factor are fitted again to the retimed flight slowed down uniformly by that factor's root (speed
+1, acceleration 2, jerk 3), this many times at most; then the export names the limit."""
 MAX_SAMPLES = 7e6
 """The most samples x drones an export takes (checks at 500 Hz and setpoints at ``rate_hz``): each
 took about 560 bytes and 34 us (setpoint CSVs written), so about 4 GiB and 4 minutes."""
@@ -39,8 +43,9 @@ took about 560 bytes and 34 us (setpoint CSVs written), so about 4 GiB and 4 min
 class PhasePieces:
     """A phase ``name``: its planned samples (T, n, 3) [m] and the lines joining them
     (``dense_t_s`` (D,), ``dense_m`` (D, n, 3)), its retiming, the fit (error against the planned
-    samples at ``t_planned_s``, their retimed times) and the float32 pieces ``flown`` (series
-    drone * 4 + x, y, z, yaw)."""
+    samples at ``t_planned_s``, their retimed times), the float32 pieces ``flown`` (series
+    drone * 4 + x, y, z, yaw) and ``min_time_s``, a lower bound on the shortest flight along
+    the same path within the limits (:func:`mpcform.outputs.flight.retime.minimum_time_s`)."""
 
     name: str
     planned_m: Array
@@ -50,6 +55,7 @@ class PhasePieces:
     fit: PolynomialFit
     flown: PiecewisePolynomial
     t_planned_s: Array
+    min_time_s: float
 
 
 def phase_pieces(
@@ -78,11 +84,42 @@ def phase_pieces(
         LIMIT_SLACK * limits.max_jerk_mps3,
         max_duration_s=MAX_SAMPLES / (n * (CHECK_RATE_HZ + DEFAULT_RATE_HZ)),
     )
+    for _ in range(REFITS):
+        check_samples(timing.duration_s, n, rate_hz)
+        poly, flown = _fit_pieces(timing, t, yaw_rad, half, max_piece_s, n)
+        check = np.linspace(0.0, flown.duration_s, int(np.ceil(CHECK_RATE_HZ * flown.duration_s)) + 1)
+        state = flat_state(flown, check, n)
+        env = envelope(check, state["vel"], state["acc"], state["jerk"], state["omega"])
+        slower = max(
+            (peak.value / limit) ** (1.0 / order)
+            for peak, limit, order in (
+                (env.speed, limits.max_speed_mps, 1),
+                (env.acc, limits.max_acc_mps2, 2),
+                (env.jerk, limits.max_jerk_mps3, 3),
+            )
+        )
+        if slower <= 1.0:
+            break
+        timing = timing.slowed(1.02 * slower)
     check_samples(timing.duration_s, n, rate_hz)
     t_planned = timing.new_time(t)
+    err = flown.evaluate(t_planned).reshape(t.shape[0], n, 4)[..., :3] - planned_m
+    fit = PolynomialFit(poly, float(np.linalg.norm(err, axis=-1).max()), tolerance_m)
+    min_time = minimum_time_s(path, limits.max_speed_mps, limits.max_acc_mps2, limits.max_jerk_mps3)
+    return PhasePieces(name, planned_m, dense, lines, timing, fit, flown, t_planned, min_time)
+
+
+def _fit_pieces(
+    timing: Retiming, t_s: Array, yaw_rad: Array, half_tolerance_m: float, max_piece_s: float, n: int
+) -> tuple[PiecewisePolynomial, PiecewisePolynomial]:
+    """The fit of the retimed positions and the float32 pieces of the positions and the yaw
+    (planned at ``t_s``)."""
+    t_planned = timing.new_time(t_s)
     grid = np.linspace(0.0, timing.duration_s, int(np.ceil(FIT_RATE_HZ * timing.duration_s)) + 1)
     t_fit = np.unique(np.concatenate([grid, t_planned]))
-    poly = fit_positions(t_fit, timing.positions(t_fit), half, max_piece_s, rest_ends=True).polynomial
+    poly = fit_positions(
+        t_fit, timing.positions(t_fit), half_tolerance_m, max_piece_s, rest_ends=True
+    ).polynomial
     yaw_poly = fit_piecewise_polynomial(
         t_fit, np.interp(t_fit, t_planned, yaw_rad)[:, None], poly.pieces, rest_ends=True
     )
@@ -93,10 +130,8 @@ def phase_pieces(
         ],
         axis=2,
     )
-    flown = PiecewisePolynomial(0.0, poly.durations_s, coef.reshape(poly.pieces, n * 4, -1)).as_float32()
-    err = flown.evaluate(t_planned).reshape(t.shape[0], n, 4)[..., :3] - planned_m
-    fit = PolynomialFit(poly, float(np.linalg.norm(err, axis=-1).max()), tolerance_m)
-    return PhasePieces(name, planned_m, dense, lines, timing, fit, flown, t_planned)
+    flown = PiecewisePolynomial(0.0, poly.durations_s, coef.reshape(poly.pieces, n * 4, -1))
+    return poly, flown.as_float32()
 
 
 def join(parts: list[PhasePieces]) -> PiecewisePolynomial:

@@ -110,9 +110,11 @@ def test_flight_starts_and_ends_at_rest(tmp_path: Path, name: str) -> None:
     result = export_run(load_run(tmp_path / "run"), tmp_path / "export", offset_m=LIFT, fly=False)
     poly = read_poly([tmp_path / "export" / "drone000_poly7.csv"])
     for end in (0.0, poly.duration_s):
-        assert np.abs(poly.evaluate(end, 1)[0, :3]).max() < 1e-6
-        assert np.abs(poly.evaluate(end, 2)[0, :3]).max() < 1e-6
-    assert result.retiming.duration_s > result.record["planned_duration_s"]  # from rest: slower
+        assert np.abs(poly.evaluate(end, 1)[0, :3]).max() < 1e-5  # float32 coefficients
+        assert np.abs(poly.evaluate(end, 2)[0, :3]).max() < 1e-5  # float32 coefficients
+    mission = result.record["phases"]["mission"]  # close to the fastest flight along the path
+    assert mission["min_time_s"] <= result.retiming.duration_s <= 1.3 * mission["min_time_s"]
+    assert mission["slow_end_s"] <= 0.5
     limits = FlightLimits()
     assert result.envelope.speed.value <= limits.max_speed_mps
     assert result.envelope.acc.value <= limits.max_acc_mps2

@@ -55,7 +55,7 @@ def test_envelope_names_drone_time_value() -> None:
 
 
 def test_defaults_and_validation() -> None:
-    assert DEFAULT_MAX_ACC_MPS2 == pytest.approx(9.81 * np.tan(np.radians(20.0)))
+    assert DEFAULT_MAX_ACC_MPS2 == pytest.approx(0.5 * 9.81 * np.tan(np.radians(20.0)))  # the planner's
     with pytest.raises(ValidationError, match="max_speed"):
         FlightLimits(max_speed_mps=0.0)
     with pytest.raises(ValidationError, match="max_thrust"):

@@ -7,7 +7,7 @@ import pytest
 
 from mpcform.errors import ValidationError
 from mpcform.outputs.flight.polynomial import fit_positions
-from mpcform.outputs.flight.retime import retime
+from mpcform.outputs.flight.retime import minimum_time_s, retime
 
 
 def _path():  # two drones crossing at 1 m/s for 4 s, with a turn
@@ -57,3 +57,21 @@ def test_a_flight_too_long_is_refused_naming_the_limit_that_slows_it(
     ):
         retime(path, *limits, max_duration_s=100.0)  # before its 2 ms grid (50 GiB at 1e-6 m/s) is allocated
     assert retime(path, 0.5, 1.0, 5.0, max_duration_s=100.0).duration_s < 100.0
+
+
+def test_close_to_the_minimum_time_without_a_slow_end() -> None:
+    """Within 1.3 times a lower bound on the minimum time, and no final stretch below 5 % of the
+    speed limit over 0.5 s, on a plan that creeps to its goal for its last half (the old
+    one-motion scaling took 2-3 times)."""
+    t = np.linspace(0.0, 8.0, 161)
+    x = np.where(t < 4.0, t / 4.0, 1.0 + 0.05 * (1.0 - np.exp(-(t - 4.0))))  # 1 m, then 5 cm slowly
+    p = np.stack([x, 0 * t, np.ones_like(t)], axis=-1)[:, None]
+    path = fit_positions(t, p, 1e-4).polynomial
+    v, a, j = 1.0, 1.79, 30.0
+    timing = retime(path, v, a, j)
+    floor = minimum_time_s(path, v, a, j)
+    assert floor <= timing.duration_s <= 1.3 * floor
+    tt = timing.t_s
+    speed = np.linalg.norm(np.gradient(timing.positions(tt), tt, axis=0), axis=-1)[:, 0]
+    fast = np.nonzero(speed >= 0.05 * v)[0]
+    assert tt[-1] - tt[fast[-1]] <= 0.5
