@@ -95,6 +95,17 @@ class RunData:
         return _limit(self.summary, "tracking") or 0.0
 
     @property
+    def downwash_kappa(self) -> float | None:
+        """The downwash factor the plan kept (``limits.downwash``; None: none)."""
+        return _limit(self.summary, "downwash")
+
+    @property
+    def downwash_metric(self) -> Array | None:
+        """``diag(1, 1, 1 / kappa)`` of the downwash ellipsoid (None: none)."""
+        kappa = self.downwash_kappa
+        return None if kappa is None else np.array([1.0, 1.0, 1.0 / kappa])
+
+    @property
     def v_max_mps(self) -> float | None:
         return _limit(self.summary, "v_max")
 

@@ -121,7 +121,7 @@ def _type(key: Key, table: Table) -> dict[str, Any]:
             op, low = key.bound.split()
             value = int(low) if key.type == "int" else float(low)
             out["exclusiveMinimum" if op == ">" else "minimum"] = value
-        return out
+        return {"anyOf": [out, {"enum": list(key.names)}]} if key.names else out
     if key.type == "bool":
         return {"type": "boolean"}
     if key.type == "string":

@@ -35,6 +35,8 @@ class Key:
     shown_default: str | None = None
     inf: bool = False
     """A float key that also takes ``inf`` (meaning: no bound)."""
+    names: tuple[str, ...] = ()
+    """A float key that also takes one of these names (``limits.downwash = "crazyswarm"``)."""
 
     @property
     def bound_text(self) -> str:

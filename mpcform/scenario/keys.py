@@ -41,6 +41,9 @@ def _type_text(key: Key) -> str:
     if key.choices:
         quote = '"' if key.type == "string" else ""
         return f"{base}: {listing(key.choices, quote)}"
+    if key.names:
+        names = listing(key.names, '"')
+        return f"{base}{key.bound_text} or {names}"
     return base + key.bound_text
 
 

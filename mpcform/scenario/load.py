@@ -39,7 +39,7 @@ from mpcform.scenario.schema import CONSENSUS_FIELDS, NULLSPACE_FIELDS, TABLES
 from mpcform.scenario.size import MAX_STEPS, REFERENCE_SAMPLES, check_drone_count
 from mpcform.scenario.solve import solve_strategy
 from mpcform.scenario.spec import ControllerSpec, Scenario, SimulationSpec
-from mpcform.world.limits import Limits
+from mpcform.world.limits import Limits, crazyswarm_downwash
 from mpcform.world.obstacles import SphereObstacle, resolve_clearances
 
 
@@ -284,6 +284,11 @@ def _mission(tpl: Template, start: FormationState, ref: dict[str, Any], limits: 
 def _limits(lim: dict[str, Any], dim: int) -> Limits:
     if lim["downwash"] is not None and dim != 3:
         raise ScenarioError("limits.downwash", f"applies only when dim = 3, got dim = {dim}")
+    if lim["downwash"] == "crazyswarm":
+        if lim["d_min"] is None:
+            raise ScenarioError("limits.downwash", "'crazyswarm' needs limits.d_min")
+        with as_scenario_error("limits"):
+            lim = lim | {"downwash": crazyswarm_downwash(lim["d_min"])}
     with as_scenario_error("limits"):
         return Limits(**_renamed(lim, "limits"))
 

@@ -114,6 +114,13 @@ def _convert(key: Key, value: Any, field: str, dim: int, n: int | None) -> Any:
                 f"got {shown(value)}{did_you_mean(value, key.choices)}",
             )
         return value
+    if key.names and isinstance(value, str):
+        if value not in key.names:
+            hint = did_you_mean(value, key.names)
+            raise ScenarioError(
+                field, f"expected a number or one of {listing(key.names)}, got {shown(value)}{hint}"
+            )
+        return value
     if key.type in ("int", "float"):
         number = _number(value, integer=key.type == "int", allow_inf=key.inf)
         allowed = not key.choices or number in key.choices

@@ -153,8 +153,10 @@ SCHEMA: tuple[Table, ...] = (
             shown_default="1.79 (mpc: a Crazyflie's; a quadrotor plant: its own)"),
         Key("geofence_min", "bounds", "Lower corner of the allowed box (mpc; -inf: open).", "m"),
         Key("geofence_max", "bounds", "Upper corner of the allowed box (mpc; inf: open).", "m"),
-        Key("downwash", "float", "Vertical separation factor kappa (spatial, mpc).", "",
-            bound=">= 1"),
+        Key("downwash", "float", "Vertical separation factor kappa (spatial): pairs keep d_min "
+            "horizontally and kappa d_min vertically; \"crazyswarm\": Crazyswarm's per-robot "
+            "ellipsoid (radii 0.12, 0.12, 0.3 m), kappa = 0.6 m / d_min for d_min >= 0.24 m.", "",
+            bound=">= 1", names=("crazyswarm",)),
         Key("tracking", "float", "Room per drone for the position controller's tracking error when "
             "the plan is flown (mpc; `mpcform run --flyable`: a Crazyflie's 0.05): pairs keep "
             "d_min + 2 tracking apart, obstacles and the geofence tracking more. `export` refuses a run "

@@ -18,6 +18,24 @@ DEFAULT_A_MAX_MPS2 = float(0.5 * 9.81 * np.tan(PLATFORM_TILT_RAD))
 acceleration of a 20 deg tilt, so that the position loop keeps the other half for its own
 corrections; the linear plants' default too (:func:`mpcform.sim.margin.default_a_max`). A step
 beyond what the firmware's attitude loop can follow from hover flips a Crazyflie."""
+CRAZYSWARM_ELLIPSOID_M = (0.12, 0.12, 0.3)
+"""Crazyswarm's collision ellipsoid of one Crazyflie (radii x, y, z [m]): a pair needs 0.24 m
+horizontally and 0.6 m vertically, the downwash below a rotor reaching further than its arms."""
+
+
+def crazyswarm_downwash(d_min_m: float) -> float:
+    """``kappa`` of ``limits.downwash = "crazyswarm"``: pairs ``d_min`` apart horizontally keep
+    Crazyswarm's vertical 0.6 m (``kappa = 0.6 / d_min``, at least 1), for ``d_min >= 0.24 m``."""
+    horizontal, vertical = 2.0 * CRAZYSWARM_ELLIPSOID_M[0], 2.0 * CRAZYSWARM_ELLIPSOID_M[2]
+    if d_min_m < horizontal:
+        raise ValidationError(
+            "limits.downwash",
+            f"'crazyswarm' keeps d_min = {d_min_m:g} m horizontally, below the ellipsoid's "
+            f"{horizontal:g} m: expected d_min >= {horizontal:g} m",
+        )
+    return max(1.0, vertical / d_min_m)
+
+
 PLATFORM_TRACKING_M = 0.05
 """A Crazyflie 2.x's (cf2x_L250) tracking allowance per drone [m] (``--flyable``): the largest
 absolute per-drone error of the firmware's Mellinger position loop flying exported setpoints,

@@ -306,3 +306,16 @@ def test_scenario_from_dict_refuses_too_many_drones_before_building_the_template
     with pytest.raises(ScenarioError, match=r"^template.n: 1,000,000,000 drones would need about"):
         scenario_from_dict(data, max_memory_gib=4.0)
     assert time.perf_counter() - start < 1.0
+
+
+def test_downwash_crazyswarm_is_the_ellipsoid_of_crazyswarm() -> None:
+    doc = tomllib.loads((SCENARIOS / "swap_spatial_12.toml").read_text())
+    doc["limits"]["downwash"] = "crazyswarm"
+    limits = scenario_from_dict(doc).world.limits
+    assert limits.downwash_kappa == pytest.approx(0.6 / doc["limits"]["d_min"])  # 0.24 / 0.6 m per pair
+    doc["limits"]["downwash"] = "crazyswarn"
+    with pytest.raises(ScenarioError, match=r"^limits.downwash: .* did you mean 'crazyswarm'"):
+        scenario_from_dict(doc)
+    doc["limits"] |= {"downwash": "crazyswarm", "d_min": 0.2}
+    with pytest.raises(ScenarioError, match=r"^limits.downwash: .* expected d_min >= 0.24 m"):
+        scenario_from_dict(doc)

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from mpcform.errors import ValidationError
-from mpcform.world.limits import DEFAULT_A_MAX_MPS2, Limits, planning_limits, tightened
+from mpcform.world.limits import DEFAULT_A_MAX_MPS2, Limits, crazyswarm_downwash, planning_limits, tightened
 from mpcform.world.obstacles import SphereObstacle
 
 
@@ -80,3 +80,11 @@ def test_planning_limits_take_the_platform_a_max_and_inf_turns_it_off():
 def test_tightened_needs_resolved_clearances():
     with pytest.raises(ValidationError, match=r"obstacles\[0\]\.clearance"):
         tightened(Limits(1.0, 0.5), (SphereObstacle([1.0, 0.0], 0.5),), 0.05, 2.0)
+
+
+def test_crazyswarm_downwash_keeps_its_ellipsoid() -> None:
+    assert crazyswarm_downwash(0.24) == pytest.approx(2.5)  # the ellipsoid itself: 0.24 / 0.6 m
+    assert crazyswarm_downwash(0.5) == pytest.approx(1.2)
+    assert crazyswarm_downwash(0.8) == 1.0  # the sphere already holds 0.6 m vertically
+    with pytest.raises(ValidationError, match="expected d_min >= 0.24 m"):
+        crazyswarm_downwash(0.2)

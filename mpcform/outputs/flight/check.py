@@ -115,9 +115,10 @@ def fly_export(
     control_dt_s: float,
     a_max_mps2: float,
     d_min_m: float | None = None,
+    metric: Array | None = None,
 ) -> FlightCheck | None:
     """Fly ``n`` drones' pieces (series drone * 4 + x, y, z, yaw) on the quadrotor plant; the
-    closest true pair is checked against ``d_min_m``."""
+    closest true pair (in the downwash ``metric`` when given) is checked against ``d_min_m``."""
     if not drone_models_available():
         return None
     spec = QuadrotorPlantSpec()
@@ -140,11 +141,15 @@ def fly_export(
         true.append(samples.p_true_m[1:])
     t = np.concatenate(times)
     p_true = np.concatenate(true)
-    return _flight_check(poly, n, t, p_true, float(margin), fit_tolerance_m, d_min_m)
+    return _flight_check(poly, n, t, p_true, float(margin), fit_tolerance_m, d_min_m, metric)
 
 
 def fly_export_crazyflow(
-    poly: PiecewisePolynomial, n: int, fit_tolerance_m: float, d_min_m: float | None = None
+    poly: PiecewisePolynomial,
+    n: int,
+    fit_tolerance_m: float,
+    d_min_m: float | None = None,
+    metric: Array | None = None,
 ) -> FlightCheck | None:
     """Fly ``n`` drones' pieces open loop in crazyflow (module docstring); None without it."""
     if importlib.util.find_spec("crazyflow") is None:
@@ -155,7 +160,9 @@ def fly_export_crazyflow(
     setpoints = FullState(t, st["pos"], st["vel"], st["acc"], st["yaw"], st["omega"])
     t_true, p_true = plant.fly_full_state(st["pos"][0], setpoints)
     events = {k: v for k, v in plant.events.items() if k in CONTACT_EVENTS}
-    return _flight_check(poly, n, t_true, p_true, PLATFORM_TRACKING_M, fit_tolerance_m, d_min_m, events)
+    return _flight_check(
+        poly, n, t_true, p_true, PLATFORM_TRACKING_M, fit_tolerance_m, d_min_m, metric, events
+    )
 
 
 def _flight_check(
@@ -166,13 +173,14 @@ def _flight_check(
     margin_m: float,
     fit_tolerance_m: float,
     d_min_m: float | None,
+    metric: Array | None,
     events: dict[str, Any] | None = None,
 ) -> FlightCheck:
     """The check of true positions ``p_true_m`` (K, n, 3) at ``t_s`` (K,) against the pieces: the
     worst tracking error and the closest true pair."""
     err = np.linalg.norm(p_true_m - poly.evaluate(t_s).reshape(-1, n, 4)[..., :3], axis=-1)
     j, i = np.unravel_index(int(np.argmax(err)), err.shape)
-    closest = closest_pair(t_s, p_true_m)
+    closest = closest_pair(t_s, p_true_m, metric)
     return FlightCheck(
         float(err[j, i]), int(i), float(t_s[j]), margin_m, fit_tolerance_m, closest, d_min_m, events
     )

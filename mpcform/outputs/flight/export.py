@@ -157,7 +157,13 @@ def export_run(
         check_tracked(run.d_min_m, run.n, run.tracking_m)
     out = Path(out_dir)
     dt = float(np.median(np.diff(run.trajectory.t_s)))
-    phase_limits = Limits(run.v_max_mps or lim.max_speed_mps, run.d_min_m, tracking_m=run.tracking_m)
+    phase_limits = Limits(
+        run.v_max_mps or lim.max_speed_mps,
+        run.d_min_m,
+        tracking_m=run.tracking_m,
+        downwash_kappa=run.downwash_kappa,
+    )
+    metric = run.downwash_metric
     mission_m = positions_3d(run, opts)
     _check_floor(mission_m, run.trajectory.t_s - run.trajectory.t_s[0], opts.floor_m)  # as planned
     flight = whole_flight(mission_m, dt, phase_limits, lim, opts.floor_m)
@@ -184,14 +190,18 @@ def export_run(
     env = envelope(t_check, state["vel"], state["acc"], state["jerk"], state["omega"])
     worst = max(parts, key=lambda p: p.fit.max_error_m).fit
     warnings = _warnings(worst, env, opts)
-    check = fly_export(flown, n, opts.tolerance_m, dt, lim.max_acc_mps2, run.d_min_m) if opts.fly else None
-    cf = fly_export_crazyflow(flown, n, opts.tolerance_m, run.d_min_m) if opts.crazyflow else None
+    check = (
+        fly_export(flown, n, opts.tolerance_m, dt, lim.max_acc_mps2, run.d_min_m, metric)
+        if opts.fly
+        else None
+    )
+    cf = fly_export_crazyflow(flown, n, opts.tolerance_m, run.d_min_m, metric) if opts.crazyflow else None
     if opts.crazyflow and cf is None:
         raise ValidationError(
             "crazyflow", 'flying an export in crazyflow needs it: pip install -e ".[crazyflow]"'
         )
-    retimed = closest_pair(t_check, state["pos"])
-    planned = [closest_pair(p.dense_t_s, p.dense_m) for p in parts]
+    retimed = closest_pair(t_check, state["pos"], metric)
+    planned = [closest_pair(p.dense_t_s, p.dense_m, metric) for p in parts]
     breaches = separation_breaches(
         run.d_min_m,
         opts.tolerance_m,
@@ -229,7 +239,7 @@ def export_run(
         )
     record = _record(run, opts, fit, timing, main.min_time_s, env, min_sep, per_drone, warnings)
     record["max_fit_error_m"] = worst.max_error_m  # of every phase
-    record["phases"] = phase_record(flight, parts, lim)
+    record["phases"] = phase_record(flight, parts, lim, metric)
     record["duration_s"] = flown.duration_s  # the trajectories: ascent, mission, descent
     record["flight_duration_s"] = sum(p["duration_s"] for p in record["phases"].values())  # with the legs
     record["quadrotor_flight"] = None if check is None else check.record()
@@ -339,7 +349,7 @@ def _record(
         "peaks": peak,
         "min_separation_m": min_sep,
         "planned_min_separation_m": getattr(
-            closest_pair(run.trajectory.t_s, positions_3d(run, opts)), "distance_m", None
+            closest_pair(run.trajectory.t_s, positions_3d(run, opts), run.downwash_metric), "distance_m", None
         ),
         "d_min_m": run.d_min_m,
         "allow_unsafe": opts.allow_unsafe,

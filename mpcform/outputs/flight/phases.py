@@ -155,9 +155,12 @@ def whole_flight(
     return Flight(path, dt_s, tuple(phases), up, down, floor_m, hover, takeoff_s, takeoff_s)
 
 
-def phase_record(flight: Flight, parts: list[PhasePieces], limits: FlightLimits) -> dict[str, Any]:
+def phase_record(
+    flight: Flight, parts: list[PhasePieces], limits: FlightLimits, metric: Array | None = None
+) -> dict[str, Any]:
     """Per phase (takeoff, the exported ``parts``, landing): duration [s], peak speed [m/s],
-    acceleration [m/s^2] and jerk [m/s^3], and the closest two drones [m] of its pieces; for the
+    acceleration [m/s^2] and jerk [m/s^3], and the closest two drones [m] of its pieces (in the
+    downwash ``metric`` when given); for the
     retimed ones the minimum duration under speed and acceleration alone and ``slow_end_s``, how
     long the phase ends with every drone below :data:`SLOW_SHARE` of the speed limit."""
     h = flight.hover_m - flight.floor_m
@@ -167,7 +170,8 @@ def phase_record(flight: Flight, parts: list[PhasePieces], limits: FlightLimits)
         t = np.linspace(0.0, poly.duration_s, int(np.ceil(CHECK_RATE_HZ * poly.duration_s)) + 1)
         state = flat_state(poly, t, flight.positions_m.shape[1])
         peaks = {key: float(np.linalg.norm(state[s], axis=-1).max()) for key, s in _PEAKS}
-        sep = float(min_pair_distances(state["pos"]).min()) if state["pos"].shape[1] > 1 else None
+        scaled = state["pos"] if metric is None else state["pos"] * metric
+        sep = float(min_pair_distances(scaled).min()) if state["pos"].shape[1] > 1 else None
         fast = np.nonzero(
             np.linalg.norm(state["vel"], axis=-1).max(axis=1) >= SLOW_SHARE * limits.max_speed_mps
         )[0]

@@ -28,11 +28,12 @@ class ClosestPair:
         return f"drones {i} and {j} {self.distance_m:.3g} m apart at t = {self.t_s:.2f} s"
 
 
-def closest_pair(t_s: Array, positions_m: Array) -> ClosestPair | None:
-    """The closest pair over the samples ``t_s`` (K,) of ``positions_m`` (K, n, d); None for one drone."""
+def closest_pair(t_s: Array, positions_m: Array, metric: Array | None = None) -> ClosestPair | None:
+    """The closest pair over the samples ``t_s`` (K,) of ``positions_m`` (K, n, d), in the downwash
+    ``metric`` ``||diag(metric) (p_i - p_j)||`` when given; None for one drone."""
     if positions_m.shape[1] < 2:
         return None
-    k, i, j, dist = geometry.closest_pair(positions_m)
+    k, i, j, dist = geometry.closest_pair(positions_m if metric is None else positions_m * metric)
     return ClosestPair(dist, float(t_s[k]), (i, j))
 
 

@@ -6,6 +6,7 @@ from __future__ import annotations
 import csv
 import importlib.util
 import json
+import tomllib
 from pathlib import Path
 
 import numpy as np
@@ -26,7 +27,7 @@ from mpcform.outputs.flight.export import (
 from mpcform.outputs.flight.limits import FlightLimits
 from mpcform.outputs.rundata import load_run
 from mpcform.run.runner import run_scenario
-from mpcform.scenario.load import load_scenario
+from mpcform.scenario.load import load_scenario, scenario_from_dict
 from mpcform.world.limits import PLATFORM_TRACKING_M
 
 TOLERANCE_M = 0.02  # the stated tolerance: every planned sample within 2 cm of the pieces
@@ -332,3 +333,27 @@ def test_exports_fly_ground_to_ground_in_crazyflow(tmp_path: Path, name: str, of
     print(
         name, {k: round(v["duration_s"], 2) for k, v in record["phases"].items()}, cf["max_tracking_error_m"]
     )
+
+
+def test_downwash_holds_in_every_phase_and_check(tmp_path: Path) -> None:
+    """A run planned with Crazyswarm's ellipsoid is exported in its metric: the ascent and descent
+    are planned with it, and the separations recorded and checked are the ellipsoid's."""
+    doc = tomllib.loads((SCENARIOS / "swap_spatial_12.toml").read_text())
+    doc["limits"]["downwash"] = "crazyswarm"
+    run_scenario(shortened(scenario_from_dict(doc), 60).flyable(), tmp_path / "run")
+    data = load_run(tmp_path / "run")
+    metric = np.array([1.0, 1.0, data.d_min_m / 0.6])  # kappa = 0.6 m / d_min
+    assert np.allclose(data.downwash_metric, metric)
+    result = export_run(data, tmp_path / "export", offset_m=LIFT, fly=False)
+    gaps = []
+    for name, suffix in (("ascent", "_ascent"), ("mission", ""), ("descent", "_descent")):
+        polys = [read_poly([tmp_path / "export" / f"drone{k:03d}{suffix}_poly7.csv"]) for k in range(data.n)]
+        t = np.linspace(0.0, polys[0].duration_s, 2000)
+        p = np.stack([poly.evaluate(t)[:, :3] for poly in polys], axis=1)
+        i, j = np.triu_indices(data.n, 1)
+        scaled = np.linalg.norm((p[:, i] - p[:, j]) * metric, axis=-1).min()
+        recorded = result.record["phases"][name]["min_separation_m"]
+        assert recorded == pytest.approx(scaled, abs=2e-3)
+        assert recorded >= data.d_min_m - 2 * TOLERANCE_M
+        gaps.append(np.linalg.norm(p[:, i] - p[:, j], axis=-1).min() - scaled)
+    assert max(gaps) > 1e-3  # somewhere the closest pair is one above another: not the distance
