@@ -6,6 +6,7 @@ from __future__ import annotations
 import argparse
 import sys
 
+from mpcform.outputs.flight.crazyswarm import read_pads
 from mpcform.outputs.flight.export import (
     CRAZYFLIE_MAX_PIECES,
     DEFAULT_RATE_HZ,
@@ -17,7 +18,7 @@ from mpcform.outputs.flight.limits import FlightLimits, platform_thrust_acc_mps2
 from mpcform.outputs.flight.polynomial import DEFAULT_TOLERANCE_M
 
 EXPORT_FIELDS = (
-    "altitude offset floor tolerance rate max_speed max_acc max_jerk max_body_rate crazyflow".split()
+    "altitude offset floor tolerance rate max_speed max_acc max_jerk max_body_rate crazyflow ground".split()
 )
 """The library's fields that are export flags (their errors name ``--max-speed``, not ``max_speed``)."""
 
@@ -47,6 +48,12 @@ def add_export_options(cmd: argparse.ArgumentParser) -> None:
         default=0.0,
         metavar="M",
         help="refuse an export whose lowest point is below this height [m]",
+    )
+    cmd.add_argument(
+        "--ground",
+        metavar="YAML",
+        help="a Crazyswarm2 crazyflies.yaml: take off from and land on its robots' initial_position "
+        "(default: the start formation below itself, or a grid mpcform chooses)",
     )
     cmd.add_argument(
         "--rate",
@@ -128,6 +135,7 @@ def export_options(args: argparse.Namespace) -> ExportOptions:
         allow_unsafe=args.allow_unsafe,
         fly=not args.no_flight_check,
         crazyflow=args.crazyflow,
+        ground_m=None if args.ground is None else read_pads(args.ground),
     )
 
 

@@ -22,6 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from mpcform._validate import Array
+from mpcform.errors import ValidationError
 from mpcform.outputs.flight.files import CRAZYFLIE_MAX_PIECES
 from mpcform.outputs.flight.phases import Flight
 
@@ -145,3 +146,33 @@ def _places(flight: Flight) -> Array:
     """The drones' places on the floor (n, 3): the takeoff layout."""
     xy = flight.takeoff_xy_m
     return np.column_stack([xy, np.full(xy.shape[0], flight.floor_m)])
+
+
+def read_pads(path: str | Path) -> tuple[tuple[float, float], ...]:
+    """The floor positions ``(x, y)`` [m] of the enabled robots of a ``crazyflies.yaml``
+    (Crazyswarm2's ``robots: name: initial_position: [x, y, z]``): the pads an export takes off
+    from and lands on. Needs PyYAML (the ``flight`` extra)."""
+    try:
+        import yaml
+    except ImportError:
+        raise ValidationError(
+            "ground", 'reading crazyflies.yaml needs PyYAML: pip install -e ".[flight]"'
+        ) from None
+    try:
+        doc = yaml.safe_load(Path(path).read_text())
+    except (OSError, yaml.YAMLError) as exc:
+        raise ValidationError("ground", f"cannot read {path}: {exc}") from None
+    robots = doc.get("robots") if isinstance(doc, dict) else None
+    if not isinstance(robots, dict) or not robots:
+        raise ValidationError("ground", f"{path}: expected a 'robots' table of Crazyswarm2 robots")
+    pads = []
+    for name, robot in robots.items():
+        if not isinstance(robot, dict) or not robot.get("enabled", True):
+            continue
+        p = robot.get("initial_position")
+        if not (isinstance(p, list) and len(p) in (2, 3) and all(isinstance(x, int | float) for x in p)):
+            raise ValidationError(
+                "ground", f"{path}: robot {name}: expected initial_position [x, y, z], got {p!r}"
+            )
+        pads.append((float(p[0]), float(p[1])))
+    return tuple(pads)

@@ -100,6 +100,7 @@ class ExportOptions:
     allow_unsafe: bool = False  # export a flight whose drones come closer than d_min
     fly: bool = True  # fly the export on the quadrotor plant (skipped without drone-models)
     crazyflow: bool = False  # also fly it open loop in crazyflow (needs the extra)
+    ground_m: tuple[tuple[float, float], ...] | None = None  # pads (x, y) [m]; None: mpcform's layout
 
     def __post_init__(self) -> None:
         positive("tolerance", self.tolerance_m)
@@ -110,6 +111,14 @@ class ExportOptions:
             raise ValidationError("floor", f"expected a finite height [m], got {self.floor_m}")
         if len(self.offset_m) != 3 or not np.all(np.isfinite(self.offset_m)):
             raise ValidationError("offset", f"expected three finite numbers X,Y,Z, got {self.offset_m!r}")
+        if self.ground_m is not None and not (
+            len(self.ground_m)
+            and np.asarray(self.ground_m, dtype=float).shape[1:] == (2,)
+            and np.all(np.isfinite(self.ground_m))
+        ):
+            raise ValidationError(
+                "ground", f"expected pads of two finite numbers x, y, got {self.ground_m!r}"
+            )
         if self.yaw not in YAW_MODES:
             raise ValidationError("yaw", f"expected one of {', '.join(YAW_MODES)}, got {self.yaw!r}")
 
@@ -166,7 +175,8 @@ def export_run(
     metric = run.downwash_metric
     mission_m = positions_3d(run, opts)
     _check_floor(mission_m, run.trajectory.t_s - run.trajectory.t_s[0], opts.floor_m)  # as planned
-    flight = whole_flight(mission_m, dt, phase_limits, lim, opts.floor_m)
+    pads = None if opts.ground_m is None else np.asarray(opts.ground_m, dtype=float)
+    flight = whole_flight(mission_m, dt, phase_limits, lim, opts.floor_m, pads)
     n = run.n
     yaw: Array = np.zeros(flight.positions_m.shape[0])
     mission = dict(flight.phases)["mission"]

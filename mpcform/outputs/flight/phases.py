@@ -87,6 +87,31 @@ def ground_layout(xy_m: Array, spacing_m: float) -> Array:
     return grid[cols[np.argsort(rows)]]
 
 
+def pad_layout(xy_m: Array, pads_m: Array, spacing_m: float) -> Array:
+    """Positions (n, 2) on the given ``pads_m`` (k, 2), k >= n: the assignment nearest to
+    ``xy_m`` (scipy's ``linear_sum_assignment``); pads closer than ``spacing_m`` are refused, naming
+    the pair (the planner could not start from them)."""
+    n, k = xy_m.shape[0], pads_m.shape[0]
+    if k < n:
+        raise ValidationError(
+            "ground", f"{k} pad{'s' * (k != 1)} on the floor for {n} drones: expected at least {n}"
+        )
+    rows, cols = linear_sum_assignment(((xy_m[:, None] - pads_m[None]) ** 2).sum(-1))
+    chosen = cols[np.argsort(rows)]
+    gap = np.linalg.norm(pads_m[chosen][:, None] - pads_m[chosen][None], axis=-1) + np.diag(
+        np.full(n, np.inf)
+    )
+    i, j = np.unravel_index(int(np.argmin(gap)), gap.shape)
+    if n > 1 and gap[i, j] < spacing_m:
+        a, b = sorted((int(chosen[i]), int(chosen[j])))
+        raise ValidationError(
+            "ground",
+            f"pads {a} and {b} are {gap[i, j]:.3g} m apart, closer than the {spacing_m:.3g} m the "
+            "planner keeps (d_min + 2 tracking): move them apart",
+        )
+    return pads_m[chosen]
+
+
 def vertical_leg_s(height_m: float, limits: FlightLimits, slack: float = 0.9) -> float:
     """The shortest septic takeoff or landing over ``height_m`` within ``slack`` of the speed,
     acceleration and jerk limits (at least :data:`LEG_MIN_S`)."""
@@ -130,17 +155,26 @@ def plan_phase(start_m: Array, goal_m: Array, dt_s: float, limits: Limits, name:
 
 
 def whole_flight(
-    mission_m: Array, dt_s: float, limits: Limits, flight_limits: FlightLimits, floor_m: float = 0.0
+    mission_m: Array,
+    dt_s: float,
+    limits: Limits,
+    flight_limits: FlightLimits,
+    floor_m: float = 0.0,
+    pads_m: Array | None = None,
 ) -> Flight:
     """The flight from the ground to ``mission_m`` (T, n, 3) [m] and back (module docstring):
-    ``limits`` the run's (v_max, d_min, tracking allowance)."""
+    ``limits`` the run's (v_max, d_min, tracking allowance); ``pads_m`` (k, 2): the places on the
+    floor to take off from and land on (None: :func:`ground_layout`'s)."""
     first, last = mission_m[0], mission_m[-1]
     hover = floor_m + HOVER_M
     bottom = min(floor_m + FLOOR_CLEARANCE_M, float(first[:, 2].min()), float(last[:, 2].min()))
     lo, hi = np.array([-np.inf, -np.inf, bottom]), np.full(3, np.inf)
     limits = replace(limits, geofence_min_m=lo, geofence_max_m=hi)  # the floor: no drone pushed into it
-    spacing = 0.0 if limits.d_min_m is None else LAYOUT_SPACING * (limits.d_min_m + 2.0 * limits.tracking_m)
-    up, down = ground_layout(first[:, :2], spacing), ground_layout(last[:, :2], spacing)
+    keep = 0.0 if limits.d_min_m is None else limits.d_min_m + 2.0 * limits.tracking_m
+    if pads_m is None:
+        up, down = (ground_layout(x[:, :2], LAYOUT_SPACING * keep) for x in (first, last))
+    else:
+        up, down = (pad_layout(x[:, :2], pads_m, keep) for x in (first, last))
     lift = np.column_stack([up, np.full(up.shape[0], hover)])
     land = np.column_stack([down, np.full(down.shape[0], hover)])
     ascent = plan_phase(lift, first, dt_s, limits, "ascent")

@@ -11,7 +11,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from mpcform.outputs.flight.crazyswarm import CRAZYFLIE_MAX_PIECES, FLY_PY, crazyflies_yaml, write_files
+from mpcform.errors import ValidationError
+from mpcform.outputs.flight.crazyswarm import (
+    CRAZYFLIE_MAX_PIECES,
+    FLY_PY,
+    crazyflies_yaml,
+    read_pads,
+    write_files,
+)
 from mpcform.outputs.flight.files import POLY_HEADER
 from mpcform.outputs.flight.phases import Flight
 
@@ -150,3 +157,19 @@ def test_fly_script_refuses_a_split_export(tmp_path: Path, monkeypatch: pytest.M
 def test_crazyflies_yaml_prints_no_negative_zero() -> None:
     text = crazyflies_yaml(np.array([[-0.0, -0.00001, -0.0], [-1e-9, 2.0, 0.0]]))
     assert "-0.0000" not in text and "    initial_position: [0.0000, 0.0000, 0.0000]" in text
+
+
+def test_pads_are_read_from_a_crazyflies_yaml(tmp_path: Path) -> None:
+    path = tmp_path / "crazyflies.yaml"
+    path.write_text(crazyflies_yaml(np.array([[0.0, 1.0, 0.0], [2.5, -1.0, 0.0]])))  # our own, read back
+    assert read_pads(path) == ((0.0, 1.0), (2.5, -1.0))
+    path.write_text(
+        "robots:\n  cf1:\n    enabled: false\n    initial_position: [0, 0, 0]\n"
+        "  cf2:\n    initial_position: [1, 2, 0]\n"
+    )
+    assert read_pads(path) == ((1.0, 2.0),)  # a disabled robot has no pad
+    path.write_text("robots:\n  cf1:\n    initial_position: [0, nope]\n")
+    with pytest.raises(ValidationError, match=r"^ground: .*robot cf1: expected initial_position \[x, y, z\]"):
+        read_pads(path)
+    with pytest.raises(ValidationError, match=r"^ground: cannot read"):
+        read_pads(tmp_path / "missing.yaml")

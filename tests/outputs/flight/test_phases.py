@@ -92,3 +92,22 @@ def test_the_whole_flight_joins_its_phases() -> None:
         and parts["mission"].stop - 1 == parts["descent"].start
     )
     assert flight.takeoff_s == flight.land_s == phases.LEG_MIN_S
+
+
+def test_given_pads_are_assigned_nearest_and_refused_when_too_few_or_too_close() -> None:
+    xy = np.array([[0.0, 0.0], [2.0, 0.0], [4.0, 0.0]])
+    pads = np.array([[4.1, 1.0], [9.0, 9.0], [-0.1, 1.0], [2.0, 1.0]])
+    np.testing.assert_array_equal(phases.pad_layout(xy, pads, 1.0), pads[[2, 3, 0]])  # the far pad unused
+    with pytest.raises(ValidationError, match=r"^ground: 2 pads on the floor for 3 drones"):
+        phases.pad_layout(xy, pads[:2], 1.0)
+    close = np.array([[0.0, 0.0], [0.3, 0.0], [4.0, 0.0]])
+    with pytest.raises(
+        ValidationError, match=r"^ground: pads 0 and 1 are 0.3 m apart, closer than the 0.6 m"
+    ):
+        phases.pad_layout(xy, close, 0.6)
+    t = np.linspace(0.0, 1.0, 11)[:, None, None]
+    mission = np.array([[0.0, 0.0, 1.0], [2.0, 0.0, 1.0]]) + t * np.array([1.0, 0.0, 0.0])
+    flight = phases.whole_flight(mission, 0.1, LIMITS, FlightLimits(), pads_m=pads)
+    np.testing.assert_array_equal(flight.takeoff_xy_m, pads[[2, 3]])
+    np.testing.assert_array_equal(flight.landing_xy_m, pads[[3, 0]])  # landing nearest the last positions
+    np.testing.assert_array_equal(flight.positions_m[0, :, :2], pads[[2, 3]])
