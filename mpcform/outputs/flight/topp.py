@@ -25,7 +25,6 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import clarabel
 import numpy as np
 from scipy import sparse
 
@@ -185,6 +184,8 @@ class _Program:
         )
 
     def _solve_active(self, kinds: tuple[str, ...], tangents: Array | None) -> Array:
+        import clarabel  # imported when an export is retimed, not with the package
+
         k1 = self.nodes
         rows, cols, vals, rhs = [np.array([0, 1])], [np.array([0, k1 - 1])], [np.ones(2)], [np.zeros(2)]
         cones: list = [clarabel.ZeroConeT(2)]
