@@ -9,16 +9,20 @@ unknowns are ``b_k = s'^2`` and, per segment, the constant ``s'' = alpha_k = (b_
     v = P' \sqrt{b}, \quad a = P'' b + P' \alpha, \quad
     j = \sqrt{b}\,(P''' b + 3 P'' \alpha) + P' \dddot s,
 
-so ``|v| <= v_max`` is a bound on ``b_k`` and ``|a| <= a_max`` a second-order cone in ``b``: the
-scaling under speed and acceleration is a convex program (Verscheure et al., "Time-optimal path
-tracking for robots: a convex optimization approach", IEEE TAC 2009), whose largest ``b`` (every
-node as fast as it may be) is the time-optimal one. Its duration is therefore a lower bound on
-the minimum time under all three limits (:attr:`Profile.lower_bound_s`). The jerk is not convex in
-``b``: its ``sqrt(b)`` factors are taken from the previous solution (``s''' = (alpha_k -
-alpha_{k-1}) sqrt(b) / dtau`` between segments, from rest before the first and after the last),
-and the program is solved again until ``b`` settles (sequential convex programming; exact at the
-fixed point). Cones are added per drone and node where they bind (the fastest drones first,
-then every violated one), so a hundred drones cost about what a few do. Solved by clarabel.
+so ``|v| <= v_max`` is a bound on ``b_k`` and ``|a| <= a_max`` a second-order cone in ``b`` (at
+both ends of each segment), and the duration ``sum_k 2 dtau / (sqrt(b_k) + sqrt(b_{k+1}))`` is
+convex (two rotated cones per segment): the time-optimal scaling under speed and acceleration is a
+convex program (Verscheure et al., "Time-optimal path tracking for robots: a convex optimization
+approach", IEEE TAC 2009), and its duration a lower bound on the minimum under all three limits
+(:attr:`Profile.lower_bound_s`). The jerk is not convex in ``b``: with the third derivative of
+``s`` taken as ``(alpha_k - alpha_{k-1}) sqrt(b_k) / dtau`` (from rest before the first segment
+and after the last) it reads ``|Y_k(b)| <= j / sqrt(b_k)``, ``Y`` linear in ``b``, and ``j /
+sqrt(b)`` is convex, so each of its tangents lies below it: the cone ``|Y_k(b)| <= its tangent
+at b_bar`` is safe. The first round takes a ladder of tangents below the speed-and-acceleration
+optimum, each later one the tangent at the previous solution, until the duration settles
+(sequential convex programming: every round is feasible and none slower than the one before; exact
+at the fixed point). Cones are added per drone and node where they bind (the largest derivatives
+first, then every violated one), so a hundred drones cost about what a few do. Solved by clarabel.
 """
 
 from __future__ import annotations
@@ -35,7 +39,7 @@ S_DOT_MAX = 100.0
 """The fastest the scaling runs through the plan (plan seconds per second): where the drones
 barely move (a plan's slow approach to its goals) the flight passes in 1/100 of the plan's time."""
 LADDER = 8  # the first jerk round's tangents per node, each a quarter of the one before
-JERK_ROUNDS = 4  # convex programs with the jerk's factors taken from the previous one, at most
+JERK_ROUNDS = 4  # later rounds (the jerk's tangents at the previous solution), at most
 SETTLED = 5e-3  # relative change of the duration at which the rounds stop
 TANGENT_FLOOR = 1e-3
 """The jerk's tangents are taken no lower than this share of the largest ``b`` (any tangent of the
