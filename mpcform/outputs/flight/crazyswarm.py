@@ -23,8 +23,8 @@ import numpy as np
 
 from mpcform._validate import Array
 from mpcform.errors import ValidationError
-from mpcform.outputs.flight.files import CRAZYFLIE_MAX_PIECES
 from mpcform.outputs.flight.phases import Flight
+from mpcform.outputs.flight.pieces import CRAZYFLIE_MAX_PIECES
 
 CRAZYFLIES_YAML = "crazyflies.yaml"
 FLY_PY = "fly.py"

@@ -17,11 +17,8 @@ import numpy as np
 from mpcform._validate import Array
 from mpcform.errors import ValidationError
 from mpcform.outputs.flight.limits import flat_state
-from mpcform.outputs.flight.pieces import PhasePieces
+from mpcform.outputs.flight.pieces import CRAZYFLIE_MAX_PIECES, PhasePieces
 from mpcform.outputs.flight.polynomial import POLY_DEGREE, PiecewisePolynomial
-
-CRAZYFLIE_MAX_PIECES = 31
-"""Pieces a Crazyflie holds (``TRAJECTORY_MEMORY_SIZE`` 4096 B / 132 B per piece in crazyflie-firmware)."""
 
 SETPOINT_COLUMNS = (
     "t",

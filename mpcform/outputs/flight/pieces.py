@@ -1,16 +1,18 @@
 """One phase of an exported flight as flyable pieces: retimed from rest to rest, fitted, float32.
 
 A phase's planned samples (the ascent's, the mission's or the descent's,
-:mod:`mpcform.outputs.flight.phases`) are joined by lines (the held commands), fitted by degree-7
-pieces within half the tolerance, retimed within the speed, acceleration and jerk limits from rest
-to rest (:mod:`mpcform.outputs.flight.retime`), fitted again at the new times with the yaw, and
-rounded to float32 as the Crazyflie stores them. Every phase ends at rest, so the phases join into
-one flight (:func:`join`) whose derivatives are continuous.
+:mod:`mpcform.outputs.flight.phases`), up to where every drone has settled at its end, are joined
+by lines (the held commands), fitted by degree-7 pieces within half the tolerance, retimed
+time-optimally within the speed, acceleration and jerk limits from rest to rest
+(:mod:`mpcform.outputs.flight.retime`), fitted again at the new times with the yaw (slowed down
+and fitted again where the fit exceeds a limit; retimed with a lower jerk limit where it needs more
+pieces than a Crazyflie holds), and rounded to float32 as the Crazyflie stores them. Every phase
+ends at rest, so the phases join into one flight (:func:`join`) whose derivatives are continuous.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -29,6 +31,16 @@ DEFAULT_RATE_HZ = 100.0
 PATH_SAMPLES = 10  # per planned interval: the path is fitted to the planned positions joined by lines
 FIT_RATE_HZ = 50.0  # samples of the retimed reference per second, besides the planned samples
 CHECK_RATE_HZ = 500.0  # sampling of the pieces for limits, floor and separation
+CRAZYFLIE_MAX_PIECES = 31
+"""Pieces a Crazyflie holds (``TRAJECTORY_MEMORY_SIZE`` 4096 B / 132 B per piece in crazyflie-firmware)."""
+SMOOTHER = (0.5, 0.25)
+"""A phase whose fit takes more pieces than a Crazyflie holds (but at most twice as many) is
+retimed with the jerk limit at these shares in turn: the time-optimal scaling switches its
+acceleration abruptly, and a smoother one fits in fewer pieces (obstacles_planar's mission: 37
+pieces at 30 m/s^3, 22 at 5 m/s^3, 6 % slower)."""
+SETTLED_SHARE = 0.25
+"""A phase's last samples, once every drone is within this share of the tolerance of its end, are
+flown as its end (each within 5 mm at the default 2 cm)."""
 LIMIT_SLACK = 0.95  # the retiming aims at this share of each limit (the fit adds a little)
 REFITS = 4
 """A fit within the tolerance can add acceleration and jerk: pieces that exceed a limit by a
@@ -73,10 +85,43 @@ def phase_pieces(
     n = planned_m.shape[1]
     t = dt_s * np.arange(planned_m.shape[0])
     half = 0.5 * tolerance_m
-    dense = np.linspace(0.0, t[-1], PATH_SAMPLES * (t.shape[0] - 1) + 1)  # held commands: lines
-    lines = np.stack([np.interp(dense, t, x) for x in planned_m.reshape(t.shape[0], -1).T], axis=-1)
+    # the plan's settling (every drone within SETTLED_SHARE of the tolerance of its end) is left
+    # out: its fit's wiggles would cap the scaling's speed where the drones barely move
+    moving = np.flatnonzero(
+        np.linalg.norm(planned_m - planned_m[-1], axis=-1).max(axis=1) > SETTLED_SHARE * tolerance_m
+    )
+    cut = min(t.shape[0], (moving[-1] + 2) if moving.size else 2)
+    kept = np.concatenate([planned_m[: cut - 1], planned_m[-1:]])
+    dense = np.linspace(0.0, t[cut - 1], PATH_SAMPLES * (cut - 1) + 1)  # held commands: lines
+    lines = np.stack([np.interp(dense, t[:cut], x) for x in kept.reshape(cut, -1).T], axis=-1)
     lines = lines.reshape(dense.shape[0], n, 3)
     path = fit_positions(dense, lines, half, max_piece_s).polynomial
+    timing, poly, flown = _timed(path, t, yaw_rad, limits, half, max_piece_s, n, rate_hz)
+    if CRAZYFLIE_MAX_PIECES < flown.pieces <= 2 * CRAZYFLIE_MAX_PIECES:
+        for share in SMOOTHER:
+            smooth = replace(limits, max_jerk_mps3=share * limits.max_jerk_mps3)
+            timing, poly, flown = _timed(path, t, yaw_rad, smooth, half, max_piece_s, n, rate_hz)
+            if flown.pieces <= CRAZYFLIE_MAX_PIECES:
+                break
+    check_samples(timing.duration_s, n, rate_hz)
+    t_planned = timing.new_time(t)
+    err = flown.evaluate(t_planned).reshape(t.shape[0], n, 4)[..., :3] - planned_m
+    fit = PolynomialFit(poly, float(np.linalg.norm(err, axis=-1).max()), tolerance_m)
+    min_time = minimum_time_s(path, limits.max_speed_mps, limits.max_acc_mps2, limits.max_jerk_mps3)
+    return PhasePieces(name, planned_m, dense, lines, timing, fit, flown, t_planned, min_time)
+
+
+def _timed(
+    path: PiecewisePolynomial,
+    t: Array,
+    yaw_rad: Array,
+    limits: FlightLimits,
+    half: float,
+    max_piece_s: float,
+    n: int,
+    rate_hz: float,
+) -> tuple[Retiming, PiecewisePolynomial, PiecewisePolynomial]:
+    """``path`` retimed within ``limits`` and fitted (module docstring; :data:`REFITS`)."""
     timing = retime(
         path,
         LIMIT_SLACK * limits.max_speed_mps,
@@ -101,12 +146,7 @@ def phase_pieces(
         if slower <= 1.0:
             break
         timing = timing.slowed(1.02 * slower)
-    check_samples(timing.duration_s, n, rate_hz)
-    t_planned = timing.new_time(t)
-    err = flown.evaluate(t_planned).reshape(t.shape[0], n, 4)[..., :3] - planned_m
-    fit = PolynomialFit(poly, float(np.linalg.norm(err, axis=-1).max()), tolerance_m)
-    min_time = minimum_time_s(path, limits.max_speed_mps, limits.max_acc_mps2, limits.max_jerk_mps3)
-    return PhasePieces(name, planned_m, dense, lines, timing, fit, flown, t_planned, min_time)
+    return timing, poly, flown
 
 
 def _fit_pieces(
