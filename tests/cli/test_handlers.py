@@ -261,6 +261,28 @@ def test_export_command(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> N
     assert (tmp_path / "export" / "fly.py").exists() and (tmp_path / "export" / "crazyflies.yaml").exists()
 
 
+def test_export_takes_off_from_the_pads_of_a_crazyflies_yaml(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    short_run("swap_planar_8", tmp_path / "run", steps=40, flyable=True)
+    pads = [(1.0 * (k % 4), -4.0 - (k // 4), 0.0) for k in range(8)]
+    robots = "".join(f"  cf{k}:\n    initial_position: [{x}, {y}, {z}]\n" for k, (x, y, z) in enumerate(pads))
+    (tmp_path / "pads.yaml").write_text("robots:\n" + robots)
+    argv = ["export", str(tmp_path / "run"), "--ground", str(tmp_path / "pads.yaml"), "--no-flight-check"]
+    assert main(argv) == 0
+    placed = (tmp_path / "run" / "export" / "crazyflies.yaml").read_text()
+    assert (
+        sorted(placed.count(f"[{x:.4f}, {y:.4f}, 0.0000]") for x, y, _ in pads) == [1] * 8
+    )  # every pad used
+    (tmp_path / "pads.yaml").write_text("robots:\n" + robots.split("  cf7:")[0])
+    assert main(argv) == 2
+    assert (
+        capsys.readouterr()
+        .err.strip()
+        .endswith("--ground: 7 pads on the floor for 8 drones: expected at least 8")
+    )
+
+
 def test_export_refuses_the_floor_and_limits(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     short_run("swap_spatial_12", tmp_path, steps=10, flyable=True)
     assert main(["export", str(tmp_path), "--no-flight-check"]) != 0
