@@ -7,9 +7,8 @@ held velocity commands into huge path accelerations). The export flies ``P(s(t))
 ``s(t)`` for every drone, at rest at both ends: the drones keep their relative timing, so they pass
 the same places together as in the plan and the planned separation is kept along the paths.
 ``s(t)`` is the time-optimal scaling under the speed, acceleration and jerk limits
-(:mod:`mpcform.outputs.flight.topp`): fast where the path allows it, so a plan's slow approach to
-its goals passes quickly, and within 1.3 times the minimum time under speed and acceleration
-alone (:func:`minimum_time_s`, measured by the tests).
+(:mod:`mpcform.outputs.flight.topp`): fast wherever the path allows it. :func:`minimum_time_s`
+bounds the minimum time from below; the tests hold the scaling within 1.3 times it.
 """
 
 from __future__ import annotations
