@@ -89,7 +89,7 @@ def time_optimal(
     program = _Program(d1, d2, d3, dtau_s, upper, a_max, np.inf if j_max is None else j_max)
     b = program.solve(None)
     lower = float(_segment_times(b, dtau_s).sum())
-    if j_max is None:
+    if j_max is None or program.jerk_ok(b):  # the jerk limit does not bind
         return Profile(dtau_s, b, lower)
     # the first jerk tangents: a ladder from the speed-and-acceleration optimum down to a quarter
     # of the one constant scaling that keeps every limit (a tangent far above the optimum alone
@@ -103,8 +103,11 @@ def time_optimal(
     b = program.solve(ladder)
     duration = float(_segment_times(b, dtau_s).sum())
     for _ in range(JERK_ROUNDS):
-        b = program.solve(b[None])
-        new = float(_segment_times(b, dtau_s).sum())
+        try:
+            b_next = program.solve(b[None])
+        except MPCFormError:  # a later round that stalls keeps the last one (feasible, not slower)
+            break
+        b, new = b_next, float(_segment_times(b_next, dtau_s).sum())
         if abs(new - duration) <= SETTLED * new:
             break
         duration = new
@@ -152,6 +155,15 @@ class _Program:
             if not grew:
                 return b
         raise MPCFormError("the time scaling did not settle on its binding cones")
+
+    def jerk_ok(self, b: Array) -> bool:
+        """Whether ``b`` keeps every drone's jerk at every node within the limit."""
+        scale = np.sqrt(b[self.factor])[:, None]
+        return bool(
+            np.all(
+                scale * np.linalg.norm(self._values("jerk", b), axis=-1) <= self.limit["jerk"] * (1 + 1e-6)
+            )
+        )
 
     def _coefficients(self, kind: str) -> tuple[Array, Array, Array]:
         """Per node k and drone i, the vectors (K + 1, n, 3) multiplying ``b_{k-1}, b_k, b_{k+1}``

@@ -80,3 +80,9 @@ def test_a_path_standing_still_passes_at_the_fastest_scaling() -> None:
     (d1, d2, d3), step = _line(1.0)
     profile = time_optimal((0 * d1, 0 * d2, 0 * d3), step, 1.0, 1.0, 1.0)
     assert np.isfinite(profile.duration_s) and profile.duration_s < 0.05
+
+
+def test_a_jerk_limit_that_does_not_bind_gives_the_speed_and_acceleration_optimum() -> None:
+    derivatives, step = _line(4.0)
+    profile = time_optimal(derivatives, step, 1.0, 2.0, 1e9)  # no tangent of 1e9 / sqrt(b) to solve
+    assert profile.duration_s == profile.lower_bound_s
