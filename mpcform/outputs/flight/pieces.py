@@ -20,6 +20,7 @@ from mpcform._validate import Array
 from mpcform.errors import ValidationError
 from mpcform.outputs.flight.limits import FlightLimits, envelope, flat_state
 from mpcform.outputs.flight.polynomial import (
+    MIN_SAMPLES_PER_PIECE,
     PiecewisePolynomial,
     PolynomialFit,
     fit_piecewise_polynomial,
@@ -155,7 +156,10 @@ def _fit_pieces(
     """The fit of the retimed positions and the float32 pieces of the positions and the yaw
     (planned at ``t_s``)."""
     t_planned = timing.new_time(t_s)
-    grid = np.linspace(0.0, timing.duration_s, int(np.ceil(FIT_RATE_HZ * timing.duration_s)) + 1)
+    samples = max(
+        int(np.ceil(FIT_RATE_HZ * timing.duration_s)) + 1, 2 * MIN_SAMPLES_PER_PIECE
+    )  # a short phase too
+    grid = np.linspace(0.0, timing.duration_s, samples)
     t_fit = np.unique(np.concatenate([grid, t_planned]))
     poly = fit_positions(
         t_fit, timing.positions(t_fit), half_tolerance_m, max_piece_s, rest_ends=True
