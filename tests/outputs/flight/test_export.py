@@ -165,7 +165,7 @@ def test_poly_files_follow_the_uav_trajectories_format(tmp_path: Path) -> None:
 
 
 def test_long_fits_are_split_for_the_crazyflie(tmp_path: Path) -> None:
-    short_run("obstacles_planar", tmp_path / "run", steps=300, flyable=True)
+    short_run("obstacles_planar", tmp_path / "run", steps=80, flyable=True)
     result = export_run(load_run(tmp_path / "run"), tmp_path / "export", tolerance_m=0.001, fly=False)
     assert result.fit.polynomial.pieces > CRAZYFLIE_MAX_PIECES and result.files_per_drone >= 2
     assert any("exceed the Crazyflie's 31" in w for w in result.warnings)
