@@ -118,12 +118,8 @@ class _Program:
     """The convex program of :func:`time_optimal`: cones added where they bind."""
 
     def __init__(self, d1: Array, d2: Array, d3: Array, dtau: float, upper: Array, a: float, j: float):
-        self.d, self.dtau, self.upper, self.limit = (
-            (d1, d2, d3),
-            dtau,
-            upper,
-            {"acc_out": a, "acc_in": a, "jerk": j},
-        )
+        self.d, self.dtau, self.upper = (d1, d2, d3), dtau, upper
+        self.limit = {"acc_out": a, "acc_in": a, "jerk": j}
         nodes, n = d1.shape[:2]
         self.nodes = nodes
         self.factor = np.arange(nodes)  # whose sqrt(b) scales a node's jerk (the ends: their neighbour's)
