@@ -39,8 +39,8 @@ S_DOT_MAX = 100.0
 """The fastest the scaling runs through the plan (plan seconds per second): where the drones
 barely move (a plan's slow approach to its goals) the flight passes in 1/100 of the plan's time."""
 LADDER = 8  # the first jerk round's tangents per node, each a quarter of the one before
-JERK_ROUNDS = 3  # later rounds (the jerk's tangents at the previous solution), at most
-SETTLED = 2e-2  # relative change of the duration at which the rounds stop
+JERK_ROUNDS = 4  # later rounds (the jerk's tangents at the previous solution), at most
+SETTLED = 5e-3  # relative change of the duration at which the rounds stop
 TANGENT_FLOOR = 1e-3
 """The jerk's tangents are taken no lower than this share of the largest ``b`` (any tangent of the
 convex ``j / sqrt(b)`` lies below it, so each is safe; a tangent at nearly 0 would be ill-conditioned)."""
