@@ -11,8 +11,10 @@ Defaults and their sources (override with the export's ``--max-*`` options):
 
 - speed 1.0 m/s: crazyflie-firmware ``platform_defaults_cf2.h``, ``PID_POS_VEL_X/Y/Z_MAX``, the
   velocity the position PID may ask for;
-- acceleration g tan(20 deg) = 3.57 m/s^2: the same file's ``PID_VEL_ROLL_MAX`` /
-  ``PID_VEL_PITCH_MAX`` = 20 deg, the tilt the velocity PID may ask for;
+- acceleration 1.79 m/s^2, half of g tan(20 deg) = 3.57 m/s^2 (the same file's
+  ``PID_VEL_ROLL_MAX`` / ``PID_VEL_PITCH_MAX`` = 20 deg, the tilt the velocity PID may ask for):
+  the planner's platform bound, which leaves the position loop the other half for its
+  corrections (:data:`DEFAULT_MAX_ACC_MPS2`);
 - thrust: the collective force ``m |a + g e_z|`` must stay below the largest force of
   drone-models' ``cf2x_L250`` parameters (``acc_coef + cmd_f_coef * 4 thrust_max``, mass
   ``mass``, read by :func:`mpcform.sim.so_rpy.load_params`); skipped without drone-models;
