@@ -101,8 +101,9 @@ def phase_pieces(
     if CRAZYFLIE_MAX_PIECES < flown.pieces <= 2 * CRAZYFLIE_MAX_PIECES:
         for share in SMOOTHER:
             smooth = replace(limits, max_jerk_mps3=share * limits.max_jerk_mps3)
-            timing, poly, flown = _timed(path, t, yaw_rad, smooth, half, max_piece_s, n, rate_hz)
-            if flown.pieces <= CRAZYFLIE_MAX_PIECES:
+            smoother = _timed(path, t, yaw_rad, smooth, half, max_piece_s, n, rate_hz)
+            if smoother[2].pieces <= CRAZYFLIE_MAX_PIECES:  # else the faster one, split into files
+                timing, poly, flown = smoother
                 break
     check_samples(timing.duration_s, n, rate_hz)
     t_planned = timing.new_time(t)

@@ -50,3 +50,11 @@ def test_too_many_samples_are_refused_naming_the_rate() -> None:
     with pytest.raises(ValidationError, match="rate: the export would take"):
         pieces.check_samples(1e4, 1000, 100.0)
     pieces.check_samples(10.0, 2, 100.0)
+
+
+def test_a_smoother_timing_is_kept_only_when_it_fits_in_a_crazyflie(monkeypatch: pytest.MonkeyPatch) -> None:
+    fast = _phase("mission", 0.0, 3.0)
+    monkeypatch.setattr(pieces, "CRAZYFLIE_MAX_PIECES", (fast.flown.pieces + 1) // 2)  # no share gets there
+    kept = _phase("mission", 0.0, 3.0)
+    assert kept.flown.pieces == fast.flown.pieces
+    assert kept.timing.duration_s == pytest.approx(fast.timing.duration_s, rel=1e-12)
