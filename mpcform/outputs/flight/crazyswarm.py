@@ -11,7 +11,7 @@ straight up to the hover height before the first, and starts them together with
 ``startTrajectory(0, timescale=1.0, relative=False)`` (the files hold absolute positions;
 Crazyswarm2's default ``relative=True`` would shift them to the current setpoint); after the last
 it lands straight down. No move is left unplanned. The Crazyflie holds at most 31 pieces
-(:data:`~mpcform.outputs.flight.files.CRAZYFLIE_MAX_PIECES`): ``fly.py`` refuses a drone whose
+(:data:`~mpcform.outputs.flight.pieces.CRAZYFLIE_MAX_PIECES`): ``fly.py`` refuses a drone whose
 trajectory has more, before anything flies.
 """
 

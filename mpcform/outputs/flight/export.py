@@ -111,16 +111,20 @@ class ExportOptions:
             raise ValidationError("floor", f"expected a finite height [m], got {self.floor_m}")
         if len(self.offset_m) != 3 or not np.all(np.isfinite(self.offset_m)):
             raise ValidationError("offset", f"expected three finite numbers X,Y,Z, got {self.offset_m!r}")
-        if self.ground_m is not None and not (
-            len(self.ground_m)
-            and np.asarray(self.ground_m, dtype=float).shape[1:] == (2,)
-            and np.all(np.isfinite(self.ground_m))
-        ):
-            raise ValidationError(
-                "ground", f"expected pads of two finite numbers x, y, got {self.ground_m!r}"
-            )
+        if self.ground_m is not None:
+            _check_pads(self.ground_m)
         if self.yaw not in YAW_MODES:
             raise ValidationError("yaw", f"expected one of {', '.join(YAW_MODES)}, got {self.yaw!r}")
+
+
+def _check_pads(pads: object) -> None:
+    """Refuse pads that are not a non-empty list of finite ``(x, y)`` [m]."""
+    try:
+        xy = np.asarray(pads, dtype=float)
+    except (TypeError, ValueError):  # ragged or not numbers
+        xy = np.empty((0, 0))
+    if not (xy.ndim == 2 and xy.shape[0] and xy.shape[1] == 2 and np.all(np.isfinite(xy))):
+        raise ValidationError("ground", f"expected pads of two finite numbers x, y, got {pads!r}")
 
 
 @dataclass(frozen=True)

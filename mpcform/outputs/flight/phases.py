@@ -48,7 +48,7 @@ ARRIVED_M = 0.002  # a phase ends once every drone is this close to its goal (th
 PHASE_GAIN_PER_S = 2.0  # eq. 14's k in the ascent and descent
 LAYOUT_SPACING = 1.25  # a grid layout's spacing per distance the planner keeps (so it can reach it)
 LEG_MIN_S = 1.5  # the shortest takeoff or landing [s]
-SLOW_SHARE = 0.05  # a retimed phase may end below this share of the speed limit for 0.5 s at most
+SLOW_SHARE = 0.05  # a retimed phase's slow end: every drone below this share of the speed limit
 _SEPTIC = np.polynomial.Polynomial([0, 0, 0, 0, 35, -84, 70, -20])  # rest to rest, zero jerk at both ends
 _S = np.linspace(0.0, 1.0, 2001)
 LEG_PEAKS = tuple(float(np.abs(_SEPTIC.deriv(r)(_S)).max()) for r in (1, 2, 3))
@@ -194,9 +194,9 @@ def phase_record(
 ) -> dict[str, Any]:
     """Per phase (takeoff, the exported ``parts``, landing): duration [s], peak speed [m/s],
     acceleration [m/s^2] and jerk [m/s^3], and the closest two drones [m] of its pieces (in the
-    downwash ``metric`` when given); for the
-    retimed ones the minimum duration under speed and acceleration alone and ``slow_end_s``, how
-    long the phase ends with every drone below :data:`SLOW_SHARE` of the speed limit."""
+    downwash ``metric`` when given); for the retimed ones ``min_time_s``, a lower bound on their
+    duration (:func:`mpcform.outputs.flight.retime.minimum_time_s`), and ``slow_end_s``, how long
+    the phase ends with every drone below :data:`SLOW_SHARE` of the speed limit."""
     h = flight.hover_m - flight.floor_m
     out: dict[str, Any] = {"takeoff": _leg(flight.takeoff_s, h, flight.takeoff_xy_m)}
     for part in parts:

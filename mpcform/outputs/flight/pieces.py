@@ -12,12 +12,12 @@ ends at rest, so the phases join into one flight (:func:`join`) whose derivative
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 
 from mpcform._validate import Array
-from mpcform.errors import ValidationError
+from mpcform.errors import MPCFormError, ValidationError
 from mpcform.outputs.flight.limits import FlightLimits, envelope, flat_state
 from mpcform.outputs.flight.polynomial import (
     MIN_SAMPLES_PER_PIECE,
@@ -36,9 +36,9 @@ CRAZYFLIE_MAX_PIECES = 31
 """Pieces a Crazyflie holds (``TRAJECTORY_MEMORY_SIZE`` 4096 B / 132 B per piece in crazyflie-firmware)."""
 SMOOTHER = (0.5, 0.25)
 """A phase whose fit takes more pieces than a Crazyflie holds (but at most twice as many) is
-retimed with the jerk limit at these shares in turn: the time-optimal scaling switches its
-acceleration abruptly, and a smoother one fits in fewer pieces (obstacles_planar's mission: 37
-pieces at 30 m/s^3, 22 at 5 m/s^3, 6 % slower)."""
+retimed with the jerk limit at these shares in turn (checked against the whole limit): the
+time-optimal scaling switches its acceleration abruptly, and a smoother one fits in fewer pieces.
+The smoother one is kept only when it fits."""
 SETTLED_SHARE = 0.25
 """A phase's last samples, once every drone is within this share of the tolerance of its end, are
 flown as its end (each within 5 mm at the default 2 cm)."""
@@ -100,8 +100,10 @@ def phase_pieces(
     timing, poly, flown = _timed(path, t, yaw_rad, limits, half, max_piece_s, n, rate_hz)
     if CRAZYFLIE_MAX_PIECES < flown.pieces <= 2 * CRAZYFLIE_MAX_PIECES:
         for share in SMOOTHER:
-            smooth = replace(limits, max_jerk_mps3=share * limits.max_jerk_mps3)
-            smoother = _timed(path, t, yaw_rad, smooth, half, max_piece_s, n, rate_hz)
+            try:
+                smoother = _timed(path, t, yaw_rad, limits, half, max_piece_s, n, rate_hz, share)
+            except MPCFormError:  # e.g. a flight too long to sample: the faster one stays
+                continue
             if smoother[2].pieces <= CRAZYFLIE_MAX_PIECES:  # else the faster one, split into files
                 timing, poly, flown = smoother
                 break
@@ -122,16 +124,19 @@ def _timed(
     max_piece_s: float,
     n: int,
     rate_hz: float,
+    jerk_share: float = 1.0,
 ) -> tuple[Retiming, PiecewisePolynomial, PiecewisePolynomial]:
-    """``path`` retimed within ``limits`` and fitted (module docstring; :data:`REFITS`)."""
+    """``path`` retimed within ``limits`` (its jerk at ``jerk_share`` of the limit:
+    :data:`SMOOTHER`) and fitted; a fit that exceeds a limit is slowed down and fitted again
+    (module docstring; :data:`REFITS`), the last one returned as it is."""
     timing = retime(
         path,
         LIMIT_SLACK * limits.max_speed_mps,
         LIMIT_SLACK * limits.max_acc_mps2,
-        LIMIT_SLACK * limits.max_jerk_mps3,
+        LIMIT_SLACK * jerk_share * limits.max_jerk_mps3,
         max_duration_s=MAX_SAMPLES / (n * (CHECK_RATE_HZ + DEFAULT_RATE_HZ)),
     )
-    for _ in range(REFITS):
+    for refit in range(REFITS + 1):
         check_samples(timing.duration_s, n, rate_hz)
         poly, flown = _fit_pieces(timing, t, yaw_rad, half, max_piece_s, n)
         check = np.linspace(0.0, flown.duration_s, int(np.ceil(CHECK_RATE_HZ * flown.duration_s)) + 1)
@@ -145,7 +150,7 @@ def _timed(
                 (env.jerk, limits.max_jerk_mps3, 3),
             )
         )
-        if slower <= 1.0:
+        if slower <= 1.0 or refit == REFITS:
             break
         timing = timing.slowed(1.02 * slower)
     return timing, poly, flown

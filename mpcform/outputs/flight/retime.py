@@ -22,7 +22,7 @@ from ruckig import Trajectory as RuckigTrajectory
 from scipy.integrate import trapezoid
 
 from mpcform._validate import Array, positive
-from mpcform.errors import ValidationError
+from mpcform.errors import MPCFormError, ValidationError
 from mpcform.outputs.flight.polynomial import PiecewisePolynomial
 from mpcform.outputs.flight.topp import time_optimal
 
@@ -101,12 +101,17 @@ def minimum_time_s(
     path: PiecewisePolynomial, v_max_mps: float, a_max_mps2: float, j_max_mps3: float
 ) -> float:
     """A lower bound on the shortest rest-to-rest flight along ``path`` within the limits: the
-    larger of the time-optimal flight under speed and acceleration alone and ruckig's time-optimal
-    straight flight over the farthest drone's distance from start to end (the motion projected
-    on that line starts and ends at rest within all three limits)."""
+    largest of the time-optimal flight under speed and acceleration alone (with its limits held at
+    the nodes, :data:`NODE_SPACING_S` of the plan apart), ruckig's time-optimal straight flight
+    over the farthest drone's distance from start to end (the motion projected on that line starts
+    and ends at rest within all three limits) and the longest path under each limit alone."""
+    bound = max(_duration_floors(path, v_max_mps, a_max_mps2, j_max_mps3))
     tau, derivatives = _nodes(path)
     step = path.duration_s / (tau.shape[0] - 1)
-    bound = time_optimal(derivatives, step, v_max_mps, a_max_mps2, None).lower_bound_s
+    try:
+        bound = max(bound, time_optimal(derivatives, step, v_max_mps, a_max_mps2, None).lower_bound_s)
+    except MPCFormError:  # the scaling's program did not solve: the other bounds stand
+        pass
     ends = path.evaluate(np.array([0.0, path.duration_s])).reshape(2, -1, 3)
     otg, inp, out = Ruckig(1), InputParameter(1), RuckigTrajectory(1)
     inp.current_position = [0.0]

@@ -113,8 +113,8 @@ def test_flight_starts_and_ends_at_rest(tmp_path: Path, name: str) -> None:
     result = export_run(load_run(tmp_path / "run"), tmp_path / "export", offset_m=LIFT, fly=False)
     poly = read_poly([tmp_path / "export" / "drone000_poly7.csv"])
     for end in (0.0, poly.duration_s):
-        assert np.abs(poly.evaluate(end, 1)[0, :3]).max() < 1e-5  # float32 coefficients
-        assert np.abs(poly.evaluate(end, 2)[0, :3]).max() < 1e-5  # float32 coefficients
+        assert np.abs(poly.evaluate(end, 1)[0, :3]).max() < 1e-4  # float32 coefficients: ~1e-5 of rounding
+        assert np.abs(poly.evaluate(end, 2)[0, :3]).max() < 1e-4  # float32 coefficients: ~1e-5 of rounding
     mission = result.record["phases"]["mission"]  # close to the fastest flight along the path
     assert mission["min_time_s"] <= result.retiming.duration_s <= 1.3 * mission["min_time_s"]
     assert mission["slow_end_s"] <= 0.5
@@ -264,6 +264,13 @@ def test_a_floor_that_is_not_a_height_is_refused(floor: float) -> None:
     """``--floor nan`` used to pass every check and write a fly.py with a NaN takeoff height."""
     with pytest.raises(ValidationError, match="floor: expected a finite height"):
         ExportOptions(floor_m=floor)
+
+
+@pytest.mark.parametrize("pads", [(), ((0.0, 0.0), (1.0,)), (("a", "b"),), ((0.0, float("nan")),)])
+def test_pads_that_are_not_points_on_the_floor_are_refused(pads: tuple) -> None:
+    """Ragged pads from the API used to end in numpy's ValueError."""
+    with pytest.raises(ValidationError, match="ground: expected pads of two finite numbers"):
+        ExportOptions(ground_m=pads)
 
 
 def test_an_export_of_too_many_samples_is_refused_naming_the_rate(tmp_path: Path) -> None:

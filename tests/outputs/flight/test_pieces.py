@@ -58,3 +58,12 @@ def test_a_smoother_timing_is_kept_only_when_it_fits_in_a_crazyflie(monkeypatch:
     kept = _phase("mission", 0.0, 3.0)
     assert kept.flown.pieces == fast.flown.pieces
     assert kept.timing.duration_s == pytest.approx(fast.timing.duration_s, rel=1e-12)
+
+
+def test_the_timing_is_the_one_the_pieces_were_fitted_to_when_the_refits_run_out(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    monkeypatch.setattr(pieces, "LIMIT_SLACK", 1.5)  # aim above the limits: every fit exceeds one
+    monkeypatch.setattr(pieces, "REFITS", 1)
+    part = _phase("mission", 0.0, 3.0)
+    assert part.timing.duration_s == pytest.approx(part.flown.duration_s, abs=1e-4)
