@@ -122,6 +122,7 @@ def export_options(args: argparse.Namespace) -> ExportOptions:
         args.max_body_rate_rad_s,
         platform_thrust_acc_mps2(),
     )
+    pads = None if args.ground is None else read_pads(args.ground)
     return ExportOptions(
         altitude_m=args.altitude,
         offset_m=args.offset,
@@ -135,7 +136,8 @@ def export_options(args: argparse.Namespace) -> ExportOptions:
         allow_unsafe=args.allow_unsafe,
         fly=not args.no_flight_check,
         crazyflow=args.crazyflow,
-        ground_m=None if args.ground is None else read_pads(args.ground),
+        ground_m=pads[0] if pads else None,
+        ground_robots=pads[1] if pads else None,
     )
 
 

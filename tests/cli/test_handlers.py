@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import yaml
 from saved_runs import SCENARIOS, short_run
 
 from mpcform.cli import handlers as cli_runner
@@ -266,15 +267,20 @@ def test_export_takes_off_from_the_pads_of_a_crazyflies_yaml(
 ) -> None:
     short_run("swap_planar_8", tmp_path / "run", steps=40, flyable=True)
     pads = [(1.0 * (k % 4), -4.0 - (k // 4), 0.0) for k in range(8)]
-    robots = "".join(f"  cf{k}:\n    initial_position: [{x}, {y}, {z}]\n" for k, (x, y, z) in enumerate(pads))
+    robots = "".join(
+        f"  lab{k}:\n    uri: radio://0/{k}/2M/E7E7E7E7{k:02X}\n    initial_position: [{x}, {y}, {z}]\n"
+        for k, (x, y, z) in enumerate(pads)
+    )
     (tmp_path / "pads.yaml").write_text("robots:\n" + robots)
     argv = ["export", str(tmp_path / "run"), "--ground", str(tmp_path / "pads.yaml"), "--no-flight-check"]
     assert main(argv) == 0
-    placed = (tmp_path / "run" / "export" / "crazyflies.yaml").read_text()
-    assert (
-        sorted(placed.count(f"[{x:.4f}, {y:.4f}, 0.0000]") for x, y, _ in pads) == [1] * 8
-    )  # every pad used
-    (tmp_path / "pads.yaml").write_text("robots:\n" + robots.split("  cf7:")[0])
+    placed = yaml.safe_load((tmp_path / "run" / "export" / "crazyflies.yaml").read_text())["robots"]
+    for k, (x, y, _) in enumerate(pads):  # every pad used, by the robot standing on it
+        assert placed[f"lab{k}"]["uri"] == f"radio://0/{k}/2M/E7E7E7E7{k:02X}"
+        assert placed[f"lab{k}"]["initial_position"] == [x, y, 0.0]
+    fly = (tmp_path / "run" / "export" / "fly.py").read_text()
+    assert all(f"'lab{k}': (" in fly for k in range(8)) and "'cf1'" not in fly
+    (tmp_path / "pads.yaml").write_text("robots:\n" + robots.split("  lab7:")[0])
     assert main(argv) == 2
     assert (
         capsys.readouterr()

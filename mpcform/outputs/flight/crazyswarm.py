@@ -2,8 +2,9 @@
 
 ``crazyflies.yaml`` lists one robot per drone (``cf1``, ``cf2``, ... for drone 0, 1, ...) in
 Crazyswarm2's format (``enabled``, ``uri``, ``initial_position``, ``type``); the radio
-addresses are placeholders to edit; each robot's ``initial_position`` is its place on the floor
-in the takeoff layout (:mod:`mpcform.outputs.flight.phases`). ``fly.py`` uses Crazyswarm2's Python
+addresses are placeholders to edit (on the pads of ``--ground``, each drone is the robot standing
+on its takeoff pad, with that robot's name and uri); each robot's ``initial_position`` is its
+place on the floor in the takeoff layout (:mod:`mpcform.outputs.flight.phases`). ``fly.py`` uses Crazyswarm2's Python
 API (``crazyflie_py``): it checks every phase's file of every drone, then for each phase (the
 ascent, the mission, the descent) uploads each drone's trajectory as trajectory 0
 (``uploadTrajectory(0, 0, traj)``: the memory holds one phase) while the drones hover, takes off
@@ -17,6 +18,7 @@ trajectory has more, before anything flies.
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import numpy as np
@@ -93,32 +95,43 @@ if __name__ == "__main__":
 '''
 
 
+ROS_NAME = re.compile(r"[A-Za-z][A-Za-z0-9_]*")  # a Crazyswarm2 robot's name is a ROS name
+URI = re.compile(r"[A-Za-z0-9_.:/\-]+")  # radio://0/80/2M/E7E7E7E701, usb://0, ...
+EXAMPLE_URI = "radio://0/80/2M/E7E7E7E701"
+
+
 def robot_name(i: int) -> str:
     """Crazyswarm2 name of drone ``i`` (0-based): ``cf1``, ``cf2``, ..."""
     return f"cf{i + 1}"
 
 
-def crazyflies_yaml(floor_m: Array) -> str:
-    """The ``robots`` section for drones placed at ``floor_m`` (n, 3): the takeoff layout."""
-    lines = ["# mpcform export: one robot per drone; edit each uri (radio address) before flying", "robots:"]
+def crazyflies_yaml(floor_m: Array, robots: list[tuple[str, str]] | None = None) -> str:
+    """The ``robots`` section for drones placed at ``floor_m`` (n, 3): the takeoff layout, with
+    each drone's (name, uri) from ``robots`` (the robots on the pads of ``--ground``; an empty
+    uri: a placeholder) or :func:`robot_name` and a placeholder uri."""
+    lines = ["# mpcform export: one robot per drone; edit each placeholder uri before flying", "robots:"]
     for i, p in enumerate(np.round(floor_m, 4).tolist()):
         x, y, z = (c + 0.0 for c in p)  # rounded first, + 0.0: no "-0.0000"
+        name, uri = robots[i] if robots is not None else (robot_name(i), "")
         lines += [
-            f"  {robot_name(i)}:",
+            f"  {name}:",
             "    enabled: true",
-            f"    uri: radio://0/80/2M/E7E7E7E7{i + 1:02X}  # placeholder",
+            f"    uri: {uri}" if uri else f"    uri: radio://0/80/2M/E7E7E7E7{i + 1:02X}  # placeholder",
             f"    initial_position: [{x:.4f}, {y:.4f}, {z:.4f}]",
             f"    type: {ROBOT_TYPE}",
         ]
     return "\n".join(lines) + "\n"
 
 
-def fly_script(stems: list[str], flight: Flight, phases: list[tuple[str, float]]) -> str:
+def fly_script(
+    stems: list[str], flight: Flight, phases: list[tuple[str, float]], names: list[str] | None = None
+) -> str:
     """The text of ``fly.py`` for the drones' files ``<stem>[_<phase>]_poly7.csv`` of each of
-    ``phases`` (name, duration [s]) and their ``flight``."""
+    ``phases`` (name, duration [s]) and their ``flight``, flown by the robots ``names`` (None:
+    :func:`robot_name`)."""
     places = _places(flight)
     robots = {
-        robot_name(i): (
+        (names[i] if names is not None else robot_name(i)): (
             [f"{stem}{'' if name == 'mission' else '_' + name}_poly7.csv" for name, _ in phases],
             [round(x, 4) + 0.0 for x in places[i].tolist()],
         )
@@ -134,11 +147,21 @@ def fly_script(stems: list[str], flight: Flight, phases: list[tuple[str, float]]
     )
 
 
-def write_files(out: Path, stems: list[str], flight: Flight, phases: list[tuple[str, float]]) -> list[Path]:
-    """Write ``crazyflies.yaml`` and ``fly.py`` into ``out``."""
+def write_files(
+    out: Path,
+    stems: list[str],
+    flight: Flight,
+    phases: list[tuple[str, float]],
+    pad_robots: tuple[tuple[str, str], ...] | None = None,
+) -> list[Path]:
+    """Write ``crazyflies.yaml`` and ``fly.py`` into ``out``; with ``pad_robots`` (name, uri) per
+    pad of ``--ground``, each drone is flown by the robot on the pad it takes off from."""
+    robots = None
+    if pad_robots is not None and flight.takeoff_pads is not None:
+        robots = [pad_robots[k] for k in flight.takeoff_pads.tolist()]
     yaml, fly = out / CRAZYFLIES_YAML, out / FLY_PY
-    yaml.write_text(crazyflies_yaml(_places(flight)))
-    fly.write_text(fly_script(stems, flight, phases))
+    yaml.write_text(crazyflies_yaml(_places(flight), robots))
+    fly.write_text(fly_script(stems, flight, phases, None if robots is None else [r[0] for r in robots]))
     return [yaml, fly]
 
 
@@ -148,10 +171,10 @@ def _places(flight: Flight) -> Array:
     return np.column_stack([xy, np.full(xy.shape[0], flight.floor_m)])
 
 
-def read_pads(path: str | Path) -> tuple[tuple[float, float], ...]:
+def read_pads(path: str | Path) -> tuple[tuple[tuple[float, float], ...], tuple[tuple[str, str], ...]]:
     """The floor positions ``(x, y)`` [m] of the enabled robots of a ``crazyflies.yaml``
-    (Crazyswarm2's ``robots: name: initial_position: [x, y, z]``): the pads an export takes off
-    from and lands on. Needs PyYAML (the ``flight`` extra)."""
+    (Crazyswarm2's ``robots: name: {uri, initial_position: [x, y, z]}``), the pads an export takes
+    off from and lands on, and their robots' (name, uri). Needs PyYAML (the ``flight`` extra)."""
     try:
         import yaml
     except ImportError:
@@ -165,14 +188,25 @@ def read_pads(path: str | Path) -> tuple[tuple[float, float], ...]:
     robots = doc.get("robots") if isinstance(doc, dict) else None
     if not isinstance(robots, dict) or not robots:
         raise ValidationError("ground", f"{path}: expected a 'robots' table of Crazyswarm2 robots")
-    pads = []
+    pads, names = [], []
     for name, robot in robots.items():
         if not isinstance(robot, dict) or not robot.get("enabled", True):
             continue
-        p = robot.get("initial_position")
+        p, uri = robot.get("initial_position"), robot.get("uri")
         if not (isinstance(p, list) and len(p) in (2, 3) and all(isinstance(x, int | float) for x in p)):
             raise ValidationError(
                 "ground", f"{path}: robot {name}: expected initial_position [x, y, z], got {p!r}"
             )
+        if not (isinstance(name, str) and ROS_NAME.fullmatch(name)):
+            raise ValidationError(
+                "ground", f"{path}: robot {name!r}: expected a ROS name ([A-Za-z][A-Za-z0-9_]*)"
+            )
+        if uri is not None and not (isinstance(uri, str) and URI.fullmatch(uri)):
+            raise ValidationError(
+                "ground", f"{path}: robot {name}: expected a uri such as {EXAMPLE_URI}, got {uri!r}"
+            )
         pads.append((float(p[0]), float(p[1])))
-    return tuple(pads)
+        names.append((name, uri or ""))
+    if not pads:
+        raise ValidationError("ground", f"{path}: no enabled robot: expected one pad per drone")
+    return tuple(pads), tuple(names)

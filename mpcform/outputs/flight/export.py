@@ -101,6 +101,7 @@ class ExportOptions:
     fly: bool = True  # fly the export on the quadrotor plant (skipped without drone-models)
     crazyflow: bool = False  # also fly it open loop in crazyflow (needs the extra)
     ground_m: tuple[tuple[float, float], ...] | None = None  # pads (x, y) [m]; None: mpcform's layout
+    ground_robots: tuple[tuple[str, str], ...] | None = None  # (name, uri) of the robot on each pad
 
     def __post_init__(self) -> None:
         positive("tolerance", self.tolerance_m)
@@ -113,6 +114,10 @@ class ExportOptions:
             raise ValidationError("offset", f"expected three finite numbers X,Y,Z, got {self.offset_m!r}")
         if self.ground_m is not None:
             _check_pads(self.ground_m)
+        if self.ground_robots is not None and (
+            self.ground_m is None or len(self.ground_robots) != len(self.ground_m)
+        ):
+            raise ValidationError("ground", "expected a (name, uri) for each pad of ground_m")
         if self.yaw not in YAW_MODES:
             raise ValidationError("yaw", f"expected one of {', '.join(YAW_MODES)}, got {self.yaw!r}")
 
@@ -245,7 +250,8 @@ def export_run(
     files: list[Path] = []
     for part in parts:
         files += write_phase(out, stems, part, opts.rate_hz)
-    files += crazyswarm.write_files(out, stems, flight, [(p.name, p.flown.duration_s) for p in parts])
+    phases = [(p.name, p.flown.duration_s) for p in parts]
+    files += crazyswarm.write_files(out, stems, flight, phases, opts.ground_robots)
     if check is not None and check.max_error_m > check.declared_tolerance_m:
         warnings.append(
             f"flown on the quadrotor plant, drone {check.error_drone} is {check.max_error_m:.3g} m off "

@@ -60,8 +60,8 @@ LEG_PEAKS = tuple(float(np.abs(_SEPTIC.deriv(r)(_S)).max()) for r in (1, 2, 3))
 class Flight:
     """The planned path (T, n, 3) [m] at the mission's ``dt_s``: the ascent, the mission and the
     descent, each a ``phases`` entry (name, its samples; an ascent or descent without motion is
-    left out); the layouts (n, 2) [m] on the floor at ``floor_m``, the hover height [m] and the
-    vertical legs' durations [s]."""
+    left out); the layouts (n, 2) [m] on the floor at ``floor_m``, the hover height [m], the
+    vertical legs' durations [s] and, on given pads, the pad each drone takes off from (n,)."""
 
     positions_m: Array
     dt_s: float
@@ -72,6 +72,7 @@ class Flight:
     hover_m: float
     takeoff_s: float
     land_s: float
+    takeoff_pads: Array | None = None
 
 
 def ground_layout(xy_m: Array, spacing_m: float) -> Array:
@@ -88,9 +89,9 @@ def ground_layout(xy_m: Array, spacing_m: float) -> Array:
 
 
 def pad_layout(xy_m: Array, pads_m: Array, spacing_m: float) -> Array:
-    """Positions (n, 2) on the given ``pads_m`` (k, 2), k >= n: the assignment nearest to
-    ``xy_m`` (scipy's ``linear_sum_assignment``); pads closer than ``spacing_m`` are refused, naming
-    the pair (the planner could not start from them)."""
+    """The pads (n,) of ``pads_m`` (k, 2), k >= n, the drones at ``xy_m`` go to: the assignment of
+    least total squared distance (scipy's ``linear_sum_assignment``); pads closer than
+    ``spacing_m`` are refused, naming the pair (the planner could not start from them)."""
     n, k = xy_m.shape[0], pads_m.shape[0]
     if k < n:
         raise ValidationError(
@@ -109,7 +110,7 @@ def pad_layout(xy_m: Array, pads_m: Array, spacing_m: float) -> Array:
             f"pads {a} and {b} are {gap[i, j]:.3g} m apart, closer than the {spacing_m:.3g} m the "
             "planner keeps (d_min + 2 tracking): move them apart",
         )
-    return pads_m[chosen]
+    return chosen
 
 
 def vertical_leg_s(height_m: float, limits: FlightLimits, slack: float = 0.9) -> float:
@@ -171,10 +172,12 @@ def whole_flight(
     lo, hi = np.array([-np.inf, -np.inf, bottom]), np.full(3, np.inf)
     limits = replace(limits, geofence_min_m=lo, geofence_max_m=hi)  # the floor: no drone pushed into it
     keep = 0.0 if limits.d_min_m is None else limits.d_min_m + 2.0 * limits.tracking_m
+    pads = None
     if pads_m is None:
         up, down = (ground_layout(x[:, :2], LAYOUT_SPACING * keep) for x in (first, last))
     else:
-        up, down = (pad_layout(x[:, :2], pads_m, keep) for x in (first, last))
+        pads, landing = (pad_layout(x[:, :2], pads_m, keep) for x in (first, last))
+        up, down = pads_m[pads], pads_m[landing]
     lift = np.column_stack([up, np.full(up.shape[0], hover)])
     land = np.column_stack([down, np.full(down.shape[0], hover)])
     ascent = plan_phase(lift, first, dt_s, limits, "ascent")
@@ -186,7 +189,7 @@ def whole_flight(
     if descent.shape[0] > 1 and np.any(descent[-1] != descent[0]):
         phases.append(("descent", slice(b, path.shape[0])))
     takeoff_s = vertical_leg_s(hover - floor_m, flight_limits)
-    return Flight(path, dt_s, tuple(phases), up, down, floor_m, hover, takeoff_s, takeoff_s)
+    return Flight(path, dt_s, tuple(phases), up, down, floor_m, hover, takeoff_s, takeoff_s, pads)
 
 
 def phase_record(

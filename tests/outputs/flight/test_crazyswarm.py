@@ -162,14 +162,25 @@ def test_crazyflies_yaml_prints_no_negative_zero() -> None:
 def test_pads_are_read_from_a_crazyflies_yaml(tmp_path: Path) -> None:
     path = tmp_path / "crazyflies.yaml"
     path.write_text(crazyflies_yaml(np.array([[0.0, 1.0, 0.0], [2.5, -1.0, 0.0]])))  # our own, read back
-    assert read_pads(path) == ((0.0, 1.0), (2.5, -1.0))
+    pads, robots = read_pads(path)
+    assert pads == ((0.0, 1.0), (2.5, -1.0))
+    assert robots == (("cf1", "radio://0/80/2M/E7E7E7E701"), ("cf2", "radio://0/80/2M/E7E7E7E702"))
     path.write_text(
         "robots:\n  cf1:\n    enabled: false\n    initial_position: [0, 0, 0]\n"
-        "  cf2:\n    initial_position: [1, 2, 0]\n"
+        "  cf7:\n    initial_position: [1, 2, 0]\n"
     )
-    assert read_pads(path) == ((1.0, 2.0),)  # a disabled robot has no pad
-    path.write_text("robots:\n  cf1:\n    initial_position: [0, nope]\n")
-    with pytest.raises(ValidationError, match=r"^ground: .*robot cf1: expected initial_position \[x, y, z\]"):
-        read_pads(path)
+    assert read_pads(path) == (((1.0, 2.0),), (("cf7", ""),))  # a disabled robot has no pad; no uri
+    for bad, pattern in (
+        ("robots:\n  cf1:\n    initial_position: [0, nope]\n", r"robot cf1: expected initial_position"),
+        ("robots:\n  cf 1:\n    initial_position: [0, 0, 0]\n", r"robot 'cf 1': expected a ROS name"),
+        (
+            "robots:\n  cf1:\n    uri: 'radio: x\\n'\n    initial_position: [0, 0, 0]\n",
+            r"cf1: expected a uri",
+        ),
+        ("robots:\n  cf1:\n    enabled: false\n    initial_position: [0, 0, 0]\n", r"no enabled robot"),
+    ):
+        path.write_text(bad)
+        with pytest.raises(ValidationError, match=r"^ground: .*" + pattern):
+            read_pads(path)
     with pytest.raises(ValidationError, match=r"^ground: cannot read"):
         read_pads(tmp_path / "missing.yaml")
