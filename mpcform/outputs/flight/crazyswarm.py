@@ -4,10 +4,11 @@
 Crazyswarm2's format (``enabled``, ``uri``, ``initial_position``, ``type``); the radio
 addresses are placeholders to edit (on the pads of ``--ground``, each drone is the robot standing
 on its takeoff pad, with that robot's name and uri); each robot's ``initial_position`` is its
-place on the floor in the takeoff layout (:mod:`mpcform.outputs.flight.phases`). ``fly.py`` uses Crazyswarm2's Python
-API (``crazyflie_py``): it checks every phase's file of every drone, then for each phase (the
-ascent, the mission, the descent) uploads each drone's trajectory as trajectory 0
-(``uploadTrajectory(0, 0, traj)``: the memory holds one phase) while the drones hover, takes off
+place on the floor in the takeoff layout (:mod:`mpcform.outputs.flight.phases`). ``fly.py`` uses
+Crazyswarm2's Python API (``crazyflie_py``): it checks every phase's file of every drone, then
+for each phase (the ascent, the mission, the descent) uploads each drone's trajectory as
+trajectory 0 (``uploadTrajectory(0, 0, traj)``: the memory holds one phase) while the drones
+hover, takes off
 straight up to the hover height before the first, and starts them together with
 ``startTrajectory(0, timescale=1.0, relative=False)`` (the files hold absolute positions;
 Crazyswarm2's default ``relative=True`` would shift them to the current setpoint); after the last
