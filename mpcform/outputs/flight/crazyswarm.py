@@ -8,8 +8,7 @@ place on the floor in the takeoff layout (:mod:`mpcform.outputs.flight.phases`).
 Crazyswarm2's Python API (``crazyflie_py``): it checks every phase's file of every drone, then
 for each phase (the ascent, the mission, the descent) uploads each drone's trajectory as
 trajectory 0 (``uploadTrajectory(0, 0, traj)``: the memory holds one phase) while the drones
-hover, takes off
-straight up to the hover height before the first, and starts them together with
+hover, takes off straight up to the hover height before the first, and starts them together with
 ``startTrajectory(0, timescale=1.0, relative=False)`` (the files hold absolute positions;
 Crazyswarm2's default ``relative=True`` would shift them to the current setpoint); after the last
 it lands straight down. No move is left unplanned. The Crazyflie holds at most 31 pieces
