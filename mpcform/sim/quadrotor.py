@@ -7,7 +7,9 @@ firmware's ``position_controller_pid`` computes, for every drone at once:
 
 - velocity setpoint ``v_sp = u + kp (p_ref - p)``, with ``p_ref = planned + u (t - t_k)`` when the
   planner passes its planned positions (no position term otherwise), and an altitude hold at
-  ``altitude_m`` for planar (d = 2) flights, which return the horizontal position only;
+  ``altitude_m`` for planar (d = 2) flights, which return the horizontal position only (a
+  full-state setpoint, :meth:`QuadrotorPlant.follow`, adds its acceleration ``a_ff``: ``u + a_ff
+  (t - t_k)``, ``p_ref + a_ff (t - t_k)^2 / 2`` and ``a_ff`` in the desired acceleration);
 - desired acceleration ``a = kv (v_sp - v) + ki I`` with ``I' = v_sp - v`` (``|ki I|`` clamped at
   ``i_limit_mps2``), vertical part within ``[-g/2, thrust limit]`` and horizontal part scaled so the
   tilt stays within ``max_tilt_rad``;
@@ -36,10 +38,10 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.linalg import expm
 
-from mpcform._validate import Array, positive
+from mpcform._validate import Array, finite_array, positive
 from mpcform.errors import ValidationError
 from mpcform.sim import so_rpy
-from mpcform.sim.plants import Loop, Plant
+from mpcform.sim.plants import Loop, Plant, PlantSamples
 from mpcform.sim.so_rpy import RPY, STATE, F, P, QuadrotorParams, V
 
 RK4_STEP = 0.5
@@ -130,6 +132,7 @@ class QuadrotorPlant(Plant):
             self._x[:, 2] = self.spec.altitude_m
         self._x[:, F] = self.params.hover_command_N  # level hover thrust
         self._i = np.zeros((self.n, 3))
+        self._acc_ff = np.zeros((self.n, 3))  # a full-state setpoint's acceleration (:meth:`follow`)
         self._no_force = np.zeros((self.n, 3))
         self._cmd = np.zeros((self.n, 4))
         self._cmd[:, 3] = self.params.hover_command_N
@@ -178,6 +181,21 @@ class QuadrotorPlant(Plant):
             )
         return steps
 
+    def follow(
+        self, positions_m: Array, velocities_mps: Array, accelerations_mps2: Array, dt_s: float
+    ) -> PlantSamples:
+        """Hold a full-state setpoint (n, d) each over ``dt_s``, as a Crazyflie's ``cmdFullState``
+        gives one to its controller: the position reference ``p + v tau + a tau^2 / 2``, the
+        velocity ``v + a tau`` fed forward and the acceleration ``a`` added to the cascade's (not
+        to its integral). An export's flight check flies its pieces this way
+        (:mod:`mpcform.outputs.flight.check`)."""
+        acc = finite_array("plant.accelerations", accelerations_mps2, (self.n, self.dim))
+        self._acc_ff[:, : self.dim] = acc
+        try:
+            return self.advance(velocities_mps, dt_s, positions_m)
+        finally:
+            self._acc_ff[:] = 0.0
+
     def _advance(self, u: Array, dt: float, planned: Array | None) -> tuple[Array, Array, Array, dict]:
         steps = self.steps_per_interval(dt)
         stride = max(1, steps // self.samples_per_step)
@@ -202,8 +220,9 @@ class QuadrotorPlant(Plant):
         for i in range(steps):
             if wind is not None:
                 w3[:, :d] = wind[i]
-            x = self._x
-            self._control(x, u3 + kp * (ref0 + u3 * (i * h) - x[:, P]), h)
+            x, tau, acc = self._x, i * h, self._acc_ff
+            ref = ref0 + u3 * tau + (0.5 * tau * tau) * acc  # + 0 without a setpoint's acceleration
+            self._control(x, u3 + tau * acc + kp * (ref - x[:, P]), h)
             k1 = self._rhs(x, w3)
             k2 = self._rhs(x + 0.5 * h * k1, w3)
             k3 = self._rhs(x + 0.5 * h * k2, w3)
@@ -231,7 +250,7 @@ class QuadrotorPlant(Plant):
         pr, g, lim = self.params, self.params.gravity_mps2, self.spec
         e = v_sp - x[:, V]
         self._i = np.minimum(np.maximum(self._i + h * e, -self._i_max), self._i_max)
-        a = self._kv * e + self._ki * self._i
+        a = self._kv * e + self._ki * self._i + self._acc_ff
         az_max = (pr.cmd_f_coef * pr.thrust_max_N + pr.acc_coef_N) / pr.mass_kg - g
         fz = g + np.minimum(np.maximum(a[:, 2], -0.5 * g), az_max)
         axy = a[:, :2]

@@ -3,20 +3,20 @@ tracking error and separation of the swarm.
 
 Every drone starts at rest at the start of its pieces on a :class:`~mpcform.sim.quadrotor.
 QuadrotorPlant` (drone-models' Crazyflie model flown by a PID cascade at 500 Hz). Every
-``INTERVAL_S`` the pieces give each drone's position, velocity and acceleration; the plant's
-position loop follows ``p(t_k) + u (t - t_k)`` at its inner rate with ``u = v(t_k) + a(t_k) / kv``,
-the acceleration fed forward through the velocity loop (``a = kv (v_sp - v)``), as the firmware's
-controllers take it from a full-state setpoint (without it the cascade lags a time-optimal
-flight by 0.14-0.16 m). The report: the largest distance between the true and the exported positions, the
-smallest true pairwise distance, and the declared tolerance they are held to: the plant's robust
-margin (``QuadrotorPlantSpec().robustness``, one control interval of the run at the export's
-acceleration limit) plus the fit tolerance. Without drone-models the check is skipped (None).
+``INTERVAL_S`` the pieces give each drone's position, velocity and acceleration, which the plant
+follows as a full-state setpoint (:meth:`~mpcform.sim.quadrotor.QuadrotorPlant.follow`: the
+acceleration fed forward, as the firmware's controllers take it from ``cmdFullState``; without it
+the cascade lags a time-optimal flight by 0.14-0.16 m). The report: the largest distance between
+the true and the exported positions, the smallest true pairwise distance, and the declared
+tolerance they are held to: the plant's robust margin (``QuadrotorPlantSpec().robustness``, one
+control interval of the run at the export's acceleration limit) plus the fit tolerance. Without
+drone-models the check is skipped (None).
 
 :func:`fly_export_crazyflow` flies the pieces' full state (position, velocity, acceleration, yaw
 and body rates at 100 Hz, what ``cmdFullState`` takes) open loop through crazyflow's Mellinger
 controller (:meth:`mpcform.sim.crazyflow.CrazyflowPlant.fly_full_state`), the drones hovering at
-the start; its declared tolerance is a Crazyflie's tracking allowance plus the fit tolerance,
-and its contacts, floor contacts and flips are reported.
+the start; its declared tolerance is a Crazyflie's tracking allowance plus the fit tolerance, and
+its contacts, floor contacts and flips are reported.
 """
 
 from __future__ import annotations
@@ -24,7 +24,7 @@ from __future__ import annotations
 import importlib.util
 from dataclasses import dataclass
 from importlib import metadata
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
@@ -35,7 +35,7 @@ from mpcform.outputs.flight.polynomial import PiecewisePolynomial
 from mpcform.outputs.flight.safety import ClosestPair, closest_pair
 from mpcform.sim.crazyflow import CrazyflowPlant
 from mpcform.sim.plant_spec import QuadrotorPlantSpec
-from mpcform.sim.quadrotor import QuadrotorGains
+from mpcform.sim.quadrotor import QuadrotorPlant
 from mpcform.world.limits import PLATFORM_TRACKING_M
 
 INTERVAL_S = 0.02  # 10 inner steps of the 500 Hz plant (the plant records >= 10 samples per call)
@@ -123,20 +123,17 @@ def fly_export(
         return None
     spec = QuadrotorPlantSpec()
     margin = spec.robustness(3, control_dt_s, a_max_mps2).margin_m
-    plant = spec.build(n, 3)
+    plant = cast(QuadrotorPlant, spec.build(n, 3))
     steps = int(np.floor(poly.duration_s / INTERVAL_S + 1e-9))  # the last < 20 ms are at rest
     t_k = np.arange(steps + 1) * INTERVAL_S
     pos = poly.evaluate(t_k).reshape(-1, n, 4)[..., :3]
     vel = poly.evaluate(t_k, 1).reshape(-1, n, 4)[..., :3]
     acc = poly.evaluate(t_k, 2).reshape(-1, n, 4)[..., :3]
-    gains = QuadrotorGains()
-    kv = np.array([gains.kv_xy_per_s, gains.kv_xy_per_s, gains.kv_z_per_s])
-    vel = vel + acc / kv  # the acceleration fed forward through the velocity loop (a = kv (v_sp - v))
     plant.reset(pos[0])
     times: list[Array] = []
     true: list[Array] = []
-    for k in range(steps):
-        samples = plant.advance(vel[k], INTERVAL_S, pos[k])
+    for k in range(steps):  # the pieces' full state, as cmdFullState gives it to a Crazyflie
+        samples = plant.follow(pos[k], vel[k], acc[k], INTERVAL_S)
         times.append(samples.t_s[1:])
         true.append(samples.p_true_m[1:])
     t = np.concatenate(times)
