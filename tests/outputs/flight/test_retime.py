@@ -5,7 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from mpcform.errors import ValidationError
+from mpcform.errors import MPCFormError, ValidationError
+from mpcform.outputs.flight import retime as retime_module
 from mpcform.outputs.flight.polynomial import fit_positions
 from mpcform.outputs.flight.retime import minimum_time_s, retime
 
@@ -75,3 +76,21 @@ def test_close_to_the_minimum_time_without_a_slow_end() -> None:
     speed = np.linalg.norm(np.gradient(timing.positions(tt), tt, axis=0), axis=-1)[:, 0]
     fast = np.nonzero(speed >= 0.05 * v)[0]
     assert tt[-1] - tt[fast[-1]] <= 0.5
+
+
+def test_the_minimum_time_takes_every_limit_alone_and_survives_an_unsolved_scaling(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """A long, gentle path whose jerk alone sets the bound: (32 L / j)^(1/3) for its length L; and
+    a scaling program that does not solve leaves the other bounds (it used to stop the export)."""
+    t = np.linspace(0.0, 40.0, 401)
+    p = np.stack([0.05 * t, 0 * t, np.ones_like(t)], axis=-1)[:, None]  # 2 m over 40 s of plan
+    path = fit_positions(t, p, 1e-4).polynomial
+    v, a, j = 10.0, 10.0, 0.01  # jerk-bound: (32 * 2 / 0.01)^(1/3) = 18.6 s
+    assert minimum_time_s(path, v, a, j) >= 0.999 * np.cbrt(32.0 * 2.0 / j)
+
+    def fails(*args, **kwargs):
+        raise MPCFormError("the time scaling's convex program ended MaxIterations")
+
+    monkeypatch.setattr(retime_module, "time_optimal", fails)
+    assert minimum_time_s(path, v, a, j) >= 0.999 * np.cbrt(32.0 * 2.0 / j)
