@@ -132,7 +132,7 @@ class QuadrotorPlant(Plant):
             self._x[:, 2] = self.spec.altitude_m
         self._x[:, F] = self.params.hover_command_N  # level hover thrust
         self._i = np.zeros((self.n, 3))
-        self._acc_ff = np.zeros((self.n, 3))  # a full-state setpoint's acceleration (:meth:`follow`)
+        self._acc_ff: Array | None = None  # a full-state setpoint's acceleration (:meth:`follow`)
         self._no_force = np.zeros((self.n, 3))
         self._cmd = np.zeros((self.n, 4))
         self._cmd[:, 3] = self.params.hover_command_N
@@ -189,12 +189,14 @@ class QuadrotorPlant(Plant):
         velocity ``v + a tau`` fed forward and the acceleration ``a`` added to the cascade's (not
         to its integral). An export's flight check flies its pieces this way
         (:mod:`mpcform.outputs.flight.check`)."""
-        acc = finite_array("plant.accelerations", accelerations_mps2, (self.n, self.dim))
-        self._acc_ff[:, : self.dim] = acc
+        self._acc_ff = np.zeros((self.n, 3))
+        self._acc_ff[:, : self.dim] = finite_array(
+            "plant.accelerations", accelerations_mps2, (self.n, self.dim)
+        )
         try:
             return self.advance(velocities_mps, dt_s, positions_m)
         finally:
-            self._acc_ff[:] = 0.0
+            self._acc_ff = None
 
     def _advance(self, u: Array, dt: float, planned: Array | None) -> tuple[Array, Array, Array, dict]:
         steps = self.steps_per_interval(dt)
@@ -221,8 +223,11 @@ class QuadrotorPlant(Plant):
             if wind is not None:
                 w3[:, :d] = wind[i]
             x, tau, acc = self._x, i * h, self._acc_ff
-            ref = ref0 + u3 * tau + (0.5 * tau * tau) * acc  # + 0 without a setpoint's acceleration
-            self._control(x, u3 + tau * acc + kp * (ref - x[:, P]), h)
+            if acc is None:  # a velocity command
+                self._control(x, u3 + kp * (ref0 + u3 * tau - x[:, P]), h)
+            else:  # a full-state setpoint
+                ref = ref0 + u3 * tau + (0.5 * tau * tau) * acc
+                self._control(x, u3 + tau * acc + kp * (ref - x[:, P]), h)
             k1 = self._rhs(x, w3)
             k2 = self._rhs(x + 0.5 * h * k1, w3)
             k3 = self._rhs(x + 0.5 * h * k2, w3)
@@ -250,7 +255,9 @@ class QuadrotorPlant(Plant):
         pr, g, lim = self.params, self.params.gravity_mps2, self.spec
         e = v_sp - x[:, V]
         self._i = np.minimum(np.maximum(self._i + h * e, -self._i_max), self._i_max)
-        a = self._kv * e + self._ki * self._i + self._acc_ff
+        a = self._kv * e + self._ki * self._i
+        if self._acc_ff is not None:
+            a = a + self._acc_ff
         az_max = (pr.cmd_f_coef * pr.thrust_max_N + pr.acc_coef_N) / pr.mass_kg - g
         fz = g + np.minimum(np.maximum(a[:, 2], -0.5 * g), az_max)
         axy = a[:, :2]

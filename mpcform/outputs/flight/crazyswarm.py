@@ -105,14 +105,19 @@ def robot_name(i: int) -> str:
     return f"cf{i + 1}"
 
 
+def default_robots(n: int) -> list[tuple[str, str]]:
+    """(name, uri) of ``n`` drones without given robots: :func:`robot_name` and no uri yet."""
+    return [(robot_name(i), "") for i in range(n)]
+
+
 def crazyflies_yaml(floor_m: Array, robots: list[tuple[str, str]] | None = None) -> str:
     """The ``robots`` section for drones placed at ``floor_m`` (n, 3): the takeoff layout, with
     each drone's (name, uri) from ``robots`` (the robots on the pads of ``--ground``; an empty
     uri: a placeholder) or :func:`robot_name` and a placeholder uri."""
+    robots = robots or default_robots(floor_m.shape[0])
     lines = ["# mpcform export: one robot per drone; edit each placeholder uri before flying", "robots:"]
-    for i, p in enumerate(np.round(floor_m, 4).tolist()):
+    for i, ((name, uri), p) in enumerate(zip(robots, np.round(floor_m, 4).tolist(), strict=True)):
         x, y, z = (c + 0.0 for c in p)  # rounded first, + 0.0: no "-0.0000"
-        name, uri = robots[i] if robots is not None else (robot_name(i), "")
         lines += [
             f"  {name}:",
             "    enabled: true",
@@ -123,15 +128,12 @@ def crazyflies_yaml(floor_m: Array, robots: list[tuple[str, str]] | None = None)
     return "\n".join(lines) + "\n"
 
 
-def fly_script(
-    stems: list[str], flight: Flight, phases: list[tuple[str, float]], names: list[str] | None = None
-) -> str:
+def fly_script(stems: list[str], flight: Flight, phases: list[tuple[str, float]], names: list[str]) -> str:
     """The text of ``fly.py`` for the drones' files ``<stem>[_<phase>]_poly7.csv`` of each of
-    ``phases`` (name, duration [s]) and their ``flight``, flown by the robots ``names`` (None:
-    :func:`robot_name`)."""
+    ``phases`` (name, duration [s]) and their ``flight``, flown by the robots ``names``."""
     places = _places(flight)
     robots = {
-        (names[i] if names is not None else robot_name(i)): (
+        names[i]: (
             [f"{stem}{'' if name == 'mission' else '_' + name}_poly7.csv" for name, _ in phases],
             [round(x, 4) + 0.0 for x in places[i].tolist()],
         )
@@ -156,12 +158,12 @@ def write_files(
 ) -> list[Path]:
     """Write ``crazyflies.yaml`` and ``fly.py`` into ``out``; with ``pad_robots`` (name, uri) per
     pad of ``--ground``, each drone is flown by the robot on the pad it takes off from."""
-    robots = None
+    robots = default_robots(len(stems))
     if pad_robots is not None and flight.takeoff_pads is not None:
         robots = [pad_robots[k] for k in flight.takeoff_pads.tolist()]
     yaml, fly = out / CRAZYFLIES_YAML, out / FLY_PY
     yaml.write_text(crazyflies_yaml(_places(flight), robots))
-    fly.write_text(fly_script(stems, flight, phases, None if robots is None else [r[0] for r in robots]))
+    fly.write_text(fly_script(stems, flight, phases, [name for name, _ in robots]))
     return [yaml, fly]
 
 
