@@ -169,17 +169,22 @@ class Scenario:
 
     def spacing_warning(self, controller: str | None = None) -> str | None:
         """A line when the MPC cannot reach the final formation: its closest pair is nearer than
-        ``d_min + 2 (margin + tracking)``, the distance the planner keeps between two drones
-        (:func:`mpcform.world.limits.tightened`; ``d_min`` on the ideal plant); those drones then
-        stop short of their targets. None otherwise (no d_min, a controller other than
-        ``controller`` or the file's ``mpc``)."""
+        ``d_min + 2 (margin + tracking) + controller.margin``, the distance the planner keeps
+        between two drones (:func:`mpcform.world.limits.tightened`, then its rows' solver margin;
+        ``d_min + controller.margin`` on the ideal plant); those drones then stop short of their
+        targets. None otherwise (no d_min, a controller other than ``controller`` or the file's
+        ``mpc``)."""
         rob = self.robustness
         if (controller or self.controller.kind) != "mpc" or self.limits.d_min_m is None:
             return None
-        keep = tightened(self.limits, (), rob.margin_m, rob.a_max_mps2)[0].d_min_m
+        planned = tightened(self.limits, (), rob.margin_m, rob.a_max_mps2)[0].d_min_m
+        solver = self.controller.mpc.margin_m  # the rows ask for this much more (solver tolerance)
+        if planned is None:
+            return None
+        keep = planned + solver
         final = self.reference.targets(np.array([self.simulation.duration_s]))[0][0]
         closest = min_pair_distance(final)  # inf for one drone
-        if keep is None or closest >= keep * (1.0 - 1e-12):  # at d_min exactly the rows are met
+        if closest >= keep * (1.0 - 1e-12):  # at that distance exactly the rows are met
             return None
         near = pairs_within(final, keep * (1.0 - 1e-12))
         gaps = np.linalg.norm(final[near[:, 0]] - final[near[:, 1]], axis=1)
@@ -187,10 +192,11 @@ class Scenario:
         more = f", {near.shape[0] - 1} more pairs closer than it" if near.shape[0] > 1 else ""
         pair = f"closest pair (drones {i} and {k}{more})"
         tracking = self.limits.tracking_m
+        rows = f" + controller.margin {solver:.3g} m" if solver > 0 else ""
         if rob.margin_m == 0.0 and tracking == 0.0:
             return (
                 f"limits.d_min: the final formation's {pair} is {closest:.3g} m apart, below "
-                f"d_min = {keep:.3g} m: those drones stop short of their targets (widen the "
+                f"d_min = {planned:.3g} m{rows}: those drones stop short of their targets (widen the "
                 "formation or lower limits.d_min)"
             )
         parts = [f"margin {rob.margin_m:.3g} m"] * (rob.margin_m > 0) + [f"tracking {tracking:.3g} m"] * (
@@ -199,8 +205,8 @@ class Scenario:
         field = "plant" if rob.margin_m > 0 else "limits.tracking"
         return (
             f"{field}: the final formation's {pair} is {closest:.3g} m apart, below the "
-            f"{keep:.3g} m (d_min + 2 x ({' + '.join(parts)})) the MPC keeps: those drones stop "
-            "short of their targets (widen the formation, lower limits.a_max or limits.tracking, "
+            f"{keep:.4g} m (d_min + 2 x ({' + '.join(parts)}){rows}) the MPC keeps: those drones "
+            "stop short of their targets (widen the formation, lower limits.a_max or limits.tracking, "
             "or set plant.margin)"
         )
 
