@@ -1,9 +1,10 @@
 """Certification of a command, and the safe fallback when a solve fails or does not certify.
 
 A command is certified when it lies in the ball ``||u_i|| <= v_max`` (it is scaled into it,
-eq. 7) and, along the first segment ``p0 -> p0 + dt u``, no pair (or drone-obstacle item) within
-reach gets closer than ``d_min`` (its required distance), or than it already was. With a velocity
-loop (:mod:`mpcform.mpc.loop`) the segment ends where the loop takes the drone,
+eq. 7; with ``limits.v_max_z``, into the spheroid ``||S u_i|| <= v_max`` inside it) and, along
+the first segment ``p0 -> p0 + dt u``, no pair (or drone-obstacle item) within reach gets
+closer than ``d_min`` (its required distance), or than it already was. With a velocity loop
+(:mod:`mpcform.mpc.loop`) the segment ends where the loop takes the drone,
 ``p0 + dt u + F_1 xi_0 + G_{1,0} u`` (the chord of the interval's true motion), and an item inside
 its distance may also come as close as the hold's chord ``p0 -> p0 + F_1 xi_0`` takes it: within
 the interval no command undoes the velocity a drone already has (the QP's no-approach rows leave
@@ -41,7 +42,8 @@ CERTIFY_TOL_M = 1e-7  # separation certification tolerance [m]
 
 
 class Certifier:
-    """Certifies first inputs against the ball of radius ``v_max_mps`` and the ``separation`` items."""
+    """Certifies first inputs against the ball of radius ``v_max_mps`` (squeezed along the axes by
+    ``scale``, :meth:`mpcform.world.limits.Limits.speed_scale`) and the ``separation`` items."""
 
     def __init__(
         self,
@@ -50,8 +52,10 @@ class Certifier:
         separation: Separation,
         a_max_mps2: float | None = None,
         braking: Braking | None = None,
+        scale: Array | None = None,
     ) -> None:
         self.dt_s, self.v_max_mps, self.separation, self.braking = dt_s, v_max_mps, separation, braking
+        self.scale = scale
         self.a_step_mps = None if a_max_mps2 is None else a_max_mps2 * dt_s  # largest change per step
         self.drift: Callable[[Array], Array] | None = None
         """With a velocity loop: where a command takes the drones beyond ``dt u`` in the interval."""
@@ -63,7 +67,7 @@ class Certifier:
         """The command ``u`` (n, d) scaled into the ball (with ``u_prev`` and ``a_max``, first moved
         into the box ``|u - u_prev| <= a_max dt``: the solver's tolerance off), if it is safe from
         ``p0`` (n, d), else None."""
-        u0 = saturate(u, self.v_max_mps) if u_prev is None else self.within_limits(u, u_prev)
+        u0 = self.saturate(u) if u_prev is None else self.within_limits(u, u_prev)
         return u0 if self.safe(p0, u0, cand) else None
 
     def safe(self, p0: Array, u0: Array, cand: Candidates) -> bool:
@@ -144,7 +148,13 @@ class Certifier:
         scaled into the ball."""
         if self.a_step_mps is not None:
             u = u_prev + np.clip(u - u_prev, -self.a_step_mps, self.a_step_mps)
-        return saturate(u, self.v_max_mps)
+        return self.saturate(u)
+
+    def saturate(self, u: Array) -> Array:
+        """``u`` (n, d) scaled into the ball (eq. 7), or the spheroid ``||S u|| <= v_max``."""
+        if self.scale is None or self.v_max_mps is None:
+            return saturate(u, self.v_max_mps)
+        return saturate(u * self.scale, self.v_max_mps) / self.scale
 
     def hold_after(self, u0: Array, horizon: int, note: str) -> tuple[Array, Array, str]:
         """The plan ``u0`` then slowing to a hold (within ``a_max dt`` per step with ``a_max``)."""

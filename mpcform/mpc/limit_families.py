@@ -56,13 +56,17 @@ class LimitRows(ABC):
 
 
 class VelocityRows(LimitRows):
-    """Velocity set ``D u_{j,i} <= h`` [m/s] inside the ball ``||u|| <= v_max`` (:func:`velocity_set`)."""
+    """Velocity set ``D u_{j,i} <= h`` [m/s] inside the ball ``||u|| <= v_max``, squeezed along z by
+    ``scale`` (:meth:`mpcform.world.limits.Limits.speed_scale`; :func:`velocity_set`)."""
 
     fixed_bounds = True
 
-    def __init__(self, dim: int, horizon: int, settings: MPCSettings, v_max_mps: float) -> None:
+    def __init__(
+        self, dim: int, horizon: int, settings: MPCSettings, v_max_mps: float, scale: Array | None = None
+    ) -> None:
         self.horizon = horizon
-        self.normals, self.h_mps = velocity_set(dim, settings, v_max_mps)
+        self.scale = np.ones(dim) if scale is None else scale
+        self.normals, self.h_mps = velocity_set(dim, settings, v_max_mps, self.scale)
 
     def sparse(self, lay: Layout) -> RowBlock:
         h, n, dim, m = lay.horizon, lay.n, lay.dim, self.normals.shape[0]
@@ -81,9 +85,10 @@ class VelocityRows(LimitRows):
         return np.full(shape, -inf), np.full(shape, self.h_mps)
 
     def violators(self, p0: Array, u_prev: Array, u: Array, x: Array) -> Array:
-        """Tested on the drones with an input outside the inscribed ball ``||u|| <= h`` (inside it,
-        every ``D_i^T u <= ||u|| <= h``, rounding included with the factor's margin)."""
-        out = squared_norms(u).max(axis=0, initial=0.0) > INSCRIBED * self.h_mps**2
+        """Tested on the drones with an input outside the inscribed spheroid ``||S u|| <= h`` (inside
+        it, every ``D_i^T u <= ||S u|| <= h`` with ``D = D_ball S``, rounding included with the
+        factor's margin)."""
+        out = squared_norms(u * self.scale).max(axis=0, initial=0.0) > INSCRIBED * self.h_mps**2
         if out.any():
             out[out] = (u[:, out] @ self.normals.T > self.h_mps).any(axis=(0, 2))
         return out
@@ -228,7 +233,7 @@ def limit_rows(
     h = settings.horizon
     families: list[LimitRows] = []
     if limits.v_max_mps is not None:
-        families.append(VelocityRows(dim, h, settings, limits.v_max_mps))
+        families.append(VelocityRows(dim, h, settings, limits.v_max_mps, limits.speed_scale(dim)))
     if limits.a_max_mps2 is not None:
         families.append(AccelerationRows(dim, h, dt_s, limits.a_max_mps2))
     if limits.geofence_min_m is not None and limits.geofence_max_m is not None:
@@ -269,13 +274,18 @@ def velocity_polytope(dim: int, facets: int | None) -> tuple[Array, float]:
     return normals, float(1.0 / np.linalg.norm(verts, axis=1).max())
 
 
-def velocity_set(dim: int, settings: MPCSettings, v_max_mps: float) -> tuple[Array, float]:
-    """Rows ``D u <= h`` [m/s] of the velocity set: the inscribed polytope, or for ``box`` the
-    cube ``|u_a| <= v_max / sqrt(d)`` (rows ``+-e_a``)."""
+def velocity_set(
+    dim: int, settings: MPCSettings, v_max_mps: float, scale: Array | None = None
+) -> tuple[Array, float]:
+    """Rows ``D u <= h`` [m/s] of the velocity set: the polytope inscribed in the ball, or for
+    ``box`` the cube ``|u_a| <= v_max / sqrt(d)`` (rows ``+-e_a``); with per-axis ``scale`` (d,)
+    the same set of ``S u`` (``D S``): inscribed in the spheroid ``||S u|| <= v_max``."""
     if settings.velocity_set == "box":
-        return np.vstack([np.eye(dim), -np.eye(dim)]), v_max_mps / np.sqrt(dim)
-    normals, h_rel = velocity_polytope(dim, settings.facets)
-    return normals, h_rel * v_max_mps
+        normals, h = np.vstack([np.eye(dim), -np.eye(dim)]), v_max_mps / np.sqrt(dim)
+    else:
+        normals, h_rel = velocity_polytope(dim, settings.facets)
+        h = h_rel * v_max_mps
+    return (normals if scale is None else normals * scale), h
 
 
 def admitted(families: tuple[LimitRows, ...], p0: Array, free_m: Array, path_m: Array) -> Array:

@@ -109,7 +109,9 @@ class MPCPlanner(Controller):
         tail_s = 0.0 if braking is None else braking.kappa_s * gain + (self.loop.lag_s if self.loop else 0.0)
         self._predict = Prediction(dt_s, settings.horizon, self.loop, braking)
         self._candidates = CandidateSelector(self.n, dt_s, limits, settings, self.obstacles, gain, tail_s)
-        self._certifier = Certifier(dt_s, limits.v_max_mps, sep, limits.a_max_mps2, braking)
+        scale = limits.speed_scale(self.dim)  # with v_max_z: the velocity set's spheroid
+        squeezed = None if np.all(scale == 1.0) else scale
+        self._certifier = Certifier(dt_s, limits.v_max_mps, sep, limits.a_max_mps2, braking, squeezed)
         self._loop_state: Array  # the velocity loop's state (n, d, s), set by reset
         if self.loop is not None:  # certify where the loop takes the drones in the interval
             loop = self.loop
@@ -337,6 +339,8 @@ def _check_limits(
         )
     if limits.downwash_kappa is not None and dim != 3:
         raise ValidationError("limits.downwash", "downwash separation needs a spatial (dim = 3) formation")
+    if limits.v_max_z_mps is not None and (dim != 3 or limits.v_max_mps is None):
+        raise ValidationError("limits.v_max_z", "a vertical speed bound needs v_max and dim = 3")
     if limits.geofence_min_m is not None and limits.geofence_min_m.shape != (dim,):
         raise ValidationError(
             "limits.geofence_min", f"expected {dim} numbers, got {limits.geofence_min_m.tolist()}"

@@ -138,11 +138,13 @@ def build_summary(
     plant: dict[str, Any] | None = None,
     tracking_m: float = 0.0,
     downwash_kappa: float | None = None,
+    v_max_z_mps: float | None = None,
 ) -> dict[str, Any]:
     """The ``summary.json`` record (keys :data:`SUMMARY_KEYS`, and ``plant`` when given: the plant's
     kind, its robust margin and the acceleration limit the plan kept), JSON-safe (no NaN or inf).
     ``limits.tracking`` is the tracking allowance the plan kept (0: none; ``export`` refuses it),
-    ``limits.downwash`` the downwash factor kappa (None: none)."""
+    ``limits.downwash`` the downwash factor kappa (None: none), ``limits.v_max_z`` the vertical
+    speed bound the plan kept (None: none)."""
     summary = {
         "scenario": scenario,
         "n": n,
@@ -151,7 +153,13 @@ def build_summary(
         "steps": steps,
         "controller": controller,
         "solver": solver,
-        "limits": {"v_max": v_max_mps, "d_min": d_min_m, "tracking": tracking_m, "downwash": downwash_kappa},
+        "limits": {
+            "v_max": v_max_mps,
+            "d_min": d_min_m,
+            "tracking": tracking_m,
+            "downwash": downwash_kappa,
+            "v_max_z": v_max_z_mps,
+        },
         "provenance": provenance(seed, scenario_file, scenario_sha256),
         "metrics": metrics,
     }

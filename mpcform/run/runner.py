@@ -74,6 +74,7 @@ def run_scenario(
         | result.plant_events,
         tracking_m=limits.tracking_m if is_mpc else 0.0,
         downwash_kappa=limits.downwash_kappa,
+        v_max_z_mps=limits.v_max_z_mps if is_mpc else None,
     )
     path = None if out_dir is None else write_outputs(Path(out_dir), result, summary)
     return RunResult(result, summary, path)

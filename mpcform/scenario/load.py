@@ -282,8 +282,11 @@ def _mission(tpl: Template, start: FormationState, ref: dict[str, Any], limits: 
 
 
 def _limits(lim: dict[str, Any], dim: int) -> Limits:
-    if lim["downwash"] is not None and dim != 3:
-        raise ScenarioError("limits.downwash", f"applies only when dim = 3, got dim = {dim}")
+    for key in ("downwash", "v_max_z"):
+        if lim[key] is not None and dim != 3:
+            raise ScenarioError(f"limits.{key}", f"applies only when dim = 3, got dim = {dim}")
+    if lim["v_max_z"] is not None and lim["v_max"] is None:
+        raise ScenarioError("limits.v_max_z", "bounds the vertical part of limits.v_max: set v_max too")
     if lim["downwash"] == "crazyswarm":
         if lim["d_min"] is None:
             raise ScenarioError("limits.downwash", "'crazyswarm' needs limits.d_min")
@@ -375,6 +378,7 @@ _ATTRS = {
         "geofence_max": "geofence_max_m",
         "downwash": "downwash_kappa",
         "tracking": "tracking_m",
+        "v_max_z": "v_max_z_mps",
     },
     "simulation": {"dt": "dt_s", "duration": "duration_s", "noise": "noise_std_m"},
 }

@@ -23,6 +23,7 @@ from mpcform.sim.plant_spec import (
     scenario_key,
 )
 from mpcform.sim.wind import GUST_FIELDS, Wind
+from mpcform.world.limits import PLATFORM_CLIMB_MPS
 
 WIND_KEYS = ("mean", "gust_std", "gust_time", "gust_bound", "gust_field")
 RATE_RTOL = 1e-9
@@ -83,8 +84,16 @@ def with_plant_kind(scenario: Scenario, kind: str) -> Scenario:
 
 def planned_for_its_plant(scenario: Scenario) -> Scenario:
     """``scenario`` as its plant needs it planned: on crazyflow, which flies the plan as a
-    Crazyflie's setpoints, with the tracking allowance (:meth:`~mpcform.scenario.spec.Scenario.flyable`)."""
-    return scenario.flyable() if scenario.plant.kind == "crazyflow" else scenario
+    Crazyflie's setpoints, with the tracking allowance (:meth:`~mpcform.scenario.spec.Scenario.flyable`)
+    and, in space, a Crazyflie's vertical speed bound where ``limits.v_max_z`` is unset
+    (:data:`~mpcform.world.limits.PLATFORM_CLIMB_MPS`)."""
+    if scenario.plant.kind != "crazyflow":
+        return scenario
+    flown = scenario.flyable()
+    lim = flown.limits
+    if flown.dim == 3 and lim.v_max_mps is not None and lim.v_max_z_mps is None:
+        flown = dataclasses.replace(flown, limits=dataclasses.replace(lim, v_max_z_mps=PLATFORM_CLIMB_MPS))
+    return flown
 
 
 def _wind(raw: Any, dim: int) -> Wind | None:

@@ -147,6 +147,9 @@ SCHEMA: tuple[Table, ...] = (
     ), required=False, array=True),
     Table("limits", "Physical limits; each unset one is not enforced.", (
         Key("v_max", "float", "Speed bound per drone.", "m/s", bound="> 0"),
+        Key("v_max_z", "float", "Vertical speed bound (mpc, spatial, with v_max): the velocity set "
+            "inscribed in the spheroid of semi-axes v_max, v_max, v_max_z.", "m/s", bound="> 0",
+            shown_default="none (crazyflow plant: a Crazyflie's 0.7)"),
         Key("d_min", "float", "Minimum distance between two drones.", "m", bound="> 0"),
         Key("a_max", "float", "Componentwise bound on command changes (mpc; inf: none, ideal "
             "plant only).", "m/s^2", bound="> 0", inf=True,

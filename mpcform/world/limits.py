@@ -36,6 +36,12 @@ def crazyswarm_downwash(d_min_m: float) -> float:
     return max(1.0, vertical / d_min_m)
 
 
+PLATFORM_CLIMB_MPS = 0.7
+"""A Crazyflie 2.x's (cf2x_L250) vertical speed bound [m/s] for velocity commands flown online
+(the crazyflow plant's default ``limits.v_max_z``): the Mellinger controller turns a vertical
+velocity error into thrust at 17 m/s^2 per m/s, and climbs of 0.9 m/s while turning saturated the
+motors (the attitude loop then loses its torque and the drone flips: 1 of 4 online flights of
+swap_spatial_20 under CPU load in crazyflow); at 0.7 m/s none of 6 did."""
 PLATFORM_TRACKING_M = 0.05
 """A Crazyflie 2.x's (cf2x_L250) tracking allowance per drone [m] (``--flyable``): the largest
 absolute per-drone error of the firmware's Mellinger position loop flying exported setpoints,
@@ -56,7 +62,9 @@ class Limits:
     ``tracking_m``: room per drone for the position controller's tracking error when the plan is
     flown as setpoints (:data:`PLATFORM_TRACKING_M` for a Crazyflie; 0: none, and ``export``
     refuses the run), applied by :func:`tightened`; ``tube_m``: the plant's margin and tracking
-    allowance these limits are already tightened by.
+    allowance these limits are already tightened by; ``v_max_z_mps``: vertical speed bound [m/s]
+    (spatial, with ``v_max``): the velocity set is squeezed along z into the spheroid of semi-axes
+    ``v_max, v_max, v_max_z`` (:meth:`speed_scale`).
     """
 
     v_max_mps: float | None = None
@@ -67,9 +75,12 @@ class Limits:
     downwash_kappa: float | None = None
     tracking_m: float = 0.0
     tube_m: float = 0.0
+    v_max_z_mps: float | None = None
 
     def __post_init__(self) -> None:
         positive("limits.tube", self.tube_m, allow_zero=True)
+        if self.v_max_z_mps is not None:
+            object.__setattr__(self, "v_max_z_mps", positive("limits.v_max_z", self.v_max_z_mps))
         object.__setattr__(self, "tracking_m", positive("limits.tracking", self.tracking_m, allow_zero=True))
         for name in ("v_max_mps", "d_min_m", "a_max_mps2", "downwash_kappa"):
             value = getattr(self, name)
@@ -94,6 +105,15 @@ class Limits:
                 )
             object.__setattr__(self, "geofence_min_m", lo_a)
             object.__setattr__(self, "geofence_max_m", hi_a)
+
+    def speed_scale(self, dim: int) -> Array:
+        """Per-axis factors (d,) that map the velocity set's spheroid onto the ball of radius
+        ``v_max``: 1, and ``v_max / v_max_z`` on z when that squeezes it (``|u_z| <= v_max_z``)."""
+        scale = np.ones(dim)
+        v, vz = self.v_max_mps, self.v_max_z_mps
+        if dim == 3 and v is not None and vz is not None and vz < v:
+            scale[2] = v / vz
+        return scale
 
     @property
     def a_max_bounded(self) -> bool:
@@ -160,6 +180,7 @@ def tightened(
         None if hi is None else hi - static,
         limits.downwash_kappa,
         tube_m=tube + e,
+        v_max_z_mps=limits.v_max_z_mps,
     )
     inflated = tuple(
         SphereObstacle(o.center_m, o.radius_m, o.resolved_clearance_m + static) for o in obstacles

@@ -35,6 +35,19 @@ def test_a_command_outside_the_ball_is_scaled_onto_it() -> None:
     assert np.linalg.norm(out, axis=1).max() <= 1.0 + 1e-12
 
 
+def test_with_a_vertical_bound_a_command_is_scaled_into_the_spheroid() -> None:
+    """``v_max_z`` 0.5 of v_max 1: a climb of 0.8 m/s is scaled along its direction onto the
+    spheroid (vertical 0.5), a slow climb is kept."""
+    lim = Limits(v_max_mps=1.0, d_min_m=0.5, v_max_z_mps=0.5)
+    cert = Certifier(DT, 1.0, Separation(3, lim, MPCSettings(), ()), scale=lim.speed_scale(3))
+    p0 = np.array([[0.0, 0.0, 0.0], [5.0, 0.0, 0.0]])
+    u = np.array([[0.3, 0.0, 0.8], [0.0, 0.2, 0.3]])
+    out = cert.certify(p0, u, items([[0, 1]]))
+    assert out is not None
+    k = 1.0 / np.hypot(0.3, 0.8 * 2.0)  # ||S u|| = v_max with S = diag(1, 1, 2)
+    np.testing.assert_allclose(out, [[0.3 * k, 0.0, 0.8 * k], [0.0, 0.2, 0.3]])
+
+
 def test_a_command_that_breaks_d_min_is_refused() -> None:
     """0.55 m apart, both flying at 1 m/s towards each other for 0.1 s: 0.35 m < d_min."""
     p0 = np.array([[0.0, 0.0], [0.55, 0.0]])

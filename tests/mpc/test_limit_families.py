@@ -168,3 +168,30 @@ def test_velocity_violators_near_the_inscribed_ball(velocity_set: str) -> None:
         got = rows.violators(np.zeros(u.shape[1:]), np.zeros(u.shape[1:]), u, np.zeros_like(u))
         np.testing.assert_array_equal(got, brute)
         assert brute.any() and not brute.all()  # both answers occur
+
+
+@pytest.mark.parametrize("velocity_set", ["polytope", "box"])
+def test_a_vertical_bound_squeezes_the_velocity_set_into_its_spheroid(velocity_set: str) -> None:
+    """With ``v_max_z`` every vertex of the set lies in the spheroid ``||S u|| <= v_max`` (so within
+    v_max and v_max_z), some on it, and the violator test (inscribed spheroid first) agrees with
+    every facet checked, also for inputs well inside the ball that climb too fast."""
+    lim = Limits(v_max_mps=2.0, v_max_z_mps=0.5)
+    scale = lim.speed_scale(3)
+    np.testing.assert_array_equal(scale, [1.0, 1.0, 4.0])
+    rows = VelocityRows(3, 2, MPCSettings(velocity_set=velocity_set), 2.0, scale)
+    halfspaces = np.column_stack([rows.normals, -np.full(rows.normals.shape[0], rows.h_mps)])
+    verts = HalfspaceIntersection(halfspaces, np.zeros(3)).intersections
+    squeezed = np.linalg.norm(verts * scale, axis=1)
+    assert squeezed.max() <= 2.0 * (1 + 1e-12) and np.abs(verts[:, 2]).max() <= 0.5 * (1 + 1e-12)
+    if velocity_set == "polytope":
+        assert squeezed.max() == pytest.approx(2.0, rel=1e-9)
+    rng = np.random.default_rng(5)
+    u = rng.normal(size=(2, 300, 3))
+    u *= rng.uniform(0.0, 1.0, (1, 300, 1)) / np.linalg.norm(u, axis=-1, keepdims=True)  # inside ||u|| <= 1
+    brute = (u @ rows.normals.T > rows.h_mps).any(axis=(0, 2))
+    got = rows.violators(np.zeros((300, 3)), np.zeros((300, 3)), u, np.zeros_like(u))
+    np.testing.assert_array_equal(got, brute)
+    assert brute.any() and not brute.all()  # the climbs beyond v_max_z are caught
+    np.testing.assert_array_equal(limit_rows(3, DT, lim, MPCSettings(horizon=2))[0].scale, scale)
+    np.testing.assert_array_equal(Limits(v_max_mps=2.0, v_max_z_mps=0.5).speed_scale(2), [1.0, 1.0])
+    np.testing.assert_array_equal(Limits(v_max_mps=2.0, v_max_z_mps=3.0).speed_scale(3), [1.0, 1.0, 1.0])

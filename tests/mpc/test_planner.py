@@ -185,6 +185,21 @@ def test_spatial_swap_of_twelve_finishes() -> None:
     assert np.linalg.norm(res.positions_m[-1] - res.reference_m[-1], axis=1).max() < 1e-2
 
 
+def test_a_vertical_speed_bound_holds_in_every_command_and_the_swap_finishes() -> None:
+    """``v_max_z`` 0.4 m/s: every certified command climbs or sinks at most that fast (and keeps
+    v_max), the drones still arrive; a planar formation refuses the bound."""
+    ref, start = swap(12, 3)
+    lim = Limits(v_max_mps=1.0, d_min_m=0.5, v_max_z_mps=0.4)
+    res = simulate(MPCPlanner(ref, 0.1, lim, MPCSettings(horizon=10)), start, 20.0)
+    check_limits(res, 1.0, 0.5)
+    assert np.abs(res.commands_mps[..., 2]).max() <= 0.4 + 1e-9
+    assert np.abs(res.commands_mps[..., 2]).max() > 0.3  # the bound is met, not avoided
+    assert np.linalg.norm(res.positions_m[-1] - res.reference_m[-1], axis=1).max() < 1e-2
+    planar, planar_start = swap(4, 2)
+    with pytest.raises(ValidationError, match="limits.v_max_z"):
+        MPCPlanner(planar, 0.1, lim)
+
+
 def test_infeasible_start_reports_slack_and_separates() -> None:
     tpl = Template.line(2, 2.0)
     ref = ConstantReference(tpl, FormationState.from_param([0.0, 0.0]))

@@ -125,6 +125,7 @@ BAD_INPUTS: list[tuple[str, dict[str, Any], str, str]] = [
     ("obstacles not an array", {"obstacles": {"center": [0, 0], "radius": 1}}, "obstacles", "[[obstacles]]"),
     ("bad obstacle", {"obstacles": [{"center": [0, 0], "radius": 0}]}, "obstacles[0].radius", "> 0"),
     ("downwash in 2D", {"limits.downwash": 2.0}, "limits.downwash", "dim = 3"),
+    ("vertical bound in 2D", {"limits.v_max_z": 0.5}, "limits.v_max_z", "dim = 3"),
     (
         "geofence order",
         {"limits.geofence_min": [0, 0], "limits.geofence_max": [0, 1]},
@@ -318,4 +319,13 @@ def test_downwash_crazyswarm_is_the_ellipsoid_of_crazyswarm() -> None:
         scenario_from_dict(doc)
     doc["limits"] |= {"downwash": "crazyswarm", "d_min": 0.2}
     with pytest.raises(ScenarioError, match=r"^limits.downwash: .* expected d_min >= 0.24 m"):
+        scenario_from_dict(doc)
+
+
+def test_a_vertical_speed_bound_needs_v_max_and_is_recorded() -> None:
+    doc = tomllib.loads((SCENARIOS / "swap_spatial_12.toml").read_text())
+    doc["limits"]["v_max_z"] = 0.5
+    assert scenario_from_dict(doc).limits.v_max_z_mps == 0.5
+    del doc["limits"]["v_max"]
+    with pytest.raises(ScenarioError, match=r"^limits.v_max_z: .* set v_max too"):
         scenario_from_dict(doc)

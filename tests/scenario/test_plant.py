@@ -11,7 +11,7 @@ from helpers import tiny_swap_toml
 from saved_runs import SCENARIOS
 
 from mpcform.errors import ScenarioError
-from mpcform.scenario.load import scenario_from_dict
+from mpcform.scenario.load import load_scenario, scenario_from_dict
 from mpcform.scenario.plant import with_plant_kind
 from mpcform.scenario.schema import TABLES
 from mpcform.sim.plant_spec import (
@@ -156,3 +156,17 @@ def test_an_unclipped_gust_names_its_key_not_the_margin(tmp_path) -> None:  # no
     path.write_text(text.replace("gust_std = 0.5", "gust_std = -1"))
     with pytest.raises(ScenarioError, match=r"gust_std: expected a finite number >= 0, got -1$"):
         load_scenario(path)
+
+
+def test_crazyflow_plans_a_crazyflies_climb_rate_in_space_unless_the_file_sets_one() -> None:
+    from mpcform.world.limits import PLATFORM_CLIMB_MPS, PLATFORM_TRACKING_M
+
+    spatial = load_scenario(SCENARIOS / "swap_spatial_12.toml")
+    flown = with_plant_kind(spatial, "crazyflow")
+    assert flown.limits.v_max_z_mps == PLATFORM_CLIMB_MPS == 0.7
+    assert flown.limits.tracking_m == PLATFORM_TRACKING_M
+    own = dataclasses.replace(spatial, limits=dataclasses.replace(spatial.limits, v_max_z_mps=0.9))
+    assert with_plant_kind(own, "crazyflow").limits.v_max_z_mps == 0.9
+    assert with_plant_kind(spatial, "quadrotor").limits.v_max_z_mps is None
+    planar = with_plant_kind(load_scenario(SCENARIOS / "swap_planar_8.toml"), "crazyflow")
+    assert planar.limits.v_max_z_mps is None

@@ -88,3 +88,10 @@ def test_crazyswarm_downwash_keeps_its_ellipsoid() -> None:
     assert crazyswarm_downwash(0.8) == 1.0  # the sphere already holds 0.6 m vertically
     with pytest.raises(ValidationError, match="expected d_min >= 0.24 m"):
         crazyswarm_downwash(0.2)
+
+
+def test_a_vertical_speed_bound_is_validated_and_kept_when_tightened() -> None:
+    with pytest.raises(ValidationError, match="limits.v_max_z"):
+        Limits(v_max_mps=1.0, v_max_z_mps=0.0)
+    lim = Limits(v_max_mps=1.0, d_min_m=0.5, v_max_z_mps=0.7, tracking_m=0.05)
+    assert tightened(lim, (), 0.01, None)[0].v_max_z_mps == 0.7
