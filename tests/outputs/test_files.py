@@ -157,7 +157,13 @@ def test_summary_keys_and_values(tmp_path: Path) -> None:
     assert summary["scenario"] == "worked_example"
     assert (summary["n"], summary["dim"], summary["dt"], summary["steps"]) == (3, 2, 0.02, 7)
     assert summary["controller"] == "tracking" and summary["solver"] is None
-    assert summary["limits"] == {"v_max": 3.0, "d_min": 0.5, "tracking": 0.0, "downwash": None, "v_max_z": None}
+    assert summary["limits"] == {
+        "v_max": 3.0,
+        "d_min": 0.5,
+        "tracking": 0.0,
+        "downwash": None,
+        "v_max_z": None,
+    }
     assert set(summary["metrics"]) == METRIC_KEYS
     prov = summary["provenance"]
     assert set(prov["dependencies"]) == set(DEPENDENCIES)
@@ -169,7 +175,13 @@ def test_summary_keys_and_values(tmp_path: Path) -> None:
 def test_unset_and_infinite_values_are_null(tmp_path: Path) -> None:
     run = run_short("go_to_goal", tmp_path)  # one drone: no separation; no d_min
     summary = strict_json(tmp_path / "summary.json")
-    assert summary["limits"] == {"v_max": 2.0, "d_min": None, "tracking": 0.0, "downwash": None, "v_max_z": None}
+    assert summary["limits"] == {
+        "v_max": 2.0,
+        "d_min": None,
+        "tracking": 0.0,
+        "downwash": None,
+        "v_max_z": None,
+    }
     assert summary["metrics"]["min_separation"] is None
     assert run.summary["metrics"]["min_separation_segments"] is None
     assert "-" in format_summary(summary)

@@ -83,11 +83,19 @@ def online(sc: Scenario) -> Scenario:
     return dataclasses.replace(sc, controller=dataclasses.replace(sc.controller, mpc=mpc))
 
 
+EXTRA_S = 3.0
+"""Flight time added to a bundled scenario's duration: a crazyflow plan keeps a Crazyflie's
+tracking allowance and climb rate, which the file's duration was not sized for (swap_spatial_12
+arrives at 9.7 s of its 10 s, later when the deadline cuts more split rounds)."""
+
+
 def flown(name: str, altitude_m: float = 1.0) -> dict:
-    """Fly a bundled scenario in crazyflow: no contact, floor contact or flip, d_min kept on the
-    500 Hz true path, every drone arrived; the step times printed."""
+    """Fly a bundled scenario in crazyflow (:data:`EXTRA_S` longer): no contact, floor contact or
+    flip, d_min kept on the 500 Hz true path, every drone arrived; the step times printed."""
     sc = with_plant_kind(load_scenario(SCENARIOS / f"{name}.toml"), "crazyflow")
-    sc = online(dataclasses.replace(sc, plant=dataclasses.replace(sc.plant, altitude_m=altitude_m)))
+    sim = dataclasses.replace(sc.simulation, duration_s=sc.simulation.duration_s + EXTRA_S)
+    plant = dataclasses.replace(sc.plant, altitude_m=altitude_m)
+    sc = online(dataclasses.replace(sc, plant=plant, simulation=sim))
     run = run_scenario(sc)
     m, plant, times = run.summary["metrics"], run.summary["plant"], run.simulation.step_times_s
     shown = ("min_separation_true", "completion", "time_to_complete", "deadline_misses", "max_speed_true")
