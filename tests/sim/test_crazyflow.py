@@ -161,6 +161,32 @@ def test_bundled_scenarios_fly_in_crazyflow(name: str, altitude_m: float) -> Non
 
 
 @pytest.mark.slow
+def test_a_climb_beyond_a_crazyflies_rate_flips_it_and_the_bound_keeps_it_upright() -> None:
+    """The commands a drone of swap_spatial_20 flew online before it flipped (climbs of 0.9 m/s
+    while turning, each change within a_max dt) flip a lone crazyflow drone too; scaled into the
+    velocity set's spheroid of :data:`~mpcform.world.limits.PLATFORM_CLIMB_MPS` (as the certifier
+    does), the same commands fly with at most 20 degrees of tilt."""
+    from mpcform.control.laws import saturate
+    from mpcform.world.limits import PLATFORM_CLIMB_MPS, Limits
+
+    u = np.loadtxt(Path(__file__).with_name("climb_flip_commands.csv"), delimiter=",", skiprows=4)
+    scale = Limits(v_max_mps=1.0, v_max_z_mps=PLATFORM_CLIMB_MPS).speed_scale(3)
+    flown = {}
+    for name, commands in (("recorded", u), ("bounded", saturate(u * scale, 1.0) / scale)):
+        plant = CrazyflowPlant(1, 3, altitude_m=3.0)
+        plant.reset(np.array([[-1.438988, -0.437479, -1.6875]]))  # where the drone started
+        up_z = 1.0
+        for row in commands:
+            q = plant.advance(row[None], 0.1).quat_xyzw  # (K, 1, 4): the body z axis' world z below
+            up_z = min(up_z, float((1.0 - 2.0 * (q[..., 0] ** 2 + q[..., 1] ** 2)).min()))
+            if plant.lost_drones.size:
+                break
+        flown[name] = (np.degrees(np.arccos(up_z)), plant.events["flipped"])
+    assert flown["recorded"][1] == [0], flown
+    assert flown["bounded"][1] == [] and flown["bounded"][0] < 20.0, flown
+
+
+@pytest.mark.slow
 def test_planning_stops_for_a_drone_on_the_floor() -> None:
     """Drone 0's goal lies below crazyflow's floor: it lands on it, the planner stops planning for
     it (commands zero) and the others arrive, clear of it."""
