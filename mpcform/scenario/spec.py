@@ -178,9 +178,9 @@ class Scenario:
         if (controller or self.controller.kind) != "mpc" or self.limits.d_min_m is None:
             return None
         planned = tightened(self.limits, (), rob.margin_m, rob.a_max_mps2)[0].d_min_m
-        solver = self.controller.mpc.margin_m  # the rows ask for this much more (solver tolerance)
-        if planned is None:
+        if planned is None:  # (d_min is set: for the type checker)
             return None
+        solver = self.controller.mpc.margin_m  # the rows ask for this much more (solver tolerance)
         keep = planned + solver
         final = self.reference.targets(np.array([self.simulation.duration_s]))[0][0]
         closest = min_pair_distance(final)  # inf for one drone
