@@ -23,7 +23,8 @@ setpoints then hold it where it is, zero velocity, as a ground station would unt
 cuts its motors).
 
 The planner models a crazyflow drone by the quadrotor plant's hover linearisation of the same
-platform (:class:`mpcform.sim.plant_spec.CrazyflowPlantSpec`).
+platform (:class:`mpcform.sim.plant_spec.CrazyflowPlantSpec`), and plans for it with a Crazyflie's
+tracking allowance and, in space, climb rate (:func:`mpcform.scenario.plant.planned_for_its_plant`).
 """
 
 from __future__ import annotations
