@@ -41,7 +41,7 @@ PLATFORM_CLIMB_MPS = 0.7
 (the crazyflow plant's default ``limits.v_max_z``): the Mellinger controller turns a vertical
 velocity error into thrust at 17 m/s^2 per m/s, and climbs of 0.9 m/s while turning saturated the
 motors (the attitude loop then loses its torque and the drone flips: 1 of 4 online flights of
-swap_spatial_20 under CPU load in crazyflow); at 0.7 m/s none of 6 did."""
+swap_spatial_20 under CPU load in crazyflow); at 0.7 m/s none of 16 did."""
 PLATFORM_TRACKING_M = 0.05
 """A Crazyflie 2.x's (cf2x_L250) tracking allowance per drone [m] (``--flyable``): the largest
 absolute per-drone error of the firmware's Mellinger position loop flying exported setpoints,
