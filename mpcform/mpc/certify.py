@@ -55,7 +55,7 @@ class Certifier:
         scale: Array | None = None,
     ) -> None:
         self.dt_s, self.v_max_mps, self.separation, self.braking = dt_s, v_max_mps, separation, braking
-        self.scale = scale
+        self.scale = None if scale is None or np.all(scale == 1.0) else scale  # None: the ball
         self.a_step_mps = None if a_max_mps2 is None else a_max_mps2 * dt_s  # largest change per step
         self.drift: Callable[[Array], Array] | None = None
         """With a velocity loop: where a command takes the drones beyond ``dt u`` in the interval."""

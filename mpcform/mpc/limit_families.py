@@ -66,6 +66,7 @@ class VelocityRows(LimitRows):
     ) -> None:
         self.horizon = horizon
         self.scale = np.ones(dim) if scale is None else scale
+        self._squeezed = bool(np.any(self.scale != 1.0))  # else the ball: no product per step
         self.normals, self.h_mps = velocity_set(dim, settings, v_max_mps, self.scale)
 
     def sparse(self, lay: Layout) -> RowBlock:
@@ -88,7 +89,8 @@ class VelocityRows(LimitRows):
         """Tested on the drones with an input outside the inscribed spheroid ``||S u|| <= h`` (inside
         it, every ``D_i^T u <= ||S u|| <= h`` with ``D = D_ball S``, rounding included with the
         factor's margin)."""
-        out = squared_norms(u * self.scale).max(axis=0, initial=0.0) > INSCRIBED * self.h_mps**2
+        scaled = u * self.scale if self._squeezed else u
+        out = squared_norms(scaled).max(axis=0, initial=0.0) > INSCRIBED * self.h_mps**2
         if out.any():
             out[out] = (u[:, out] @ self.normals.T > self.h_mps).any(axis=(0, 2))
         return out

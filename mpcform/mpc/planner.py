@@ -110,8 +110,7 @@ class MPCPlanner(Controller):
         self._predict = Prediction(dt_s, settings.horizon, self.loop, braking)
         self._candidates = CandidateSelector(self.n, dt_s, limits, settings, self.obstacles, gain, tail_s)
         scale = limits.speed_scale(self.dim)  # with v_max_z: the velocity set's spheroid
-        squeezed = None if np.all(scale == 1.0) else scale
-        self._certifier = Certifier(dt_s, limits.v_max_mps, sep, limits.a_max_mps2, braking, squeezed)
+        self._certifier = Certifier(dt_s, limits.v_max_mps, sep, limits.a_max_mps2, braking, scale)
         self._loop_state: Array  # the velocity loop's state (n, d, s), set by reset
         if self.loop is not None:  # certify where the loop takes the drones in the interval
             loop = self.loop
