@@ -67,6 +67,9 @@ from mpcform.world.limits import Limits, planning_limits, tightened
 from mpcform.world.obstacles import SphereObstacle, resolve_clearances
 
 SLACK_REPORT_M = 1e-6  # slack above this is reported
+DEADLINE_RESERVE = 0.25
+"""Share of ``step_budget_s`` no optional solver work is planned into: it is kept for what follows
+the solve and for the machine's jitter (the scheduler, the garbage collector, a plant's process)."""
 
 
 class MPCPlanner(Controller):
@@ -248,7 +251,7 @@ class MPCPlanner(Controller):
         if free is not None:
             qp = replace(qp, free_m=free[:, drones])
         if deadline is not None:
-            qp = replace(qp, deadline_s=deadline)
+            qp = replace(qp, deadline_s=deadline - DEADLINE_RESERVE * (self.settings.step_budget_s or 0.0))
         sol, active = solver.solve(qp)
         late = deadline is not None and time.perf_counter() > deadline
         if late:  # the command had to be sent: the solution came too late

@@ -52,8 +52,9 @@ class MPCSettings:
     - ``braking``: with a finite ``a_max``, end every plan where the drones can still stop
       (:mod:`mpcform.mpc.braking`).
     - ``step_budget_s``: the deadline of one step [s] (online planning, :mod:`mpcform.online`):
-      no split round starts after it, and a step whose solve is not done by then returns the
-      certified braking fallback instead (reported as a deadline miss). None: no deadline, so
+      no split round is planned into its last quarter (``planner.DEADLINE_RESERVE``, kept for the
+      machine's jitter), and a step whose solve ends past it returns the certified braking
+      fallback instead (reported as a deadline miss). None: no deadline, so
       offline runs stay deterministic.
     """
 
