@@ -86,8 +86,3 @@ class Braking:
     def shifted(self, u: Array) -> Array:
         """Inputs (H, n, d) shifted one step, the last one braking: ``(u_1 .. u_{H-1}, rho u_{H-1})``."""
         return np.concatenate([u[1:], self.rho * u[-1:]])
-
-
-def separation_steps(horizon: int, braking: Braking | None) -> int:
-    """The separation rows' segments: the horizon's, plus the braking tail to the stop point."""
-    return horizon + (braking is not None)

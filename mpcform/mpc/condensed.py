@@ -24,13 +24,14 @@ import numpy as np
 from scipy.linalg import solve_triangular
 
 from mpcform._validate import Array
-from mpcform.mpc.braking import Braking, separation_steps
+from mpcform.mpc.braking import Braking
 from mpcform.mpc.drone_solves import DroneSolves
 from mpcform.mpc.limit_families import LimitRows
 from mpcform.mpc.loop import VelocityLoop
 from mpcform.mpc.rows import position_table, positions_of_inputs, row_ends
 from mpcform.mpc.sensitivity import Sensitivity, drone_sensitivity
 from mpcform.mpc.settings import MPCSettings
+from mpcform.mpc.tail import braking_tail
 from mpcform.solvers.dense import NO_BOUND
 from mpcform.world.limits import Limits
 
@@ -61,18 +62,19 @@ class CondensedDroneQP:
         self._const_v = (np.vstack(rows) if rows else np.zeros((0, nu))) @ self._m_inv
         self._const_pm = np.vstack([self._const_v, -self._const_v])  # one-sided: lower, then upper
         self.braking = braking = Braking.of(dt_s, limits, settings.braking)
-        self._steps = steps = separation_steps(h, braking)  # the rows' positions: x_1..x_H (and the stop)
-        self._ends = row_ends(steps)
+        tail = None if braking is None else braking_tail(braking, h, dim, loop)
+        count = 0 if tail is None else tail.count
+        self._steps = steps = h + count  # the rows' positions: x_1..x_H (then the braking tail's points)
+        self._ends = row_ends(h, count)
         table = position_table(self._m_inv, h, dim, dt_s, loop).reshape(h, h, dim)  # x_e per axis
         reach = 1.0 if loop is None else loop.reach_factor  # the longest step, with a loop's response
         self._reach_steps = self._ends.astype(float)  # how many longest steps each row's position is away
-        if braking is not None:  # the stop point g (x_H + kappa u_{H-1}) (:mod:`mpcform.mpc.braking`)
+        if tail is not None:  # the tail's points g x_H + sum_j F_j u_j (:mod:`mpcform.mpc.tail`)
             plain = position_table(self._m_inv, h, dim, dt_s, None).reshape(h, h, dim)
-            u_last = self._m_inv.reshape(h, dim, h, dim)[-1, 0, :, 0]  # u_{H-1} per axis, over v
-            gain = np.ones(dim) if loop is None else loop.dc_gain
-            stop = (plain[-1] + braking.kappa_s * u_last[:, None]) * gain
-            table = np.concatenate([table, stop[None]])
-            self._reach_steps[self._ends == steps] = h + braking.kappa_s * float(gain.max()) / dt_s
+            u_of_v = self._m_inv.reshape(h, dim, h, dim)[:, 0, :, 0]  # u_j per axis, over v
+            points = tail.gain * plain[-1] + np.einsum("tjd,jm->tmd", tail.forced, u_of_v)
+            table = np.concatenate([table, points])
+            self._reach_steps[self._ends > h] = h + tail.reach_s / dt_s
         self._table = table
         # positions x_1..x_H (and the stop) from v, drone by drone ((S d, H d))
         self._x_of_v = (table[:, None] * np.eye(dim)[:, None, :]).reshape(steps * dim, nu)

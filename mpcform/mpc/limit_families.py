@@ -19,6 +19,7 @@ from mpcform.mpc.braking import Braking
 from mpcform.mpc.loop import VelocityLoop
 from mpcform.mpc.rows import INF, Layout, RowBlock, positions_of_inputs
 from mpcform.mpc.settings import MPCSettings
+from mpcform.mpc.tail import Tail, braking_tail
 from mpcform.world.limits import Limits
 
 INSCRIBED = 1.0 - 1e-9  # ||u||^2 below this times h^2: inside the velocity set, rounding included
@@ -138,8 +139,8 @@ class AccelerationRows(LimitRows):
 
 class GeofenceRows(LimitRows):
     """``lo <= p0 + x_j <= hi``: the box tightened by the margin; a drone outside it may stay or
-    move inwards, never further out. With braking (``kappa_s``, :mod:`mpcform.mpc.braking`) the
-    stop point ``x_H + kappa u_{H-1}`` too (the box is convex: the whole tail stays in it). With a
+    move inwards, never further out. With braking the ``tail``'s points too (:mod:`mpcform.mpc.tail`:
+    the box is convex, so the whole tail stays in it when they do). With a
     velocity ``loop`` the rows are on where it takes the drones, ``y_e``: its forced response in
     the rows, its free response in the bounds (see :meth:`_boxes`)."""
 
@@ -151,13 +152,13 @@ class GeofenceRows(LimitRows):
         min_m: Array,
         max_m: Array,
         margin_m: float,
-        kappa_s: float | None = None,
+        tail: Tail | None = None,
         loop: VelocityLoop | None = None,
     ) -> None:
         self.dim, self.horizon, self.dt_s, self.margin_m = dim, horizon, dt_s, margin_m
         self.min_m, self.max_m = min_m, max_m  # the fence (d,) [m]
-        self.kappa_s, self.loop = kappa_s, loop
-        self.steps = horizon + (kappa_s is not None)  # positions bounded: x_1 .. x_H (and the stop)
+        self.tail, self.loop = tail, loop
+        self.steps = horizon + (0 if tail is None else tail.count)  # x_1 .. x_H, then the tail's points
 
     def box(self, p0: Array) -> tuple[Array, Array]:
         """Bounds (..., n, d) on each drone's relative positions x (``p0`` (..., n, d): with a loop,
@@ -181,12 +182,15 @@ class GeofenceRows(LimitRows):
         nud, nd = lay.nud, lay.n * lay.dim
         at = lay.y_cols() if lay.true_positions else lay.x_cols()
         rows, cols, vals = np.arange(nud), at.ravel(), np.ones(nud)
-        if self.kappa_s is not None:  # the stop points: g (x_H + kappa u_{H-1}), g the loop's DC gain
-            gain = np.ones(nd) if self.loop is None else np.tile(self.loop.dc_gain, lay.n)
-            stop = nud + np.arange(nd)
-            rows = np.concatenate([rows, stop, stop])
-            cols = np.concatenate([cols, lay.x_cols()[-1].ravel(), lay.u_cols()[-1].ravel()])
-            vals = np.concatenate([vals, gain, self.kappa_s * gain])
+        if self.tail is not None:  # the tail's points: g x_H + sum_j F_j u_j, g the loop's DC gain
+            t, support = self.tail, self.tail.support
+            point = nud + np.arange(t.count * nd).reshape(t.count, 1, nd)
+            on_u = np.broadcast_to(lay.u_cols()[support].reshape(1, -1, nd), (t.count, support.size, nd))
+            f = np.tile(t.forced[:, support], (1, 1, lay.n))  # (T, J, n d)
+            rows = np.concatenate([rows, point.ravel(), np.broadcast_to(point, f.shape).ravel()])
+            x_last = np.broadcast_to(lay.x_cols()[-1].ravel(), (t.count, nd))
+            cols = np.concatenate([cols, x_last.ravel(), on_u.ravel()])
+            vals = np.concatenate([vals, np.tile(t.gain, t.count * lay.n), f.ravel()])
         m = self.steps * nd
         return RowBlock(rows, cols, vals, np.zeros(m), np.zeros(m))
 
@@ -202,14 +206,12 @@ class GeofenceRows(LimitRows):
         if self.loop is not None:  # + sum_j G_{e,j} u_j per axis
             forced = self.loop.forced[1:]  # (H, H, d)
             x = x + np.einsum("ejd,dc->edjc", forced, np.eye(d)).reshape(h * d, h * d)
-        if self.kappa_s is None:
+        if self.tail is None:
             return x
-        last = np.zeros((d, h * d))
-        last[:, -d:] = self.kappa_s * np.eye(d)
-        stop = positions_of_inputs(h, d, self.dt_s)[-d:] + last
-        if self.loop is not None:
-            stop = stop * self.loop.dc_gain[:, None]
-        return np.vstack([x, stop])
+        t = self.tail
+        on_u = np.einsum("tjd,dc->tdjc", t.forced, np.eye(d)).reshape(t.count * d, h * d)
+        points = np.tile(t.gain[:, None] * positions_of_inputs(h, d, self.dt_s)[-d:], (t.count, 1)) + on_u
+        return np.vstack([x, points])
 
     def dense_bounds(
         self, p0: Array, u_prev: Array, inf: float, free_m: Array | None = None
@@ -219,11 +221,11 @@ class GeofenceRows(LimitRows):
         return lo.transpose(1, 0, 2).reshape(n, -1), hi.transpose(1, 0, 2).reshape(n, -1)
 
     def violators(self, p0: Array, u_prev: Array, u: Array, x: Array) -> Array:
-        """``x`` (H, n, d), or (H + 1, n, d) with the stop point already in it (and with a loop
-        the true positions, :meth:`mpcform.mpc.planner.MPCPlanner._true`)."""
+        """``x`` (H, n, d), or (H + T, n, d) with the tail's points already in it (and with a loop
+        the true positions, :meth:`mpcform.mpc.prediction.Prediction.points`)."""
         lo, hi = self.box(p0)
-        if self.kappa_s is not None and x.shape[0] == self.horizon:
-            x = np.concatenate([x, x[-1:] + self.kappa_s * u[-1:]])
+        if self.tail is not None and x.shape[0] == self.horizon:
+            x = np.concatenate([x, self.tail.points(x[-1], u)])
         return np.asarray(((x < lo) | (x > hi)).any(axis=(0, 2)))
 
 
@@ -241,8 +243,8 @@ def limit_rows(
     if limits.geofence_min_m is not None and limits.geofence_max_m is not None:
         fence = limits.geofence_min_m, limits.geofence_max_m
         braking = Braking.of(dt_s, limits, settings.braking)
-        kappa = None if braking is None else braking.kappa_s
-        families.append(GeofenceRows(dim, h, dt_s, *fence, settings.margin_m, kappa, loop))
+        tail = None if braking is None else braking_tail(braking, h, dim, loop)
+        families.append(GeofenceRows(dim, h, dt_s, *fence, settings.margin_m, tail, loop))
     return tuple(families)
 
 

@@ -107,10 +107,12 @@ class MPCPlanner(Controller):
         self.loop = _check_loop(loop, self.dim, settings)
         self._families = limit_rows(self.dim, dt_s, limits, settings, self.loop)
         self.braking = braking = Braking.of(dt_s, limits, settings.braking)  # the plans' terminal condition
-        self._separation = sep = Separation(self.dim, limits, settings, self.obstacles, braking)
+        self._separation = sep = Separation(self.dim, limits, settings, self.obstacles, braking, self.loop)
         gain = 1.0 if self.loop is None else self.loop.speed_gain
-        tail_s = 0.0 if braking is None else braking.kappa_s * gain + (self.loop.lag_s if self.loop else 0.0)
-        self._predict = Prediction(dt_s, settings.horizon, self.loop, braking)
+        tail_s = 0.0
+        if braking is not None and sep.tail is not None:  # how far past x_H the tail's points lie
+            tail_s = max(braking.kappa_s * gain, sep.tail.reach_s) + (self.loop.lag_s if self.loop else 0.0)
+        self._predict = Prediction(dt_s, settings.horizon, self.loop, braking, sep.tail)
         self._candidates = CandidateSelector(self.n, dt_s, limits, settings, self.obstacles, gain, tail_s)
         scale = limits.speed_scale(self.dim)  # with v_max_z: the velocity set's spheroid
         self._certifier = Certifier(dt_s, limits.v_max_mps, sep, limits.a_max_mps2, braking, scale)
@@ -218,12 +220,15 @@ class MPCPlanner(Controller):
         if (self.loop is not None or self.braking is not None) and conflicted.any():
             # encounters: the single integrator's conflicts within the horizon (a stop point's
             # conflict is the QP's to brake for, not one to turn away from)
-            plain = (
-                rows
-                if self.loop is None
-                else sep.rows(p0, guess(self._plan, p0, horizon, self.braking), cand)
-            )
-            x_enc = x_nom if self.braking is None else np.concatenate([x_nom, x_nom[-1:]])
+            pad = 0 if sep.tail is None else sep.tail.count  # the tail's rows: not counted here
+            plain = rows
+            if self.loop is not None:
+                about_plain = guess(self._plan, p0, horizon, self.braking)
+                about_plain = np.concatenate(
+                    [about_plain, np.repeat(about_plain[-1:], max(pad - 1, 0), axis=0)]
+                )
+                plain = sep.rows(p0, about_plain, cand)
+            x_enc = np.concatenate([x_nom, np.repeat(x_nom[-1:], pad, axis=0)])
             turned = conflicted & sep.conflicted(x_enc, plain, tail=False)
         speed, step = None, 0.0  # with a_max: how fast the drones fly, how much that changes per step
         if self.limits.a_max_mps2 is not None:

@@ -1,5 +1,5 @@
 """Where a plan takes the drones: the single integrator, the velocity loop's offsets
-(:mod:`mpcform.mpc.loop`) and the braking tail's stop point (:mod:`mpcform.mpc.braking`)."""
+(:mod:`mpcform.mpc.loop`) and the braking tail's points (:mod:`mpcform.mpc.tail`)."""
 
 from __future__ import annotations
 
@@ -12,34 +12,33 @@ from mpcform.mpc.braking import Braking
 from mpcform.mpc.loop import VelocityLoop
 from mpcform.mpc.plan import Plan, guess
 from mpcform.mpc.separation import SeparationRows
+from mpcform.mpc.tail import Tail
 
 
 class Prediction:
     """The positions the separation rows and tests are written on, for drones in loop ``state``
-    (n, d, s) (no states without a ``loop``): steps 1..H, then with ``braking`` the stop point."""
+    (n, d, s) (no states without a ``loop``): steps 1..H, then with ``braking`` the ``tail``'s points."""
 
-    def __init__(self, dt_s: float, horizon: int, loop: VelocityLoop | None, braking: Braking | None) -> None:
-        self.dt_s, self.horizon, self.loop, self.braking = dt_s, horizon, loop, braking
+    def __init__(
+        self, dt_s: float, horizon: int, loop: VelocityLoop | None, braking: Braking | None, tail: Tail | None
+    ) -> None:
+        self.dt_s, self.horizon, self.loop, self.braking, self.tail = dt_s, horizon, loop, braking, tail
 
-    def points(self, state: Array, u: Array, x: Array, loop: bool = True) -> Array:
+    def points(self, state: Array, u: Array, x: Array) -> Array:
         """Relative positions (S, n, d) the drones reach with the inputs ``u`` (H, n, d): the single
-        integrator's ``x``, plus the loop's offsets (not with ``loop`` False); with braking, then
-        the stop point (with the loop, where it comes to rest)."""
-        with_loop = loop and self.loop is not None
-        y = x + self.loop.offsets(state, u)[1:] if with_loop else x  # type: ignore[union-attr]
-        if self.braking is None:
+        integrator's ``x``, plus the loop's offsets; with braking, then the tail's points, the
+        stop point last (with the loop, where it comes to rest; :mod:`mpcform.mpc.tail`)."""
+        y = x if self.loop is None else x + self.loop.offsets(state, u)[1:]
+        if self.tail is None:
             return y
-        stop = self.braking.stop(x[-1], u[-1])
-        if with_loop:
-            stop = self.loop.dc_gain * stop + self.loop.at_rest(state)  # type: ignore[union-attr]
-        return np.concatenate([y, stop[None]])
+        return np.concatenate([y, self.tail.points(x[-1], u, state)])
 
     def free(self, state: Array) -> Array:
-        """The loop's free response (H + 1, n, d), then with braking where it comes to rest."""
+        """The loop's free response (H + 1, n, d), then with braking at the tail's points."""
         free = self.loop.free(state)  # type: ignore[union-attr]
-        if self.braking is None:
+        if self.tail is None:
             return free
-        return np.concatenate([free, self.loop.at_rest(state)[None]])  # type: ignore[union-attr]
+        return np.concatenate([free, self.tail.free_response(state)])
 
     def guess(self, plan: Plan | None, p0: Array, state: Array) -> Array:
         """The guess (S + 1, n, d) the rows are linearised about (:func:`mpcform.mpc.plan.guess`);

@@ -30,7 +30,6 @@ import numpy as np
 import scipy.sparse as sp
 
 from mpcform._validate import Array
-from mpcform.mpc.braking import Braking, separation_steps
 from mpcform.mpc.limit_families import LimitRows
 from mpcform.mpc.loop import VelocityLoop
 from mpcform.mpc.rows import (
@@ -39,10 +38,11 @@ from mpcform.mpc.rows import (
     dynamics_rows,
     separation_pattern,
     slack_rows,
-    stop_row,
+    tail_rows,
     true_position_rows,
 )
 from mpcform.mpc.settings import MPCSettings
+from mpcform.mpc.tail import Tail
 from mpcform.world.limits import Limits
 
 
@@ -66,18 +66,17 @@ class MPCQP:
         singles: Array,
         families: tuple[LimitRows, ...],
         loop: VelocityLoop | None = None,
-        braking: Braking | None = None,
+        tail: Tail | None = None,
     ) -> None:
         h = settings.horizon
         self.layout = lay = Layout(n, dim, h, loop is not None)
-        self.settings, self.braking = settings, braking
-        # the stop rows' scale per axis: the loop's DC gain on x_H, times kappa on u_{H-1}
-        self._stop_gain = np.ones(dim) if loop is None else loop.dc_gain
-        self._stop = stop_row(separation_steps(h, braking))
+        self.settings, self.tail = settings, tail
+        count, support = (0, None) if tail is None else (tail.count, tail.support)
+        self._tail_at = tail_rows(h, count)  # the braking tail's rows among an item's
         blocks = [dynamics_rows(lay, dt_s), *(f.sparse(lay) for f in families)]
         if loop is not None:
             blocks.append(true_position_rows(lay, loop.forced))
-        blocks += [separation_pattern(lay, pairs, singles, braking is not None), slack_rows(lay)]
+        blocks += [separation_pattern(lay, pairs, singles, count, support), slack_rows(lay)]
         rows_all, cols_all, vals, row_slices, entry_slices = _stack(blocks)
         self._families = tuple(zip(families, row_slices[1 : 1 + len(families)], strict=True))
         self.sep_rows, self._sep_entries = row_slices[-2], entry_slices[-2]
@@ -93,8 +92,8 @@ class MPCQP:
         self.u0 = np.concatenate([b.upper for b in blocks])
         self.P = _cost_hessian(lay, settings)
         # rows of inactive items stay in the pattern with a bound no plan can reach (finite, so
-        # interior-point backends do not drop them): |c^T (x_i - x_k)| <= 2 v_max (H dt + kappa)
-        look_ahead_s = h * dt_s + (0.0 if braking is None else braking.kappa_s * float(self._stop_gain.max()))
+        # interior-point backends do not drop them): |c^T (x_i - x_k)| <= 2 v_max (H dt + the tail's reach)
+        look_ahead_s = h * dt_s + (0.0 if tail is None else tail.reach_s)
         self._off_lower = -(2.0 * (limits.v_max_mps or 0.0) * look_ahead_s + 1.0)
 
     def cost_vector(self, c: Array, slack_weight: float | None = None) -> Array:
@@ -137,31 +136,31 @@ class MPCQP:
             ones = np.ones(coeffs_pairs.shape[:2] + (2,))
             if hard_pairs is not None:
                 ones[hard_pairs, 0] = 0.0
-            main, stop = self._stop_values(coeffs_pairs)
+            main, on_u = self._tail_values(coeffs_pairs)
             parts.append(np.concatenate([main, -main, ones], axis=2).ravel())
-            extra.append(np.concatenate([stop, -stop], axis=1).ravel())
+            extra.append(np.concatenate([on_u, -on_u], axis=-1).ravel())
         if coeffs_singles.shape[0]:
             ones = np.ones(coeffs_singles.shape[:2] + (1,))
             if hard_singles is not None:
                 ones[hard_singles, 0] = 0.0
-            main, stop = self._stop_values(coeffs_singles)
+            main, on_u = self._tail_values(coeffs_singles)
             parts.append(np.concatenate([main, ones], axis=2).ravel())
-            extra.append(stop.ravel())
-        if self.braking is not None:
+            extra.append(on_u.ravel())
+        if self.tail is not None:
             parts += extra
         if parts:
             vals[self._sep_entries] = np.concatenate(parts)
         return vals[self._perm]
 
-    def _stop_values(self, coeffs: Array) -> tuple[Array, Array]:
-        """Coefficients (items, R, d) on the rows' positions, and (items, d) of the stop rows on
-        ``u_{H-1}`` (:mod:`mpcform.mpc.braking`): ``g c`` on ``x_H`` and ``kappa g c`` on ``u_{H-1}``."""
-        if self.braking is None:
+    def _tail_values(self, coeffs: Array) -> tuple[Array, Array]:
+        """Coefficients (items, R, d) on the rows' positions, and (items, T, J, d) of the braking
+        tail's rows on its inputs (:class:`mpcform.mpc.tail.Tail`): ``g c`` on ``x_H`` and ``c F_j``
+        on ``u_j`` (without a loop ``kappa c`` on ``u_{H-1}``)."""
+        if self.tail is None:
             return coeffs, coeffs[:, 0, :0]
-        at_stop = coeffs[:, self._stop] * self._stop_gain
         main = coeffs.copy()
-        main[:, self._stop] = at_stop
-        return main, self.braking.kappa_s * at_stop
+        main[:, self._tail_at] = coeffs[:, self._tail_at] * self.tail.gain
+        return main, coeffs[:, self._tail_at, None] * self.tail.forced[:, self.tail.support]
 
 
 def _stack(blocks: list[RowBlock]) -> tuple[Array, Array, Array, list[slice], list[slice]]:

@@ -120,27 +120,31 @@ def slack_rows(lay: Layout) -> RowBlock:
     return RowBlock(np.arange(ns), 2 * lay.nud + np.arange(ns), np.ones(ns), np.zeros(ns), np.full(ns, INF))
 
 
-def separation_pattern(lay: Layout, pairs: Array, singles: Array, tail: bool = False) -> RowBlock:
+def separation_pattern(
+    lay: Layout, pairs: Array, singles: Array, tail: int = 0, support: Array | None = None
+) -> RowBlock:
     """Pattern of the separation rows (values zero; they change every step), R rows per item.
 
     Pairs ``(i, k)`` (P, 2) first: ``c^T (x_{e,i} - x_{e,k}) + s_{e,i} + s_{e,k} >= b``; then the
     one-drone items ``singles`` (S,) (decoupled pair sides, obstacles): ``c^T x_{e,i} + s_{e,i} >= b``;
     at the position steps e of :func:`row_ends` (on y instead of x with ``lay.true_positions``).
-    With the braking ``tail`` (:mod:`mpcform.mpc.braking`) step H + 1 is the stop point
-    ``x_H + kappa u_{H-1}`` (with its step-H slack): its rows' entries on ``u_{H-1}`` come after
-    all the others, pairs then singles.
+    With the braking tail's ``tail`` points (:mod:`mpcform.mpc.tail`, each ``g x_H + sum_j F_j u_j``
+    over the inputs ``support``) steps H + 1 .. H + tail are those points (with the step-H
+    slack): their rows' entries on the inputs come after all the others, pairs then singles, per
+    item, tail row, input and drone.
     """
-    steps = lay.horizon + tail
-    e = row_ends(steps)  # (R,) position index 1..H (H + 1: the stop point) of each row
+    h = lay.horizon
+    e = row_ends(h, tail)  # (R,) position index 1..H (then the tail points) of each row
     nr = e.shape[0]
     x_col, s_col = lay.y_cols() if lay.true_positions else lay.x_cols(), lay.s_cols()
     if tail:
-        x_col = np.concatenate([x_col, lay.x_cols()[-1:]])
-        s_col = np.concatenate([s_col, s_col[-1:]])
+        x_col = np.concatenate([x_col, np.repeat(lay.x_cols()[-1:], tail, axis=0)])
+        s_col = np.concatenate([s_col, np.repeat(s_col[-1:], tail, axis=0)])
     rows: list[Array] = [np.empty(0, dtype=np.intp)]
     cols: list[Array] = [np.empty(0, dtype=np.intp)]
     extra_rows, extra_cols = [], []
     count = 0
+    at_tail = tail_rows(h, tail)
     for drones in ([pairs[:, 0], pairs[:, 1]], [singles]):
         m = drones[0].shape[0]
         if m == 0:
@@ -151,9 +155,10 @@ def separation_pattern(lay: Layout, pairs: Array, singles: Array, tail: bool = F
         row_ids = count + np.arange(m * nr).reshape(m, nr, 1)
         rows.append(np.broadcast_to(row_ids, cc.shape).ravel())
         cols.append(cc.ravel())
-        if tail:  # the stop rows' u_{H-1} entries (items, d per drone)
-            uu = np.concatenate([lay.u_cols()[-1][i] for i in drones], axis=1)
-            extra_rows.append(np.broadcast_to(row_ids[:, stop_row(steps)], uu.shape).ravel())
+        if tail and support is not None:  # the tail rows' input entries (items, tail, J, d per drone)
+            uu = np.concatenate([lay.u_cols()[support][:, i].transpose(1, 0, 2) for i in drones], axis=2)
+            uu = np.broadcast_to(uu[:, None], (m, tail) + uu.shape[1:])
+            extra_rows.append(np.broadcast_to(row_ids[:, at_tail, :, None], uu.shape).ravel())
             extra_cols.append(uu.ravel())
         count += m * nr
     entries = np.concatenate(rows + extra_rows)
@@ -161,28 +166,39 @@ def separation_pattern(lay: Layout, pairs: Array, singles: Array, tail: bool = F
     return RowBlock(entries, np.concatenate(cols + extra_cols), zeros, np.zeros(count), np.full(count, INF))
 
 
-def stop_row(steps: int) -> int:
-    """Index among an item's rows of the braking tail's end (the stop point, step ``steps``)."""
-    return 2 * steps - 3 if steps > 1 else 0
+def tail_rows(horizon: int, tail: int) -> Array:
+    """Indices among an item's rows of the braking tail's points (the stop point last)."""
+    return 2 * horizon - 1 + np.arange(tail) if tail else np.empty(0, dtype=np.intp)
 
 
-def row_ends(horizon: int) -> Array:
-    """Row order per item: for segment j = 0..H-1, its end x_{j+1}, then its start x_j (j >= 1)."""
+def stop_row(horizon: int, tail: int = 1) -> int:
+    """Index among an item's rows of the braking tail's end (the stop point)."""
+    return 2 * horizon - 2 + tail
+
+
+def row_ends(horizon: int, tail: int = 0) -> Array:
+    """Row order per item: for segment j = 0..H-1, its end x_{j+1}, then its start x_j (j >= 1);
+    then with the braking tail's ``tail`` points, each of them (H + 1 .. H + tail) and its start x_H."""
     ends = []
     for j in range(horizon):
         ends.append(j + 1)
         if j >= 1:
             ends.append(j)
+    if tail:
+        ends += [horizon + 1 + t for t in range(tail)] + [horizon]
     return np.array(ends, dtype=np.intp)
 
 
-def row_segments(horizon: int) -> Array:
-    """Segment index j of each separation row of an item (R,), matching :func:`row_ends`."""
+def row_segments(horizon: int, tail: int = 0) -> Array:
+    """Segment index j of each separation row of an item (R,), matching :func:`row_ends` (the
+    tail's rows: segment H)."""
     segs = []
     for j in range(horizon):
         segs.append(j)
         if j >= 1:
             segs.append(j)
+    if tail:
+        segs += [horizon] * (tail + 1)
     return np.array(segs, dtype=np.intp)
 
 

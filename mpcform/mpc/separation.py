@@ -31,11 +31,13 @@ import numpy as np
 
 from mpcform._validate import Array
 from mpcform.formation.geometry import drone_spreads, pairs_within, vector_norms
-from mpcform.mpc.braking import Braking, separation_steps
+from mpcform.mpc.braking import Braking
 from mpcform.mpc.candidates import Candidates
+from mpcform.mpc.loop import VelocityLoop
 from mpcform.mpc.rows import row_ends, row_segments
 from mpcform.mpc.separation_units import BLOCK, ObstacleSeparation, PairSeparation, Test, inside
 from mpcform.mpc.settings import MPCSettings
+from mpcform.mpc.tail import braking_tail
 from mpcform.world.limits import Limits
 from mpcform.world.obstacles import SphereObstacle
 
@@ -98,17 +100,24 @@ class Separation:
         settings: MPCSettings,
         obstacles: tuple[SphereObstacle, ...],
         braking: Braking | None = None,
+        loop: VelocityLoop | None = None,
     ) -> None:
         self.dim, self.margin_m, self.braking = dim, settings.margin_m, braking
-        steps = separation_steps(settings.horizon, braking)  # with braking, the tail to the stop point
+        h = settings.horizon  # with braking, then the tail's points (:mod:`mpcform.mpc.tail`)
+        self.tail = None if braking is None else braking_tail(braking, h, dim, loop)
+        tail = 0 if self.tail is None else self.tail.count
         self.d_min_m, self.tube_m = limits.d_min_m, limits.tube_m
         self.metric = np.ones(dim)  # W's diagonal
         if limits.downwash_kappa is not None:
             self.metric[2] = 1.0 / limits.downwash_kappa
         d_min = limits.d_min_m
-        self.pairs = None if d_min is None else PairSeparation(d_min, self.metric, settings, steps)
-        self.obstacles = ObstacleSeparation(obstacles, settings, steps) if obstacles else None
-        self.ends, self.n_rows = row_ends(steps), row_segments(steps).shape[0]
+        self.pairs = None if d_min is None else PairSeparation(d_min, self.metric, settings, tail)
+        self.obstacles = ObstacleSeparation(obstacles, settings, tail) if obstacles else None
+        self.ends, self.n_rows, self.tail_rows = (
+            row_ends(h, tail),
+            row_segments(h, tail).shape[0],
+            tail + bool(tail),
+        )
 
     def rows(self, p0: Array, guess: Array, cand: Candidates, stops: Array | None = None) -> SeparationRows:
         """Closest-point rows about ``guess`` (H + 1, n, d) for every candidate item; ``stops`` (n, d):
@@ -136,7 +145,8 @@ class Separation:
         side by side can pass it while crossing the guess's midpoint plane.
 
         A row's normal c is a unit vector with ``c^T g >= |closest point of its guess segment|
-        >= max(|g_j|, |g_j+1|) - |g_j+1 - g_j|``, so ``c^T delta_e >= that - |delta_e - g_e|``.
+        >= max(|g_j|, |g_j+1|) - |g_j+1 - g_j|`` (the braking tail's hull: its points' largest
+        norm less its diameter), so ``c^T delta_e >= that - |delta_e - g_e|``.
         Before that per-segment bound, a per-drone one: drone i's guess stays within ``spread_i``
         of its start and its positions within ``spread_i`` of the guess, so an item whose start
         distance clears the requirement by the spreads of its drones is clear. No row is built.
@@ -156,8 +166,14 @@ class Separation:
     def _passes(self, g: Array, delta: Array, required: Array | float) -> bool:
         """Whether relative positions ``delta`` about the relative guess ``g`` (H + 1, m, d) meet
         the per-segment bound of :meth:`clear` for every item."""
-        g_norm = vector_norms(g)
-        seg = np.maximum(g_norm[:-1], g_norm[1:]) - vector_norms(np.diff(g, axis=0))
+        tail = self.tail_rows - 1  # the braking tail's points past x_H (0 without braking)
+        head = g if tail <= 1 else g[: g.shape[0] - tail]  # a polyline (with one tail point, too)
+        g_norm = vector_norms(head)
+        seg = np.maximum(g_norm[:-1], g_norm[1:]) - vector_norms(np.diff(head, axis=0))
+        if tail > 1:  # the tail's hull: its points' largest norm less its diameter
+            hull = g[-tail - 1 :]
+            diameter = vector_norms(hull[:, None] - hull[None]).max(axis=(0, 1))
+            seg = np.concatenate([seg, (vector_norms(hull).max(axis=0) - diameter)[None]])
         dev = vector_norms(delta - g).max(axis=0, initial=0.0)
         return not np.any(seg.min(axis=0, initial=np.inf) - dev < required + self.margin_m)
 
@@ -195,9 +211,11 @@ class Separation:
     ) -> Array:
         """Drones (n,) of the items whose rows positions ``x`` (H, n, d) miss (an obstacle item
         names only its drone); ``values``: :meth:`single_values` when known; ``tail`` False: not
-        counting the braking tail's rows (its last two) of drone pairs, only the horizon's (an
+        counting the braking tail's rows (its last ones) of drone pairs, only the horizon's (an
         obstacle's tail still counts: a drone turns early for a sphere it would have to brake for)."""
-        least, labels = self._least(x, rows, values, None if tail or self.braking is None else -2)
+        least, labels = self._least(
+            x, rows, values, None if tail or self.braking is None else -self.tail_rows
+        )
         labels = labels[least < 0.0]
         conflicted = np.zeros(x.shape[1], dtype=bool)
         conflicted[labels[labels >= 0]] = True

@@ -6,6 +6,8 @@ geometry they share (:func:`segment_normals`, :func:`inside`).
 
 from __future__ import annotations
 
+from itertools import combinations
+
 import numpy as np
 
 from mpcform._validate import Array
@@ -19,11 +21,16 @@ RowPart = tuple[Array, Array, Array, Array, Array]  # (items or labels, coeffici
 Test = tuple[Array, Array, Array | float]  # (relative guess, relative positions, required distance)
 
 
-def segment_normals(rel: Array, segs: Array | None = None) -> Array:
+def segment_normals(rel: Array, segs: Array | None = None, tail: int = 0) -> Array:
     """Unit normals (m, R, d) per row: the direction to each guess segment's point closest to the
-    origin (``rel`` (m, H + 1, d) are the guess's relative positions, ``segs`` (R,) each row's
-    segment; without ``segs`` one normal per segment, (m, H, d))."""
-    normal = closest_on_segments(rel[:, :-1], rel[:, 1:])  # (m, H, d), divided in place
+    origin (``rel`` (m, S + 1, d) are the guess's relative positions, ``segs`` (R,) each row's
+    segment; without ``segs`` one normal per segment). With more than one braking ``tail`` point
+    the last segment is their hull with ``x_H`` (:func:`closest_in_hull`)."""
+    if tail > 1:
+        head = closest_on_segments(rel[:, : -tail - 1], rel[:, 1:-tail])
+        normal = np.concatenate([head, closest_in_hull(rel[:, -tail - 1 :])[:, None]], axis=1)
+    else:
+        normal = closest_on_segments(rel[:, :-1], rel[:, 1:])  # (m, H, d), divided in place
     dist = vector_norms(normal)
     ok = dist > 1e-9
     normal /= np.where(ok, dist, 1.0)[..., None]
@@ -31,17 +38,38 @@ def segment_normals(rel: Array, segs: Array | None = None) -> Array:
     return normal if segs is None else np.take(normal, segs, axis=1)
 
 
+def closest_in_hull(points: Array) -> Array:
+    """The point (m, d) of each hull of ``points`` (m, K, d) closest to the origin (d <= 3): the
+    nearest over every edge and, in 3-D, every triangle's interior (it lies on a face of at most
+    two dimensions; the origin itself when it lies inside a 2-D hull's triangle is not sought:
+    no row can keep an item whose guess covers it anyway)."""
+    a, b = np.triu_indices(points.shape[1], 1)
+    best = closest_on_segments(points[:, a], points[:, b])  # (m, E, d)
+    if points.shape[2] == 3 and points.shape[1] > 2:
+        i, j, k = np.array([t for t in combinations(range(points.shape[1]), 3)]).T
+        p, e1, e2 = points[:, i], points[:, j] - points[:, i], points[:, k] - points[:, i]
+        g11, g12, g22 = (np.einsum("mtd,mtd->mt", u, v) for u, v in ((e1, e1), (e1, e2), (e2, e2)))
+        r1, r2 = np.einsum("mtd,mtd->mt", e1, p), np.einsum("mtd,mtd->mt", e2, p)
+        det = g11 * g22 - g12**2
+        ok = det > 1e-12 * (g11 * g22 + 1e-300)
+        safe = np.where(ok, det, 1.0)
+        s, t = (g12 * r2 - g22 * r1) / safe, (g12 * r1 - g11 * r2) / safe  # min |p + s e1 + t e2|
+        inner = ok & (s >= 0.0) & (t >= 0.0) & (s + t <= 1.0)
+        face = p + s[..., None] * e1 + t[..., None] * e2
+        best = np.concatenate([best, np.where(inner[..., None], face, best[:, :1])], axis=1)
+    pick = np.argmin(np.einsum("med,med->me", best, best), axis=1)
+    return np.take_along_axis(best, pick[:, None, None], axis=1)[:, 0]
+
+
 class PairSeparation:
     """``d_min`` [m] between drone pairs in the metric ``W = diag(metric)``, joint or decoupled."""
 
-    def __init__(
-        self, d_min_m: float, metric: Array, settings: MPCSettings, steps: int | None = None
-    ) -> None:
+    def __init__(self, d_min_m: float, metric: Array, settings: MPCSettings, tail: int = 0) -> None:
         self.d_min_m, self.metric, self.margin_m = d_min_m, metric, settings.margin_m
         self.unit_metric = bool(np.all(metric == 1.0))  # W = I: no scaling
         self.joint = settings.coupling == "joint"
-        steps = settings.horizon if steps is None else steps  # segments (the braking tail's too)
-        self.segs, self.ends = row_segments(steps), row_ends(steps)
+        self.tail = tail  # the braking tail's points (:mod:`mpcform.mpc.tail`)
+        self.segs, self.ends = row_segments(settings.horizon, tail), row_ends(settings.horizon, tail)
         self.near = NearPairs()  # the clear test's neighbour list, kept between steps
 
     def relative(self, points: Array, i: Array, k: Array) -> Array:
@@ -62,7 +90,7 @@ class PairSeparation:
             return None, self._sides(p0, path, pairs, on, stops)
         i, k = pairs[:, 0], pairs[:, 1]
         rel = self.scaled(path[i] - path[k])  # (P, H + 1, d), metric space
-        coeffs = self.scaled(segment_normals(rel, self.segs))  # (P, R, d), world coordinates
+        coeffs = self.scaled(segment_normals(rel, self.segs, self.tail))  # (P, R, d), world coordinates
         hard, c0 = inside(rel[:, 0], self.d_min_m)
         coeffs[hard, 0] = self.scaled(c0)
         lower = self.d_min_m + self.margin_m - np.einsum("prd,pd->pr", coeffs, p0[i] - p0[k])
@@ -84,7 +112,7 @@ class PairSeparation:
             i, k = pairs[a:b, 0], pairs[a:b, 1]
             g_i, g_k = path[i], path[k]  # (B, H + 1, d)
             rel = self.scaled(g_i - g_k)  # metric space
-            normal = self.scaled(segment_normals(rel))  # (B, H, d), world coordinates
+            normal = self.scaled(segment_normals(rel, None, self.tail))  # (B, H, d), world coordinates
             np.take(normal, self.segs, axis=1, out=coeffs[a:b])
             hard[a:b], c0 = inside(rel[:, 0], self.d_min_m)
             coeffs[a:b][hard[a:b], 0] = self.scaled(c0)
@@ -145,19 +173,17 @@ class ObstacleSeparation:
     """Drones keep ``required_m`` (m,) [m] from the obstacles' centres ``center_m`` (m, d): the
     radius plus each obstacle's resolved clearance (:func:`mpcform.world.obstacles.resolve_clearances`)."""
 
-    def __init__(
-        self, obstacles: tuple[SphereObstacle, ...], settings: MPCSettings, steps: int | None = None
-    ) -> None:
+    def __init__(self, obstacles: tuple[SphereObstacle, ...], settings: MPCSettings, tail: int = 0) -> None:
         self.center_m, self.required_m = obstacle_arrays(obstacles)
-        steps = settings.horizon if steps is None else steps  # segments (the braking tail's too)
-        self.margin_m, self.segs = settings.margin_m, row_segments(steps)
+        self.margin_m, self.tail = settings.margin_m, tail  # the braking tail's points
+        self.segs = row_segments(settings.horizon, tail)
 
     def rows(self, p0: Array, path: Array, items: Array, on: Array) -> RowPart:
         """One-drone rows of the ``(drone, obstacle)`` items (O, 2) about the guess ``path``
         (n, H + 1, d) (drone-major)."""
         drone, ob = items[:, 0], items[:, 1]
         center, required = self.center_m[ob], self.required_m[ob]
-        coeffs = segment_normals(path[drone] - center[:, None], self.segs)
+        coeffs = segment_normals(path[drone] - center[:, None], self.segs, self.tail)
         hard, c0 = inside(p0[drone] - center, required)
         coeffs[hard, 0] = c0
         lower = required[:, None] + self.margin_m - np.einsum("ord,od->or", coeffs, p0[drone] - center)

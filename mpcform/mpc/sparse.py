@@ -143,12 +143,11 @@ class SparseSolver(StepSolver):
             return False
         at = lay.y_cols() if lay.true_positions else lay.x_cols()  # the rows' positions
         x = z[at.ravel()].reshape(lay.horizon, lay.n, lay.dim)
-        braking = self.separation.braking
-        if braking is not None:  # and the stop point (:mod:`mpcform.mpc.braking`)
-            gain = 1.0 if self.loop is None else self.loop.dc_gain
-            ends = (lay.x_cols()[-1], lay.u_cols()[-1])
-            x_last, u_last = (z[c.ravel()].reshape(lay.n, lay.dim) for c in ends)
-            x = np.concatenate([x, gain * braking.stop(x_last, u_last)[None]])
+        tail = self.separation.tail
+        if tail is not None:  # and the braking tail's points (:mod:`mpcform.mpc.tail`)
+            x_last = z[lay.x_cols()[-1].ravel()].reshape(lay.n, lay.dim)
+            u = z[lay.u_cols().ravel()].reshape(lay.horizon, lay.n, lay.dim)
+            x = np.concatenate([x, tail.points(x_last, u)])
         return self.separation.shortfall(x, qp.rows, SLACK_TOL_M)[0] > SLACK_TOL_M
 
     def _sub_qp(self, drones: Array, rows: SeparationRows, rebuilt: bool) -> MPCQP:
@@ -165,7 +164,7 @@ class SparseSolver(StepSolver):
                 rows.singles,
                 self.families,
                 self.loop,
-                self.separation.braking,
+                self.separation.tail,
             )
             self._qp_key = key
         return self._qp

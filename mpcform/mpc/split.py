@@ -38,7 +38,6 @@ from mpcform.errors import ValidationError
 from mpcform.mpc.drone_solves import DroneSolves
 from mpcform.mpc.per_drone import PerDroneQP
 from mpcform.mpc.problem import StepQP, StepSolver
-from mpcform.mpc.rows import row_ends
 from mpcform.mpc.sensitivity import Sensitivity
 from mpcform.mpc.separation import SeparationRows
 from mpcform.solvers.base import QPSolution
@@ -173,7 +172,6 @@ class SplitStep:
         self.sign = np.zeros(rows.singles.shape[0])
         self.sign[first], self.sign[second] = 1.0, -1.0
         self.c_sq = 0.5 * float(np.sum(qp.targets_mps**2))
-        self.ends = row_ends(per_drone.settings.horizon)
         self.iterations, self.time_s = 0, 0.0
 
     def midpoint(self) -> Array:

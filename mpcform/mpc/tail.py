@@ -22,11 +22,22 @@ its inscribed circle. Every row of ``W M`` is then a convex combination of the r
 ``W z`` of a state hold those of every later state: the tail's points lie in the hull of
 ``rest - W z`` and the rest point, and the shifted plan's hull (``z -> M z``) lies in this one.
 No eigenvector is formed: nothing blows up when ``rho`` meets a pole of the loop.
+
+**The tail points** (:class:`Tail`, :func:`braking_tail`). The rows past the horizon sit at the
+points ``rest - W_k z`` (``k >= 1``; ``k = 0`` is ``y_H``, whose rows the horizon has) and at the
+rest point, with one normal per item: a half-space holding at every vertex holds on the hull, so
+on the whole tail to rest. The tail's weights over its vertices are the same for every axis when
+the axes share one loop (a lag, the second-order loop, a planar quadrotor), so the 3-D points are
+the hull's vertices. Where the axes differ (a spatial quadrotor's xy and z loops) the hull is the
+product of the axes' hulls, which this module does not build: its tail is the chord to rest, whose
+bend the margin has to cover (:mod:`mpcform.mpc.braking`). Without a loop the tail is the straight
+segment to the stop point ``x_H + kappa u_{H-1}``: one point.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 from scipy.optimize import linprog
@@ -37,6 +48,90 @@ from mpcform.mpc.braking import Braking
 from mpcform.mpc.loop import VelocityLoop
 
 REAL_TOL = 1e-9  # an eigenvalue with a smaller imaginary part is real
+SAME_TOL = 1e-12  # axes whose tail systems differ by less share one hull
+
+
+@dataclass(frozen=True, eq=False)
+class Tail:
+    """The braking tail's points past the horizon, the rest (stop) point last: point t of a drone
+    is ``gain x_H + sum_j forced[t, j] u_j + free[t] xi_0`` per axis (``gain`` (d,) the loop's DC
+    gain, ``forced`` (T, H, d), ``free`` (T, d, s) on the loop state; None without a loop)."""
+
+    gain: Array
+    forced: Array
+    free: Array | None
+
+    @property
+    def count(self) -> int:
+        return int(self.forced.shape[0])
+
+    @property
+    def support(self) -> Array:
+        """The inputs j the points depend on (u_{H-1} alone without a loop)."""
+        return np.flatnonzero(np.any(self.forced != 0.0, axis=(0, 2)))
+
+    @property
+    def reach_s(self) -> float:
+        """How far past ``g x_H`` the points lie at most, per m/s of the largest input component [s]."""
+        return float(np.abs(self.forced).sum(axis=1).max())
+
+    def points(self, x_last: Array, u: Array, state: Array | None = None) -> Array:
+        """The tail points (T, n, d) of plans ending at ``x_last`` (n, d) with inputs ``u`` (H, n, d)
+        from loop ``state`` (n, d, s) (ignored without a loop)."""
+        out = self.gain * x_last + np.einsum("tjd,jnd->tnd", self.forced, u)
+        if self.free is not None and state is not None:
+            out += np.einsum("tds,nds->tnd", self.free, state)
+        return out
+
+    def free_response(self, state: Array) -> Array:
+        """``free[t] xi_0`` (T, n, d) [m] of drones in loop ``state`` (n, d, s)."""
+        if self.free is None:
+            return np.zeros((self.count,) + state.shape[:2])
+        return np.einsum("tds,nds->tnd", self.free, state)
+
+
+@lru_cache(maxsize=64)  # a planner's parts each ask for the same tail
+def braking_tail(braking: Braking, horizon: int, dim: int, loop: VelocityLoop | None = None) -> Tail:
+    """The tail points of plans over ``horizon`` steps braking with ``braking`` (module
+    docstring): the stop point alone without a ``loop`` or where its axes differ, else the hull's
+    vertices past ``y_H`` and the rest point."""
+    gain = np.ones(dim) if loop is None else loop.dc_gain.copy()
+    rest = np.zeros((1, horizon, dim))
+    rest[0, -1] = braking.kappa_s * gain  # g (x_H + kappa u_{H-1}) (+ F_rest xi_0)
+    if loop is None:
+        return Tail(gain, rest, None)
+    rest_free = loop.rest_m[None].copy()
+    vertices = _shared_vertices(loop, braking, dim)
+    if vertices is None:
+        return Tail(gain, rest, rest_free)
+    s = vertices.shape[1] - 1  # the loop's states without the velocity offset
+    phi, gamma = loop.step_state[0, :s, :s], loop.step_input[0, :s]
+    powers = [np.eye(s)]
+    for _ in range(horizon):
+        powers.append(phi @ powers[-1])
+    to_state = np.array([powers[horizon - 1 - j] @ gamma for j in range(horizon)])  # (H, s): xi_H per u_j
+    on_inputs = vertices[:, 1:] @ to_state.T  # (V, H): W_k's xi part through xi_H
+    on_inputs[:, -1] += vertices[:, 0]  # and its command part, c = u_{H-1}
+    forced = rest - on_inputs[:, :, None]  # rest - W_k z, for every axis
+    free = np.broadcast_to(rest_free, (vertices.shape[0],) + rest_free.shape[1:]).copy()
+    free[:, :, :s] -= (vertices[:, 1:] @ powers[horizon])[:, None, :]
+    return Tail(gain, np.concatenate([forced, rest]), np.concatenate([free, rest_free]))
+
+
+def _shared_vertices(loop: VelocityLoop, braking: Braking, dim: int) -> Array | None:
+    """The vertex functionals past ``W_0`` (V - 1, q) of a hull every axis shares, or None when
+    the axes' tail systems differ or the hull cannot be built (the chord then stands)."""
+    systems = [tail_system(loop, braking, axis) for axis in range(dim)]
+    m0, l0 = systems[0]
+    if any(
+        not (np.allclose(m, m0, rtol=0.0, atol=SAME_TOL) and np.allclose(ell, l0, rtol=0.0, atol=SAME_TOL))
+        for m, ell in systems[1:]
+    ):
+        return None
+    try:
+        return axis_hull(m0, l0).vertices[1:]
+    except (ValidationError, MPCFormError):  # poles the construction does not cover
+        return None
 
 
 @dataclass(frozen=True, eq=False)

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from mpcform.errors import ValidationError
-from mpcform.mpc.braking import Braking, separation_steps
+from mpcform.mpc.braking import Braking
 from mpcform.run.runner import run_scenario
 from mpcform.scenario.load import scenario_from_dict
 from mpcform.world.limits import Limits
@@ -27,7 +27,6 @@ def test_braking_needs_a_finite_a_max_and_v_max() -> None:
     assert b is not None and b.rho == pytest.approx(0.975) and b.kappa_s == pytest.approx(2.0 / 0.5 - DT)
     fast = Braking.of(DT, Limits(v_max_mps=0.1, a_max_mps2=5.0))  # stops in one step
     assert fast is not None and fast.rho == 0.0 and fast.kappa_s == 0.0
-    assert separation_steps(10, b) == 11 and separation_steps(10, None) == 10
 
 
 def test_a_speed_no_drone_stops_from_is_refused_naming_v_max() -> None:

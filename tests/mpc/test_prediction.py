@@ -9,6 +9,7 @@ from mpcform.mpc.braking import Braking
 from mpcform.mpc.loop import VelocityLoop
 from mpcform.mpc.plan import Plan
 from mpcform.mpc.prediction import Prediction
+from mpcform.mpc.tail import braking_tail
 from mpcform.world.limits import Limits
 
 DT, H, TAU = 0.1, 5, 0.3
@@ -34,14 +35,14 @@ def test_the_stop_point_is_where_the_braking_plan_comes_to_rest() -> None:
     u = rng.uniform(-1.0, 1.0, (H, 2, 2))
     tail = BRAKING.rho ** np.arange(1, 2000)[:, None, None] * u[-1]  # geometric braking
     x = DT * np.cumsum(u, axis=0)
-    plain = Prediction(DT, H, None, BRAKING).points(np.zeros((2, 2, 0)), u, x)
+    plain = Prediction(DT, H, None, BRAKING, braking_tail(BRAKING, H, 2)).points(np.zeros((2, 2, 0)), u, x)
     np.testing.assert_allclose(plain[:H], x)
     np.testing.assert_allclose(plain[-1], DT * np.concatenate([u, tail]).sum(axis=0), atol=1e-9)
     loop = VelocityLoop.from_groups([LAG], 2, DT, H)
     v0 = rng.uniform(-1.0, 1.0, (2, 2))
     state = loop.rest(2)
     state[..., 0] = v0
-    true = Prediction(DT, H, loop, BRAKING).points(state, u, x)
+    true = Prediction(DT, H, loop, BRAKING, braking_tail(BRAKING, H, 2, loop)).points(state, u, x)
     path = lag_path(v0, np.concatenate([u, tail]))
     np.testing.assert_allclose(true[:H], path[1 : H + 1], atol=1e-12)  # the loop's true positions
     np.testing.assert_allclose(true[-1], path[-1], atol=1e-9)  # and where it comes to rest
@@ -51,7 +52,7 @@ def test_the_guess_ends_in_the_previous_plans_stop_point() -> None:
     u = np.tile([[0.5, -0.2]], (H, 1, 1))
     p0 = np.zeros((1, 2))
     plan = Plan.from_relative(p0, u, DT * np.cumsum(u, axis=0))
-    pred = Prediction(DT, H, None, BRAKING)
+    pred = Prediction(DT, H, None, BRAKING, braking_tail(BRAKING, H, 2))
     g = pred.guess(plan, plan.positions_m[1], np.zeros((1, 2, 0)))
     assert g.shape == (H + 2, 1, 2)
     np.testing.assert_allclose(g[-1], BRAKING.stop(plan.positions_m[-1], u[-1]))
