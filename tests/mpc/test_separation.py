@@ -10,7 +10,7 @@ from hypothesis import strategies as st
 from mpcform.mpc.braking import Braking
 from mpcform.mpc.candidates import Candidates
 from mpcform.mpc.separation import Separation
-from mpcform.mpc.separation_units import PairSeparation, segment_normals
+from mpcform.mpc.separation_units import PairSeparation, closest_in_hull, segment_normals
 from mpcform.mpc.settings import MPCSettings
 from mpcform.world.limits import Limits
 from mpcform.world.obstacles import SphereObstacle
@@ -40,6 +40,39 @@ def test_segment_normals_by_hand() -> None:
     normals = segment_normals(rel, np.array([0]))
     np.testing.assert_allclose(normals[0, 0], [1.0, 0.0])  # closest point (2, 0)
     np.testing.assert_allclose(normals[1, 0], [1.0, 0.0])  # coincident: a fixed unit vector
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_the_closest_point_of_a_hull_is_the_qps(dim: int) -> None:
+    """``closest_in_hull`` against clarabel's minimum-norm point ``min |P^T w|`` over the simplex,
+    for random hulls of 2-9 points that keep the origin outside (the braking tail's rows), and the
+    closest point's own certificate: every point of the hull is at least as far along it."""
+    import qpsolvers
+
+    rng = np.random.default_rng(dim)
+    for trial in range(60):
+        k = 2 + trial % 8
+        pts = rng.normal(size=(k, dim)) + rng.uniform(0.5, 3.0) * rng.normal(size=dim)
+        w = qpsolvers.solve_qp(
+            pts @ pts.T, np.zeros(k), A=np.ones((1, k)), b=np.ones(1), lb=np.zeros(k), solver="clarabel"
+        )
+        want = w @ pts
+        if np.linalg.norm(want) < 1e-6:  # the origin inside: no normal is sought
+            continue
+        got = closest_in_hull(pts[None])[0]
+        assert np.linalg.norm(got) == pytest.approx(np.linalg.norm(want), abs=1e-6)
+        assert np.all(pts @ got >= got @ got - 1e-12)  # and the certificate: (p - got)^T got >= 0
+
+
+def test_the_tails_rows_share_the_hulls_normal() -> None:
+    """With three tail points every tail row of an item has the normal towards its guess hull's
+    closest point (here the middle point's side of the triangle), not the chord's."""
+    rel = np.array([[[3.0, 0.0], [2.0, 0.0], [1.0, 1.0], [1.0, -1.0], [2.0, 0.0]]])  # x_1, then 3 points
+    normals = segment_normals(rel, np.array([0, 1, 1, 1, 1]), tail=3)
+    np.testing.assert_allclose(normals[0, 0], [1.0, 0.0])
+    np.testing.assert_allclose(normals[0, 1:], np.tile([[1.0, 0.0]], (4, 1)))  # the edge x = 1
+    chord = segment_normals(rel[:, [0, 1, 4]], np.array([0, 1]))
+    np.testing.assert_allclose(chord[0, 1], [1.0, 0.0])
 
 
 def test_joint_pair_row_by_hand() -> None:

@@ -5,11 +5,13 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from scipy.linalg import expm
 from scipy.optimize import linprog
 
 from mpcform.mpc.braking import Braking
 from mpcform.mpc.loop import VelocityLoop
-from mpcform.mpc.tail import axis_hull, tail_system
+from mpcform.mpc.prediction import Prediction
+from mpcform.mpc.tail import axis_hull, braking_tail, tail_system
 from mpcform.sim.plants import lag_plant, second_order_plant
 from mpcform.world.limits import Limits
 
@@ -123,3 +125,106 @@ def test_a_lags_hull_is_its_path_in_steady_flight(tau: float) -> None:
     hull = axis_hull(m, rest)
     togo = hull.vertices @ np.array([1.0, 1.0])  # command 1 m/s, velocity 1 m/s
     assert hull.vertices.shape[0] == 2 and np.all(togo > 0.0) and np.all(togo <= togo[0] + 1e-12)
+
+
+def _true_path(plant: str, xi0: np.ndarray, commands: np.ndarray, dt: float) -> np.ndarray:
+    """Positions (K + 1, n, d) from the origin of drones whose loop (per axis ``xi' = A xi + B u``,
+    ``p' = c^T xi``) starts in ``xi0`` (n, d, k), each command (K, n, d) held for ``dt``: the exact
+    discretisation of the plant's own loop, independent of :class:`VelocityLoop`."""
+    (a, b, _, c, _), *_ = PLANTS[plant]().velocity_loops()
+    a, b, c = np.asarray(a), np.asarray(b), np.asarray(c)
+    k = a.shape[0]
+    m = np.zeros((k + 2, k + 2))
+    m[0, 1 : k + 1], m[1 : k + 1, 1 : k + 1], m[1 : k + 1, k + 1] = c, a, b
+    ex = expm(m * dt)
+    z = np.concatenate([np.zeros(xi0.shape[:2] + (1,)), xi0, np.zeros(xi0.shape[:2] + (1,))], axis=2)
+    out = [z[..., 0].copy()]
+    for u in commands:
+        z[..., -1] = u
+        z = z @ ex.T
+        out.append(z[..., 0].copy())
+    return np.array(out)
+
+
+@pytest.mark.parametrize(
+    ("plant", "dt", "horizon"), [(p, dt, h) for p in PLANTS for dt, h in ((0.1, 10), (0.05, 7))]
+)
+def test_the_tail_points_hold_the_drones_true_path_to_rest(plant: str, dt: float, horizon: int) -> None:
+    """For random loop states and plans of three drones in 3-D, every position of the true path from
+    ``y_H`` to rest (the plan, then its geometric braking, integrated exactly) lies in the hull of
+    ``y_H`` and the tail's points, the last of which is the rest point; the chord alone (``y_H``
+    and the rest point) misses most of them."""
+    braking = Braking.of(dt, Limits(v_max_mps=1.0, a_max_mps2=1.79))
+    loop = VelocityLoop.from_groups(
+        [
+            (np.asarray(a), np.asarray(b), np.asarray(c), ax)
+            for a, b, _, c, ax in PLANTS[plant]().velocity_loops()
+        ],
+        3,
+        dt,
+        horizon,
+    )
+    tail = braking_tail(braking, horizon, 3, loop)
+    assert tail.count == 2 if plant.startswith("lag") else tail.count > 2  # the chord: 1
+    rng = np.random.default_rng(int(100 * dt) + horizon)
+    k = loop.step_state.shape[1] - 1
+    missed = 0
+    for _ in range(4):
+        u = rng.uniform(-1.0, 1.0, (horizon, 3, 3))
+        state = np.concatenate([0.5 * rng.normal(size=(3, 3, k)), np.zeros((3, 3, 1))], axis=2)
+        x = dt * np.cumsum(u, axis=0)
+        planned = Prediction(dt, horizon, loop, braking, tail).points(state, u, x)  # (H + T, n, d)
+        brake = braking.rho ** np.arange(1, 3000)[:, None, None] * u[-1]
+        path = _true_path(plant, state[..., :k], np.concatenate([u, brake]), dt)[horizon:]
+        np.testing.assert_allclose(planned[horizon - 1], path[0], atol=1e-9)  # y_H
+        np.testing.assert_allclose(planned[-1], path[-1], atol=1e-9)  # the rest point
+        for drone in range(3):
+            hull = planned[horizon - 1 :, drone]
+            for p in path[::7, drone]:
+                assert _in_hull(hull, p)
+                missed += not _in_hull(hull[[0, -1]], p)
+    assert missed > 100  # of 4 * 3 * 429 samples: the chord is not enough
+
+
+def _in_hull(points: np.ndarray, x: np.ndarray) -> bool:
+    """``x`` (d,) in the convex hull of ``points`` (V, d) (to 1e-9 m)."""
+    k = points.shape[0]
+    a_eq = np.vstack([points.T, np.ones((1, k))])
+    res = linprog(np.zeros(k), A_eq=a_eq, b_eq=np.append(x, 1.0), bounds=[(0, None)] * k)
+    if res.status == 0:
+        return True
+    near = linprog(  # the nearest combination: within 1e-9 m counts (the LP's tolerance)
+        np.concatenate([np.zeros(k), np.ones(2 * x.shape[0])]),
+        A_eq=np.hstack(
+            [
+                a_eq,
+                np.vstack([np.eye(x.shape[0]), np.zeros((1, x.shape[0]))]),
+                np.vstack([-np.eye(x.shape[0]), np.zeros((1, x.shape[0]))]),
+            ]
+        ),
+        b_eq=np.append(x, 1.0),
+        bounds=[(0, None)] * (k + 2 * x.shape[0]),
+    )
+    return bool(near.status == 0 and near.fun <= 1e-9)
+
+
+def test_without_a_loop_or_with_differing_axes_the_tail_is_its_stop_point() -> None:
+    """The single integrator's tail is straight: one point, ``x_H + kappa u_{H-1}``. A spatial
+    quadrotor's xy and z loops differ: its tail is the chord to rest (one point, the rest point)."""
+    braking = Braking.of(0.1, Limits(v_max_mps=1.0, a_max_mps2=1.79))
+    plain = braking_tail(braking, 10, 3)
+    rng = np.random.default_rng(1)
+    u, x_last = rng.normal(size=(10, 2, 3)), rng.normal(size=(2, 3))
+    assert plain.count == 1 and plain.support.tolist() == [9] and plain.reach_s == braking.kappa_s
+    np.testing.assert_array_equal(plain.points(x_last, u)[0], braking.stop(x_last, u[-1]))
+    quad = _quadrotor_loop(0.1)
+    chord = braking_tail(braking, 10, 3, quad)
+    assert chord.count == 1 and chord.free is not None
+    np.testing.assert_allclose(chord.free[0], quad.rest_m)
+    from mpcform.sim.quadrotor import QuadrotorPlant, QuadrotorSpec
+
+    planar = [
+        (np.asarray(a), np.asarray(b), np.asarray(c), axes)
+        for a, b, _, c, axes in QuadrotorPlant(2, 2, QuadrotorSpec()).velocity_loops()
+    ]
+    assert braking_tail(braking, 10, 2, VelocityLoop.from_groups(planar, 2, 0.1, 10)).count > 1
