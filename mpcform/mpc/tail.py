@@ -29,8 +29,9 @@ rest point, with one normal per item: a half-space holding at every vertex holds
 on the whole tail to rest. The tail's weights over its vertices are the same for every axis when
 the axes share one loop (a lag, the second-order loop, a planar quadrotor), so the 3-D points are
 the hull's vertices. Where the axes differ (a spatial quadrotor's xy and z loops) the hull is the
-product of the axes' hulls, which this module does not build: its tail is the chord to rest, whose
-bend the margin has to cover (:mod:`mpcform.mpc.braking`). Without a loop the tail is the straight
+product of the axes' hulls, which this module does not build, and where the hull is much wider
+than the path (:data:`TAIL_SPREAD`: a quadrotor's) it would cost more than it guards: those tails
+are the chord to rest, whose bend the margin has to cover (:mod:`mpcform.mpc.braking`). Without a loop the tail is the straight
 segment to the stop point ``x_H + kappa u_{H-1}``: one point.
 """
 
@@ -49,6 +50,11 @@ from mpcform.mpc.loop import VelocityLoop
 
 REAL_TOL = 1e-9  # an eigenvalue with a smaller imaginary part is real
 SAME_TOL = 1e-12  # axes whose tail systems differ by less share one hull
+TAIL_SPREAD = 4.0
+"""The hull is used while its points reach at most this many times as far past ``x_H`` as the
+chord's rest point can (``kappa`` times the loop's speed gain, plus its lag): the second-order
+loop's reaches about twice as far, a quadrotor's 14-29 times (its slow integral pole widens the
+polygon), which would open every encounter metres wide; such a tail keeps the chord."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -115,7 +121,10 @@ def braking_tail(braking: Braking, horizon: int, dim: int, loop: VelocityLoop | 
     forced = rest - on_inputs[:, :, None]  # rest - W_k z, for every axis
     free = np.broadcast_to(rest_free, (vertices.shape[0],) + rest_free.shape[1:]).copy()
     free[:, :, :s] -= (vertices[:, 1:] @ powers[horizon])[:, None, :]
-    return Tail(gain, np.concatenate([forced, rest]), np.concatenate([free, rest_free]))
+    hull = Tail(gain, np.concatenate([forced, rest]), np.concatenate([free, rest_free]))
+    if hull.reach_s > TAIL_SPREAD * (braking.kappa_s * loop.speed_gain + loop.lag_s):
+        return Tail(gain, rest, rest_free)
+    return hull
 
 
 def _shared_vertices(loop: VelocityLoop, braking: Braking, dim: int) -> Array | None:
