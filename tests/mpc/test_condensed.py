@@ -29,6 +29,34 @@ def test_rows_over_v_are_the_rows_over_positions(dim: int) -> None:
     np.testing.assert_allclose(qp._rows_v(a, end) @ v, np.einsum("kd,kd->k", a, x[end - 1]), atol=1e-13)
 
 
+def test_rows_at_the_braking_tails_points_under_a_loop() -> None:
+    """With a second-order loop and braking, the rows past the horizon are at the tail's points
+    (:class:`mpcform.mpc.tail.Tail`), over ``v`` as over ``u``; the loop's positions before them."""
+    from mpcform.mpc.braking import Braking
+    from mpcform.mpc.loop import VelocityLoop
+    from mpcform.mpc.tail import braking_tail
+    from mpcform.sim.plants import second_order_plant
+
+    h, dt, k, dim = 5, 0.1, 1.3, 3
+    lim = Limits(v_max_mps=1.0, d_min_m=0.5, a_max_mps2=1.79)
+    groups = [
+        (np.asarray(a), np.asarray(b), np.asarray(c), axes)
+        for a, b, _, c, axes in second_order_plant(2, dim, 0.7, 6.0).velocity_loops()
+    ]
+    loop = VelocityLoop.from_groups(groups, dim, dt, h)
+    qp = CondensedDroneQP(dim, dt, lim, MPCSettings(horizon=h, gain_per_s=k, coupling="decoupled"), (), loop)
+    tail = braking_tail(Braking.of(dt, lim), h, dim, loop)
+    assert tail.count > 2 and qp._steps == h + tail.count
+    rng = np.random.default_rng(7)
+    v = rng.normal(size=h * dim)
+    m = np.eye(h * dim) + k * dt * np.kron(np.tril(np.ones((h, h)), -1), np.eye(dim))
+    u = np.linalg.solve(m, v).reshape(h, 1, dim)
+    x = dt * np.cumsum(u, axis=0)
+    points = np.concatenate([x + np.einsum("ejd,jnd->end", loop.forced[1:], u), tail.points(x[-1], u)])[:, 0]
+    a, end = rng.normal(size=(h + tail.count, dim)), np.arange(1, h + tail.count + 1)
+    np.testing.assert_allclose(qp._rows_v(a, end) @ v, np.einsum("kd,kd->k", a, points), atol=1e-12)
+
+
 def test_the_soft_problem_puts_the_slacks_first() -> None:
     """Hessian diag(w2, I), cost ``w1`` per slack, each separation row's slack in its step's column,
     slacks bounded below by 0 and above by nothing."""

@@ -107,3 +107,45 @@ def test_separation_rows_with_a_velocity_loop_carry_its_forced_response() -> Non
     pair, single = np.einsum("rd,rd->r", c[0], y[e, 0] - y[e, 2]), np.einsum("rd,rd->r", a[0], y[e, 1])
     want = np.concatenate([pair, single])
     np.testing.assert_allclose(got, want, atol=1e-12)
+
+
+def test_the_braking_tails_rows_sit_at_its_points_under_a_second_order_loop() -> None:
+    """A second-order loop's tail has several points (each ``g x_H + sum_j F_j u_j``, its free part
+    in the bounds): the separation rows there are ``c^T`` of those points, and the fence's rows are
+    the points themselves (:class:`mpcform.mpc.tail.Tail`)."""
+    from mpcform.mpc.braking import Braking
+    from mpcform.mpc.loop import VelocityLoop
+    from mpcform.mpc.tail import braking_tail
+    from mpcform.sim.plants import second_order_plant
+
+    h = 4
+    groups = [
+        (np.asarray(a), np.asarray(b), np.asarray(c), axes)
+        for a, b, _, c, axes in second_order_plant(3, 2, 0.7, 6.0).velocity_loops()
+    ]
+    loop = VelocityLoop.from_groups(groups, 2, DT, h)
+    lim = Limits(v_max_mps=1.0, d_min_m=0.5, a_max_mps2=1.79, **FENCE)
+    st = MPCSettings(horizon=h)
+    tail = braking_tail(Braking.of(DT, lim), h, 2, loop)
+    assert tail.count > 2
+    families = limit_rows(2, DT, lim, st, loop)
+    m = MPCQP(3, 2, DT, lim, st, np.array([[0, 2]]), np.array([1]), families, loop, tail)
+    rng = np.random.default_rng(4)
+    ends = row_ends(h, tail.count)
+    c, a = rng.normal(size=(1, ends.shape[0], 2)), rng.normal(size=(1, ends.shape[0], 2))
+    m.A.data = m.separation_values(c, a)
+    u = rng.normal(size=(h, 3, 2))
+    x = DT * np.cumsum(u, axis=0)
+    y = x + np.einsum("ejd,jnd->end", loop.forced[1:], u)
+    rows = m.A @ np.concatenate([u.ravel(), x.ravel(), np.zeros(3 * h), y.ravel()])
+    points = np.concatenate([y, tail.points(x[-1], u)])  # (H + T, n, d), no free response
+    e = ends - 1
+    pair, single = (
+        np.einsum("rd,rd->r", c[0], points[e, 0] - points[e, 2]),
+        np.einsum("rd,rd->r", a[0], points[e, 1]),
+    )
+    np.testing.assert_allclose(rows[m.sep_rows], np.concatenate([pair, single]), atol=1e-12)
+    fence = next(r for f, r in m._families if type(f).__name__ == "GeofenceRows")
+    np.testing.assert_allclose(rows[fence], points.ravel(), atol=1e-12)
+    dense = families[-1].dense() @ u.transpose(1, 0, 2).reshape(3, -1).T  # (S d, n): drone by drone
+    np.testing.assert_allclose(dense.T.reshape(3, -1, 2), points.transpose(1, 0, 2), atol=1e-12)
