@@ -31,8 +31,8 @@ the axes share one loop (a lag, the second-order loop, a planar quadrotor), so t
 the hull's vertices. Where the axes differ (a spatial quadrotor's xy and z loops) the hull is the
 product of the axes' hulls, which this module does not build, and where the hull is much wider
 than the path (:data:`TAIL_SPREAD`: a quadrotor's) it would cost more than it guards: those tails
-are the chord to rest, whose bend the margin has to cover (:mod:`mpcform.mpc.braking`). Without a loop the tail is the straight
-segment to the stop point ``x_H + kappa u_{H-1}``: one point.
+are the chord to rest, whose bend the margin has to cover (:mod:`mpcform.mpc.braking`). Without a
+loop the tail is the straight segment to the stop point ``x_H + kappa u_{H-1}``: one point.
 """
 
 from __future__ import annotations

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from scipy import sparse
 
 from mpcform.mpc.braking import Braking
 from mpcform.mpc.candidates import Candidates
@@ -53,9 +54,8 @@ def test_the_closest_point_of_a_hull_is_the_qps(dim: int) -> None:
     for trial in range(60):
         k = 2 + trial % 8
         pts = rng.normal(size=(k, dim)) + rng.uniform(0.5, 3.0) * rng.normal(size=dim)
-        w = qpsolvers.solve_qp(
-            pts @ pts.T, np.zeros(k), A=np.ones((1, k)), b=np.ones(1), lb=np.zeros(k), solver="clarabel"
-        )
+        hess, row = sparse.csc_matrix(pts @ pts.T), sparse.csc_matrix(np.ones((1, k)))
+        w = qpsolvers.solve_qp(hess, np.zeros(k), A=row, b=np.ones(1), lb=np.zeros(k), solver="clarabel")
         want = w @ pts
         if np.linalg.norm(want) < 1e-6:  # the origin inside: no normal is sought
             continue
