@@ -168,8 +168,8 @@ def test_the_tail_points_hold_the_drones_true_path_to_rest(plant: str, dt: float
     assert tail.count == 2 if plant.startswith("lag") else tail.count > 2  # the chord: 1
     rng = np.random.default_rng(int(100 * dt) + horizon)
     k = loop.step_state.shape[1] - 1
-    missed = 0
-    for _ in range(4):
+    missed = checked = 0
+    for _ in range(2):
         u = rng.uniform(-1.0, 1.0, (horizon, 3, 3))
         state = np.concatenate([0.5 * rng.normal(size=(3, 3, k)), np.zeros((3, 3, 1))], axis=2)
         x = dt * np.cumsum(u, axis=0)
@@ -180,10 +180,11 @@ def test_the_tail_points_hold_the_drones_true_path_to_rest(plant: str, dt: float
         np.testing.assert_allclose(planned[-1], path[-1], atol=1e-9)  # the rest point
         for drone in range(3):
             hull = planned[horizon - 1 :, drone]
-            for p in path[::7, drone]:
+            for p in path[:300:3, drone]:  # the first 30 s (at dt 0.1), where the tail moves
                 assert _in_hull(hull, p)
                 missed += not _in_hull(hull[[0, -1]], p)
-    assert missed > 100  # of 4 * 3 * 429 samples: the chord is not enough
+                checked += 1
+    assert missed > checked / 10  # the chord is not enough (24 % of them for the 0.3 s lag at dt 0.1)
 
 
 def _in_hull(points: np.ndarray, x: np.ndarray) -> bool:
