@@ -130,10 +130,6 @@ class VelocityLoop:
         """The free response ``F_e xi_0`` (H + 1, n, d) [m] of drones in loop ``state`` (n, d, s)."""
         return np.einsum("eds,nds->end", self.free_m, state)
 
-    def at_rest(self, state: Array) -> Array:
-        """The free response ``F_rest xi_0`` (n, d) [m] once the loop has come to rest."""
-        return np.einsum("ds,nds->nd", self.rest_m, state)
-
     def first(self, state: Array, u0: Array) -> Array:
         """The offset (n, d) [m] at the end of the first interval for the commands ``u0`` (n, d)."""
         return np.einsum("ds,nds->nd", self.free_m[1], state) + self.forced[1, 0] * u0
