@@ -73,6 +73,7 @@ class MPCQP:
         self.settings, self.tail = settings, tail
         count, support = (0, None) if tail is None else (tail.count, tail.support)
         self._tail_at = tail_rows(h, count)  # the braking tail's rows among an item's
+        self._tail_forced = None if tail is None else tail.forced[:, support]  # (T, J, d)
         blocks = [dynamics_rows(lay, dt_s), *(f.sparse(lay) for f in families)]
         if loop is not None:
             blocks.append(true_position_rows(lay, loop.forced))
@@ -160,7 +161,7 @@ class MPCQP:
             return coeffs, coeffs[:, 0, :0]
         main = coeffs.copy()
         main[:, self._tail_at] = coeffs[:, self._tail_at] * self.tail.gain
-        return main, coeffs[:, self._tail_at, None] * self.tail.forced[:, self.tail.support]
+        return main, coeffs[:, self._tail_at, None] * self._tail_forced
 
 
 def _stack(blocks: list[RowBlock]) -> tuple[Array, Array, Array, list[slice], list[slice]]:

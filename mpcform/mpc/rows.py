@@ -171,11 +171,6 @@ def tail_rows(horizon: int, tail: int) -> Array:
     return 2 * horizon - 1 + np.arange(tail) if tail else np.empty(0, dtype=np.intp)
 
 
-def stop_row(horizon: int, tail: int = 1) -> int:
-    """Index among an item's rows of the braking tail's end (the stop point)."""
-    return 2 * horizon - 2 + tail
-
-
 def row_ends(horizon: int, tail: int = 0) -> Array:
     """Row order per item: for segment j = 0..H-1, its end x_{j+1}, then its start x_j (j >= 1);
     then with the braking tail's ``tail`` points, each of them (H + 1 .. H + tail) and its start x_H."""

@@ -113,11 +113,7 @@ class Separation:
         d_min = limits.d_min_m
         self.pairs = None if d_min is None else PairSeparation(d_min, self.metric, settings, tail)
         self.obstacles = ObstacleSeparation(obstacles, settings, tail) if obstacles else None
-        self.ends, self.n_rows, self.tail_rows = (
-            row_ends(h, tail),
-            row_segments(h, tail).shape[0],
-            tail + bool(tail),
-        )
+        self.ends, self.n_rows, self.tail_count = row_ends(h, tail), row_segments(h, tail).shape[0], tail
 
     def rows(self, p0: Array, guess: Array, cand: Candidates, stops: Array | None = None) -> SeparationRows:
         """Closest-point rows about ``guess`` (H + 1, n, d) for every candidate item; ``stops`` (n, d):
@@ -166,7 +162,7 @@ class Separation:
     def _passes(self, g: Array, delta: Array, required: Array | float) -> bool:
         """Whether relative positions ``delta`` about the relative guess ``g`` (H + 1, m, d) meet
         the per-segment bound of :meth:`clear` for every item."""
-        tail = self.tail_rows - 1  # the braking tail's points past x_H (0 without braking)
+        tail = self.tail_count  # the braking tail's points past x_H (0 without braking)
         head = g if tail <= 1 else g[: g.shape[0] - tail]  # a polyline (with one tail point, too)
         g_norm = vector_norms(head)
         seg = np.maximum(g_norm[:-1], g_norm[1:]) - vector_norms(np.diff(head, axis=0))
@@ -214,7 +210,7 @@ class Separation:
         counting the braking tail's rows (its last ones) of drone pairs, only the horizon's (an
         obstacle's tail still counts: a drone turns early for a sphere it would have to brake for)."""
         least, labels = self._least(
-            x, rows, values, None if tail or self.braking is None else -self.tail_rows
+            x, rows, values, None if tail or self.braking is None else -1 - self.tail_count
         )
         labels = labels[least < 0.0]
         conflicted = np.zeros(x.shape[1], dtype=bool)

@@ -6,6 +6,7 @@ geometry they share (:func:`segment_normals`, :func:`inside`).
 
 from __future__ import annotations
 
+from functools import lru_cache
 from itertools import combinations
 
 import numpy as np
@@ -46,7 +47,7 @@ def closest_in_hull(points: Array) -> Array:
     a, b = np.triu_indices(points.shape[1], 1)
     best = closest_on_segments(points[:, a], points[:, b])  # (m, E, d)
     if points.shape[2] == 3 and points.shape[1] > 2:
-        i, j, k = np.array([t for t in combinations(range(points.shape[1]), 3)]).T
+        i, j, k = _triangles(points.shape[1])
         p, e1, e2 = points[:, i], points[:, j] - points[:, i], points[:, k] - points[:, i]
         g11, g12, g22 = (np.einsum("mtd,mtd->mt", u, v) for u, v in ((e1, e1), (e1, e2), (e2, e2)))
         r1, r2 = np.einsum("mtd,mtd->mt", e1, p), np.einsum("mtd,mtd->mt", e2, p)
@@ -59,6 +60,12 @@ def closest_in_hull(points: Array) -> Array:
         best = np.concatenate([best, np.where(inner[..., None], face, best[:, :1])], axis=1)
     pick = np.argmin(np.einsum("med,med->me", best, best), axis=1)
     return np.take_along_axis(best, pick[:, None, None], axis=1)[:, 0]
+
+
+@lru_cache(maxsize=16)
+def _triangles(k: int) -> Array:
+    """Every triple of ``k`` points' indices (3, C(k, 3)) (the hull's faces are among them)."""
+    return np.array(list(combinations(range(k), 3))).T
 
 
 class PairSeparation:

@@ -38,7 +38,7 @@ loop the tail is the straight segment to the stop point ``x_H + kappa u_{H-1}``:
 from __future__ import annotations
 
 from dataclasses import dataclass
-from functools import lru_cache
+from functools import cached_property, lru_cache
 
 import numpy as np
 from scipy.optimize import linprog
@@ -71,12 +71,12 @@ class Tail:
     def count(self) -> int:
         return int(self.forced.shape[0])
 
-    @property
+    @cached_property
     def support(self) -> Array:
         """The inputs j the points depend on (u_{H-1} alone without a loop)."""
         return np.flatnonzero(np.any(self.forced != 0.0, axis=(0, 2)))
 
-    @property
+    @cached_property
     def reach_s(self) -> float:
         """How far past ``g x_H`` the points lie at most, per m/s of the largest input component [s]."""
         return float(np.abs(self.forced).sum(axis=1).max())

@@ -14,7 +14,7 @@ from mpcform.mpc.rows import (
     row_segments,
     separation_pattern,
     slack_rows,
-    stop_row,
+    tail_rows,
 )
 
 DT = 0.1
@@ -70,10 +70,10 @@ def test_slack_rows() -> None:
 
 def test_the_braking_tail_adds_a_stop_row_on_x_h_and_u_h_minus_1() -> None:
     """Horizon 1 with the tail: rows at x_1, the stop point and x_1 again (the tail's start); the
-    stop row (index :func:`stop_row`) has the single's x_1 and u_0 columns and its step-1 slack."""
+    stop row (the last of :func:`tail_rows`) has the single's x_1 and u_0 columns and its step-1 slack."""
     lay = Layout(1, 2, 1)
     block = separation_pattern(lay, np.empty((0, 2), dtype=int), np.array([0]), 1, np.array([0]))
-    assert block.lower.shape == (3,) and stop_row(1) == 1 and row_ends(1, 1).tolist() == [1, 2, 1]
+    assert block.lower.shape == (3,) and tail_rows(1, 1)[-1] == 1 and row_ends(1, 1).tolist() == [1, 2, 1]
     cols = [sorted(block.cols.ravel()[block.rows.ravel() == r].tolist()) for r in range(3)]
     x, u, s = lay.x_cols()[0, 0].tolist(), lay.u_cols()[0, 0].tolist(), lay.s_cols()[0, 0]
     assert cols[0] == cols[2] == sorted([*x, s]) and cols[1] == sorted([*u, *x, s])
