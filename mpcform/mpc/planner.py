@@ -267,7 +267,7 @@ class MPCPlanner(Controller):
             if not np.array_equal(wider, free):
                 sol, active = solver.solve(replace(qp, free_m=wider[:, drones]))
         status, solved = sol.status, None
-        inside_m, inside = sep.start_shortfall(p0, rows)  # items that start too close
+        inside_m, inside = sep.start_shortfall(p0, rows, SLACK_REPORT_M)  # items that start too close
         if sol.success and sol.x is not None:
             u, x = merge(drones, sol.x, u_nom, x_nom)
             u0 = self._certifier.certify(p0, u[0], cand, self._u_prev)

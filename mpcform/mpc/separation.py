@@ -261,9 +261,9 @@ class Separation:
         norm = np.linalg.norm(push, axis=1, keepdims=True)
         return np.divide(push, norm, out=np.zeros_like(push), where=norm > 1e-12)
 
-    def start_shortfall(self, p0: Array, rows: SeparationRows) -> tuple[float, Array]:
-        """How far [m] the items that start inside their required distance (the hard ones) are
-        inside it at ``p0``, at most, and their labels (m, 2)."""
+    def start_shortfall(self, p0: Array, rows: SeparationRows, tol_m: float = 0.0) -> tuple[float, Array]:
+        """How far [m] the items that start inside their required distance (the hard ones) by more
+        than ``tol_m`` are inside it at ``p0``, at most, and their labels (m, 2)."""
         labels = np.concatenate(
             [rows.pairs[rows.pair_hard & rows.pair_on], rows.labels[rows.single_hard & rows.single_on]]
         )
@@ -272,16 +272,15 @@ class Separation:
         pair = labels[:, 1] >= 0
         labels[pair] = np.sort(labels[pair], axis=1)  # a decoupled pair's two sides name it once
         labels = np.unique(labels, axis=0)
-        pair, worst = labels[:, 1] >= 0, 0.0
+        pair, short = labels[:, 1] >= 0, np.zeros(labels.shape[0])
         if pair.any() and self.pairs is not None:
             i, k = labels[pair].T
-            dist = vector_norms(self.pairs.relative(p0, i, k))
-            worst = max(worst, float((self.pairs.d_min_m - dist).max()))
+            short[pair] = self.pairs.d_min_m - vector_norms(self.pairs.relative(p0, i, k))
         if (~pair).any() and self.obstacles is not None:
             i, m = labels[~pair, 0], -1 - labels[~pair, 1]
-            dist = vector_norms(p0[i] - self.obstacles.center_m[m])
-            worst = max(worst, float((self.obstacles.required_m[m] - dist).max()))
-        return worst, labels
+            short[~pair] = self.obstacles.required_m[m] - vector_norms(p0[i] - self.obstacles.center_m[m])
+        inside = short > tol_m
+        return float(short[inside].max(initial=0.0)), labels[inside]
 
     def first_segment(self, p0: Array, p1: Array, cand: Candidates) -> list[Test]:
         """For the items within reach: relative positions at ``p0`` and ``p1`` and the distance required."""

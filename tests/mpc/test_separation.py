@@ -231,6 +231,18 @@ def test_a_pair_inside_d_min_gets_a_hard_no_approach_row(coupling: str) -> None:
     assert short == pytest.approx(0.2) and labels.tolist() == [[0, 1]]
 
 
+def test_a_start_a_solver_tolerance_inside_is_no_shortfall() -> None:
+    """A pair that starts 1e-9 m inside d_min (the last plan met its row to the solver's tolerance)
+    gets the hard row, but only a shortfall beyond ``tol_m`` is reported."""
+    p0 = np.array([[0.0, 0.0], [0.5 - 1e-9, 0.0]])
+    sep = Separation(2, Limits(v_max_mps=1.0, d_min_m=0.5), MPCSettings(horizon=3), ())
+    rows = sep.rows(p0, still(p0, 3), cand([[0, 1]]))
+    assert rows.pair_hard.tolist() == [True]
+    assert sep.start_shortfall(p0, rows)[0] == pytest.approx(1e-9, abs=1e-12)
+    short, labels = sep.start_shortfall(p0, rows, 1e-6)
+    assert short == 0.0 and labels.shape == (0, 2)
+
+
 def test_a_drone_inside_an_obstacles_clearance_gets_a_hard_row_and_a_push() -> None:
     ob = SphereObstacle(np.zeros(2), 1.0, clearance_m=0.5)
     p0 = np.array([[0.0, 1.2]])  # 0.3 m inside
