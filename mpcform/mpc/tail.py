@@ -26,13 +26,14 @@ No eigenvector is formed: nothing blows up when ``rho`` meets a pole of the loop
 **The tail points** (:class:`Tail`, :func:`braking_tail`). The rows past the horizon sit at the
 points ``rest - W_k z`` (``k >= 1``; ``k = 0`` is ``y_H``, whose rows the horizon has) and at the
 rest point, with one normal per item: a half-space holding at every vertex holds on the hull, so
-on the whole tail to rest. The tail's weights over its vertices are the same for every axis when
+on the whole tail to rest. Where the hull is much wider than the path (a quadrotor's) the tail's
+first K points are exact samples and the hull's vertices follow K intervals later
+(:data:`TAIL_SAMPLES`). The tail's weights over its vertices are the same for every axis when
 the axes share one loop (a lag, the second-order loop, a planar quadrotor), so the 3-D points are
 the hull's vertices. Where the axes differ (a spatial quadrotor's xy and z loops) the hull is the
-product of the axes' hulls, which this module does not build, and where the hull is much wider
-than the path (:data:`TAIL_SPREAD`: a quadrotor's) it would cost more than it guards: those tails
-are the chord to rest, whose bend the margin has to cover (:mod:`mpcform.mpc.braking`). Without a
-loop the tail is the straight segment to the stop point ``x_H + kappa u_{H-1}``: one point.
+product of the axes' hulls, which this module does not build: those tails are the chord to rest,
+whose bend the margin has to cover (:mod:`mpcform.mpc.braking`). Without a loop the tail is the
+straight segment to the stop point ``x_H + kappa u_{H-1}``: one point.
 """
 
 from __future__ import annotations
@@ -51,10 +52,17 @@ from mpcform.mpc.loop import VelocityLoop
 REAL_TOL = 1e-9  # an eigenvalue with a smaller imaginary part is real
 SAME_TOL = 1e-12  # axes whose tail systems differ by less share one hull
 TAIL_SPREAD = 4.0
-"""The hull is used while its points reach at most this many times as far past ``x_H`` as the
-chord's rest point can (``kappa`` times the loop's speed gain, plus its lag): the second-order
-loop's reaches about twice as far, a quadrotor's 14-29 times (its slow integral pole widens the
-polygon), which would open every encounter metres wide; such a tail keeps the chord."""
+"""The hull is used once its points reach at most this many times as far past ``x_H`` as the
+chord's rest point can (``kappa`` times the loop's speed gain, plus its lag). The lag's and the
+second-order loop's hulls reach at most about 1.4 times as far; a quadrotor's 14 (dt 0.1) to 29
+(dt 0.05) times, because its slow integral pole widens the polygon, which would open every
+encounter metres wide: its tail takes exact samples first (:data:`TAIL_SAMPLES`)."""
+TAIL_SAMPLES = 30
+"""At most this many exact points ``rest - L M^k z`` (k = 1..K) of the tail precede its hull,
+which then holds ``M^K z``: the polygon's width shrinks with the poles' powers, and the points stay
+closed under the shift (``L M^{K+1} = W_0 M^K M`` lies in the hull). The least K whose hull is within
+:data:`TAIL_SPREAD` is used: 0 for the lag and the second-order loop, 3 (dt 0.1) to 7 (dt 0.05)
+for a planar quadrotor; a tail that needs more keeps the chord."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -107,29 +115,37 @@ def braking_tail(braking: Braking, horizon: int, dim: int, loop: VelocityLoop | 
     if loop is None:
         return Tail(gain, rest, None)
     rest_free = loop.rest_m[None].copy()
-    vertices = _shared_vertices(loop, braking, dim)
-    if vertices is None:
-        return Tail(gain, rest, rest_free)
-    s = vertices.shape[1] - 1  # the loop's states without the velocity offset
+    chord = Tail(gain, rest, rest_free)
+    shared = _shared_hull(loop, braking, dim)
+    if shared is None:
+        return chord
+    m, vertices = shared
+    s = m.shape[0] - 1  # the loop's states without the velocity offset
     phi, gamma = loop.step_state[0, :s, :s], loop.step_input[0, :s]
     powers = [np.eye(s)]
     for _ in range(horizon):
         powers.append(phi @ powers[-1])
     to_state = np.array([powers[horizon - 1 - j] @ gamma for j in range(horizon)])  # (H, s): xi_H per u_j
-    on_inputs = vertices[:, 1:] @ to_state.T  # (V, H): W_k's xi part through xi_H
-    on_inputs[:, -1] += vertices[:, 0]  # and its command part, c = u_{H-1}
-    forced = rest - on_inputs[:, :, None]  # rest - W_k z, for every axis
-    free = np.broadcast_to(rest_free, (vertices.shape[0],) + rest_free.shape[1:]).copy()
-    free[:, :, :s] -= (vertices[:, 1:] @ powers[horizon])[:, None, :]
-    hull = Tail(gain, np.concatenate([forced, rest]), np.concatenate([free, rest_free]))
-    if hull.reach_s > TAIL_SPREAD * (braking.kappa_s * loop.speed_gain + loop.lag_s):
-        return Tail(gain, rest, rest_free)
-    return hull
+    reach = TAIL_SPREAD * (braking.kappa_s * loop.speed_gain + loop.lag_s)
+    samples = [vertices[0]]  # L M^k
+    for _ in range(TAIL_SAMPLES + 1):
+        ahead = np.linalg.matrix_power(m, len(samples) - 1)
+        functionals = np.vstack(samples[1:] + [vertices[1:] @ ahead])  # past W_0 = L
+        on_inputs = functionals[:, 1:] @ to_state.T  # (V, H): W_k's xi part through xi_H
+        on_inputs[:, -1] += functionals[:, 0]  # and its command part, c = u_{H-1}
+        forced = rest - on_inputs[:, :, None]  # rest - W_k z, for every axis
+        free = np.broadcast_to(rest_free, (functionals.shape[0],) + rest_free.shape[1:]).copy()
+        free[:, :, :s] -= (functionals[:, 1:] @ powers[horizon])[:, None, :]
+        hull = Tail(gain, np.concatenate([forced, rest]), np.concatenate([free, rest_free]))
+        if hull.reach_s <= reach:
+            return hull
+        samples.append(samples[-1] @ m)
+    return chord
 
 
-def _shared_vertices(loop: VelocityLoop, braking: Braking, dim: int) -> Array | None:
-    """The vertex functionals past ``W_0`` (V - 1, q) of a hull every axis shares, or None when
-    the axes' tail systems differ or the hull cannot be built (the chord then stands)."""
+def _shared_hull(loop: VelocityLoop, braking: Braking, dim: int) -> tuple[Array, Array] | None:
+    """The tail system ``M`` (q, q) every axis shares and its hull's vertex functionals (V, q), or
+    None when the axes' tail systems differ or the hull cannot be built (the chord then stands)."""
     systems = [tail_system(loop, braking, axis) for axis in range(dim)]
     m0, l0 = systems[0]
     if any(
@@ -138,7 +154,7 @@ def _shared_vertices(loop: VelocityLoop, braking: Braking, dim: int) -> Array | 
     ):
         return None
     try:
-        return axis_hull(m0, l0).vertices[1:]
+        return m0, axis_hull(m0, l0).vertices
     except (ValidationError, MPCFormError):  # poles the construction does not cover
         return None
 

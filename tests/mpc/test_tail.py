@@ -11,15 +11,16 @@ from scipy.optimize import linprog
 from mpcform.mpc.braking import Braking
 from mpcform.mpc.loop import VelocityLoop
 from mpcform.mpc.prediction import Prediction
-from mpcform.mpc.tail import axis_hull, braking_tail, tail_system
-from mpcform.sim.plants import lag_plant, second_order_plant
+from mpcform.mpc.tail import TAIL_SPREAD, axis_hull, braking_tail, tail_system
+from mpcform.sim.plants import Plant, lag_plant, second_order_plant
 from mpcform.world.limits import Limits
 
 PLANTS = {
-    "lag 0.3 s": lambda: lag_plant(2, 3, 0.3),
-    "lag 0.1 s": lambda: lag_plant(2, 3, 0.1),
-    "second order": lambda: second_order_plant(2, 3, 0.7, 6.0),
+    "lag 0.3 s": lambda dim=3: lag_plant(2, dim, 0.3),
+    "lag 0.1 s": lambda dim=3: lag_plant(2, dim, 0.1),
+    "second order": lambda dim=3: second_order_plant(2, dim, 0.7, 6.0),
 }
+QUADROTOR = "quadrotor (planar)"  # its axes share one loop in 2-D only
 
 
 def _loop(plant_name: str, dt: float) -> VelocityLoop:
@@ -127,11 +128,19 @@ def test_a_lags_hull_is_its_path_in_steady_flight(tau: float) -> None:
     assert hull.vertices.shape[0] == 2 and np.all(togo > 0.0) and np.all(togo <= togo[0] + 1e-12)
 
 
+def _plant(name: str, dim: int) -> Plant:
+    if name == QUADROTOR:
+        from mpcform.sim.quadrotor import QuadrotorPlant, QuadrotorSpec
+
+        return QuadrotorPlant(2, dim, QuadrotorSpec())
+    return PLANTS[name](dim)
+
+
 def _true_path(plant: str, xi0: np.ndarray, commands: np.ndarray, dt: float) -> np.ndarray:
     """Positions (K + 1, n, d) from the origin of drones whose loop (per axis ``xi' = A xi + B u``,
     ``p' = c^T xi``) starts in ``xi0`` (n, d, k), each command (K, n, d) held for ``dt``: the exact
     discretisation of the plant's own loop, independent of :class:`VelocityLoop`."""
-    (a, b, _, c, _), *_ = PLANTS[plant]().velocity_loops()
+    (a, b, _, c, _), *_ = _plant(plant, commands.shape[-1]).velocity_loops()
     a, b, c = np.asarray(a), np.asarray(b), np.asarray(c)
     k = a.shape[0]
     m = np.zeros((k + 2, k + 2))
@@ -147,31 +156,35 @@ def _true_path(plant: str, xi0: np.ndarray, commands: np.ndarray, dt: float) -> 
 
 
 @pytest.mark.parametrize(
-    ("plant", "dt", "horizon"), [(p, dt, h) for p in PLANTS for dt, h in ((0.1, 10), (0.05, 7))]
+    ("plant", "dim", "dt", "horizon"),
+    [(p, 3, dt, h) for p in PLANTS for dt, h in ((0.1, 10), (0.05, 7))]
+    + [(QUADROTOR, 2, dt, h) for dt, h in ((0.1, 10), (0.05, 7))],
 )
-def test_the_tail_points_hold_the_drones_true_path_to_rest(plant: str, dt: float, horizon: int) -> None:
-    """For random loop states and plans of three drones in 3-D, every position of the true path from
+def test_the_tail_points_hold_the_drones_true_path_to_rest(
+    plant: str, dim: int, dt: float, horizon: int
+) -> None:
+    """For random loop states and plans of three drones, every position of the true path from
     ``y_H`` to rest (the plan, then its geometric braking, integrated exactly) lies in the hull of
     ``y_H`` and the tail's points, the last of which is the rest point; the chord alone (``y_H``
-    and the rest point) misses most of them."""
+    and the rest point) misses many of them. A planar quadrotor's tail starts with exact samples."""
     braking = Braking.of(dt, Limits(v_max_mps=1.0, a_max_mps2=1.79))
     loop = VelocityLoop.from_groups(
         [
             (np.asarray(a), np.asarray(b), np.asarray(c), ax)
-            for a, b, _, c, ax in PLANTS[plant]().velocity_loops()
+            for a, b, _, c, ax in _plant(plant, dim).velocity_loops()
         ],
-        3,
+        dim,
         dt,
         horizon,
     )
-    tail = braking_tail(braking, horizon, 3, loop)
+    tail = braking_tail(braking, horizon, dim, loop)
     assert tail.count == 2 if plant.startswith("lag") else tail.count > 2  # the chord: 1
     rng = np.random.default_rng(int(100 * dt) + horizon)
     k = loop.step_state.shape[1] - 1
     missed = checked = 0
     for _ in range(2):
-        u = rng.uniform(-1.0, 1.0, (horizon, 3, 3))
-        state = np.concatenate([0.5 * rng.normal(size=(3, 3, k)), np.zeros((3, 3, 1))], axis=2)
+        u = rng.uniform(-1.0, 1.0, (horizon, 3, dim))
+        state = np.concatenate([0.5 * rng.normal(size=(3, dim, k)), np.zeros((3, dim, 1))], axis=2)
         x = dt * np.cumsum(u, axis=0)
         planned = Prediction(dt, horizon, loop, braking, tail).points(state, u, x)  # (H + T, n, d)
         brake = braking.rho ** np.arange(1, 3000)[:, None, None] * u[-1]
@@ -211,8 +224,9 @@ def _in_hull(points: np.ndarray, x: np.ndarray) -> bool:
 
 def test_without_a_loop_or_with_differing_axes_the_tail_is_its_stop_point() -> None:
     """The single integrator's tail is straight: one point, ``x_H + kappa u_{H-1}``. A spatial
-    quadrotor's xy and z loops differ, and a planar one's hull reaches 14 times as far as its chord:
-    both tails are the chord to rest (one point, the rest point)."""
+    quadrotor's xy and z loops differ: the chord to rest (one point, the rest point). A planar
+    one's hull alone reaches 14 times as far as its chord: 3 exact samples first bring it within
+    ``TAIL_SPREAD``."""
     braking = Braking.of(0.1, Limits(v_max_mps=1.0, a_max_mps2=1.79))
     plain = braking_tail(braking, 10, 3)
     rng = np.random.default_rng(1)
@@ -229,4 +243,8 @@ def test_without_a_loop_or_with_differing_axes_the_tail_is_its_stop_point() -> N
         (np.asarray(a), np.asarray(b), np.asarray(c), axes)
         for a, b, _, c, axes in QuadrotorPlant(2, 2, QuadrotorSpec()).velocity_loops()
     ]
-    assert braking_tail(braking, 10, 2, VelocityLoop.from_groups(planar, 2, 0.1, 10)).count == 1  # too wide
+    loop = VelocityLoop.from_groups(planar, 2, 0.1, 10)
+    m, rest = tail_system(loop, braking, 0)
+    tail = braking_tail(braking, 10, 2, loop)
+    assert tail.count == 3 + axis_hull(m, rest).vertices.shape[0]  # 3 samples, 6 vertices past W_0, rest
+    assert tail.reach_s <= TAIL_SPREAD * (braking.kappa_s * loop.speed_gain + loop.lag_s)
