@@ -135,8 +135,9 @@ def test_random_swaps_fly_in_crazyflow() -> None:
     results = [completion_family.outcome(sc) for sc in swaps(SWAP_RUNS)]
     for r in results:
         print(
-            r["name"], r["n"], f"{r['min_separation']:.3f}", r["completion"], r["deadline_misses"], r["cpu_s"]
+            r["name"], r["n"], f"{r['min_separation']:.3f}", r["completion"], r["time_to_complete"], end=" "
         )
+        print("incomplete (drone, m)", r["incomplete"], "misses", r["deadline_misses"], "cpu", r["cpu_s"])
     bad = [
         r for r in results if r["violations"] or r["completion"] < 1.0 or r["events"] or r["deadline_misses"]
     ]
