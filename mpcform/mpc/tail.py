@@ -53,16 +53,17 @@ REAL_TOL = 1e-9  # an eigenvalue with a smaller imaginary part is real
 SAME_TOL = 1e-12  # axes whose tail systems differ by less share one hull
 TAIL_SPREAD = 4.0
 """The hull is used once its points reach at most this many times as far past ``x_H`` as the
-chord's rest point can (``kappa`` times the loop's speed gain, plus its lag). The lag's and the
-second-order loop's hulls reach at most about 1.4 times as far; a quadrotor's 14 (dt 0.1) to 29
-(dt 0.05) times, because its slow integral pole widens the polygon, which would open every
-encounter metres wide: its tail takes exact samples first (:data:`TAIL_SAMPLES`)."""
+chord's rest point can (``kappa`` times the loop's speed gain, plus its lag). A lag's hull and an
+underdamped second-order loop's reach at most about 1.4 times as far; a quadrotor's 14 (dt 0.1)
+to 29 (dt 0.05) times (its slow integral pole widens the polygon), and a nearly critically damped
+loop's far more (its pole pair's rotation coordinates are ill-conditioned), which would open
+every encounter metres wide: those tails take exact samples first (:data:`TAIL_SAMPLES`)."""
 TAIL_SAMPLES = 30
 """At most this many exact points ``rest - L M^k z`` (k = 1..K) of the tail precede its hull,
 which then holds ``M^K z``: the polygon's width shrinks with the poles' powers, and the points stay
 closed under the shift (``L M^{K+1} = W_0 M^K M`` lies in the hull). The least K whose hull is within
-:data:`TAIL_SPREAD` is used: 0 for the lag and the second-order loop, 3 (dt 0.1) to 7 (dt 0.05)
-for a planar quadrotor; a tail that needs more keeps the chord."""
+:data:`TAIL_SPREAD` is used: 0 for a lag and an underdamped second-order loop, 3 (dt 0.1) to 7
+(dt 0.05) for a planar quadrotor; a tail that needs more keeps the chord."""
 
 
 @dataclass(frozen=True, eq=False)

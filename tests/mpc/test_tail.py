@@ -19,6 +19,7 @@ PLANTS = {
     "lag 0.3 s": lambda dim=3: lag_plant(2, dim, 0.3),
     "lag 0.1 s": lambda dim=3: lag_plant(2, dim, 0.1),
     "second order": lambda dim=3: second_order_plant(2, dim, 0.7, 6.0),
+    "second order, nearly critical": lambda dim=3: second_order_plant(2, dim, 0.994, 6.0),
 }
 QUADROTOR = "quadrotor (planar)"  # its axes share one loop in 2-D only
 
