@@ -492,3 +492,30 @@ def test_with_a_loop_every_first_row_is_hard_and_braking_meets_it(coupling: str)
     at_s = np.einsum("sd,sd->s", hard.single_coeffs[:, 0], first[hard.singles])
     assert np.all(at_p >= hard.pair_lower[:, 0]) and np.all(at_s >= hard.single_lower[:, 0])
     assert (at_p < rows.pair_lower[:, 0]).any() or (at_s < rows.single_lower[:, 0]).any()
+
+
+@pytest.mark.parametrize(("miss_m", "reported"), [(1e-9, False), (1e-3, True)])
+def test_a_miss_within_the_solvers_tolerance_is_no_slack(miss_m: float, reported: bool) -> None:
+    """slack_report (a solve with lowered first rows): a plan that misses a row by 1 nm needed no
+    slack; by 1 mm it did, and the pair is named."""
+    from mpcform.mpc.candidates import Candidates
+    from mpcform.mpc.planner import SLACK_REPORT_M, slack_report
+    from mpcform.mpc.separation import Separation
+
+    d_min, h = 0.5, 3
+    sep = Separation(2, Limits(v_max_mps=1.0, d_min_m=d_min), MPCSettings(horizon=h), ())
+    p0 = np.array([[0.0, 0.0], [2.0, 0.0]])
+    pairs = np.array([[0, 1]])
+    rows = sep.rows(
+        p0,
+        np.broadcast_to(p0, (h + 1, 2, 2)),
+        Candidates(pairs, np.ones(1, bool), pairs[:0], np.ones(0, bool), False),
+    )
+    gap = d_min + sep.pairs.margin_m - miss_m  # the rows ask d_min + margin
+    x = np.zeros((h, 2, 2))
+    x[:, 1, 0] = gap - 2.0  # drone 1 moves to ``gap`` from drone 0
+    z = np.zeros(2 * h * 2 * 2 + h * 2)
+    slack_m, items = slack_report(sep, z, np.arange(2), x, rows, (0.0, pairs[:0]), True, h)
+    assert items.tolist() == ([[0, 1]] if reported else [])
+    assert slack_m == (pytest.approx(miss_m, rel=1e-6) if reported else 0.0)  # 0: not a slack step
+    assert reported == (miss_m > SLACK_REPORT_M)
