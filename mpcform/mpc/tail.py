@@ -108,8 +108,8 @@ class Tail:
 @lru_cache(maxsize=64)  # a planner's parts each ask for the same tail
 def braking_tail(braking: Braking, horizon: int, dim: int, loop: VelocityLoop | None = None) -> Tail:
     """The tail points of plans over ``horizon`` steps braking with ``braking`` (module
-    docstring): the stop point alone without a ``loop`` or where its axes differ, else the hull's
-    vertices past ``y_H`` and the rest point."""
+    docstring): the stop point alone without a ``loop`` or where its axes differ, else the tail's
+    first K exact points (:data:`TAIL_SAMPLES`), the hull's vertices past them and the rest point."""
     gain = np.ones(dim) if loop is None else loop.dc_gain.copy()
     rest = np.zeros((1, horizon, dim))
     rest[0, -1] = braking.kappa_s * gain  # g (x_H + kappa u_{H-1}) (+ F_rest xi_0)
