@@ -7,7 +7,8 @@
 drone), ``max_speed`` (largest ``||u_i||`` [m/s]), ``separation_violations`` (count of
 (sample, pair) closer than d_min) and ``speed_violations`` (count of (step, drone) faster than
 v_max), ``qp_solves``, ``fast_path_steps``, ``solver_failures``, ``max_slack`` [m],
-``slack_steps`` (steps whose plan needed slack, or that start inside a required distance) and
+``slack_steps`` (steps whose plan needed slack, or that start inside a required distance, by
+more than :data:`mpcform.mpc.planner.SLACK_REPORT_M`) and
 ``lowered_first_rows`` (steps whose first separation rows were lowered to what braking reaches,
 :func:`mpcform.mpc.first_rows.hard_first_rows`),
 ``stall_events``, ``resolutions`` and ``circling_resets`` (drones that started to stall,
