@@ -32,8 +32,9 @@ With a velocity loop the stop point is where the loop comes to rest,
 ``g (x_H + kappa u_{H-1}) + F_rest xi_0`` (``g`` the loop's DC gain, ``F_rest`` its free response
 at rest, :class:`mpcform.mpc.loop.VelocityLoop`), and the true path from ``y_H`` to it is curved
 (an underdamped loop overshoots it). The tail's rows then sit at ``y_H``, at the vertices of a
-polytope that holds the whole path to rest and maps into itself under the shift, and at the rest
-point, one normal per item (:mod:`mpcform.mpc.tail`): (i) and (ii) hold as above, with "the
+polytope that holds the whole path to rest and maps into itself under the shift (after a few
+exact points of the path where the polytope alone would be much wider), and at the rest point,
+one normal per item (:mod:`mpcform.mpc.tail`): (i) and (ii) hold as above, with "the
 segment" read as that polytope, whenever the loop's axes share one loop (a lag, the second-order
 loop, a planar quadrotor). Where they differ (a spatial quadrotor's xy and z loops) the rows stay
 on the chord to the rest point, and the margin has to cover the path's bend. Wind and model error
