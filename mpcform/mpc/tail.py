@@ -26,8 +26,8 @@ No eigenvector is formed: nothing blows up when ``rho`` meets a pole of the loop
 **The tail points** (:class:`Tail`, :func:`braking_tail`). The rows past the horizon sit at the
 points ``rest - W_k z`` (``k >= 1``; ``k = 0`` is ``y_H``, whose rows the horizon has) and at the
 rest point, with one normal per item: a half-space holding at every vertex holds on the hull, so
-on the whole tail to rest. Where the hull is much wider than the path (a quadrotor's) the tail's
-first K points are exact samples and the hull's vertices follow K intervals later
+on the whole tail to rest. Where the hull is much wider than the path (a nearly critically damped
+loop's) the tail's first K points are exact samples and the hull's vertices follow K intervals later
 (:data:`TAIL_SAMPLES`). The tail's weights over its vertices are the same for every axis when
 the axes share one loop (a lag, the second-order loop, a planar quadrotor), so the 3-D points are
 the hull's vertices. Where the axes differ (a spatial quadrotor's xy and z loops) the hull is the
@@ -57,13 +57,17 @@ chord's rest point can (``kappa`` times the loop's speed gain, plus its lag). A 
 underdamped second-order loop's reach at most about 1.4 times as far; a quadrotor's 14 (dt 0.1)
 to 29 (dt 0.05) times (its slow integral pole widens the polygon), and a nearly critically damped
 loop's far more (its pole pair's rotation coordinates are ill-conditioned), which would open
-every encounter metres wide: those tails take exact samples first (:data:`TAIL_SAMPLES`)."""
-TAIL_SAMPLES = 30
+every encounter metres wide: those tails take exact samples first (:data:`TAIL_SAMPLES`), or keep
+the chord."""
+TAIL_SAMPLES = 2
 """At most this many exact points ``rest - L M^k z`` (k = 1..K) of the tail precede its hull,
 which then holds ``M^K z``: the polygon's width shrinks with the poles' powers, and the points stay
 closed under the shift (``L M^{K+1} = W_0 M^K M`` lies in the hull). The least K whose hull is within
-:data:`TAIL_SPREAD` is used: 0 for a lag and an underdamped second-order loop, 3 (dt 0.1) to 7
-(dt 0.05) for a planar quadrotor; a tail that needs more keeps the chord."""
+:data:`TAIL_SPREAD` is used: 0 for a lag and an underdamped second-order loop, 1 for a nearly
+critically damped one at dt 0.1 (at dt 0.05 it would need 3: the chord). A planar quadrotor would
+need 3 (dt 0.1) to 7 (dt 0.05), 9-17 tail points whose rows touch every input of both drones: its
+joint QPs took 4-6 times as long (a planar swap of the flight acceptance over 20 minutes instead
+of 4), so it keeps the chord."""
 
 
 @dataclass(frozen=True, eq=False)
