@@ -131,20 +131,25 @@ def braking_tail(braking: Braking, horizon: int, dim: int, loop: VelocityLoop | 
     for _ in range(horizon):
         powers.append(phi @ powers[-1])
     to_state = np.array([powers[horizon - 1 - j] @ gamma for j in range(horizon)])  # (H, s): xi_H per u_j
-    reach = TAIL_SPREAD * (braking.kappa_s * loop.speed_gain + loop.lag_s)
-    samples = [vertices[0]]  # L M^k
-    for _ in range(TAIL_SAMPLES + 1):
-        ahead = np.linalg.matrix_power(m, len(samples) - 1)
-        functionals = np.vstack(samples[1:] + [vertices[1:] @ ahead])  # past W_0 = L
-        on_inputs = functionals[:, 1:] @ to_state.T  # (V, H): W_k's xi part through xi_H
+
+    def at(functionals: Array) -> Tail:
+        """The tail's points ``rest - W z`` (W the rows of ``functionals``), the rest point last."""
+        on_inputs = functionals[:, 1:] @ to_state.T  # (V, H): W's xi part through xi_H
         on_inputs[:, -1] += functionals[:, 0]  # and its command part, c = u_{H-1}
-        forced = rest - on_inputs[:, :, None]  # rest - W_k z, for every axis
+        forced = rest - on_inputs[:, :, None]  # for every axis
         free = np.broadcast_to(rest_free, (functionals.shape[0],) + rest_free.shape[1:]).copy()
         free[:, :, :s] -= (functionals[:, 1:] @ powers[horizon])[:, None, :]
-        hull = Tail(gain, np.concatenate([forced, rest]), np.concatenate([free, rest_free]))
+        return Tail(gain, np.concatenate([forced, rest]), np.concatenate([free, rest_free]))
+
+    reach = TAIL_SPREAD * (braking.kappa_s * loop.speed_gain + loop.lag_s)
+    samples: list[Array] = []  # L M^k, k = 1..K
+    sample, ahead = vertices[0], np.eye(m.shape[0])  # L M^K, M^K
+    for _ in range(TAIL_SAMPLES + 1):
+        hull = at(np.vstack(samples + [vertices[1:] @ ahead]))  # past W_0 = L
         if hull.reach_s <= reach:
             return hull
-        samples.append(samples[-1] @ m)
+        sample, ahead = sample @ m, ahead @ m
+        samples.append(sample)
     return chord
 
 

@@ -12,14 +12,14 @@ from mpcform.mpc.braking import Braking
 from mpcform.mpc.loop import VelocityLoop
 from mpcform.mpc.prediction import Prediction
 from mpcform.mpc.tail import axis_hull, braking_tail, tail_system
-from mpcform.sim.plants import Plant, lag_plant, second_order_plant
+from mpcform.sim.plants import lag_plant, second_order_plant
 from mpcform.world.limits import Limits
 
 PLANTS = {
-    "lag 0.3 s": lambda dim=3: lag_plant(2, dim, 0.3),
-    "lag 0.1 s": lambda dim=3: lag_plant(2, dim, 0.1),
-    "second order": lambda dim=3: second_order_plant(2, dim, 0.7, 6.0),
-    "second order, nearly critical": lambda dim=3: second_order_plant(2, dim, 0.994, 6.0),
+    "lag 0.3 s": lambda: lag_plant(2, 3, 0.3),
+    "lag 0.1 s": lambda: lag_plant(2, 3, 0.1),
+    "second order": lambda: second_order_plant(2, 3, 0.7, 6.0),
+    "second order, nearly critical": lambda: second_order_plant(2, 3, 0.994, 6.0),
 }
 
 
@@ -128,15 +128,11 @@ def test_a_lags_hull_is_its_path_in_steady_flight(tau: float) -> None:
     assert hull.vertices.shape[0] == 2 and np.all(togo > 0.0) and np.all(togo <= togo[0] + 1e-12)
 
 
-def _plant(name: str, dim: int) -> Plant:
-    return PLANTS[name](dim)
-
-
 def _true_path(plant: str, xi0: np.ndarray, commands: np.ndarray, dt: float) -> np.ndarray:
     """Positions (K + 1, n, d) from the origin of drones whose loop (per axis ``xi' = A xi + B u``,
     ``p' = c^T xi``) starts in ``xi0`` (n, d, k), each command (K, n, d) held for ``dt``: the exact
     discretisation of the plant's own loop, independent of :class:`VelocityLoop`."""
-    (a, b, _, c, _), *_ = _plant(plant, commands.shape[-1]).velocity_loops()
+    (a, b, _, c, _), *_ = PLANTS[plant]().velocity_loops()
     a, b, c = np.asarray(a), np.asarray(b), np.asarray(c)
     k = a.shape[0]
     m = np.zeros((k + 2, k + 2))
@@ -152,13 +148,11 @@ def _true_path(plant: str, xi0: np.ndarray, commands: np.ndarray, dt: float) -> 
 
 
 @pytest.mark.parametrize(
-    ("plant", "dim", "dt", "horizon"),
-    [(p, 3, dt, h) for p in PLANTS for dt, h in ((0.1, 10), (0.05, 7)) if "critical" not in p or dt == 0.1],
+    ("plant", "dt", "horizon"),
+    [(p, dt, h) for p in PLANTS for dt, h in ((0.1, 10), (0.05, 7)) if "critical" not in p or dt == 0.1],
 )
-def test_the_tail_points_hold_the_drones_true_path_to_rest(
-    plant: str, dim: int, dt: float, horizon: int
-) -> None:
-    """For random loop states and plans of three drones, every position of the true path from
+def test_the_tail_points_hold_the_drones_true_path_to_rest(plant: str, dt: float, horizon: int) -> None:
+    """For random loop states and plans of three drones in 3-D, every position of the true path from
     ``y_H`` to rest (the plan, then its geometric braking, integrated exactly) lies in the hull of
     ``y_H`` and the tail's points, the last of which is the rest point; the chord alone (``y_H``
     and the rest point) misses many of them. A nearly critical loop's tail starts with exact samples."""
@@ -166,20 +160,20 @@ def test_the_tail_points_hold_the_drones_true_path_to_rest(
     loop = VelocityLoop.from_groups(
         [
             (np.asarray(a), np.asarray(b), np.asarray(c), ax)
-            for a, b, _, c, ax in _plant(plant, dim).velocity_loops()
+            for a, b, _, c, ax in PLANTS[plant]().velocity_loops()
         ],
-        dim,
+        3,
         dt,
         horizon,
     )
-    tail = braking_tail(braking, horizon, dim, loop)
+    tail = braking_tail(braking, horizon, 3, loop)
     assert tail.count == 2 if plant.startswith("lag") else tail.count > 2  # the chord: 1
     rng = np.random.default_rng(int(100 * dt) + horizon)
     k = loop.step_state.shape[1] - 1
     missed = checked = 0
     for _ in range(2):
-        u = rng.uniform(-1.0, 1.0, (horizon, 3, dim))
-        state = np.concatenate([0.5 * rng.normal(size=(3, dim, k)), np.zeros((3, dim, 1))], axis=2)
+        u = rng.uniform(-1.0, 1.0, (horizon, 3, 3))
+        state = np.concatenate([0.5 * rng.normal(size=(3, 3, k)), np.zeros((3, 3, 1))], axis=2)
         x = dt * np.cumsum(u, axis=0)
         planned = Prediction(dt, horizon, loop, braking, tail).points(state, u, x)  # (H + T, n, d)
         brake = braking.rho ** np.arange(1, 3000)[:, None, None] * u[-1]
