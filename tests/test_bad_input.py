@@ -99,6 +99,7 @@ def check_case(index: int) -> str | None:
     return None
 
 
+@pytest.mark.alone
 def test_bad_scenario_files_get_problems_in_time_and_memory() -> None:
     with ProcessPoolExecutor(2) as pool:
         failures = [f for f in pool.map(check_case, range(CASES)) if f is not None]

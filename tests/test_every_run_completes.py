@@ -41,6 +41,7 @@ def test_the_family_draws_what_it_promises() -> None:
 
 
 @pytest.mark.slow
+@pytest.mark.alone
 def test_every_run_of_the_completion_family_arrives_without_a_true_violation() -> None:
     """150 runs (both couplings, both velocity sets, dt 0.05-0.1, horizons 6-10, n 2-21, every
     plant): every drone ends within 0.1 m of its target, none breaks d_min, a sphere or the fence

@@ -98,6 +98,7 @@ OPEN_ADVERSARIAL: dict[int, str] = {}  # none now: run 154 (mean wind towards a 
 
 
 @pytest.mark.slow
+@pytest.mark.alone
 def test_adversarial_family_keeps_every_limit_on_the_true_path() -> None:
     """200 seeded runs (tests/families.py ``adversarial``): every run is refused at load with the
     broken assumption named (at most 20 %), or keeps 0 true separation, obstacle and geofence

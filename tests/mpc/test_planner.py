@@ -416,6 +416,7 @@ def test_fast_path_on_and_off_agree_in_every_coupling(mode: tuple[str, bool]) ->
 
 
 @pytest.mark.slow
+@pytest.mark.alone
 def test_every_run_of_the_random_families_completes_safely() -> None:
     """200 runs of ``tests/families.py`` (swaps, spheres, close starts): every drone ends within 0.1 m
     of its target, pairs that start d_min apart stay so along every segment, pairs that start

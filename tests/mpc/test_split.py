@@ -143,6 +143,7 @@ def test_a_budget_stops_the_rounds() -> None:
 
 
 @pytest.mark.slow
+@pytest.mark.alone
 def test_every_run_of_the_random_families_completes_safely_with_split_rounds() -> None:
     """The first 80 runs of ``tests/families.py``, all decoupled with 10 split rounds per step: no
     separation, approach or obstacle violation, every drone ends within 0.1 m of its target."""

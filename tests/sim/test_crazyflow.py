@@ -131,6 +131,7 @@ def swaps(count: int, seed: int = SWAP_SEED) -> Iterator[dict]:
 
 
 @pytest.mark.slow
+@pytest.mark.alone
 def test_random_swaps_fly_in_crazyflow() -> None:
     results = [completion_family.outcome(sc) for sc in swaps(SWAP_RUNS)]
     for r in results:
@@ -145,6 +146,7 @@ def test_random_swaps_fly_in_crazyflow() -> None:
 
 
 @pytest.mark.slow
+@pytest.mark.alone
 @pytest.mark.parametrize(
     ("name", "altitude_m"),
     [
@@ -162,6 +164,7 @@ def test_bundled_scenarios_fly_in_crazyflow(name: str, altitude_m: float) -> Non
 
 
 @pytest.mark.slow
+@pytest.mark.alone
 def test_a_climb_beyond_a_crazyflies_rate_flips_it_and_the_bound_keeps_it_upright() -> None:
     """The commands a drone of swap_spatial_20 flew online before it flipped (climbs of 0.9 m/s
     while turning, each change within a_max dt) flip a lone crazyflow drone too; scaled into the
@@ -188,6 +191,7 @@ def test_a_climb_beyond_a_crazyflies_rate_flips_it_and_the_bound_keeps_it_uprigh
 
 
 @pytest.mark.slow
+@pytest.mark.alone
 def test_planning_stops_for_a_drone_on_the_floor() -> None:
     """Drone 0's goal lies below crazyflow's floor: it lands on it, the planner stops planning for
     it (commands zero) and the others arrive, clear of it."""
