@@ -45,6 +45,10 @@ from mpcform.world.limits import Limits
 HOVER_M = 0.3  # takeoff and landing height above the floor [m]
 FLOOR_CLEARANCE_M = 0.15  # the ascent and the descent keep this far above the floor (a geofence)
 ARRIVED_M = 0.002  # a phase ends once every drone is this close to its goal (then the goal itself)
+BLEND_S = 1.0
+"""The last gap to the goals (up to :data:`ARRIVED_M`) is closed over this long before a phase's
+end, smoothly, not in its last interval: an export within a tolerance below that gap would
+otherwise follow the jump and crawl to its end."""
 PHASE_GAIN_PER_S = 2.0  # eq. 14's k in the ascent and descent
 LAYOUT_SPACING = 1.25  # a grid layout's spacing per distance the planner keeps (so it can reach it)
 LEG_MIN_S = 1.5  # the shortest takeoff or landing [s]
@@ -129,7 +133,8 @@ def vertical_leg_s(height_m: float, limits: FlightLimits, slack: float = 0.9) ->
 
 def plan_phase(start_m: Array, goal_m: Array, dt_s: float, limits: Limits, name: str) -> Array:
     """The planner's path (T, n, 3) from ``start_m`` to ``goal_m`` (n, 3), until every drone is
-    within :data:`ARRIVED_M` of its goal, the last sample the goal itself."""
+    within :data:`ARRIVED_M` of its goal, the last sample the goal itself (the gap closed over
+    :data:`BLEND_S`)."""
     travel = float(np.linalg.norm(goal_m - start_m, axis=-1).max())
     if travel <= ARRIVED_M:  # no motion: the goal alone
         return goal_m[None].copy()
@@ -151,7 +156,11 @@ def plan_phase(start_m: Array, goal_m: Array, dt_s: float, limits: Limits, name:
         )
     end = 0 if not late.size else late[-1] + 1
     out = path[: end + 1].copy()
-    out[-1] = goal_m
+    blend = min(end, math.ceil(BLEND_S / dt_s))  # samples (end >= 1: the start is not arrived)
+    x = np.arange(1, blend + 1) / blend
+    smooth = x**3 * (10.0 - 15.0 * x + 6.0 * x**2)  # 0 to 1, its slope and curvature 0 at both
+    out[end + 1 - blend :] += smooth[:, None, None] * (goal_m - out[-1])
+    out[-1] = goal_m  # exactly, as the next phase starts
     return out
 
 

@@ -2,11 +2,12 @@
 
 A phase's planned samples (the ascent's, the mission's or the descent's,
 :mod:`mpcform.outputs.flight.phases`), up to where every drone has settled at its end, are joined
-by lines (the held commands), fitted by degree-7 pieces within half the tolerance, retimed
-time-optimally within the speed, acceleration and jerk limits from rest to rest
-(:mod:`mpcform.outputs.flight.retime`), fitted again at the new times with the yaw (slowed down
-and fitted again where the fit exceeds a limit; retimed with a lower jerk limit where it needs more
-pieces than a Crazyflie holds), and rounded to float32 as the Crazyflie stores them. Every phase
+by a cubic spline (at rest at both ends), fitted by degree-7 pieces within half the tolerance,
+retimed time-optimally within the speed, acceleration and jerk limits from rest to rest
+(:mod:`mpcform.outputs.flight.retime`), fitted again at the new times with the yaw (retimed with
+the limits lowered where the fit exceeds one, then slowed down; retimed with a lower jerk limit
+where it needs more pieces than a Crazyflie holds), and rounded to float32 as the Crazyflie stores
+them. Every phase
 ends at rest, so the phases join into one flight (:func:`join`) whose derivatives are continuous.
 """
 
@@ -15,10 +16,12 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.interpolate import make_interp_spline
+from scipy.ndimage import maximum_filter1d
 
 from mpcform._validate import Array
 from mpcform.errors import MPCFormError, ValidationError
-from mpcform.outputs.flight.limits import FlightLimits, envelope, flat_state
+from mpcform.outputs.flight.limits import FlightLimits, flat_state
 from mpcform.outputs.flight.polynomial import (
     MIN_SAMPLES_PER_PIECE,
     PiecewisePolynomial,
@@ -44,9 +47,13 @@ SETTLED_SHARE = 0.25
 flown as its end (each within 5 mm at the default 2 cm)."""
 LIMIT_SLACK = 0.95  # the retiming aims at this share of each limit (the fit adds a little)
 REFITS = 4
-"""A fit within the tolerance can add acceleration and jerk: pieces that exceed a limit by a
-factor are fitted again to the retimed flight slowed down uniformly by that factor's root (speed
-1, acceleration 2, jerk 3), this many times at most; then the export names the limit."""
+"""A fit within the tolerance can add acceleration and jerk: where the pieces exceed a limit by a
+factor, the flight is slowed down by that factor's root (speed 1, acceleration 2, jerk 3) and
+fitted again, this many times at most; then the export names the limit. The first
+:data:`LOCAL_REFITS` times the path is retimed with its limits lowered only within
+:data:`LOCAL_WINDOW_S` of where they were exceeded, the later ones slow the whole flight down."""
+LOCAL_REFITS = 3
+LOCAL_WINDOW_S = 0.25  # of the flight, either side of an excess
 MAX_SAMPLES = 7e6
 """The most samples x drones an export takes (checks at 500 Hz and setpoints at ``rate_hz``): each
 took about 560 bytes and 34 us (setpoint CSVs written), so about 4 GiB and 4 minutes."""
@@ -96,7 +103,8 @@ def phase_pieces(
     dense = np.linspace(0.0, t[cut - 1], PATH_SAMPLES * (cut - 1) + 1)  # held commands: lines
     lines = np.stack([np.interp(dense, t[:cut], x) for x in kept.reshape(cut, -1).T], axis=-1)
     lines = lines.reshape(dense.shape[0], n, 3)
-    path = fit_positions(dense, lines, half, max_piece_s).polynomial
+    # at rest at both ends exactly where the phase starts and ends: the phases join there
+    path = fit_positions(dense, _through(t[:cut], kept, dense), half, max_piece_s, rest_ends=True).polynomial
     timing, poly, flown = _timed(path, t, yaw_rad, limits, half, max_piece_s, n, rate_hz)
     if CRAZYFLIE_MAX_PIECES < flown.pieces <= 2 * CRAZYFLIE_MAX_PIECES:
         for share in SMOOTHER:
@@ -115,6 +123,17 @@ def phase_pieces(
     return PhasePieces(name, planned_m, dense, lines, timing, fit, flown, t_planned, min_time)
 
 
+def _through(t_s: Array, samples_m: Array, dense_t_s: Array) -> Array:
+    """The cubic spline through ``samples_m`` (T, n, 3) at ``t_s``, at rest at both ends, at
+    ``dense_t_s``: continuous up to the acceleration, so the path keeps no kink of the held
+    commands that a tight tolerance would make the flight follow (the lines between the samples
+    are off it by at most ``a_max dt^2 / 8``, 2 mm at dt 0.1 s)."""
+    if t_s.shape[0] < 3:  # one interval: the line is the spline
+        return np.stack([np.interp(dense_t_s, t_s, x) for x in samples_m.reshape(t_s.shape[0], -1).T], -1)
+    spline = make_interp_spline(t_s, samples_m, k=3, bc_type="clamped")
+    return spline(dense_t_s)
+
+
 def _timed(
     path: PiecewisePolynomial,
     t: Array,
@@ -127,32 +146,39 @@ def _timed(
     jerk_share: float = 1.0,
 ) -> tuple[Retiming, PiecewisePolynomial, PiecewisePolynomial]:
     """``path`` retimed within ``limits`` (its jerk at ``jerk_share`` of the limit:
-    :data:`SMOOTHER`) and fitted; a fit that exceeds a limit is slowed down and fitted again
-    (module docstring; :data:`REFITS`), the last one returned as it is."""
-    timing = retime(
-        path,
+    :data:`SMOOTHER`) and fitted; a fit that exceeds a limit is retimed with lower limits where it
+    does, or slowed down, and fitted again (:data:`REFITS`), the last one returned as it is."""
+    aims = (
         LIMIT_SLACK * limits.max_speed_mps,
         LIMIT_SLACK * limits.max_acc_mps2,
         LIMIT_SLACK * jerk_share * limits.max_jerk_mps3,
-        max_duration_s=MAX_SAMPLES / (n * (CHECK_RATE_HZ + DEFAULT_RATE_HZ)),
     )
+    longest = MAX_SAMPLES / (n * (CHECK_RATE_HZ + DEFAULT_RATE_HZ))
+    timing = retime(path, *aims, max_duration_s=longest)
     for refit in range(REFITS + 1):
         check_samples(timing.duration_s, n, rate_hz)
         poly, flown = _fit_pieces(timing, t, yaw_rad, half, max_piece_s, n)
         check = np.linspace(0.0, flown.duration_s, int(np.ceil(CHECK_RATE_HZ * flown.duration_s)) + 1)
         state = flat_state(flown, check, n)
-        env = envelope(check, state["vel"], state["acc"], state["jerk"], state["omega"])
-        slower = max(
-            (peak.value / limit) ** (1.0 / order)
-            for peak, limit, order in (
-                (env.speed, limits.max_speed_mps, 1),
-                (env.acc, limits.max_acc_mps2, 2),
-                (env.jerk, limits.max_jerk_mps3, 3),
-            )
+        slower = np.max(
+            [
+                (np.linalg.norm(state[key], axis=-1).max(axis=1) / limit) ** (1.0 / order)
+                for key, limit, order in (
+                    ("vel", limits.max_speed_mps, 1),
+                    ("acc", limits.max_acc_mps2, 2),
+                    ("jerk", limits.max_jerk_mps3, 3),
+                )
+            ],
+            axis=0,
         )
-        if slower <= 1.0 or refit == REFITS:
+        if slower.max() <= 1.0 or refit == REFITS:
             break
-        timing = timing.slowed(1.02 * slower)
+        if refit < LOCAL_REFITS:
+            wide = maximum_filter1d(slower, 2 * round(LOCAL_WINDOW_S * CHECK_RATE_HZ) + 1)
+            local = timing.slower_where(check, np.where(wide > 1.0, 1.02 * wide, 1.0))
+            timing = retime(path, *aims, max_duration_s=longest, slower=local)
+        else:
+            timing = timing.slowed(1.02 * slower.max())
     return timing, poly, flown
 
 

@@ -27,6 +27,9 @@ from mpcform.outputs.flight.polynomial import PiecewisePolynomial
 from mpcform.outputs.flight.topp import time_optimal
 
 GRID_S = 0.002  # sampling of s(t) [s]; its inverse is interpolated on this grid
+SMOOTHING = (
+    8  # sub-nodes per node of the smoothed scaling (:meth:`~mpcform.outputs.flight.topp.Profile.smoothed`)
+)
 NODE_SPACING_S = 0.05  # plan time between the scaling's nodes [s], at most
 NODES_PER_PIECE = 8  # at least, so that the limits hold between nodes too
 MIN_NODES, MAX_NODES = 40, 4000
@@ -40,6 +43,8 @@ class Retiming:
     path: PiecewisePolynomial  # tau -> positions, series drone * 3 + axis
     t_s: Array  # (G,) new time grid, 0 .. duration_s
     tau_s: Array  # (G,) original time, non-decreasing
+    tau_nodes_s: Array  # (K + 1,) the scaling's nodes in the original time
+    slower: Array  # (K + 1,) >= 1: the limits were lowered at each node as a slow-down by it would
 
     @property
     def duration_s(self) -> float:
@@ -58,6 +63,14 @@ class Retiming:
         square, jerks over its cube."""
         return replace(self, t_s=self.t_s * factor)
 
+    def slower_where(self, t_s: Array, factor: Array) -> Array:
+        """The nodes' slow-downs (:attr:`slower`) times the largest of ``factor`` (>= 1) at the new
+        times ``t_s`` whose original time lies nearest each node: for :func:`retime` again."""
+        nearest = np.rint(np.interp(self.original_time(t_s), self.tau_nodes_s, np.arange(self.slower.size)))
+        local = np.ones_like(self.slower)
+        np.maximum.at(local, nearest.astype(int), factor)
+        return self.slower * local
+
     def positions(self, t_s: ArrayLike) -> Array:
         """Retimed positions ``P(s(t))`` (T, n, 3) [m]."""
         tau = self.original_time(t_s)
@@ -71,10 +84,12 @@ def retime(
     j_max_mps3: float,
     *,
     max_duration_s: float = np.inf,
+    slower: Array | None = None,
 ) -> Retiming:
     """The time-optimal rest-to-rest scaling of ``path`` (series drone * 3 + axis, from 0 s); a
     flight longer than ``max_duration_s`` raises :class:`ValidationError` naming the limit that
-    sets its length, before its samples are allocated."""
+    sets its length, before its samples are allocated. ``slower`` (from
+    :meth:`Retiming.slower_where`) lowers the limits at the nodes."""
     v, a, j = (
         positive(name, x)
         for name, x in (("max_speed", v_max_mps), ("max_acc", a_max_mps2), ("max_jerk", j_max_mps3))
@@ -84,17 +99,19 @@ def retime(
     _refuse_longer(float(max(floors)), max_duration_s, floors)
     tau_nodes, derivatives = _nodes(path)
     nodes = tau_nodes.shape[0]
-    profile = time_optimal(derivatives, end / (nodes - 1), v, a, j)
+    slower = np.ones(nodes) if slower is None else slower
+    profile = time_optimal(derivatives, end / (nodes - 1), v, a, j, slower).smoothed(SMOOTHING)
     duration = profile.duration_s
     _refuse_longer(duration, max_duration_s, floors)
-    t_nodes = profile.node_times_s
+    t_fine = profile.node_times_s
+    tau_fine = np.linspace(0.0, end, t_fine.shape[0])
     grid = np.append(np.arange(0.0, duration, GRID_S), duration)
-    k = np.clip(np.searchsorted(t_nodes, grid, side="right") - 1, 0, nodes - 2)
-    since = grid - t_nodes[k]  # constant s'' on each segment: s is quadratic in t there
-    tau = tau_nodes[k] + np.sqrt(profile.b[k]) * since + 0.5 * profile.segment_acc[k] * since**2
+    k = np.clip(np.searchsorted(t_fine, grid, side="right") - 1, 0, t_fine.shape[0] - 2)
+    since = grid - t_fine[k]  # constant s'' on each sub-segment: s is quadratic in t there
+    tau = tau_fine[k] + np.sqrt(profile.b[k]) * since + 0.5 * profile.segment_acc[k] * since**2
     tau = np.clip(np.maximum.accumulate(tau), 0.0, end)
     tau[-1] = end
-    return Retiming(path, grid, tau)
+    return Retiming(path, grid, tau, tau_nodes, slower)
 
 
 def minimum_time_s(

@@ -70,6 +70,19 @@ class Profile:
     def duration_s(self) -> float:
         return float(_segment_times(self.b, self.dtau_s).sum())
 
+    def smoothed(self, sub: int) -> Profile:
+        """``b`` on nodes ``dtau_s / sub`` apart (``sub`` even), averaged over one node interval:
+        ``s''`` then changes continuously, across each node over the interval that the jerk rows
+        assume (a constant ``s''`` per segment steps the acceleration at every node, and a fit of
+        the flight adds jerk there). ``b`` is continued as an odd function beyond the ends, so the
+        flight still starts and ends at rest with the same ``s''``."""
+        fine = np.interp(np.arange(sub * (self.b.size - 1) + 1) / sub, np.arange(self.b.size), self.b)
+        h = sub // 2
+        odd = np.concatenate([-fine[h:0:-1], fine, -fine[-2 : -h - 2 : -1]])
+        box = np.convolve(odd, np.full(sub + 1, 1.0 / (sub + 1)), mode="valid")
+        box[[0, -1]] = 0.0
+        return Profile(self.dtau_s / sub, np.maximum(box, 0.0), self.lower_bound_s)
+
 
 def _segment_times(b: Array, dtau: float) -> Array:
     """Each segment's duration at constant ``s''``: ``2 dtau / (sqrt(b_k) + sqrt(b_{k+1}))``."""
@@ -78,15 +91,25 @@ def _segment_times(b: Array, dtau: float) -> Array:
 
 
 def time_optimal(
-    derivatives: tuple[Array, Array, Array], dtau_s: float, v_max: float, a_max: float, j_max: float | None
+    derivatives: tuple[Array, Array, Array],
+    dtau_s: float,
+    v_max: float,
+    a_max: float,
+    j_max: float | None,
+    slower: Array | None = None,
 ) -> Profile:
     """The scaling of a path whose derivatives ``(P', P'', P''')`` (each (K + 1, n, 3)) are
     sampled ``dtau_s`` apart, at rest at both ends, within the limits (module docstring; without
-    ``j_max``, under speed and acceleration alone)."""
+    ``j_max``, under speed and acceleration alone); ``slower`` (K + 1,) >= 1 lowers the limits at
+    each node as a uniform slow-down by its factor would (the speed by it, the acceleration by
+    its square, the jerk by its cube)."""
     d1, d2, d3 = derivatives
+    f = np.ones(d1.shape[0]) if slower is None else np.asarray(slower, dtype=float)
+    v_nodes, a_nodes = v_max / f, a_max / f**2
+    j_nodes = np.full_like(f, np.inf) if j_max is None else j_max / f**3
     speed2 = np.einsum("kia,kia->ki", d1, d1).max(axis=1)
-    upper = np.minimum(S_DOT_MAX**2, v_max**2 / np.maximum(speed2, 1e-300))
-    program = _Program(d1, d2, d3, dtau_s, upper, a_max, np.inf if j_max is None else j_max)
+    upper = np.minimum(S_DOT_MAX**2, v_nodes**2 / np.maximum(speed2, 1e-300))
+    program = _Program(d1, d2, d3, dtau_s, upper, a_nodes, j_nodes)
     b = program.solve(None)
     lower = float(_segment_times(b, dtau_s).sum())
     if j_max is None or program.jerk_ok(b):  # the jerk limit does not bind
@@ -96,7 +119,10 @@ def time_optimal(
     # would pin b near 0, and each later round grows b at most 3 times)
     peaks = [max(float(np.linalg.norm(d, axis=-1).max()), 1e-300) for d in derivatives]
     steady = min(
-        S_DOT_MAX, v_max / peaks[0], np.sqrt(0.5 * a_max / peaks[1]), np.cbrt(j_max / (3.0 * peaks[2]))
+        S_DOT_MAX,
+        v_nodes.min() / peaks[0],
+        np.sqrt(0.5 * a_nodes.min() / peaks[1]),
+        np.cbrt(j_nodes.min() / (3.0 * peaks[2])),
     )
     ladder = b[None] * 4.0 ** -np.arange(LADDER)[:, None]
     ladder[1:][ladder[1:] < 0.25 * steady**2] = np.nan
@@ -117,7 +143,7 @@ def time_optimal(
 class _Program:
     """The convex program of :func:`time_optimal`: cones added where they bind."""
 
-    def __init__(self, d1: Array, d2: Array, d3: Array, dtau: float, upper: Array, a: float, j: float):
+    def __init__(self, d1: Array, d2: Array, d3: Array, dtau: float, upper: Array, a: Array, j: Array):
         self.d, self.dtau, self.upper = (d1, d2, d3), dtau, upper
         self.limit = {"acc_out": a, "acc_in": a, "jerk": j}
         nodes, n = d1.shape[:2]
@@ -144,7 +170,7 @@ class _Program:
                 norms = np.linalg.norm(self._values(kind, b), axis=-1)
                 if kind == "jerk":
                     norms *= np.sqrt(b[self.factor])[:, None]
-                late = (norms > self.limit[kind] * (1.0 + 1e-6)) & ~self.active[kind]
+                late = (norms > self.limit[kind][:, None] * (1.0 + 1e-6)) & ~self.active[kind]
                 if late.any():
                     self.active[kind] |= late
                     grew = True
@@ -155,11 +181,8 @@ class _Program:
     def jerk_ok(self, b: Array) -> bool:
         """Whether ``b`` keeps every drone's jerk at every node within the limit."""
         scale = np.sqrt(b[self.factor])[:, None]
-        return bool(
-            np.all(
-                scale * np.linalg.norm(self._values("jerk", b), axis=-1) <= self.limit["jerk"] * (1 + 1e-6)
-            )
-        )
+        norms = scale * np.linalg.norm(self._values("jerk", b), axis=-1)
+        return bool(np.all(norms <= self.limit["jerk"][:, None] * (1 + 1e-6)))
 
     def _coefficients(self, kind: str) -> tuple[Array, Array, Array]:
         """Per node k and drone i, the vectors (K + 1, n, 3) multiplying ``b_{k-1}, b_k, b_{k+1}``
@@ -215,12 +238,12 @@ class _Program:
             levels = [None] if kind != "jerk" or tangents is None else list(tangents)
             for level in levels:
                 k, i = k_all, i_all
-                bound = np.full(k.shape[0], self.limit[kind])
+                bound = self.limit[kind][k]
                 if level is not None:  # |Y| <= j / sqrt(b) by its tangent at ``bar``
                     bar = np.maximum(level[self.factor[k]], TANGENT_FLOOR * top + 1e-12)
                     use = np.isfinite(level[self.factor[k]])
                     k, i, bar = k[use], i[use], bar[use]
-                    bound = 1.5 * self.limit[kind] / np.sqrt(bar)
+                    bound = 1.5 * self.limit[kind][k] / np.sqrt(bar)
                 base = start + 4 * np.arange(k.shape[0])
                 for shift, block in zip((-1, 0, 1), coef, strict=True):
                     col = k + shift
@@ -232,7 +255,7 @@ class _Program:
                 if level is not None:
                     rows.append(base)
                     cols.append(self.factor[k])
-                    vals.append(0.5 * self.limit[kind] / bar**1.5)
+                    vals.append(0.5 * self.limit[kind][k] / bar**1.5)
                 cone_rhs = np.zeros((k.shape[0], 4))
                 cone_rhs[:, 0] = bound
                 rhs.append(cone_rhs.ravel())

@@ -65,7 +65,9 @@ def test_a_phase_reaches_its_goal_apart_and_within_v_max() -> None:
     seg = min(min_segment_distance(a, b) for a, b in zip(path[:-2], path[1:-1], strict=True))
     assert seg >= 0.5 + 2 * 0.05 - 1e-6  # d_min and the tracking allowance, as the planner keeps them
     steps = np.linalg.norm(np.diff(path, axis=0), axis=-1)
-    assert steps[:-1].max() <= 0.1 * 1.0 + 1e-9 and steps[-1].max() <= 0.1 + phases.ARRIVED_M
+    assert steps.max() <= 0.1 * 1.0 + 1e-9
+    # the gap left at arrival (up to 2 mm) is closed over the last second, not in one last jump
+    assert np.all(steps[-1] <= steps[-2])
     assert phases.plan_phase(goal, goal, 0.1, LIMITS, "ascent").shape == (1, 4, 3)  # no motion
 
 

@@ -94,3 +94,25 @@ def test_the_minimum_time_takes_every_limit_alone_and_survives_an_unsolved_scali
 
     monkeypatch.setattr(retime_module, "time_optimal", fails)
     assert minimum_time_s(path, v, a, j) >= 0.999 * np.cbrt(32.0 * 2.0 / j)
+
+
+def test_a_local_slow_down_slows_only_around_its_times() -> None:
+    """Factors at new times land on the nodes nearest their original times (times the nodes'
+    earlier ones); retimed with them, the flight is slower there and as fast elsewhere."""
+    t, p = _path()
+    path = fit_positions(t, p, 1e-4).polynomial
+    timing = retime(path, 0.5, 1.0, 5.0)
+    assert np.all(timing.slower == 1.0) and timing.slower.shape == timing.tau_nodes_s.shape
+    middle = timing.new_time(2.0)
+    at = np.array([middle - 0.2, middle, middle + 0.2])
+    slower = timing.slower_where(at, np.array([1.5, 1.5, 1.5]))
+    near = np.abs(timing.tau_nodes_s - 2.0) < 0.3
+    assert np.all(slower[~near] == 1.0) and 2 <= np.count_nonzero(slower == 1.5) <= 3
+    again = retime(path, 0.5, 1.0, 5.0, slower=slower)
+    assert timing.duration_s < again.duration_s
+    speed = [
+        np.linalg.norm(np.gradient(r.positions(r.t_s), r.t_s, axis=0), axis=-1).max(axis=1)
+        for r in (timing, again)
+    ]
+    assert speed[1][np.argmin(np.abs(again.original_time(again.t_s) - 2.0))] <= 0.5 / 1.5 * 1.01
+    assert speed[1].max() == pytest.approx(speed[0].max(), rel=0.02)  # elsewhere at the speed limit

@@ -86,3 +86,29 @@ def test_a_jerk_limit_that_does_not_bind_gives_the_speed_and_acceleration_optimu
     derivatives, step = _line(4.0)
     profile = time_optimal(derivatives, step, 1.0, 2.0, 1e9)  # no tangent of 1e9 / sqrt(b) to solve
     assert profile.duration_s == profile.lower_bound_s
+
+
+def test_slower_nodes_keep_their_lowered_limits_and_the_rest_its_own() -> None:
+    """``slower`` f at a node divides the speed limit there by f and the acceleration's by f^2."""
+    derivatives, step = _line(4.0)
+    v, a = 1.0, 2.0
+    plain = time_optimal(derivatives, step, v, a, None)
+    f = np.ones(plain.b.size)
+    f[80:120] = 2.0
+    slowed = time_optimal(derivatives, step, v, a, None, f)
+    speed = np.linalg.norm(derivatives[0], axis=-1)[:, 0] * np.sqrt(slowed.b)
+    assert speed[80:120].max() <= v / 2.0 * (1 + 1e-6) < speed.max()
+    _check_limits(slowed, derivatives, v, a)
+    assert plain.duration_s < slowed.duration_s < 2.0 * plain.duration_s
+
+
+def test_a_smoothed_profile_changes_s_ddot_continuously_from_rest_to_rest() -> None:
+    derivatives, step = _line(4.0)
+    profile = time_optimal(derivatives, step, 1.0, 2.0, 10.0)
+    smooth = profile.smoothed(8)
+    assert smooth.b.size == 8 * (profile.b.size - 1) + 1 and smooth.b[0] == smooth.b[-1] == 0.0
+    assert np.all(smooth.b >= 0.0) and np.all(smooth.b[1:-1] > 0.0)
+    # s'' steps by up to a_max / L at the nodes of the profile, by an eighth of that once smoothed
+    jumps = [np.abs(np.diff(p.segment_acc)).max() for p in (profile, smooth)]
+    assert jumps[1] <= jumps[0] / 4.0
+    assert smooth.duration_s == pytest.approx(profile.duration_s, rel=0.02)
