@@ -7,8 +7,8 @@ retimed time-optimally within the speed, acceleration and jerk limits from rest 
 (:mod:`mpcform.outputs.flight.retime`), fitted again at the new times with the yaw (retimed with
 the limits lowered where the fit exceeds one, then slowed down; retimed with a lower jerk limit
 where it needs more pieces than a Crazyflie holds), and rounded to float32 as the Crazyflie stores
-them. Every phase
-ends at rest, so the phases join into one flight (:func:`join`) whose derivatives are continuous.
+them. Every phase ends at rest, so the phases join into one flight (:func:`join`) whose
+derivatives are continuous.
 """
 
 from __future__ import annotations
@@ -124,14 +124,11 @@ def phase_pieces(
 
 
 def _through(t_s: Array, samples_m: Array, dense_t_s: Array) -> Array:
-    """The cubic spline through ``samples_m`` (T, n, 3) at ``t_s``, at rest at both ends, at
-    ``dense_t_s``: continuous up to the acceleration, so the path keeps no kink of the held
+    """The cubic spline through ``samples_m`` (T, n, 3) at ``t_s`` (T >= 2), at rest at both ends,
+    at ``dense_t_s``: continuous up to the acceleration, so the path keeps no kink of the held
     commands that a tight tolerance would make the flight follow (the lines between the samples
-    are off it by at most ``a_max dt^2 / 8``, 2 mm at dt 0.1 s)."""
-    if t_s.shape[0] < 3:  # one interval: the line is the spline
-        return np.stack([np.interp(dense_t_s, t_s, x) for x in samples_m.reshape(t_s.shape[0], -1).T], -1)
-    spline = make_interp_spline(t_s, samples_m, k=3, bc_type="clamped")
-    return spline(dense_t_s)
+    are off it by about ``a_max dt^2 / 8`` at most, 2 mm at dt 0.1 s)."""
+    return make_interp_spline(t_s, samples_m, k=3, bc_type="clamped")(dense_t_s)
 
 
 def _timed(

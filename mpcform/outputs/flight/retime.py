@@ -27,9 +27,7 @@ from mpcform.outputs.flight.polynomial import PiecewisePolynomial
 from mpcform.outputs.flight.topp import time_optimal
 
 GRID_S = 0.002  # sampling of s(t) [s]; its inverse is interpolated on this grid
-SMOOTHING = (
-    8  # sub-nodes per node of the smoothed scaling (:meth:`~mpcform.outputs.flight.topp.Profile.smoothed`)
-)
+SMOOTHING = 8  # sub-nodes per node of the smoothed scaling (topp.Profile.smoothed)
 NODE_SPACING_S = 0.05  # plan time between the scaling's nodes [s], at most
 NODES_PER_PIECE = 8  # at least, so that the limits hold between nodes too
 MIN_NODES, MAX_NODES = 40, 4000
