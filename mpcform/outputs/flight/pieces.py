@@ -46,13 +46,13 @@ SETTLED_SHARE = 0.25
 """A phase's last samples, once every drone is within this share of the tolerance of its end, are
 flown as its end (each within 5 mm at the default 2 cm)."""
 LIMIT_SLACK = 0.95  # the retiming aims at this share of each limit (the fit adds a little)
-REFITS = 4
+REFITS = 7
 """A fit within the tolerance can add acceleration and jerk: where the pieces exceed a limit by a
 factor, the flight is slowed down by that factor's root (speed 1, acceleration 2, jerk 3) and
 fitted again, this many times at most; then the export names the limit. The first
 :data:`LOCAL_REFITS` times the path is retimed with its limits lowered only within
 :data:`LOCAL_WINDOW_S` of where they were exceeded, the later ones slow the whole flight down."""
-LOCAL_REFITS = 3
+LOCAL_REFITS = 6
 LOCAL_WINDOW_S = 0.25  # of the flight, either side of an excess
 MAX_SAMPLES = 7e6
 """The most samples x drones an export takes (checks at 500 Hz and setpoints at ``rate_hz``): each
@@ -103,8 +103,10 @@ def phase_pieces(
     dense = np.linspace(0.0, t[cut - 1], PATH_SAMPLES * (cut - 1) + 1)  # held commands: lines
     lines = np.stack([np.interp(dense, t[:cut], x) for x in kept.reshape(cut, -1).T], axis=-1)
     lines = lines.reshape(dense.shape[0], n, 3)
-    # at rest at both ends exactly where the phase starts and ends: the phases join there
-    path = fit_positions(dense, _through(t[:cut], kept, dense), half, max_piece_s, rest_ends=True).polynomial
+    # through the phase's first and last sample exactly: the phases join there
+    path = fit_positions(
+        dense, _through(t[:cut], kept, dense), half, max_piece_s, pinned_ends=True
+    ).polynomial
     timing, poly, flown = _timed(path, t, yaw_rad, limits, half, max_piece_s, n, rate_hz)
     if CRAZYFLIE_MAX_PIECES < flown.pieces <= 2 * CRAZYFLIE_MAX_PIECES:
         for share in SMOOTHER:

@@ -25,6 +25,7 @@ CONTINUITY = 4  # position, velocity, acceleration and jerk are continuous at br
 KNOT_MULTIPLICITY = POLY_DEGREE + 1 - CONTINUITY  # 4: C^3 at every interior knot
 DEFAULT_TOLERANCE_M = 0.02
 MIN_SAMPLES_PER_PIECE = 8
+PIN_WEIGHT = 1e3  # least-squares weight of a pinned end sample (the rest weigh 1)
 MAX_PIECE_S = 2.0  # longest piece tried first [s] (keeps float32 powers of tau modest)
 
 
@@ -83,21 +84,26 @@ def knots(t0_s: float, t1_s: float, pieces: int) -> Array:
 
 
 def fit_piecewise_polynomial(
-    t_s: Array, values: Array, pieces: int, rest_ends: bool = False
+    t_s: Array, values: Array, pieces: int, rest_ends: bool = False, pinned_ends: bool = False
 ) -> PiecewisePolynomial:
     """Least-squares fit of ``values`` (T, m) at ``t_s`` (T,) by ``pieces`` uniform degree-7 pieces.
 
     ``rest_ends``: the fit starts and ends exactly at the first and last value with zero
     velocity, acceleration and jerk, so a drone leaves hover without a jerk step (the first and
     last four B-spline coefficients are set to the end values: a clamped spline's value and first
-    three derivatives at an end depend on those only).
+    three derivatives at an end depend on those only). ``pinned_ends``: it passes exactly through
+    the first and last value (those samples weighted :data:`PIN_WEIGHT` times, then the end
+    coefficients set to them: a clamped spline's end value is its end coefficient).
     """
     t = np.asarray(t_s, dtype=float)
     y = np.asarray(values, dtype=float).reshape(t.shape[0], -1)
     if pieces < 1 or t.shape[0] < 2:
         raise ValidationError("pieces", f"expected >= 1 piece and >= 2 samples, got {pieces}, {t.shape[0]}")
     try:
-        spline = make_lsq_spline(t, y, knots(float(t[0]), float(t[-1]), pieces), k=POLY_DEGREE)
+        w = np.ones(t.shape[0])
+        if pinned_ends:
+            w[[0, -1]] = PIN_WEIGHT
+        spline = make_lsq_spline(t, y, knots(float(t[0]), float(t[-1]), pieces), k=POLY_DEGREE, w=w)
     except (ValueError, np.linalg.LinAlgError) as exc:  # too few samples for the pieces
         raise ValidationError(
             "pieces", f"{pieces} pieces cannot be fitted to {t.shape[0]} samples: {exc}"
@@ -105,6 +111,8 @@ def fit_piecewise_polynomial(
     c = spline.c.copy()
     if rest_ends:
         c[:4], c[-4:] = y[0], y[-1]
+    elif pinned_ends:
+        c[0], c[-1] = y[0], y[-1]
     return from_spline(BSpline(spline.t, c, POLY_DEGREE))
 
 
@@ -141,6 +149,7 @@ def fit_positions(
     tolerance_m: float = DEFAULT_TOLERANCE_M,
     max_piece_s: float = MAX_PIECE_S,
     rest_ends: bool = False,
+    pinned_ends: bool = False,
 ) -> PolynomialFit:
     """Fewest uniform pieces, none longer than ``max_piece_s``, that reproduce every drone's sampled
     positions (T, n, d) within ``tolerance_m`` with float32 coefficients.
@@ -155,7 +164,7 @@ def fit_positions(
     flat = p.reshape(p.shape[0], -1)
 
     def attempt(pieces: int) -> PolynomialFit:
-        poly = fit_piecewise_polynomial(t, flat, pieces, rest_ends)
+        poly = fit_piecewise_polynomial(t, flat, pieces, rest_ends, pinned_ends)
         err = poly.as_float32().evaluate(t).reshape(p.shape) - p
         return PolynomialFit(poly, float(np.linalg.norm(err, axis=-1).max()), tol)
 
