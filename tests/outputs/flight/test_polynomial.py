@@ -79,6 +79,16 @@ def test_rest_ends_start_and_stop_at_rest_exactly() -> None:
         assert np.abs(poly.evaluate(end, 3)).max() < 1e-8  # no jerk step from (or into) hover
 
 
+def test_pinned_ends_pass_through_the_end_samples_and_barely_move_the_fit() -> None:
+    t = np.linspace(0.0, 6.0, 301)
+    y = np.stack([np.sin(3.0 * t), t**2], axis=-1)
+    free, pinned = (fit_piecewise_polynomial(t, y, 5, pinned_ends=p) for p in (False, True))
+    assert np.abs(free.evaluate(t[[0, -1]]) - y[[0, -1]]).max() > 1e-5  # the least squares miss them
+    np.testing.assert_allclose(pinned.evaluate(t[[0, -1]]), y[[0, -1]], atol=1e-12)
+    inner = slice(30, -30)
+    assert np.abs(pinned.evaluate(t[inner]) - free.evaluate(t[inner])).max() < 1e-3
+
+
 def test_same_as_scipy_lsq_spline() -> None:
     from scipy.interpolate import make_lsq_spline
 
