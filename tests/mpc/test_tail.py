@@ -234,3 +234,8 @@ def test_without_a_loop_or_with_differing_axes_the_tail_is_its_stop_point() -> N
     ]
     loop = VelocityLoop.from_groups(planar, 2, 0.1, 10)
     assert braking_tail(braking, 10, 2, loop).count == 1  # 3 samples would be needed: the chord
+    # a slower swarm brakes sooner: 2 samples would do, but the rows of 9 tail points made a
+    # 20-drone planar swap of the flight acceptance take 4 times as long (SAMPLED_STATES): the chord
+    slow = Braking.of(0.1, Limits(v_max_mps=0.54, a_max_mps2=1.79))
+    planar15 = VelocityLoop.from_groups(planar, 2, 0.1, 15)
+    assert braking_tail(slow, 15, 2, planar15).count == 1
