@@ -149,9 +149,8 @@ def braking_tail(braking: Braking, horizon: int, dim: int, loop: VelocityLoop | 
     reach = TAIL_SPREAD * (braking.kappa_s * loop.speed_gain + loop.lag_s)
     samples: list[Array] = []  # L M^k, k = 1..K
     sample, ahead = vertices[0], np.eye(m.shape[0])  # L M^K, M^K
-    for k in range(TAIL_SAMPLES + 1):
-        if k and s > SAMPLED_STATES:  # a quadrotor's cascade: its rows would cost more than they guard
-            break
+    tries = TAIL_SAMPLES + 1 if s <= SAMPLED_STATES else 1  # a quadrotor's cascade: the hull alone
+    for _ in range(tries):
         hull = at(np.vstack(samples + [vertices[1:] @ ahead]))  # past W_0 = L
         if hull.reach_s <= reach:
             return hull
