@@ -243,7 +243,7 @@ def limit_rows(
     if limits.geofence_min_m is not None and limits.geofence_max_m is not None:
         fence = limits.geofence_min_m, limits.geofence_max_m
         braking = Braking.of(dt_s, limits, settings.braking)
-        tail = None if braking is None else braking_tail(braking, h, dim, loop)
+        tail = None if braking is None else braking_tail(braking, h, dim, loop, settings.solves_per_drone)
         families.append(GeofenceRows(dim, h, dt_s, *fence, settings.margin_m, tail, loop))
     return tuple(families)
 

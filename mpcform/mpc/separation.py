@@ -104,7 +104,7 @@ class Separation:
     ) -> None:
         self.dim, self.margin_m, self.braking = dim, settings.margin_m, braking
         h = settings.horizon  # with braking, then the tail's points (:mod:`mpcform.mpc.tail`)
-        self.tail = None if braking is None else braking_tail(braking, h, dim, loop)
+        self.tail = None if braking is None else braking_tail(braking, h, dim, loop, settings.solves_per_drone)
         tail = 0 if self.tail is None else self.tail.count
         self.d_min_m, self.tube_m = limits.d_min_m, limits.tube_m
         self.metric = np.ones(dim)  # W's diagonal

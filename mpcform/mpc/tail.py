@@ -27,13 +27,16 @@ No eigenvector is formed: nothing blows up when ``rho`` meets a pole of the loop
 points ``rest - W_k z`` (``k >= 1``; ``k = 0`` is ``y_H``, whose rows the horizon has) and at the
 rest point, with one normal per item: a half-space holding at every vertex holds on the hull, so
 on the whole tail to rest. Where the hull is much wider than the path (a nearly critically damped
-loop's) the tail's first K points are exact samples and the hull's vertices follow K intervals later
-(:data:`TAIL_SAMPLES`). The tail's weights over its vertices are the same for every axis when
+loop's, a quadrotor's when the QPs are solved per drone) the tail's first K points are exact
+samples and the hull's vertices follow K intervals later (:data:`TAIL_SAMPLES`,
+:data:`CASCADE_SAMPLES`). The tail's weights over its vertices are the same for every axis when
 the axes share one loop (a lag, the second-order loop, a planar quadrotor), so the 3-D points are
 the hull's vertices. Where the axes differ (a spatial quadrotor's xy and z loops) the hull is the
-product of the axes' hulls, which this module does not build: those tails are the chord to rest,
-whose bend the margin has to cover (:mod:`mpcform.mpc.braking`). Without a loop the tail is the
-straight segment to the stop point ``x_H + kappa u_{H-1}``: one point.
+product of the axes' hulls (7-9 vertices each: about 100 points), which this module does not
+build: those tails, and a quadrotor's in a joint QP, are the chord to rest, which is not
+shift-invariant: the plans may need slack on the tail's rows, and the margin has to cover the
+path's bend (:mod:`mpcform.mpc.braking`). Without a loop the tail is the straight segment to the
+stop point ``x_H + kappa u_{H-1}``: one point.
 """
 
 from __future__ import annotations
@@ -65,14 +68,24 @@ which then holds ``M^K z``: the polygon's width shrinks with the poles' powers, 
 closed under the shift (``L M^{K+1} = W_0 M^K M`` lies in the hull). The least K whose hull is within
 :data:`TAIL_SPREAD` is used: 0 for a lag and an underdamped second-order loop, 1 for a nearly
 critically damped one at dt 0.1 (at dt 0.05 it would need 3: the chord). A planar quadrotor would
-need 3 (dt 0.1) to 7 (dt 0.05), 9-17 tail points whose rows touch every input of both drones: its
+need 3 (dt 0.1) to 9 (dt 0.05), 9-17 tail points whose rows touch every input of both drones: its
 joint QPs took 4-6 times as long (a planar swap of the flight acceptance over 20 minutes instead
-of 4), so it keeps the chord."""
+of 4), so in a joint QP it keeps the chord (:data:`SAMPLED_STATES`; per drone:
+:data:`CASCADE_SAMPLES`)."""
 SAMPLED_STATES = 2
-"""Exact samples are taken only for loops of at most this many states (a lag's 1, a second-order
-loop's 2). A quadrotor's cascade (its integral, attitude and rate states) keeps its hull or the
-chord whatever its braking time: a slow planar swap of 20 drones, whose hull was within reach
-after 2 samples, took 4 times as long with their 9 tail points' rows."""
+"""In a joint QP exact samples are taken only for loops of at most this many states (a lag's 1, a
+second-order loop's 2). A quadrotor's cascade (its integral, attitude and rate states) keeps its
+hull or the chord there whatever its braking time: a slow planar swap of 20 drones, whose hull was
+within reach after 2 samples, took 4 times as long with their 9 tail points' rows."""
+CASCADE_SAMPLES = 16
+"""With per-drone solves (decoupled mode's condensed QPs, whose rows are dense over a drone's H d
+inputs anyway) a cascade's tail takes up to this many exact samples before its hull: a planar
+cf2x_L250 needs up to 9 (dt 0.05, 9-17 tail points), a cf21B_500 up to 16 (24 points), over dt
+0.05-0.1, horizons 3-30, v_max 0.3-3 m/s and a_max 0.2 m/s^2 to the default. The chord is not
+shift-invariant (the shifted plan's ``x_H`` is a point of the curved tail, off the chord its
+rows held), so decoupled plans on it crept inside their tail rows, a few millimetres a step: a
+planar formation of 14 quadrotors in a steady wind came to 0.562 m against d_min 0.599 m. With
+the samples it kept 0.614 m with no slack, at 9 % more CPU (in a joint QP, 3.3 times as much)."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -115,10 +128,13 @@ class Tail:
 
 
 @lru_cache(maxsize=64)  # a planner's parts each ask for the same tail
-def braking_tail(braking: Braking, horizon: int, dim: int, loop: VelocityLoop | None = None) -> Tail:
+def braking_tail(
+    braking: Braking, horizon: int, dim: int, loop: VelocityLoop | None = None, per_drone: bool = False
+) -> Tail:
     """The tail points of plans over ``horizon`` steps braking with ``braking`` (module
     docstring): the stop point alone without a ``loop`` or where its axes differ, else the tail's
-    first K exact points (:data:`TAIL_SAMPLES`), the hull's vertices past them and the rest point."""
+    first K exact points (:data:`TAIL_SAMPLES`; a cascade's :data:`CASCADE_SAMPLES` when the QPs
+    are solved ``per_drone``), the hull's vertices past them and the rest point."""
     gain = np.ones(dim) if loop is None else loop.dc_gain.copy()
     rest = np.zeros((1, horizon, dim))
     rest[0, -1] = braking.kappa_s * gain  # g (x_H + kappa u_{H-1}) (+ F_rest xi_0)
@@ -149,7 +165,7 @@ def braking_tail(braking: Braking, horizon: int, dim: int, loop: VelocityLoop | 
     reach = TAIL_SPREAD * (braking.kappa_s * loop.speed_gain + loop.lag_s)
     samples: list[Array] = []  # L M^k, k = 1..K
     sample, ahead = vertices[0], np.eye(m.shape[0])  # L M^K, M^K
-    tries = TAIL_SAMPLES + 1 if s <= SAMPLED_STATES else 1  # a quadrotor's cascade: the hull alone
+    tries = TAIL_SAMPLES + 1 if s <= SAMPLED_STATES else CASCADE_SAMPLES + 1 if per_drone else 1
     for _ in range(tries):
         hull = at(np.vstack(samples + [vertices[1:] @ ahead]))  # past W_0 = L
         if hull.reach_s <= reach:

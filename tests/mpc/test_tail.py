@@ -12,7 +12,7 @@ from mpcform.mpc.braking import Braking
 from mpcform.mpc.loop import VelocityLoop
 from mpcform.mpc.prediction import Prediction
 from mpcform.mpc.tail import axis_hull, braking_tail, tail_system
-from mpcform.sim.plants import lag_plant, second_order_plant
+from mpcform.sim.plants import Plant, lag_plant, second_order_plant
 from mpcform.world.limits import Limits
 
 PLANTS = {
@@ -128,11 +128,12 @@ def test_a_lags_hull_is_its_path_in_steady_flight(tau: float) -> None:
     assert hull.vertices.shape[0] == 2 and np.all(togo > 0.0) and np.all(togo <= togo[0] + 1e-12)
 
 
-def _true_path(plant: str, xi0: np.ndarray, commands: np.ndarray, dt: float) -> np.ndarray:
+def _true_path(plant: Plant, xi0: np.ndarray, commands: np.ndarray, dt: float) -> np.ndarray:
     """Positions (K + 1, n, d) from the origin of drones whose loop (per axis ``xi' = A xi + B u``,
-    ``p' = c^T xi``) starts in ``xi0`` (n, d, k), each command (K, n, d) held for ``dt``: the exact
-    discretisation of the plant's own loop, independent of :class:`VelocityLoop`."""
-    (a, b, _, c, _), *_ = PLANTS[plant]().velocity_loops()
+    ``p' = c^T xi``; the plant's first loop, for every axis) starts in ``xi0`` (n, d, k), each
+    command (K, n, d) held for ``dt``: the exact discretisation of the plant's own loop,
+    independent of :class:`VelocityLoop`."""
+    (a, b, _, c, _), *_ = plant.velocity_loops()
     a, b, c = np.asarray(a), np.asarray(b), np.asarray(c)
     k = a.shape[0]
     m = np.zeros((k + 2, k + 2))
@@ -177,7 +178,7 @@ def test_the_tail_points_hold_the_drones_true_path_to_rest(plant: str, dt: float
         x = dt * np.cumsum(u, axis=0)
         planned = Prediction(dt, horizon, loop, braking, tail).points(state, u, x)  # (H + T, n, d)
         brake = braking.rho ** np.arange(1, 3000)[:, None, None] * u[-1]
-        path = _true_path(plant, state[..., :k], np.concatenate([u, brake]), dt)[horizon:]
+        path = _true_path(PLANTS[plant](), state[..., :k], np.concatenate([u, brake]), dt)[horizon:]
         np.testing.assert_allclose(planned[horizon - 1], path[0], atol=1e-9)  # y_H
         np.testing.assert_allclose(planned[-1], path[-1], atol=1e-9)  # the rest point
         for drone in range(3):
@@ -187,6 +188,35 @@ def test_the_tail_points_hold_the_drones_true_path_to_rest(plant: str, dt: float
                 missed += not _in_hull(hull[[0, -1]], p)
                 checked += 1
     assert missed > checked / 10  # the chord is not enough (24 % of them for the 0.3 s lag at dt 0.1)
+
+
+@pytest.mark.parametrize(("platform", "dt", "horizon"), [("cf2x_L250", 0.05, 7), ("cf21B_500", 0.1, 10)])
+def test_a_planar_quadrotors_tail_per_drone_samples_then_holds_its_true_path(
+    platform: str, dt: float, horizon: int
+) -> None:
+    """Solved per drone, a planar quadrotor's tail takes exact samples before its hull (in a joint
+    QP: the chord, one point), and every position of its true path from ``y_H`` to rest lies in the
+    hull of ``y_H`` and the tail's points, as for the loops above."""
+    from mpcform.sim.quadrotor import QuadrotorPlant, QuadrotorSpec
+
+    plant = QuadrotorPlant(2, 2, QuadrotorSpec(platform=platform))
+    groups = [(np.asarray(a), np.asarray(b), np.asarray(c), ax) for a, b, _, c, ax in plant.velocity_loops()]
+    loop = VelocityLoop.from_groups(groups, 2, dt, horizon)
+    braking = Braking.of(dt, Limits(v_max_mps=1.0, a_max_mps2=1.79))
+    tail = braking_tail(braking, horizon, 2, loop, per_drone=True)
+    assert braking_tail(braking, horizon, 2, loop).count == 1 and tail.count > 9
+    rng = np.random.default_rng(7)
+    k = loop.step_state.shape[1] - 1
+    for _ in range(2):
+        u = rng.uniform(-1.0, 1.0, (horizon, 2, 2))
+        state = np.concatenate([0.2 * rng.normal(size=(2, 2, k)), np.zeros((2, 2, 1))], axis=2)
+        planned = Prediction(dt, horizon, loop, braking, tail).points(state, u, dt * np.cumsum(u, axis=0))
+        brake = braking.rho ** np.arange(1, 3000)[:, None, None] * u[-1]
+        path = _true_path(plant, state[..., :k], np.concatenate([u, brake]), dt)[horizon:]
+        np.testing.assert_allclose(planned[-1], path[-1], atol=1e-9)  # the rest point
+        for drone in range(2):
+            hull = planned[horizon - 1 :, drone]
+            assert all(_in_hull(hull, p) for p in path[: int(6.0 / dt) : 2, drone])
 
 
 def _in_hull(points: np.ndarray, x: np.ndarray) -> bool:
