@@ -22,7 +22,7 @@ from mpcform.errors import ScenarioError
 from mpcform.mpc.planner import MPCPlanner
 from mpcform.mpc.problem import StepQP
 from mpcform.mpc.sparse import SparseSolver
-from mpcform.mpc.split import SplitQP, joint_rows
+from mpcform.mpc.split import SplitQP
 from mpcform.mpc.strategy import PerDroneSolve, SplitPolicy, as_sparse
 from mpcform.scenario.build import build_controller
 from mpcform.scenario.load import load_scenario
@@ -80,7 +80,7 @@ def curves(planner: MPCPlanner, qps: list[StepQP], rounds: int) -> dict[str, Arr
         hist = split.run(qp).history
         pad = np.vstack([hist, np.repeat(hist[-1:], rounds + 1 - hist.shape[0], axis=0)])
         pad[hist.shape[0] :, 1:] = hist[-1, 1:]  # stopped early (converged): no more time
-        joint = replace(qp, rows=joint_rows(qp.rows), warm=None, rebuilt=True)
+        joint = replace(qp, rows=qp.rows.joint(), warm=None, rebuilt=True)
         accurate.reset()
         sol, _ = accurate.solve(joint)
         fast.reset()

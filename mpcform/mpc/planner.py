@@ -372,7 +372,7 @@ def slack_report(
     slack = z[2 * nud : 2 * nud + horizon * drones.shape[0]]
     shortfall, missed = start
     if relaxed or slack.max(initial=0.0) > SLACK_REPORT_M / 2:
-        planned, late = sep.shortfall(x, rows, SLACK_REPORT_M)
+        planned, late = sep.shortfall(x, rows, SLACK_REPORT_M, joint=True)
         if late.shape[0]:  # a miss within the solver's tolerance is not slack
             shortfall, missed = max(shortfall, planned), np.concatenate([missed, late])
     return max(shortfall, 0.0), missed

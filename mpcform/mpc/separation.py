@@ -89,6 +89,41 @@ class SeparationRows:
             self.single_hard[keep_s],
         )
 
+    def joint(self) -> SeparationRows:
+        """The joint pair rows whose split these decoupled rows are: per pair side i's normal and
+        the sum of both sides' lower bounds, after the joint pairs there are (the obstacle items
+        stay one-drone items)."""
+        first, second = pair_sides(self.labels)
+        ob = np.flatnonzero(self.labels[:, 1] < 0)
+        return SeparationRows(
+            np.concatenate([self.pairs, np.column_stack([self.singles[first], self.singles[second]])]),
+            np.concatenate([self.pair_coeffs, self.single_coeffs[first]]),
+            np.concatenate([self.pair_lower, self.single_lower[first] + self.single_lower[second]]),
+            np.concatenate([self.pair_on, self.single_on[first]]),
+            self.singles[ob],
+            self.labels[ob],
+            self.single_coeffs[ob],
+            self.single_lower[ob],
+            self.single_on[ob],
+            np.concatenate([self.pair_hard, self.single_hard[first]]),
+            self.single_hard[ob],
+        )
+
+
+def pair_sides(labels: Array) -> tuple[Array, Array]:
+    """The pair sides among one-drone items of ``labels`` (S, 2): side i (``(i, k)``, i < k) and
+    side k (``(k, i)``) of each pair, in the same pair order."""
+    n = int(labels.max(initial=0)) + 1
+    key = np.where(labels[:, 1] >= 0, np.minimum(labels[:, 0], labels[:, 1]) * n + labels.max(axis=1), -1)
+    first = np.flatnonzero((labels[:, 1] >= 0) & (labels[:, 0] < labels[:, 1]))
+    second = np.flatnonzero((labels[:, 1] >= 0) & (labels[:, 0] > labels[:, 1]))
+    if first.shape == second.shape and np.array_equal(key[first], key[second]):  # the rows' own layout
+        order = np.argsort(key[first])
+        return first[order], second[order]
+    both = np.intersect1d(key[first], key[second])  # a side whose partner is not solved stays put
+    first, second = first[np.isin(key[first], both)], second[np.isin(key[second], both)]
+    return first[np.argsort(key[first])], second[np.argsort(key[second])]
+
 
 class Separation:
     """The pair and obstacle units together: the rows of a candidate set, and the tests on them."""
@@ -104,7 +139,9 @@ class Separation:
     ) -> None:
         self.dim, self.margin_m, self.braking = dim, settings.margin_m, braking
         h = settings.horizon  # with braking, then the tail's points (:mod:`mpcform.mpc.tail`)
-        self.tail = None if braking is None else braking_tail(braking, h, dim, loop, settings.solves_per_drone)
+        self.tail = (
+            None if braking is None else braking_tail(braking, h, dim, loop, settings.solves_per_drone)
+        )
         tail = 0 if self.tail is None else self.tail.count
         self.d_min_m, self.tube_m = limits.d_min_m, limits.tube_m
         self.metric = np.ones(dim)  # W's diagonal
@@ -173,10 +210,15 @@ class Separation:
         dev = vector_norms(delta - g).max(axis=0, initial=0.0)
         return not np.any(seg.min(axis=0, initial=np.inf) - dev < required + self.margin_m)
 
-    def shortfall(self, x: Array, rows: SeparationRows, tol: float) -> tuple[float, Array]:
+    def shortfall(
+        self, x: Array, rows: SeparationRows, tol: float, joint: bool = False
+    ) -> tuple[float, Array]:
         """Largest amount [m] by which positions ``x`` (H, n, d) miss an active separation row,
-        and the labels (m, 2) of the items that miss by more than ``tol``."""
-        least, labels = self._least(x, rows, None)
+        and the labels (m, 2) of the items that miss by more than ``tol``; with ``joint`` a
+        decoupled pair's two sides are taken together, as the joint row they add up to (an
+        iterated split, :mod:`mpcform.mpc.split`, lets one side miss its midpoint row by as much
+        as the other keeps it: the pair's row holds)."""
+        least, labels = self._least(x, rows.joint() if joint else rows, None)
         return -float(least.min(initial=np.inf)), np.unique(labels[least < -tol], axis=0)
 
     def single_values(self, x: Array, rows: SeparationRows) -> Array:

@@ -39,7 +39,7 @@ from mpcform.mpc.drone_solves import DroneSolves
 from mpcform.mpc.per_drone import PerDroneQP
 from mpcform.mpc.problem import StepQP, StepSolver
 from mpcform.mpc.sensitivity import Sensitivity
-from mpcform.mpc.separation import SeparationRows
+from mpcform.mpc.separation import pair_sides
 from mpcform.solvers.base import QPSolution
 
 GRAD_TOL = 1e-8  # |dV/dt| below this on every row: converged
@@ -164,7 +164,7 @@ class SplitStep:
         self.pd, self.qp, rows = per_drone, qp, qp.rows
         self.m, self.r = qp.start_m.shape[0], rows.single_lower.shape[1]
         self.ok, self.flags = np.ones(self.m, dtype=bool), np.zeros(self.m, dtype=int)  # each drone's last
-        self.first, self.second = first, second = _sides(rows.labels)
+        self.first, self.second = first, second = pair_sides(rows.labels)
         self.splittable = np.repeat(rows.single_on[first][:, None], self.r, axis=1)
         self.splittable[rows.single_hard[first], 0] = False
         self.pair_of = np.full(rows.singles.shape[0], -1)  # item -> its pair, side sign
@@ -359,40 +359,3 @@ class SplitStep:
         """The iterate as the planner's solution ``[u | x | s]`` and its number of active rows."""
         ok = np.isfinite(it.cost) | self.ok
         return self.pd.solution(it.v, it.s, ok, self.flags, it.lams, self.iterations, self.time_s, it.cost)
-
-
-def _sides(labels: Array) -> tuple[Array, Array]:
-    """The pair sides among one-drone items of ``labels`` (S, 2): side i (``(i, k)``, i < k) and
-    side k (``(k, i)``) of each pair, in the same pair order."""
-    n = int(labels.max(initial=0)) + 1
-    key = np.where(labels[:, 1] >= 0, np.minimum(labels[:, 0], labels[:, 1]) * n + labels.max(axis=1), -1)
-    first = np.flatnonzero((labels[:, 1] >= 0) & (labels[:, 0] < labels[:, 1]))
-    second = np.flatnonzero((labels[:, 1] >= 0) & (labels[:, 0] > labels[:, 1]))
-    if first.shape == second.shape and np.array_equal(key[first], key[second]):  # the rows' own layout
-        order = np.argsort(key[first])
-        return first[order], second[order]
-    both = np.intersect1d(key[first], key[second])  # a side whose partner is not solved stays put
-    first, second = first[np.isin(key[first], both)], second[np.isin(key[second], both)]
-    return first[np.argsort(key[first])], second[np.argsort(key[second])]
-
-
-def joint_rows(rows: SeparationRows) -> SeparationRows:
-    """The joint pair rows whose split the decoupled ``rows`` are: per pair side i's normal and the
-    sum of both sides' lower bounds (the obstacle items stay one-drone items)."""
-    first, second = _sides(rows.labels)
-    ob = np.flatnonzero(rows.labels[:, 1] < 0)
-    pairs = np.column_stack([rows.singles[first], rows.singles[second]])
-    lower = rows.single_lower[first] + rows.single_lower[second]
-    return SeparationRows(
-        pairs,
-        rows.single_coeffs[first],
-        lower,
-        rows.single_on[first],
-        rows.singles[ob],
-        rows.labels[ob],
-        rows.single_coeffs[ob],
-        rows.single_lower[ob],
-        rows.single_on[ob],
-        rows.single_hard[first],
-        rows.single_hard[ob],
-    )

@@ -147,6 +147,28 @@ def test_shortfall_and_conflicted_drones() -> None:
     assert sep.shortfall(x, rows, 0.0)[1].shape == (0, 2) and not sep.conflicted(x, rows).any()
 
 
+def test_a_decoupled_pairs_shortfall_taken_jointly_is_the_joint_rows() -> None:
+    """Both drones 1 m apart move +0.4 m along x: drone 0 misses its midpoint row (0.251 m from the
+    midpoint) by 0.151 m, drone 1 keeps its own by 0.4 m more, and the pair stays 1 m apart: taken
+    jointly (as a split moved from the midpoint leaves a pair), no shortfall. Drone 0 moving 0.6 m closer alone misses the pair's
+    joint row by ``0.6 - (1 - 0.5 - margin)``, as in joint mode; an obstacle's row stays its own."""
+    p0 = np.array([[0.0, 0.0], [1.0, 0.0]])
+    settings = MPCSettings(horizon=1, coupling="decoupled")
+    sphere = (SphereObstacle(np.array([0.0, 3.0]), 0.5, 0.25),)
+    sep = Separation(2, Limits(v_max_mps=1.0, d_min_m=0.5), settings, sphere)
+    rows = sep.rows(p0, still(p0, 1), cand([[0, 1]], [[0, 0]]))
+    x = np.full((1, 2, 2), [0.4, 0.0])
+    assert sep.shortfall(x, rows, 0.0)[0] == pytest.approx(0.4 - (0.5 - 0.5 * (0.5 + MARGIN)))
+    assert sep.shortfall(x, rows, 0.0, joint=True)[1].shape == (0, 2)
+    x = np.zeros((1, 2, 2))
+    x[0, 0] = [0.6, 0.0]
+    worst, missed = sep.shortfall(x, rows, 0.0, joint=True)
+    assert worst == pytest.approx(0.6 - (1.0 - 0.5 - MARGIN))
+    np.testing.assert_array_equal(missed, [[0, 1]])
+    x[0, 0] = [0.0, 2.5]  # into the sphere's clearance
+    np.testing.assert_array_equal(sep.shortfall(x, rows, 0.0, joint=True)[1], [[0, -1]])
+
+
 def test_subset_renumbers_drones() -> None:
     p0 = np.array([[0.0, 0.0], [1.0, 0.0], [9.0, 0.0], [9.0, 1.0]])
     lim, st_ = Limits(v_max_mps=1.0, d_min_m=0.5), MPCSettings(horizon=2, coupling="decoupled")

@@ -16,7 +16,7 @@ from mpcform.mpc.problem import StepQP
 from mpcform.mpc.rows import row_ends
 from mpcform.mpc.settings import MPCSettings
 from mpcform.mpc.sparse import SparseSolver
-from mpcform.mpc.split import SplitQP, joint_rows
+from mpcform.mpc.split import SplitQP
 from mpcform.mpc.strategy import PerDroneSolve, SparseSolve, SplitPolicy
 from mpcform.reference.base import ConstantReference
 from mpcform.sim.simulation import simulate
@@ -72,7 +72,7 @@ def joint_optimum(planner: MPCPlanner, qp: StepQP) -> float:
     settings = MPCSettings(coupling="joint", solve=SparseSolve(options=SolverOptions(1e-10, 1e-10, 4000)))
     backend = make_backend("qpsolvers:clarabel", SolverOptions(1e-10, 1e-10, 4000, 0.0))
     solver = SparseSolver(backend, planner.dim, DT, LIMITS, settings, planner._families, planner._separation)
-    joint = replace(qp, rows=joint_rows(qp.rows), warm=None, rebuilt=True)
+    joint = replace(qp, rows=qp.rows.joint(), warm=None, rebuilt=True)
     sol, _ = solver.solve(joint)
     assert sol.success and sol.x is not None
     cost, slack = tracking(planner, joint, sol.x)
@@ -90,7 +90,7 @@ def test_every_iterate_meets_the_joint_rows_and_the_cost_falls_to_no_less_than_t
     ends = row_ends(planner.settings.horizon)
     for qp in qps:
         run = split.run(qp, record=True)
-        joint = joint_rows(qp.rows)
+        joint = qp.rows.joint()
         i, k = joint.pairs.T
         assert len(run.positions) == run.rounds + 1
         for x in run.positions:  # (H, m, d), every round's plans, accepted or not
