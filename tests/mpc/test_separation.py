@@ -150,8 +150,9 @@ def test_shortfall_and_conflicted_drones() -> None:
 def test_a_decoupled_pairs_shortfall_taken_jointly_is_the_joint_rows() -> None:
     """Both drones 1 m apart move +0.4 m along x: drone 0 misses its midpoint row (0.251 m from the
     midpoint) by 0.151 m, drone 1 keeps its own by 0.4 m more, and the pair stays 1 m apart: taken
-    jointly (as a split moved from the midpoint leaves a pair), no shortfall. Drone 0 moving 0.6 m closer alone misses the pair's
-    joint row by ``0.6 - (1 - 0.5 - margin)``, as in joint mode; an obstacle's row stays its own."""
+    jointly (as a split moved from the midpoint leaves a pair), no shortfall. Drone 0 moving 0.6 m
+    closer alone misses the pair's joint row by ``0.6 - (1 - 0.5 - margin)``, as in joint mode; an
+    obstacle's row stays its own."""
     p0 = np.array([[0.0, 0.0], [1.0, 0.0]])
     settings = MPCSettings(horizon=1, coupling="decoupled")
     sphere = (SphereObstacle(np.array([0.0, 3.0]), 0.5, 0.25),)
