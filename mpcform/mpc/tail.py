@@ -85,7 +85,7 @@ cf2x_L250 needs up to 9 (dt 0.05, 9-17 tail points), a cf21B_500 up to 16 (24 po
 shift-invariant (the shifted plan's ``x_H`` is a point of the curved tail, off the chord its
 rows held), so decoupled plans on it crept inside their tail rows, a few millimetres a step: a
 planar formation of 14 quadrotors in a steady wind came to 0.562 m against d_min 0.599 m. With
-the samples it kept 0.614 m with no slack, at 9 % more CPU (in a joint QP, 3.3 times as much)."""
+the samples it kept 0.614 m with no slack, at 15 % more CPU (in a joint QP, 3.3 times as much)."""
 
 
 @dataclass(frozen=True, eq=False)
