@@ -31,7 +31,7 @@ from mpcform.mpc.loop import VelocityLoop
 from mpcform.mpc.rows import position_table, positions_of_inputs, row_ends
 from mpcform.mpc.sensitivity import Sensitivity, drone_sensitivity
 from mpcform.mpc.settings import MPCSettings
-from mpcform.mpc.tail import braking_tail
+from mpcform.mpc.tail import planner_tail
 from mpcform.solvers.dense import NO_BOUND
 from mpcform.world.limits import Limits
 
@@ -62,7 +62,7 @@ class CondensedDroneQP:
         self._const_v = (np.vstack(rows) if rows else np.zeros((0, nu))) @ self._m_inv
         self._const_pm = np.vstack([self._const_v, -self._const_v])  # one-sided: lower, then upper
         self.braking = braking = Braking.of(dt_s, limits, settings.braking)
-        tail = None if braking is None else braking_tail(braking, h, dim, loop, settings.solves_per_drone)
+        tail = planner_tail(braking, settings, dim, loop)
         count = 0 if tail is None else tail.count
         self._steps = steps = h + count  # the rows' positions: x_1..x_H (then the braking tail's points)
         self._ends = row_ends(h, count)

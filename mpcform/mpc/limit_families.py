@@ -19,7 +19,7 @@ from mpcform.mpc.braking import Braking
 from mpcform.mpc.loop import VelocityLoop
 from mpcform.mpc.rows import INF, Layout, RowBlock, positions_of_inputs
 from mpcform.mpc.settings import MPCSettings
-from mpcform.mpc.tail import Tail, braking_tail
+from mpcform.mpc.tail import Tail, planner_tail
 from mpcform.world.limits import Limits
 
 INSCRIBED = 1.0 - 1e-9  # ||u||^2 below this times h^2: inside the velocity set, rounding included
@@ -243,7 +243,7 @@ def limit_rows(
     if limits.geofence_min_m is not None and limits.geofence_max_m is not None:
         fence = limits.geofence_min_m, limits.geofence_max_m
         braking = Braking.of(dt_s, limits, settings.braking)
-        tail = None if braking is None else braking_tail(braking, h, dim, loop, settings.solves_per_drone)
+        tail = planner_tail(braking, settings, dim, loop)
         families.append(GeofenceRows(dim, h, dt_s, *fence, settings.margin_m, tail, loop))
     return tuple(families)
 

@@ -37,7 +37,7 @@ from mpcform.mpc.loop import VelocityLoop
 from mpcform.mpc.rows import row_ends, row_segments
 from mpcform.mpc.separation_units import BLOCK, ObstacleSeparation, PairSeparation, Test, inside
 from mpcform.mpc.settings import MPCSettings
-from mpcform.mpc.tail import braking_tail
+from mpcform.mpc.tail import planner_tail
 from mpcform.world.limits import Limits
 from mpcform.world.obstacles import SphereObstacle
 
@@ -139,9 +139,7 @@ class Separation:
     ) -> None:
         self.dim, self.margin_m, self.braking = dim, settings.margin_m, braking
         h = settings.horizon  # with braking, then the tail's points (:mod:`mpcform.mpc.tail`)
-        self.tail = (
-            None if braking is None else braking_tail(braking, h, dim, loop, settings.solves_per_drone)
-        )
+        self.tail = planner_tail(braking, settings, dim, loop)
         tail = 0 if self.tail is None else self.tail.count
         self.d_min_m, self.tube_m = limits.d_min_m, limits.tube_m
         self.metric = np.ones(dim)  # W's diagonal

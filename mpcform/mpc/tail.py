@@ -51,6 +51,7 @@ from mpcform._validate import Array
 from mpcform.errors import MPCFormError, ValidationError
 from mpcform.mpc.braking import Braking
 from mpcform.mpc.loop import VelocityLoop
+from mpcform.mpc.settings import MPCSettings
 
 REAL_TOL = 1e-9  # an eigenvalue with a smaller imaginary part is real
 SAME_TOL = 1e-12  # axes whose tail systems differ by less share one hull
@@ -67,16 +68,14 @@ TAIL_SAMPLES = 2
 which then holds ``M^K z``: the polygon's width shrinks with the poles' powers, and the points stay
 closed under the shift (``L M^{K+1} = W_0 M^K M`` lies in the hull). The least K whose hull is within
 :data:`TAIL_SPREAD` is used: 0 for a lag and an underdamped second-order loop, 1 for a nearly
-critically damped one at dt 0.1 (at dt 0.05 it would need 3: the chord). A planar quadrotor would
-need 3 (dt 0.1) to 9 (dt 0.05), 9-17 tail points whose rows touch every input of both drones: its
-joint QPs took 4-6 times as long (a planar swap of the flight acceptance over 20 minutes instead
-of 4), so in a joint QP it keeps the chord (:data:`SAMPLED_STATES`; per drone:
-:data:`CASCADE_SAMPLES`)."""
+critically damped one at dt 0.1 (at dt 0.05 it would need 3: the chord). A quadrotor's cascade
+takes none in a joint QP (:data:`SAMPLED_STATES`) and up to :data:`CASCADE_SAMPLES` per drone."""
 SAMPLED_STATES = 2
 """In a joint QP exact samples are taken only for loops of at most this many states (a lag's 1, a
 second-order loop's 2). A quadrotor's cascade (its integral, attitude and rate states) keeps its
-hull or the chord there whatever its braking time: a slow planar swap of 20 drones, whose hull was
-within reach after 2 samples, took 4 times as long with their 9 tail points' rows."""
+hull or the chord there whatever its braking time: its samples' rows touch every input of both
+drones, and its joint QPs took 4-6 times as long (a slow planar swap of 20 drones, whose hull was
+within reach after 2 samples, 4 times as long with their 9 tail points' rows)."""
 CASCADE_SAMPLES = 16
 """With per-drone solves (decoupled mode's condensed QPs, whose rows are dense over a drone's H d
 inputs anyway) a cascade's tail takes up to this many exact samples before its hull: a planar
@@ -127,6 +126,16 @@ class Tail:
         return np.einsum("tds,nds->tnd", self.free, state)
 
 
+def planner_tail(
+    braking: Braking | None, settings: MPCSettings, dim: int, loop: VelocityLoop | None = None
+) -> Tail | None:
+    """The tail a planner with ``settings`` writes its rows at (None without ``braking``): its
+    separation rows, condensed QPs and geofence all take this one."""
+    if braking is None:
+        return None
+    return braking_tail(braking, settings.horizon, dim, loop, settings.solves_per_drone)
+
+
 @lru_cache(maxsize=64)  # a planner's parts each ask for the same tail
 def braking_tail(
     braking: Braking, horizon: int, dim: int, loop: VelocityLoop | None = None, per_drone: bool = False
@@ -165,8 +174,11 @@ def braking_tail(
     reach = TAIL_SPREAD * (braking.kappa_s * loop.speed_gain + loop.lag_s)
     samples: list[Array] = []  # L M^k, k = 1..K
     sample, ahead = vertices[0], np.eye(m.shape[0])  # L M^K, M^K
-    tries = TAIL_SAMPLES + 1 if s <= SAMPLED_STATES else CASCADE_SAMPLES + 1 if per_drone else 1
-    for _ in range(tries):
+    if s <= SAMPLED_STATES:
+        most = TAIL_SAMPLES
+    else:  # a quadrotor's cascade
+        most = CASCADE_SAMPLES if per_drone else 0
+    for _ in range(most + 1):
         hull = at(np.vstack(samples + [vertices[1:] @ ahead]))  # past W_0 = L
         if hull.reach_s <= reach:
             return hull

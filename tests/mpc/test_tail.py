@@ -23,22 +23,20 @@ PLANTS = {
 }
 
 
+def _loop_of(plant: Plant, dt: float, horizon: int = 10) -> VelocityLoop:
+    """The planner's model of ``plant``'s velocity loops."""
+    groups = [(np.asarray(a), np.asarray(b), np.asarray(c), ax) for a, b, _, c, ax in plant.velocity_loops()]
+    return VelocityLoop.from_groups(groups, plant.dim, dt, horizon)
+
+
 def _loop(plant_name: str, dt: float) -> VelocityLoop:
-    groups = [
-        (np.asarray(a), np.asarray(b), np.asarray(c), axes)
-        for a, b, _, c, axes in PLANTS[plant_name]().velocity_loops()
-    ]
-    return VelocityLoop.from_groups(groups, 3, dt, 10)
+    return _loop_of(PLANTS[plant_name](), dt)
 
 
-def _quadrotor_loop(dt: float) -> VelocityLoop:
+def _quadrotor(dim: int, platform: str = "cf2x_L250") -> Plant:
     from mpcform.sim.quadrotor import QuadrotorPlant, QuadrotorSpec
 
-    groups = [
-        (np.asarray(a), np.asarray(b), np.asarray(c), axes)
-        for a, b, _, c, axes in QuadrotorPlant(2, 3, QuadrotorSpec()).velocity_loops()
-    ]
-    return VelocityLoop.from_groups(groups, 3, dt, 10)
+    return QuadrotorPlant(2, dim, QuadrotorSpec(platform=platform))
 
 
 def _remaining(loop: VelocityLoop, braking: Braking, axis: int, z: np.ndarray, steps: int) -> np.ndarray:
@@ -99,7 +97,7 @@ def test_every_tail_point_lies_in_the_hull_and_the_hull_holds_its_shift(
 def test_the_quadrotors_tail_hull_is_exact_but_loose() -> None:
     """The quadrotor's integral pole (0.95 per step at dt 0.1) widens its pair's polygon: exact, but
     vertices up to 0.8 m beyond the rest point per m/s in steady flight."""
-    loop = _quadrotor_loop(0.1)
+    loop = _loop_of(_quadrotor(3), 0.1)
     braking = Braking.of(0.1, Limits(v_max_mps=1.0, a_max_mps2=1.79))
     for axis in (0, 2):
         m, rest = tail_system(loop, braking, axis)
@@ -116,11 +114,7 @@ def test_the_quadrotors_tail_hull_is_exact_but_loose() -> None:
 def test_a_lags_hull_is_its_path_in_steady_flight(tau: float) -> None:
     """From steady flight a lag's tail runs straight to rest: its hull's vertices lie between the
     rest point and ``y_H`` (3 of them, rest included: one more than the chord)."""
-    groups = [
-        (np.asarray(a), np.asarray(b), np.asarray(c), axes)
-        for a, b, _, c, axes in lag_plant(2, 3, tau).velocity_loops()
-    ]
-    loop = VelocityLoop.from_groups(groups, 3, 0.1, 10)
+    loop = _loop_of(lag_plant(2, 3, tau), 0.1)
     braking = Braking.of(0.1, Limits(v_max_mps=1.0, a_max_mps2=1.79))
     m, rest = tail_system(loop, braking, 0)
     hull = axis_hull(m, rest)
@@ -158,15 +152,7 @@ def test_the_tail_points_hold_the_drones_true_path_to_rest(plant: str, dt: float
     ``y_H`` and the tail's points, the last of which is the rest point; the chord alone (``y_H``
     and the rest point) misses many of them. A nearly critical loop's tail starts with exact samples."""
     braking = Braking.of(dt, Limits(v_max_mps=1.0, a_max_mps2=1.79))
-    loop = VelocityLoop.from_groups(
-        [
-            (np.asarray(a), np.asarray(b), np.asarray(c), ax)
-            for a, b, _, c, ax in PLANTS[plant]().velocity_loops()
-        ],
-        3,
-        dt,
-        horizon,
-    )
+    loop = _loop_of(PLANTS[plant](), dt, horizon)
     tail = braking_tail(braking, horizon, 3, loop)
     assert tail.count == 2 if plant.startswith("lag") else tail.count > 2  # the chord: 1
     rng = np.random.default_rng(int(100 * dt) + horizon)
@@ -197,11 +183,8 @@ def test_a_planar_quadrotors_tail_per_drone_samples_then_holds_its_true_path(
     """Solved per drone, a planar quadrotor's tail takes exact samples before its hull (in a joint
     QP: the chord, one point), and every position of its true path from ``y_H`` to rest lies in the
     hull of ``y_H`` and the tail's points, as for the loops above."""
-    from mpcform.sim.quadrotor import QuadrotorPlant, QuadrotorSpec
-
-    plant = QuadrotorPlant(2, 2, QuadrotorSpec(platform=platform))
-    groups = [(np.asarray(a), np.asarray(b), np.asarray(c), ax) for a, b, _, c, ax in plant.velocity_loops()]
-    loop = VelocityLoop.from_groups(groups, 2, dt, horizon)
+    plant = _quadrotor(2, platform)
+    loop = _loop_of(plant, dt, horizon)
     braking = Braking.of(dt, Limits(v_max_mps=1.0, a_max_mps2=1.79))
     tail = braking_tail(braking, horizon, 2, loop, per_drone=True)
     assert braking_tail(braking, horizon, 2, loop).count == 1 and tail.count > 9
@@ -252,20 +235,14 @@ def test_without_a_loop_or_with_differing_axes_the_tail_is_its_stop_point() -> N
     u, x_last = rng.normal(size=(10, 2, 3)), rng.normal(size=(2, 3))
     assert plain.count == 1 and plain.support.tolist() == [9] and plain.reach_s == braking.kappa_s
     np.testing.assert_array_equal(plain.points(x_last, u)[0], braking.stop(x_last, u[-1]))
-    quad = _quadrotor_loop(0.1)
+    quad = _loop_of(_quadrotor(3), 0.1)
     chord = braking_tail(braking, 10, 3, quad)
     assert chord.count == 1 and chord.free is not None
     np.testing.assert_allclose(chord.free[0], quad.rest_m)
-    from mpcform.sim.quadrotor import QuadrotorPlant, QuadrotorSpec
-
-    planar = [
-        (np.asarray(a), np.asarray(b), np.asarray(c), axes)
-        for a, b, _, c, axes in QuadrotorPlant(2, 2, QuadrotorSpec()).velocity_loops()
-    ]
-    loop = VelocityLoop.from_groups(planar, 2, 0.1, 10)
+    loop = _loop_of(_quadrotor(2), 0.1)
     assert braking_tail(braking, 10, 2, loop).count == 1  # 3 samples would be needed: the chord
     # a slower swarm brakes sooner: 2 samples would do, but the rows of 9 tail points made a
     # 20-drone planar swap of the flight acceptance take 4 times as long (SAMPLED_STATES): the chord
     slow = Braking.of(0.1, Limits(v_max_mps=0.54, a_max_mps2=1.79))
-    planar15 = VelocityLoop.from_groups(planar, 2, 0.1, 15)
+    planar15 = _loop_of(_quadrotor(2), 0.1, 15)
     assert braking_tail(slow, 15, 2, planar15).count == 1
