@@ -46,13 +46,14 @@ def test_segment_normals_by_hand() -> None:
 @pytest.mark.parametrize("dim", [2, 3])
 def test_the_closest_point_of_a_hull_is_the_qps(dim: int) -> None:
     """``closest_in_hull`` against clarabel's minimum-norm point ``min |P^T w|`` over the simplex,
-    for random hulls of 2-9 points that keep the origin outside (the braking tail's rows), and the
-    closest point's own certificate: every point of the hull is at least as far along it."""
+    for random hulls of 2-9 points and of 10-40 (in 3-D: the descent, a spatial quadrotor's tail)
+    that keep the origin outside (the braking tail's rows), and the closest point's own
+    certificate: every point of the hull is at least as far along it."""
     import qpsolvers
 
     rng = np.random.default_rng(dim)
-    for trial in range(60):
-        k = 2 + trial % 8
+    for trial in range(90):
+        k = 2 + trial % 8 if trial < 60 else 10 + trial % 31
         pts = rng.normal(size=(k, dim)) + rng.uniform(0.5, 3.0) * rng.normal(size=dim)
         hess, row = sparse.csc_matrix(pts @ pts.T), sparse.csc_matrix(np.ones((1, k)))
         w = qpsolvers.solve_qp(hess, np.zeros(k), A=row, b=np.ones(1), lb=np.zeros(k), solver="clarabel")
