@@ -35,11 +35,15 @@ at rest, :class:`mpcform.mpc.loop.VelocityLoop`), and the true path from ``y_H``
 polytope that holds the whole path to rest and maps into itself under the shift (after a few
 exact points of the path where the polytope alone would be much wider), and at the rest point,
 one normal per item (:mod:`mpcform.mpc.tail`): (i) and (ii) hold as above, with "the
-segment" read as that polytope, whenever the loop's axes share one loop (a lag, the second-order
-loop, a planar quadrotor). Where they differ (a spatial quadrotor's xy and z loops) the rows stay
-on the chord to the rest point, and the margin has to cover the path's bend. Wind and model error
-beyond the margin break assumption (i): the planner then reports slack, and the certifier
-(:mod:`mpcform.mpc.certify`) still guards the first interval.
+segment" read as that polytope. Its vertices carry one set of weights for every axis: the axes
+share one loop (a lag, the second-order loop, a planar quadrotor), or their groups' polytopes
+are built together (a spatial quadrotor's xy and z loops). A quadrotor's polytope is tight only
+after many exact points, whose rows a joint QP cannot afford: there the rows stay on the chord
+to the rest point (:data:`mpcform.mpc.tail.SAMPLED_STATES`), and the margin has to cover the
+path's bend. Wind and model error beyond the margin break assumption (i): the planner then
+reports slack, and the certifier (:mod:`mpcform.mpc.certify`) still guards the first interval.
+When a solve leaves slack on rows the shifted plan meets (an interior-point solver can), the
+planner keeps the shifted plan, as (ii) allows (:meth:`mpcform.mpc.planner.MPCPlanner.step`).
 
 The stop point adds no speed cap (the stop lies past the horizon), but it is conservative:
 ``kappa |u|`` is up to twice the shortest braking distance ``|u|^2 / (2 a_max)`` at ``v_max``.

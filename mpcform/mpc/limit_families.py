@@ -52,8 +52,9 @@ class LimitRows(ABC):
         """Bounds (n, m) of the dense rows for each drone; ``inf`` stands for no bound."""
 
     @abstractmethod
-    def violators(self, p0: Array, u_prev: Array, u: Array, x: Array) -> Array:
-        """Drones (n,) whose inputs ``u`` and relative positions ``x`` (H, n, d) break a row."""
+    def violators(self, p0: Array, u_prev: Array, u: Array, x: Array, tol: float = 0.0) -> Array:
+        """Drones (n,) whose inputs ``u`` and relative positions ``x`` (H, n, d) break a row by more
+        than ``tol`` [m/s or m]."""
 
 
 class VelocityRows(LimitRows):
@@ -86,14 +87,14 @@ class VelocityRows(LimitRows):
         shape = (p0.shape[0], self.horizon * self.normals.shape[0])
         return np.full(shape, -inf), np.full(shape, self.h_mps)
 
-    def violators(self, p0: Array, u_prev: Array, u: Array, x: Array) -> Array:
+    def violators(self, p0: Array, u_prev: Array, u: Array, x: Array, tol: float = 0.0) -> Array:
         """Tested on the drones with an input outside the inscribed spheroid ``||S u|| <= h`` (inside
         it, every ``D_i^T u <= ||S u|| <= h`` with ``D = D_ball S``, rounding included with the
         factor's margin)."""
         scaled = u * self.scale if self._squeezed else u
         out = squared_norms(scaled).max(axis=0, initial=0.0) > INSCRIBED * self.h_mps**2
         if out.any():
-            out[out] = (u[:, out] @ self.normals.T > self.h_mps).any(axis=(0, 2))
+            out[out] = (u[:, out] @ self.normals.T > self.h_mps + tol).any(axis=(0, 2))
         return out
 
 
@@ -132,9 +133,9 @@ class AccelerationRows(LimitRows):
         shift[:, 0] = u_prev
         return (shift - da).reshape(n, -1), (shift + da).reshape(n, -1)
 
-    def violators(self, p0: Array, u_prev: Array, u: Array, x: Array) -> Array:
+    def violators(self, p0: Array, u_prev: Array, u: Array, x: Array, tol: float = 0.0) -> Array:
         du = np.diff(np.concatenate([u_prev[None], u]), axis=0)
-        return np.asarray((np.abs(du) > self.step_mps).any(axis=(0, 2)))
+        return np.asarray((np.abs(du) > self.step_mps + tol).any(axis=(0, 2)))
 
 
 class GeofenceRows(LimitRows):
@@ -220,13 +221,13 @@ class GeofenceRows(LimitRows):
         lo, hi = self._boxes(p0, free_m)
         return lo.transpose(1, 0, 2).reshape(n, -1), hi.transpose(1, 0, 2).reshape(n, -1)
 
-    def violators(self, p0: Array, u_prev: Array, u: Array, x: Array) -> Array:
+    def violators(self, p0: Array, u_prev: Array, u: Array, x: Array, tol: float = 0.0) -> Array:
         """``x`` (H, n, d), or (H + T, n, d) with the tail's points already in it (and with a loop
         the true positions, :meth:`mpcform.mpc.prediction.Prediction.points`)."""
         lo, hi = self.box(p0)
         if self.tail is not None and x.shape[0] == self.horizon:
             x = np.concatenate([x, self.tail.points(x[-1], u)])
-        return np.asarray(((x < lo) | (x > hi)).any(axis=(0, 2)))
+        return np.asarray(((x < lo - tol) | (x > hi + tol)).any(axis=(0, 2)))
 
 
 def limit_rows(
@@ -248,13 +249,15 @@ def limit_rows(
     return tuple(families)
 
 
-def violators(families: tuple[LimitRows, ...], p0: Array, u_prev: Array, u: Array, x: Array) -> Array:
-    """Drones (n,) whose ``(u, x)`` miss a velocity, acceleration or geofence row."""
+def violators(
+    families: tuple[LimitRows, ...], p0: Array, u_prev: Array, u: Array, x: Array, tol: float = 0.0
+) -> Array:
+    """Drones (n,) whose ``(u, x)`` miss a velocity, acceleration or geofence row by more than ``tol``."""
     if len(families) == 1:
-        return families[0].violators(p0, u_prev, u, x)
+        return families[0].violators(p0, u_prev, u, x, tol)
     bad = np.zeros(p0.shape[0], dtype=bool)
     for family in families:
-        bad |= family.violators(p0, u_prev, u, x)
+        bad |= family.violators(p0, u_prev, u, x, tol)
     return bad
 
 

@@ -44,7 +44,7 @@ from mpcform.control.base import Controller, ControlStep, feedforward_targets
 from mpcform.control.laws import check_gain_dt
 from mpcform.errors import ValidationError
 from mpcform.mpc.braking import Braking
-from mpcform.mpc.candidates import CandidateSelector, qp_drones
+from mpcform.mpc.candidates import Candidates, CandidateSelector, qp_drones
 from mpcform.mpc.certify import Certifier
 from mpcform.mpc.first_rows import hard_first_rows
 from mpcform.mpc.limit_families import admitted, limit_rows, violators
@@ -272,14 +272,18 @@ class MPCPlanner(Controller):
             u, x = merge(drones, sol.x, u_nom, x_nom)
             u0 = self._certifier.certify(p0, u[0], cand, self._u_prev)
             if u0 is not None:
-                self._accept(p0, u, x)
-                self._u_prev = u0.copy()  # the command sent (the solver's tolerance off)
                 x_true = self._predict.points(self._loop_state, u, x)
                 slack_m, items = slack_report(
                     sep, sol.x, drones, x_true, rows, (inside_m, inside), relaxed, horizon
                 )
+                mode = "qp"
+                if items.shape[0] > inside.shape[0] and (kept := self._kept_plan(p0, rows, cand)) is not None:
+                    (u, x), mode, status = kept, "fallback", f"{status}; previous plan (the solve left slack)"
+                    u0, slack_m, items = u[0], inside_m, inside
+                self._accept(p0, u, x)
+                self._u_prev = u0.copy()  # the command sent (the solver's tolerance off)
                 info = solve_info(
-                    "qp", sol, sol.status, active, len(drones), slack_m, items, self._tie_break, relaxed
+                    mode, sol, status, active, len(drones), slack_m, items, self._tie_break, relaxed
                 )
                 return ControlStep(u0, info)
             status, solved = status + "; command failed certification", u[0]
@@ -303,6 +307,23 @@ class MPCPlanner(Controller):
         hard, relaxed, best = hard_first_rows(rows, (self.dt_s + self.loop.forced[1, 0]) * first)
         self._certifier.floor_command = first[best]  # the rows allow its chord, so must the certifier
         return hard, relaxed, plans[best]
+
+    def _kept_plan(self, p0: Array, rows: SeparationRows, cand: Candidates) -> tuple[Array, Array] | None:
+        """With braking, the previous plan shifted (inputs, relative positions) if it meets every
+        separation and limit row of this step (to :data:`SLACK_REPORT_M`, the solver's tolerance)
+        and its first input certifies, else None: theorem (ii) of :mod:`mpcform.mpc.braking`, kept
+        over a solve that left slack (an interior-point solver can, on a QP this plan shows feasible)."""
+        if self._plan is None or self.braking is None:
+            return None
+        u = self._certifier.tail(self._plan)
+        u[0] = self._certifier.within_limits(u[0], self._u_prev)  # the solver's tolerance off
+        x = self.dt_s * np.cumsum(u, axis=0)
+        x_true = self._predict.points(self._loop_state, u, x)
+        if violators(self._families, p0, self._u_prev, u, x_true, SLACK_REPORT_M).any():
+            return None
+        if self._separation.shortfall(x_true, rows, SLACK_REPORT_M, joint=True)[1].shape[0]:
+            return None
+        return None if self._certifier.certify(p0, u[0], cand, self._u_prev) is None else (u, x)
 
     def _fast_path(self, nominal: Plan) -> ControlStep:
         """Accept the rollout's plan: its first input is the command."""

@@ -29,12 +29,16 @@ rest point, with one normal per item: a half-space holding at every vertex holds
 on the whole tail to rest. Where the hull is much wider than the path (a nearly critically damped
 loop's, a quadrotor's when the QPs are solved per drone) the tail's first K points are exact
 samples and the hull's vertices follow K intervals later (:data:`TAIL_SAMPLES`,
-:data:`CASCADE_SAMPLES`). The tail's weights over its vertices are the same for every axis when
-the axes share one loop (a lag, the second-order loop, a planar quadrotor), so the 3-D points are
-the hull's vertices. Where the axes differ (a spatial quadrotor's xy and z loops) the hull is the
-product of the axes' hulls (7-9 vertices each: about 100 points), which this module does not
-build: those tails, and a quadrotor's in a joint QP, are the chord to rest, which is not
-shift-invariant: the plans may need slack on the tail's rows, and the margin has to cover the
+:data:`CASCADE_SAMPLES`). The tail's weights over its vertices are the same for every axis, so
+the 3-D points are the hull's vertices: trivially when the axes share one loop (a lag, the
+second-order loop, a planar quadrotor). Where they differ (a spatial quadrotor's xy and z loops:
+two groups, :func:`tail_hull`) the real chain runs over both groups' real poles at once, and each
+group's complex pair gets its polygon widened P times (P groups with a pair), alone in its group:
+the pairs' parts ``(a_1, .., a_P)`` average the points ``P a_g``, so they lie in the hull of those
+polygons, each of which maps into itself. That is the chain's steps plus the polygons' corners
+(13-16 vertices for a quadrotor), not the product of the axes' hulls (about 100). A quadrotor's
+tail in a joint QP is the chord to rest (:data:`SAMPLED_STATES`), which is not shift-invariant:
+the plans may need slack on the tail's rows, and the margin has to cover the
 path's bend (:mod:`mpcform.mpc.braking`). Without a loop the tail is the straight segment to the
 stop point ``x_H + kappa u_{H-1}``: one point.
 """
@@ -55,6 +59,7 @@ from mpcform.mpc.settings import MPCSettings
 
 REAL_TOL = 1e-9  # an eigenvalue with a smaller imaginary part is real
 SAME_TOL = 1e-12  # axes whose tail systems differ by less share one hull
+SAME_POLE = 1e-9  # real poles of two groups closer than this are one step of the chain
 TAIL_SPREAD = 4.0
 """The hull is used once its points reach at most this many times as far past ``x_H`` as the
 chord's rest point can (``kappa`` times the loop's speed gain, plus its lag). A lag's hull and an
@@ -76,15 +81,17 @@ second-order loop's 2). A quadrotor's cascade (its integral, attitude and rate s
 hull or the chord there whatever its braking time: its samples' rows touch every input of both
 drones, and its joint QPs took 4-6 times as long (a slow planar swap of 20 drones, whose hull was
 within reach after 2 samples, 4 times as long with their 9 tail points' rows)."""
-CASCADE_SAMPLES = 16
+CASCADE_SAMPLES = 40
 """With per-drone solves (decoupled mode's condensed QPs, whose rows are dense over a drone's H d
-inputs anyway) a cascade's tail takes up to this many exact samples before its hull: a planar
-cf2x_L250 needs up to 9 (dt 0.05, 9-17 tail points), a cf21B_500 up to 16 (24 points), over dt
-0.05-0.1, horizons 3-30, v_max 0.3-3 m/s and a_max 0.2 m/s^2 to the default. The chord is not
-shift-invariant (the shifted plan's ``x_H`` is a point of the curved tail, off the chord its
-rows held), so decoupled plans on it crept inside their tail rows, a few millimetres a step: a
-planar formation of 14 quadrotors in a steady wind came to 0.562 m against d_min 0.599 m. With
-the samples it kept 0.614 m with no slack, at 15 % more CPU (in a joint QP, 3.3 times as much)."""
+inputs anyway) a cascade's tail takes up to this many exact samples before its hull. Over dt
+0.05-0.1, horizons 3-30, v_max 0.3-3 m/s and a_max 0.2 m/s^2 to the default a planar quadrotor
+needs up to 15 (cf21B_500; 7-24 tail points in all), a spatial one up to 32 (18-48 points: the
+two loops' hull has 13-16 vertices and is wider). The chord is not shift-invariant (the shifted
+plan's ``x_H`` is a point of the curved tail, off the chord its rows held), so decoupled plans on
+it crept inside their tail rows, a few millimetres a step: a planar formation of 14 quadrotors in
+a steady wind came to 0.562 m against d_min 0.599 m, and kept 0.614 m with the samples at 15 %
+more CPU (in a joint QP, 3.3 times as much); a spatial swap of 21 came 1.3 mm inside d_min on the
+chord and kept it with the samples at 3.7 times the CPU."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -151,62 +158,80 @@ def braking_tail(
         return Tail(gain, rest, None)
     rest_free = loop.rest_m[None].copy()
     chord = Tail(gain, rest, rest_free)
-    shared = _shared_hull(loop, braking, dim)
-    if shared is None:
+    found = _hull(loop, braking, dim)
+    if found is None:
         return chord
-    m, vertices = shared
-    s = m.shape[0] - 1  # the loop's states without the velocity offset
-    phi, gamma = loop.step_state[0, :s, :s], loop.step_input[0, :s]
-    powers = [np.eye(s)]
-    for _ in range(horizon):
-        powers.append(phi @ powers[-1])
-    to_state = np.array([powers[horizon - 1 - j] @ gamma for j in range(horizon)])  # (H, s): xi_H per u_j
+    group, systems, vertices = found
+    s = vertices.shape[2] - 1  # the loop's states without the velocity offset
+    first = [int(np.flatnonzero(group == g)[0]) for g in range(len(systems))]
+    powers, to_state = [], []  # per axis group: Phi^k (k = 0..H), xi_H per u_j (H, s)
+    for axis in first:
+        phi, gamma = loop.step_state[axis, :s, :s], loop.step_input[axis, :s]
+        group_powers = [np.eye(s)]
+        for _ in range(horizon):
+            group_powers.append(phi @ group_powers[-1])
+        powers.append(group_powers[horizon])
+        to_state.append(np.array([group_powers[horizon - 1 - j] @ gamma for j in range(horizon)]))
 
     def at(functionals: Array) -> Tail:
-        """The tail's points ``rest - W z`` (W the rows of ``functionals``), the rest point last."""
-        on_inputs = functionals[:, 1:] @ to_state.T  # (V, H): W's xi part through xi_H
-        on_inputs[:, -1] += functionals[:, 0]  # and its command part, c = u_{H-1}
-        forced = rest - on_inputs[:, :, None]  # for every axis
+        """The tail's points ``rest - W z`` (W (V, G, q): per axis group), the rest point last."""
+        on_inputs = np.stack(
+            [f[:, 1:] @ x.T for f, x in zip(functionals.swapaxes(0, 1), to_state, strict=True)], axis=2
+        )
+        on_inputs[:, -1] += functionals[:, :, 0]  # and its command part, c = u_{H-1}
+        forced = rest - on_inputs[:, :, group]  # (V, H, d)
         free = np.broadcast_to(rest_free, (functionals.shape[0],) + rest_free.shape[1:]).copy()
-        free[:, :, :s] -= (functionals[:, 1:] @ powers[horizon])[:, None, :]
+        for g, power in enumerate(powers):
+            free[:, group == g, :s] -= (functionals[:, g, 1:] @ power)[:, None, :]
         return Tail(gain, np.concatenate([forced, rest]), np.concatenate([free, rest_free]))
+
+    def times(functionals: Array, matrices: list[Array]) -> Array:
+        """Each group's functionals (V, G, q) times its matrix."""
+        return np.stack([f @ m for f, m in zip(functionals.swapaxes(0, 1), matrices, strict=True)], axis=1)
 
     reach = TAIL_SPREAD * (braking.kappa_s * loop.speed_gain + loop.lag_s)
     samples: list[Array] = []  # L M^k, k = 1..K
-    sample, ahead = vertices[0], np.eye(m.shape[0])  # L M^K, M^K
+    sample, ahead = vertices[:1], [np.eye(m.shape[0]) for m in systems]  # L M^K, M^K
     if s <= SAMPLED_STATES:
         most = TAIL_SAMPLES
     else:  # a quadrotor's cascade
         most = CASCADE_SAMPLES if per_drone else 0
     for _ in range(most + 1):
-        hull = at(np.vstack(samples + [vertices[1:] @ ahead]))  # past W_0 = L
+        hull = at(np.concatenate(samples + [times(vertices[1:], ahead)]))  # past W_0 = L
         if hull.reach_s <= reach:
             return hull
-        sample, ahead = sample @ m, ahead @ m
+        sample, ahead = times(sample, systems), [a @ m for a, m in zip(ahead, systems, strict=True)]
         samples.append(sample)
     return chord
 
 
-def _shared_hull(loop: VelocityLoop, braking: Braking, dim: int) -> tuple[Array, Array] | None:
-    """The tail system ``M`` (q, q) every axis shares and its hull's vertex functionals (V, q), or
-    None when the axes' tail systems differ or the hull cannot be built (the chord then stands)."""
-    systems = [tail_system(loop, braking, axis) for axis in range(dim)]
-    m0, l0 = systems[0]
-    if any(
-        not (np.allclose(m, m0, rtol=0.0, atol=SAME_TOL) and np.allclose(ell, l0, rtol=0.0, atol=SAME_TOL))
-        for m, ell in systems[1:]
-    ):
-        return None
+def _hull(loop: VelocityLoop, braking: Braking, dim: int) -> tuple[Array, list[Array], Array] | None:
+    """Each axis' group (d,) (axes whose tail systems are the same), the groups' tail systems ``M``
+    (q, q) and their hull's vertex functionals (V, G, q), or None when the hull cannot be built (the
+    chord then stands)."""
+    group, systems, rests = np.zeros(dim, dtype=int), [], []
+    for axis in range(dim):
+        m, ell = tail_system(loop, braking, axis)
+        same = [
+            g
+            for g, (m0, l0) in enumerate(zip(systems, rests, strict=True))
+            if np.allclose(m, m0, rtol=0.0, atol=SAME_TOL) and np.allclose(ell, l0, rtol=0.0, atol=SAME_TOL)
+        ]
+        if not same:
+            systems.append(m)
+            rests.append(ell)
+        group[axis] = same[0] if same else len(systems) - 1
     try:
-        return m0, axis_hull(m0, l0).vertices
+        return group, systems, tail_hull(list(zip(systems, rests, strict=True))).vertices
     except (ValidationError, MPCFormError):  # poles the construction does not cover
         return None
 
 
 @dataclass(frozen=True, eq=False)
-class AxisHull:
-    """One axis' vertex functionals ``vertices`` (V, q) on its tail state ``z`` (q,) and the
-    nonnegative ``transition`` (V, V) with ``vertices M = transition vertices`` (row sums <= 1)."""
+class TailHull:
+    """The vertex functionals ``vertices`` (V, G, q) on the tail states ``z`` (q,) of G axis groups
+    and the nonnegative ``transition`` (V, V) with ``vertices[:, g] M_g = transition vertices[:, g]``
+    for every group (row sums <= 1): one set of weights places every axis' point."""
 
     vertices: Array
     transition: Array
@@ -221,40 +246,60 @@ def tail_system(loop: VelocityLoop, braking: Braking, axis: int) -> tuple[Array,
     return m, np.concatenate([[braking.kappa_s * loop.dc_gain[axis]], loop.rest_m[axis, :s]])
 
 
-def axis_hull(m: Array, rest: Array) -> AxisHull:
-    """The hull (module docstring) of the tail ``rest M^k z``."""
-    eig = np.linalg.eigvals(m)
-    reals = np.sort(eig.real[np.abs(eig.imag) <= REAL_TOL])
-    pairs = eig[eig.imag > REAL_TOL]
-    if reals.size and (reals.min() < 0.0 or reals.max() >= 1.0) or np.any(np.abs(pairs) >= 1.0):
-        raise ValidationError("plant", f"the braking tail needs a stable loop with poles in [0, 1): {eig}")
-    if pairs.size > 1:
-        raise ValidationError("plant", "the braking tail's hull takes at most one complex pole pair per axis")
-    q = m.shape[0]
-    rows, steps = [rest], []
-    for d in reals:  # the real chain, fastest first
-        rows.append(rows[-1] @ (m - d * np.eye(q)) / (1.0 - d))
-        steps.append(d)
-    last = rows.pop()  # 0 without a pair, else the pair's part
-    v = len(rows)
-    if pairs.size == 0:
-        lam = np.zeros((v, v))
-        for j, d in enumerate(steps):
-            lam[j, j] = d
-            if j + 1 < v:
-                lam[j, j + 1] = 1.0 - d
-        return AxisHull(np.array(rows), lam)
-    polygon, rotation = _polygon(last, m, pairs[0])
-    n = polygon.shape[0]
-    lam = np.zeros((v + n, v + n))
+def tail_hull(systems: list[tuple[Array, Array]]) -> TailHull:
+    """The hull (module docstring) of the tails ``L_g M_g^k z_g`` of the axis groups ``systems``
+    (``(M_g, L_g)``): one real chain over every group's real poles, then each group's complex pair
+    in its polygon, widened P times when P groups have one (the hull of the P polygons, each alone
+    in its group: their sum lies in it, and each maps into itself)."""
+    q = systems[0][0].shape[0]
+    reals, pairs = [], []
+    for m, _ in systems:
+        eig = np.linalg.eigvals(m)
+        real, pair = np.sort(eig.real[np.abs(eig.imag) <= REAL_TOL]), eig[eig.imag > REAL_TOL]
+        if real.size and (real.min() < 0.0 or real.max() >= 1.0) or np.any(np.abs(pair) >= 1.0):
+            raise ValidationError(
+                "plant", f"the braking tail needs a stable loop with poles in [0, 1): {eig}"
+            )
+        if pair.size > 1:
+            raise ValidationError(
+                "plant", "the braking tail's hull takes at most one complex pole pair per axis"
+            )
+        reals.append(real)
+        pairs.append(pair)
+    steps: list[float] = []  # every group's real poles, each as often as the group that has it most
+    for real in reals:
+        for d in real:
+            most = max(int(np.sum(np.abs(r - d) <= SAME_POLE)) for r in reals)
+            if sum(abs(d - e) <= SAME_POLE for e in steps) < most:
+                steps.append(float(d))
+    steps.sort()  # the real chain, fastest first
+    rows = [np.array([rest for _, rest in systems])]
+    for d in steps:
+        rows.append(
+            np.array(
+                [w @ (m - d * np.eye(q)) / (1.0 - d) for w, (m, _) in zip(rows[-1], systems, strict=True)]
+            )
+        )
+    last = rows.pop()  # per group: 0 without a pair, else the pair's part
+    v, paired = len(rows), [g for g, pair in enumerate(pairs) if pair.size]
+    parts = [_polygon(last[g], systems[g][0], pairs[g][0]) for g in paired]
+    n = sum(polygon.shape[0] for polygon, _ in parts)
+    vertices, lam = np.zeros((v + n, len(systems), q)), np.zeros((v + n, v + n))
+    vertices[:v] = rows
+    into, at = np.zeros(n), v
+    for g, (polygon, rotation) in zip(paired, parts, strict=True):
+        k = polygon.shape[0]
+        vertices[at : at + k, g] = len(parts) * polygon
+        lam[at : at + k, at : at + k] = rotation
+        into[at - v : at - v + k] = _weights(polygon, last[g]) / len(parts)
+        at += k
     for j, d in enumerate(steps):
         lam[j, j] = d
         if j + 1 < v:
             lam[j, j + 1] = 1.0 - d
-        else:  # into the polygon: the pair's part is a convex combination of its vertices
-            lam[j, v:] = (1.0 - d) * _weights(polygon, last)
-    lam[v:, v:] = rotation
-    return AxisHull(np.vstack([np.array(rows), polygon]), lam)
+        else:  # into the polygons: the pairs' part is a convex combination of their vertices
+            lam[j, v:] = (1.0 - d) * into
+    return TailHull(vertices, lam)
 
 
 def _polygon(base: Array, m: Array, pole: complex) -> tuple[Array, Array]:

@@ -520,3 +520,17 @@ def test_a_miss_within_the_solvers_tolerance_is_no_slack(miss_m: float, reported
     assert items.tolist() == ([[0, 1]] if reported else [])
     assert slack_m == (pytest.approx(miss_m, rel=1e-6) if reported else 0.0)  # 0: not a slack step
     assert reported == (miss_m > SLACK_REPORT_M)
+
+
+def test_a_solve_that_leaves_slack_the_shifted_plan_avoids_keeps_the_plan() -> None:
+    """Slack weights far below the rows' multipliers (no exact penalty, even raised) let PIQP buy
+    slack on QPs the previous plan, shifted, meets: with braking that plan is kept instead (theorem
+    (ii)), reported as such, and no step after the first has slack (that one has no plan to keep)."""
+    ref, start = swap(6, 2)
+    settings = MPCSettings(horizon=8, slack_weight=1e-6, slack_quadratic=1e-6)
+    planner = MPCPlanner(ref, 0.1, Limits(v_max_mps=1.0, d_min_m=0.5, a_max_mps2=1.0), settings)
+    res = simulate(planner, start, 6.0)
+    kept = [i for i in res.infos if i.status.endswith("previous plan (the solve left slack)")]
+    assert len(kept) >= 3 and res.infos[0].max_slack_m > 0.01
+    assert all(i.max_slack_m == 0.0 for i in res.infos[1:])
+    check_limits(res, 1.0, 0.5)

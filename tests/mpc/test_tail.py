@@ -11,7 +11,7 @@ from scipy.optimize import linprog
 from mpcform.mpc.braking import Braking
 from mpcform.mpc.loop import VelocityLoop
 from mpcform.mpc.prediction import Prediction
-from mpcform.mpc.tail import axis_hull, braking_tail, tail_system
+from mpcform.mpc.tail import TailHull, braking_tail, tail_hull, tail_system
 from mpcform.sim.plants import Plant, lag_plant, second_order_plant
 from mpcform.world.limits import Limits
 
@@ -27,6 +27,12 @@ def _loop_of(plant: Plant, dt: float, horizon: int = 10) -> VelocityLoop:
     """The planner's model of ``plant``'s velocity loops."""
     groups = [(np.asarray(a), np.asarray(b), np.asarray(c), ax) for a, b, _, c, ax in plant.velocity_loops()]
     return VelocityLoop.from_groups(groups, plant.dim, dt, horizon)
+
+
+def _axis_hull(m: np.ndarray, rest: np.ndarray) -> TailHull:
+    """One axis' hull, vertices (V, q)."""
+    hull = tail_hull([(m, rest)])
+    return TailHull(hull.vertices[:, 0], hull.transition)
 
 
 def _loop(plant_name: str, dt: float) -> VelocityLoop:
@@ -81,7 +87,7 @@ def test_every_tail_point_lies_in_the_hull_and_the_hull_holds_its_shift(
     loop = _loop(plant, dt)
     braking = Braking.of(dt, Limits(v_max_mps=v_max, a_max_mps2=a_max))
     m, rest = tail_system(loop, braking, 0)
-    hull = axis_hull(m, rest)
+    hull = _axis_hull(m, rest)
     assert hull.transition.min() >= -1e-12 and hull.transition.sum(axis=1).max() <= 1.0 + 1e-9
     np.testing.assert_allclose(hull.vertices @ m, hull.transition @ hull.vertices, atol=1e-9)
     np.testing.assert_allclose(hull.vertices[0], rest)
@@ -101,13 +107,13 @@ def test_the_quadrotors_tail_hull_is_exact_but_loose() -> None:
     braking = Braking.of(0.1, Limits(v_max_mps=1.0, a_max_mps2=1.79))
     for axis in (0, 2):
         m, rest = tail_system(loop, braking, axis)
-        hull = axis_hull(m, rest)
+        hull = _axis_hull(m, rest)
         np.testing.assert_allclose(hull.vertices @ m, hull.transition @ hull.vertices, atol=1e-9)
         assert hull.transition.min() >= -1e-12 and hull.transition.sum(axis=1).max() <= 1.0 + 1e-9
     steady = np.concatenate(
         [[1.0], np.linalg.solve(np.eye(m.shape[0] - 1) - m[1:, 1:], m[1:, 0] / braking.rho)]
     )
-    assert np.abs(axis_hull(*tail_system(loop, braking, 0)).vertices @ steady).max() > 0.5
+    assert np.abs(_axis_hull(*tail_system(loop, braking, 0)).vertices @ steady).max() > 0.5
 
 
 @pytest.mark.parametrize("tau", [0.1, 0.3])
@@ -117,29 +123,31 @@ def test_a_lags_hull_is_its_path_in_steady_flight(tau: float) -> None:
     loop = _loop_of(lag_plant(2, 3, tau), 0.1)
     braking = Braking.of(0.1, Limits(v_max_mps=1.0, a_max_mps2=1.79))
     m, rest = tail_system(loop, braking, 0)
-    hull = axis_hull(m, rest)
+    hull = _axis_hull(m, rest)
     togo = hull.vertices @ np.array([1.0, 1.0])  # command 1 m/s, velocity 1 m/s
     assert hull.vertices.shape[0] == 2 and np.all(togo > 0.0) and np.all(togo <= togo[0] + 1e-12)
 
 
 def _true_path(plant: Plant, xi0: np.ndarray, commands: np.ndarray, dt: float) -> np.ndarray:
-    """Positions (K + 1, n, d) from the origin of drones whose loop (per axis ``xi' = A xi + B u``,
-    ``p' = c^T xi``; the plant's first loop, for every axis) starts in ``xi0`` (n, d, k), each
-    command (K, n, d) held for ``dt``: the exact discretisation of the plant's own loop,
-    independent of :class:`VelocityLoop`."""
-    (a, b, _, c, _), *_ = plant.velocity_loops()
-    a, b, c = np.asarray(a), np.asarray(b), np.asarray(c)
-    k = a.shape[0]
-    m = np.zeros((k + 2, k + 2))
-    m[0, 1 : k + 1], m[1 : k + 1, 1 : k + 1], m[1 : k + 1, k + 1] = c, a, b
-    ex = expm(m * dt)
-    z = np.concatenate([np.zeros(xi0.shape[:2] + (1,)), xi0, np.zeros(xi0.shape[:2] + (1,))], axis=2)
-    out = [z[..., 0].copy()]
-    for u in commands:
-        z[..., -1] = u
-        z = z @ ex.T
-        out.append(z[..., 0].copy())
-    return np.array(out)
+    """Positions (K + 1, n, d) from the origin of drones whose loops (per axis group ``xi' = A xi +
+    B u``, ``p' = c^T xi``, the plant's own) start in ``xi0`` (n, d, k), each command (K, n, d) held
+    for ``dt``: the exact discretisation of the plant's loops, independent of :class:`VelocityLoop`."""
+    out = np.zeros((commands.shape[0] + 1,) + xi0.shape[:2])
+    for a, b, _, c, axes in plant.velocity_loops():
+        a, b, c, axes = np.asarray(a), np.asarray(b), np.asarray(c), list(axes)
+        k = a.shape[0]
+        m = np.zeros((k + 2, k + 2))
+        m[0, 1 : k + 1], m[1 : k + 1, 1 : k + 1], m[1 : k + 1, k + 1] = c, a, b
+        ex = expm(m * dt)
+        start = xi0[:, axes, :k]
+        z = np.concatenate(
+            [np.zeros(start.shape[:2] + (1,)), start, np.zeros(start.shape[:2] + (1,))], axis=2
+        )
+        for step, u in enumerate(commands):
+            z[..., -1] = u[:, axes]
+            z = z @ ex.T
+            out[step + 1][:, axes] = z[..., 0]
+    return out
 
 
 @pytest.mark.parametrize(
@@ -176,30 +184,56 @@ def test_the_tail_points_hold_the_drones_true_path_to_rest(plant: str, dt: float
     assert missed > checked / 10  # the chord is not enough (24 % of them for the 0.3 s lag at dt 0.1)
 
 
-@pytest.mark.parametrize(("platform", "dt", "horizon"), [("cf2x_L250", 0.05, 7), ("cf21B_500", 0.1, 10)])
-def test_a_planar_quadrotors_tail_per_drone_samples_then_holds_its_true_path(
-    platform: str, dt: float, horizon: int
+@pytest.mark.parametrize(
+    ("platform", "dim", "dt", "horizon"),
+    [
+        ("cf2x_L250", 2, 0.05, 7),
+        ("cf21B_500", 2, 0.1, 10),
+        ("cf2x_L250", 3, 0.1, 10),
+        ("cf21B_500", 3, 0.05, 7),
+    ],
+)
+def test_a_quadrotors_tail_per_drone_samples_then_holds_its_true_path(
+    platform: str, dim: int, dt: float, horizon: int
 ) -> None:
-    """Solved per drone, a planar quadrotor's tail takes exact samples before its hull (in a joint
-    QP: the chord, one point), and every position of its true path from ``y_H`` to rest lies in the
-    hull of ``y_H`` and the tail's points, as for the loops above."""
-    plant = _quadrotor(2, platform)
+    """Solved per drone, a quadrotor's tail takes exact samples before its hull (in a joint QP: the
+    chord, one point); a spatial one's hull holds its xy and z loops at once. Every position of its
+    true path from ``y_H`` to rest lies in the hull of ``y_H`` and the tail's points, as for the
+    loops above."""
+    plant = _quadrotor(dim, platform)
     loop = _loop_of(plant, dt, horizon)
     braking = Braking.of(dt, Limits(v_max_mps=1.0, a_max_mps2=1.79))
-    tail = braking_tail(braking, horizon, 2, loop, per_drone=True)
-    assert braking_tail(braking, horizon, 2, loop).count == 1 and tail.count > 9
+    tail = braking_tail(braking, horizon, dim, loop, per_drone=True)
+    assert braking_tail(braking, horizon, dim, loop).count == 1 and tail.count > 9
     rng = np.random.default_rng(7)
     k = loop.step_state.shape[1] - 1
     for _ in range(2):
-        u = rng.uniform(-1.0, 1.0, (horizon, 2, 2))
-        state = np.concatenate([0.2 * rng.normal(size=(2, 2, k)), np.zeros((2, 2, 1))], axis=2)
+        u = rng.uniform(-1.0, 1.0, (horizon, 2, dim))
+        state = np.concatenate([0.2 * rng.normal(size=(2, dim, k)), np.zeros((2, dim, 1))], axis=2)
         planned = Prediction(dt, horizon, loop, braking, tail).points(state, u, dt * np.cumsum(u, axis=0))
         brake = braking.rho ** np.arange(1, 3000)[:, None, None] * u[-1]
         path = _true_path(plant, state[..., :k], np.concatenate([u, brake]), dt)[horizon:]
+        np.testing.assert_allclose(planned[horizon - 1], path[0], atol=1e-9)  # y_H
         np.testing.assert_allclose(planned[-1], path[-1], atol=1e-9)  # the rest point
         for drone in range(2):
             hull = planned[horizon - 1 :, drone]
             assert all(_in_hull(hull, p) for p in path[: int(6.0 / dt) : 2, drone])
+
+
+def test_a_spatial_quadrotors_hull_shares_one_transition_over_its_xy_and_z_loops() -> None:
+    """The xy and z loops' tails differ (two groups); one real chain over both groups' poles and
+    their two polygons give vertices with one nonnegative transition for both (rows summing to at
+    most 1), as many as the chain's steps and the polygons' corners, not their product."""
+    loop = _loop_of(_quadrotor(3), 0.05)
+    braking = Braking.of(0.05, Limits(v_max_mps=1.0, a_max_mps2=1.79))
+    systems = [tail_system(loop, braking, axis) for axis in (0, 2)]
+    assert not np.allclose(systems[0][0], systems[1][0])
+    hull = tail_hull(systems)
+    assert hull.transition.min() >= -1e-12 and hull.transition.sum(axis=1).max() <= 1.0 + 1e-9
+    for g, (m, rest) in enumerate(systems):
+        np.testing.assert_allclose(hull.vertices[:, g] @ m, hull.transition @ hull.vertices[:, g], atol=1e-9)
+        np.testing.assert_allclose(hull.vertices[0, g], rest)
+    assert hull.vertices.shape[0] < 20
 
 
 def _in_hull(points: np.ndarray, x: np.ndarray) -> bool:
@@ -224,11 +258,11 @@ def _in_hull(points: np.ndarray, x: np.ndarray) -> bool:
     return bool(near.status == 0 and near.fun <= 1e-9)
 
 
-def test_without_a_loop_or_with_differing_axes_the_tail_is_its_stop_point() -> None:
-    """The single integrator's tail is straight: one point, ``x_H + kappa u_{H-1}``. A spatial
-    quadrotor's xy and z loops differ: the chord to rest (one point, the rest point). A planar
-    one's hull alone reaches 14 times as far as its chord and needs more than ``TAIL_SAMPLES``
-    exact samples first (their rows made its joint QPs 4-6 times slower): the chord too."""
+def test_without_a_loop_or_in_a_joint_qp_a_quadrotors_tail_is_its_stop_point() -> None:
+    """The single integrator's tail is straight: one point, ``x_H + kappa u_{H-1}``. In a joint QP
+    a spatial quadrotor's tail is the chord to rest (one point, the rest point). A planar one's
+    hull alone reaches 14 times as far as its chord and needs more than ``TAIL_SAMPLES`` exact
+    samples first (their rows made its joint QPs 4-6 times slower): the chord too."""
     braking = Braking.of(0.1, Limits(v_max_mps=1.0, a_max_mps2=1.79))
     plain = braking_tail(braking, 10, 3)
     rng = np.random.default_rng(1)
