@@ -209,7 +209,9 @@ def _hull(loop: VelocityLoop, braking: Braking, dim: int) -> tuple[Array, list[A
     """Each axis' group (d,) (axes whose tail systems are the same), the groups' tail systems ``M``
     (q, q) and their hull's vertex functionals (V, G, q), or None when the hull cannot be built (the
     chord then stands)."""
-    group, systems, rests = np.zeros(dim, dtype=int), [], []
+    group = np.zeros(dim, dtype=int)
+    systems: list[Array] = []
+    rests: list[Array] = []
     for axis in range(dim):
         m, ell = tail_system(loop, braking, axis)
         same = [
