@@ -35,8 +35,9 @@ from mpcform.control.laws import saturate
 from mpcform.formation.geometry import closest_on_segments, vector_norms
 from mpcform.mpc.braking import Braking
 from mpcform.mpc.candidates import Candidates
+from mpcform.mpc.first_rows import hard_first_rows
 from mpcform.mpc.plan import Plan
-from mpcform.mpc.separation import Separation
+from mpcform.mpc.separation import Separation, SeparationRows
 
 CERTIFY_TOL_M = 1e-7  # separation certification tolerance [m]
 
@@ -124,6 +125,41 @@ class Certifier:
             return self.hold_after(u0, horizon, "decelerate (uncertified)")
         hold = np.zeros((horizon,) + p0.shape)
         return hold, hold, "hold"
+
+    def kept(
+        self,
+        plan: Plan | None,
+        p0: Array,
+        cand: Candidates,
+        u_prev: Array,
+        meets: Callable[[Array, Array], bool],
+    ) -> tuple[Array, Array] | None:
+        """With braking, the previous ``plan`` shifted (inputs, relative positions) if it ``meets``
+        this step's rows and its first input (within ``a_max dt`` of ``u_prev``) certifies, else
+        None: theorem (ii) of :mod:`mpcform.mpc.braking` makes it feasible for the drones that
+        followed it, so a solve that left slack it avoids (an interior-point solver can) gives way."""
+        if plan is None or self.braking is None:
+            return None
+        u = self.tail(plan)
+        u[0] = self.within_limits(u[0], u_prev)  # the solver's tolerance off
+        x = self.dt_s * np.cumsum(u, axis=0)
+        return (u, x) if meets(u, x) and self.safe(p0, u[0], cand) else None
+
+    def hard_first_rows(
+        self, rows: SeparationRows, plan: Plan | None, u_prev: Array, horizon: int, forced_m: Array
+    ) -> tuple[SeparationRows, bool, Array]:
+        """Under a velocity loop (``forced_m`` (d,): its first interval's forced response per m/s),
+        the QP's ``rows`` with every first row hard, lowered at most to where braking (the last
+        command ``u_prev`` moved towards zero by ``a_max dt``, or zero) or, with the braking tail,
+        the previous ``plan``'s next input takes the drones (whichever needs less lowering: the
+        plan's when the drones followed it, :mod:`mpcform.mpc.braking`)
+        (:func:`mpcform.mpc.first_rows.hard_first_rows`); also whether a bound was lowered, and
+        that braking plan (H, n, d), whose first chord becomes :attr:`floor_command`."""
+        plans = self.braking_plans(plan, u_prev, horizon)
+        first = np.stack([u[0] for u in plans])
+        hard, relaxed, best = hard_first_rows(rows, (self.dt_s + forced_m) * first)
+        self.floor_command = first[best]  # the rows allow its chord, so must the certifier
+        return hard, relaxed, plans[best]
 
     def braking_plans(self, plan: Plan | None, u_prev: Array, horizon: int) -> list[Array]:
         """Plans (H, n, d) that need no solve, from the last command ``u_prev``: decelerating by

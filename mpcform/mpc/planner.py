@@ -44,9 +44,8 @@ from mpcform.control.base import Controller, ControlStep, feedforward_targets
 from mpcform.control.laws import check_gain_dt
 from mpcform.errors import ValidationError
 from mpcform.mpc.braking import Braking
-from mpcform.mpc.candidates import Candidates, CandidateSelector, qp_drones
+from mpcform.mpc.candidates import CandidateSelector, qp_drones
 from mpcform.mpc.certify import Certifier
-from mpcform.mpc.first_rows import hard_first_rows
 from mpcform.mpc.limit_families import admitted, limit_rows, violators
 from mpcform.mpc.liveness import TieBreak
 from mpcform.mpc.loop import VelocityLoop
@@ -244,9 +243,11 @@ class MPCPlanner(Controller):
         if solver is not self._solver or self._splits:  # a pair's split moves both its drones
             linked = rows.labels[(rows.labels[:, 1] >= 0) & rows.single_on]
         drones = qp_drones(bad, linked) if grouped else np.arange(self.n)
-        qp_rows, relaxed, brake = self._hard_first_rows(
-            self._predict.on_forced(rows, self._loop_state, sep.ends)
-        )
+        qp_rows, relaxed, brake = self._predict.on_forced(rows, self._loop_state, sep.ends), False, None
+        if self.loop is not None:  # every first row hard (mpc.certify.Certifier.hard_first_rows)
+            qp_rows, relaxed, brake = self._certifier.hard_first_rows(
+                qp_rows, self._plan, self._u_prev, horizon, self.loop.forced[1, 0]
+            )
         sub = qp_rows.subset(drones, self.n, on_only=grouped)  # grouped: the pattern follows the groups
         warm = None
         if self._solver.warm_starts:
@@ -277,7 +278,14 @@ class MPCPlanner(Controller):
                     sep, sol.x, drones, x_true, rows, (inside_m, inside), relaxed, horizon
                 )
                 mode = "qp"
-                if items.shape[0] > inside.shape[0] and (kept := self._kept_plan(p0, rows, cand)) is not None:
+
+                def meets(u: Array, x: Array) -> bool:  # this step's rows, to the solver's tolerance
+                    y = self._predict.points(self._loop_state, u, x)
+                    off = violators(self._families, p0, self._u_prev, u, y, SLACK_REPORT_M).any()
+                    return not off and sep.shortfall(y, rows, SLACK_REPORT_M, joint=True)[1].shape[0] == 0
+
+                slack = items.shape[0] > inside.shape[0]  # the shifted plan may avoid it (theorem (ii))
+                if slack and (kept := self._certifier.kept(self._plan, p0, cand, self._u_prev, meets)):
                     (u, x), mode, status = kept, "fallback", f"{status}; previous plan (the solve left slack)"
                     u0, slack_m, items = u[0], inside_m, inside
                 self._accept(p0, u, x)
@@ -293,37 +301,6 @@ class MPCPlanner(Controller):
             "fallback", sol, f"{status}; {note}", 0, 0, inside_m, inside, self._tie_break, relaxed
         )
         return ControlStep(u[0].copy(), replace(info, deadline_missed=late))
-
-    def _hard_first_rows(self, rows: SeparationRows) -> tuple[SeparationRows, bool, Array | None]:
-        """With a loop, the QP's rows with every first row hard, lowered at most to where braking
-        (the last command moved towards zero by ``a_max dt``, or zero) or, with the braking tail,
-        the previous plan's next input takes the drones (whichever needs less lowering: the plan's
-        when the drones followed it, :mod:`mpcform.mpc.braking`) (:func:`hard_first_rows`); also
-        whether a bound was lowered, and that braking plan (H, n, d). Without a loop: ``rows``."""
-        if self.loop is None:
-            return rows, False, None
-        plans = self._certifier.braking_plans(self._plan, self._u_prev, self.settings.horizon)
-        first = np.stack([u[0] for u in plans])
-        hard, relaxed, best = hard_first_rows(rows, (self.dt_s + self.loop.forced[1, 0]) * first)
-        self._certifier.floor_command = first[best]  # the rows allow its chord, so must the certifier
-        return hard, relaxed, plans[best]
-
-    def _kept_plan(self, p0: Array, rows: SeparationRows, cand: Candidates) -> tuple[Array, Array] | None:
-        """With braking, the previous plan shifted (inputs, relative positions) if it meets every
-        separation and limit row of this step (to :data:`SLACK_REPORT_M`, the solver's tolerance)
-        and its first input certifies, else None: theorem (ii) of :mod:`mpcform.mpc.braking`, kept
-        over a solve that left slack (an interior-point solver can, on a QP this plan shows feasible)."""
-        if self._plan is None or self.braking is None:
-            return None
-        u = self._certifier.tail(self._plan)
-        u[0] = self._certifier.within_limits(u[0], self._u_prev)  # the solver's tolerance off
-        x = self.dt_s * np.cumsum(u, axis=0)
-        x_true = self._predict.points(self._loop_state, u, x)
-        if violators(self._families, p0, self._u_prev, u, x_true, SLACK_REPORT_M).any():
-            return None
-        if self._separation.shortfall(x_true, rows, SLACK_REPORT_M, joint=True)[1].shape[0]:
-            return None
-        return None if self._certifier.certify(p0, u[0], cand, self._u_prev) is None else (u, x)
 
     def _fast_path(self, nominal: Plan) -> ControlStep:
         """Accept the rollout's plan: its first input is the command."""

@@ -182,3 +182,27 @@ def test_the_floor_is_the_braking_commands_chord() -> None:
     assert cert.certify(p0, brake + [[0.5, 0.0], [0.0, 0.0]], items([[0, 1]])) is None
     cert.floor_command = brake + [[0.5, 0.0], [0.0, 0.0]]
     assert cert.certify(p0, brake + [[0.5, 0.0], [0.0, 0.0]], items([[0, 1]])) is not None
+
+
+def test_the_kept_plan_is_the_shifted_plan_when_it_meets_the_rows_and_certifies() -> None:
+    """``kept``: with braking, the previous plan shifted one step (its last input braking, its first
+    moved within ``a_max dt`` of the last command) when ``meets`` accepts it and its first input
+    certifies; None when ``meets`` refuses it, when it would close a pair, or without braking."""
+    from mpcform.mpc.braking import Braking
+
+    lim = Limits(v_max_mps=1.0, d_min_m=0.5, a_max_mps2=2.0)
+    braking = Braking.of(DT, lim)
+    assert braking is not None
+    cert = Certifier(DT, 1.0, Separation(2, lim, MPCSettings(), (), braking), 2.0, braking)
+    p0 = np.array([[0.0, 0.0], [3.0, 0.0]])
+    u = np.tile(np.array([[0.5, 0.0], [-0.5, 0.0]]), (4, 1, 1))
+    plan = Plan.from_relative(p0, u, DT * np.cumsum(u, axis=0))
+    kept = cert.kept(plan, p0, items([[0, 1]]), u[0], lambda u, x: True)
+    assert kept is not None
+    np.testing.assert_allclose(kept[0], braking.shifted(u))
+    np.testing.assert_allclose(kept[1], DT * np.cumsum(braking.shifted(u), axis=0))
+    assert cert.kept(plan, p0, items([[0, 1]]), u[0], lambda u, x: False) is None
+    close = np.array([[0.0, 0.0], [0.55, 0.0]])  # the first interval would bring them within d_min
+    assert cert.kept(plan, close, items([[0, 1]]), u[0], lambda u, x: True) is None
+    plain = Certifier(DT, 1.0, Separation(2, lim, MPCSettings(), ()), 2.0)
+    assert plain.kept(plan, p0, items([[0, 1]]), u[0], lambda u, x: True) is None

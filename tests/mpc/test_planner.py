@@ -482,7 +482,9 @@ def test_with_a_loop_every_first_row_is_hard_and_braking_meets_it(coupling: str)
     state = planner._loop_state
     rows = planner._separation.rows(p0, planner._predict.guess(planner._plan, p0, state), cand)
     rows = planner._predict.on_forced(rows, state, planner._separation.ends)
-    hard, relaxed, _ = planner._hard_first_rows(rows)
+    hard, relaxed, _ = planner._certifier.hard_first_rows(
+        rows, None, planner._u_prev, 6, planner.loop.forced[1, 0]
+    )
     assert hard.pair_hard.all() and hard.single_hard.all() and relaxed
     assert np.all(hard.pair_lower <= rows.pair_lower) and np.all(hard.single_lower <= rows.single_lower)
     assert np.array_equal(hard.pair_lower[:, 1:], rows.pair_lower[:, 1:])
