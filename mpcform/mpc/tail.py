@@ -18,7 +18,7 @@ and the chain ends at 0 (Cayley-Hamilton: the rest point). A complex pair ``r e^
 one per axis here) ends the chain instead with the N vertices of a regular N-gon, ``cos(pi/N) >= r``,
 around the pair's orbit in its rotation coordinates: rotated by theta and shrunk by r it lies inside
 its inscribed circle. Every row of ``W M`` is then a convex combination of the rows of ``W`` and 0
-(:attr:`AxisHull.transition`, nonnegative, rows summing to at most 1), so the distances to go
+(:attr:`TailHull.transition`, nonnegative, rows summing to at most 1), so the distances to go
 ``W z`` of a state hold those of every later state: the tail's points lie in the hull of
 ``rest - W z`` and the rest point, and the shifted plan's hull (``z -> M z``) lies in this one.
 No eigenvector is formed: nothing blows up when ``rho`` meets a pole of the loop.
