@@ -102,8 +102,7 @@ class Certifier:
         back, a decelerating step (with ``a_max``), else a hold. ``u_prev`` (n, d): the last command."""
         prev = np.zeros_like(p0) if u_prev is None else u_prev
         if plan is not None:
-            u_plan = self.tail(plan)
-            u_plan[0] = self.within_limits(u_plan[0], prev)
+            u_plan = self.tail(plan, prev)
             if u_plan[0].any() and self.safe(p0, u_plan[0], cand):  # (a hold comes last)
                 return u_plan, self.dt_s * np.cumsum(u_plan, axis=0), "previous plan"
         push = (self.v_max_mps or 1.0) * self.separation.push_apart(p0, cand)
@@ -140,8 +139,7 @@ class Certifier:
         followed it, so a solve that left slack it avoids (an interior-point solver can) gives way."""
         if plan is None or self.braking is None:
             return None
-        u = self.tail(plan)
-        u[0] = self.within_limits(u[0], u_prev)  # the solver's tolerance off
+        u = self.tail(plan, u_prev)
         x = self.dt_s * np.cumsum(u, axis=0)
         return (u, x) if meets(u, x) and self.safe(p0, u[0], cand) else None
 
@@ -167,17 +165,20 @@ class Certifier:
         input moved within ``a_max dt`` of ``u_prev``)."""
         plans = [self.hold_after(self.within_limits(np.zeros_like(u_prev), u_prev), horizon, "")[0]]
         if self.braking is not None and plan is not None:
-            tail = self.tail(plan)
-            tail[0] = self.within_limits(tail[0], u_prev)
-            plans.append(tail)
+            plans.append(self.tail(plan, u_prev))
         return plans
 
-    def tail(self, plan: Plan) -> Array:
+    def tail(self, plan: Plan, u_prev: Array | None = None) -> Array:
         """The previous plan's inputs shifted one step, its last braking (:mod:`mpcform.mpc.braking`;
-        without braking, slowing by ``a_max dt`` or, without ``a_max``, holding)."""
+        without braking, slowing by ``a_max dt`` or, without ``a_max``, holding); with the last
+        command ``u_prev``, the first moved within ``a_max dt`` of it (the solver's tolerance off)."""
         if self.braking is not None:
-            return self.braking.shifted(plan.inputs_mps)
-        return plan.shifted_inputs(self.a_step_mps)
+            u = self.braking.shifted(plan.inputs_mps)
+        else:
+            u = plan.shifted_inputs(self.a_step_mps)
+        if u_prev is not None:
+            u[0] = self.within_limits(u[0], u_prev)
+        return u
 
     def within_limits(self, u: Array, u_prev: Array) -> Array:
         """``u`` (n, d) moved into the box ``|u - u_prev| <= a_max dt`` (with ``a_max``), then

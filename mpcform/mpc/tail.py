@@ -163,7 +163,7 @@ def braking_tail(
         return chord
     group, systems, vertices = found
     s = vertices.shape[2] - 1  # the loop's states without the velocity offset
-    first = [int(np.flatnonzero(group == g)[0]) for g in range(len(systems))]
+    first = np.unique(group, return_index=True)[1]  # an axis of each group
     powers, to_state = [], []  # per axis group: Phi^k (k = 0..H), xi_H per u_j (H, s)
     for axis in first:
         phi, gamma = loop.step_state[axis, :s, :s], loop.step_input[axis, :s]
@@ -210,21 +210,19 @@ def _hull(loop: VelocityLoop, braking: Braking, dim: int) -> tuple[Array, list[A
     (q, q) and their hull's vertex functionals (V, G, q), or None when the hull cannot be built (the
     chord then stands)."""
     group = np.zeros(dim, dtype=int)
-    systems: list[Array] = []
-    rests: list[Array] = []
+    systems: list[tuple[Array, Array]] = []  # (M, L) of each group
     for axis in range(dim):
         m, ell = tail_system(loop, braking, axis)
-        same = [
+        same = (
             g
-            for g, (m0, l0) in enumerate(zip(systems, rests, strict=True))
+            for g, (m0, l0) in enumerate(systems)
             if np.allclose(m, m0, rtol=0.0, atol=SAME_TOL) and np.allclose(ell, l0, rtol=0.0, atol=SAME_TOL)
-        ]
-        if not same:
-            systems.append(m)
-            rests.append(ell)
-        group[axis] = same[0] if same else len(systems) - 1
+        )
+        group[axis] = next(same, len(systems))
+        if group[axis] == len(systems):
+            systems.append((m, ell))
     try:
-        return group, systems, tail_hull(list(zip(systems, rests, strict=True))).vertices
+        return group, [m for m, _ in systems], tail_hull(systems).vertices
     except (ValidationError, MPCFormError):  # poles the construction does not cover
         return None
 
