@@ -142,7 +142,8 @@ def scenario_case(path: str | Path, coupling: str) -> MPCCase:
     settings = replace(
         sc.controller.mpc, coupling=mode.coupling, grouping=mode.grouping, solve=solve or mode.strategy
     )
-    limits, obstacles = tightened(sc.limits, sc.obstacles, sc.robustness.margin_m, sc.robustness.a_max_mps2)
+    rob = sc.robustness
+    limits, obstacles = tightened(sc.limits, sc.obstacles, rob.margin_m, rob.a_max_mps2, rob.growth_m)
     dt = sc.simulation.dt_s
     steps = int(round(sc.simulation.duration_s / dt))
     return MPCCase(sc.name, sc.reference, sc.initial_positions_m, dt, steps, limits, settings, obstacles)

@@ -46,7 +46,8 @@ class CandidateSelector:
     fly towards each other), a drone within ``margin + v_max H dt`` of its required distance from
     an obstacle's centre; ``v_max`` times ``speed_gain`` for a velocity loop that overshoots
     (:attr:`mpcform.mpc.loop.VelocityLoop.speed_gain`); plus ``v_max tail_s`` past the horizon (the
-    braking tail to the stop point, :mod:`mpcform.mpc.braking`). The obstacles' clearances are resolved
+    braking tail to the stop point, :mod:`mpcform.mpc.braking`), plus the rows' largest growth per
+    drone ``growth_m`` (:func:`mpcform.mpc.rows.step_growth`). The obstacles' clearances are resolved
     (:func:`mpcform.world.obstacles.resolve_clearances`).
     """
 
@@ -59,10 +60,11 @@ class CandidateSelector:
         obstacles: tuple[SphereObstacle, ...],
         speed_gain: float = 1.0,
         tail_s: float = 0.0,
+        growth_m: float = 0.0,
     ) -> None:
         self.n, self.limits, self.settings = n, limits, settings
         look_ahead_s = speed_gain * settings.horizon * dt_s + tail_s
-        self.travel_m = (limits.v_max_mps or 0.0) * look_ahead_s  # farthest [m]
+        self.travel_m = (limits.v_max_mps or 0.0) * look_ahead_s + growth_m  # farthest [m]
         self.ob_center_m, self.ob_required_m = obstacle_arrays(obstacles)
         self.reset()
 

@@ -17,7 +17,7 @@ from mpcform._validate import Array
 from mpcform.formation.geometry import squared_norms
 from mpcform.mpc.braking import Braking
 from mpcform.mpc.loop import VelocityLoop
-from mpcform.mpc.rows import INF, Layout, RowBlock, positions_of_inputs
+from mpcform.mpc.rows import INF, Layout, RowBlock, positions_of_inputs, step_growth
 from mpcform.mpc.settings import MPCSettings
 from mpcform.mpc.tail import Tail, planner_tail
 from mpcform.world.limits import Limits
@@ -155,17 +155,20 @@ class GeofenceRows(LimitRows):
         margin_m: float,
         tail: Tail | None = None,
         loop: VelocityLoop | None = None,
+        growth: Array | None = None,
     ) -> None:
         self.dim, self.horizon, self.dt_s, self.margin_m = dim, horizon, dt_s, margin_m
         self.min_m, self.max_m = min_m, max_m  # the fence (d,) [m]
         self.tail, self.loop = tail, loop
         self.steps = horizon + (0 if tail is None else tail.count)  # x_1 .. x_H, then the tail's points
+        self.grow: Array | float = 0.0 if growth is None else growth[1:, None, None]  # (S, 1, 1) [m]
 
     def box(self, p0: Array) -> tuple[Array, Array]:
         """Bounds (..., n, d) on each drone's relative positions x (``p0`` (..., n, d): with a loop,
-        the starts moved by the free response)."""
-        lo = np.minimum(self.min_m + self.margin_m - p0, 0.0)
-        hi = np.maximum(self.max_m - self.margin_m - p0, 0.0)
+        the starts moved by the free response); with the rows' growth (:func:`step_growth`) one
+        box per bounded position (S, n, d)."""
+        lo = np.minimum(self.min_m + self.margin_m + self.grow - p0, 0.0)
+        hi = np.maximum(self.max_m - self.margin_m - self.grow - p0, 0.0)
         return lo, hi
 
     def _boxes(self, p0: Array, free_m: Array | None) -> tuple[Array, Array]:
@@ -176,7 +179,7 @@ class GeofenceRows(LimitRows):
             shape = (self.steps,) + p0.shape
             return tuple(np.broadcast_to(b, shape) for b in self.box(p0))  # type: ignore[return-value]
         lo, hi = (b - free_m for b in self.box(p0))
-        lo[0], hi[0] = self.box(p0 + free_m[0])
+        lo[0], hi[0] = (b if b.ndim == 2 else b[0] for b in self.box(p0 + free_m[0]))
         return lo, hi
 
     def sparse(self, lay: Layout) -> RowBlock:
@@ -234,7 +237,8 @@ def limit_rows(
     dim: int, dt_s: float, limits: Limits, settings: MPCSettings, loop: VelocityLoop | None = None
 ) -> tuple[LimitRows, ...]:
     """The families the limits ask for, in the QP's row order: velocity, acceleration, geofence
-    (on the ``loop``'s positions with one)."""
+    (on the ``loop``'s positions with one; shrunk along the horizon by the rows' growth,
+    :func:`mpcform.mpc.rows.step_growth`)."""
     h = settings.horizon
     families: list[LimitRows] = []
     if limits.v_max_mps is not None:
@@ -245,7 +249,8 @@ def limit_rows(
         fence = limits.geofence_min_m, limits.geofence_max_m
         braking = Braking.of(dt_s, limits, settings.braking)
         tail = planner_tail(braking, settings, dim, loop)
-        families.append(GeofenceRows(dim, h, dt_s, *fence, settings.margin_m, tail, loop))
+        growth = step_growth(limits.tube_growth_m, dt_s, h, 0 if tail is None else tail.count)
+        families.append(GeofenceRows(dim, h, dt_s, *fence, settings.margin_m, tail, loop, growth))
     return tuple(families)
 
 

@@ -106,13 +106,17 @@ class MPCPlanner(Controller):
         self.loop = _check_loop(loop, self.dim, settings)
         self._families = limit_rows(self.dim, dt_s, limits, settings, self.loop)
         self.braking = braking = Braking.of(dt_s, limits, settings.braking)  # the plans' terminal condition
-        self._separation = sep = Separation(self.dim, limits, settings, self.obstacles, braking, self.loop)
+        sep = Separation(self.dim, limits, settings, self.obstacles, braking, self.loop, dt_s)
+        self._separation = sep
         gain = 1.0 if self.loop is None else self.loop.speed_gain
         tail_s = 0.0
         if braking is not None and sep.tail is not None:  # how far past x_H the tail's points lie
             tail_s = max(braking.kappa_s * gain, sep.tail.reach_s) + (self.loop.lag_s if self.loop else 0.0)
         self._predict = Prediction(dt_s, settings.horizon, self.loop, braking, sep.tail)
-        self._candidates = CandidateSelector(self.n, dt_s, limits, settings, self.obstacles, gain, tail_s)
+        grown = 0.0 if sep.growth is None else float(sep.growth[-1])  # the rows' largest growth
+        self._candidates = CandidateSelector(
+            self.n, dt_s, limits, settings, self.obstacles, gain, tail_s, grown
+        )
         scale = limits.speed_scale(self.dim)  # with v_max_z: the velocity set's spheroid
         self._certifier = Certifier(dt_s, limits.v_max_mps, sep, limits.a_max_mps2, braking, scale)
         self._loop_state: Array  # the velocity loop's state (n, d, s), set by reset

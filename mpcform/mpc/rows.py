@@ -15,6 +15,7 @@ pattern is built here; their coefficients come from the linearisation about the 
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -23,6 +24,9 @@ from mpcform._validate import Array
 from mpcform.mpc.loop import VelocityLoop
 
 INF = np.inf
+GROWTH_TIME_S = 0.6
+"""How long [s] of the horizon the rows keep growing by the plant's disturbance reach
+(:func:`step_growth`): about the time a quadrotor's velocity loop takes to answer a command."""
 
 
 @dataclass(frozen=True)
@@ -182,6 +186,24 @@ def row_ends(horizon: int, tail: int = 0) -> Array:
     if tail:
         ends += [horizon + 1 + t for t in range(tail)] + [horizon]
     return np.array(ends, dtype=np.intp)
+
+
+def step_growth(growth_m: float, dt_s: float, horizon: int, tail: int = 0) -> Array | None:
+    r"""Per-drone tightening (H + T + 1,) [m] of the rows at position steps ``e = 0 .. H + T``
+    (then the braking tail's T points): ``growth_m min(e - 1, E)``, ``E = min(H, ceil(GROWTH_TIME_S
+    / dt))``; None for no growth.
+
+    Constraint tightening along the horizon (Chisci, Rossiter and Zappa, Automatica 37(7), 2001):
+    when the disturbance moves every position of the shifted plan by at most ``growth_m`` per drone
+    and interval, a plan that meets its rows at step k leaves the shifted plan meeting the next
+    step's rows at every step up to E (``e + 1`` had one growth more than ``e`` needs), the
+    first rows included, so none has to be lowered; rows beyond E (and the tail) may be missed by one
+    growth, which the plan has E steps to win back. Without wind the growth is 0 and nothing
+    changes."""
+    if growth_m <= 0.0:
+        return None
+    cap = min(horizon, math.ceil(GROWTH_TIME_S / dt_s - 1e-9))
+    return growth_m * np.clip(np.arange(horizon + tail + 1) - 1, 0, cap).astype(float)
 
 
 def row_segments(horizon: int, tail: int = 0) -> Array:

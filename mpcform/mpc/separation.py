@@ -34,7 +34,7 @@ from mpcform.formation.geometry import drone_spreads, pairs_within, vector_norms
 from mpcform.mpc.braking import Braking
 from mpcform.mpc.candidates import Candidates
 from mpcform.mpc.loop import VelocityLoop
-from mpcform.mpc.rows import row_ends, row_segments
+from mpcform.mpc.rows import row_ends, row_segments, step_growth
 from mpcform.mpc.separation_units import BLOCK, ObstacleSeparation, PairSeparation, Test, inside
 from mpcform.mpc.settings import MPCSettings
 from mpcform.mpc.tail import planner_tail
@@ -136,6 +136,7 @@ class Separation:
         obstacles: tuple[SphereObstacle, ...],
         braking: Braking | None = None,
         loop: VelocityLoop | None = None,
+        dt_s: float | None = None,
     ) -> None:
         self.dim, self.margin_m, self.braking = dim, settings.margin_m, braking
         h = settings.horizon  # with braking, then the tail's points (:mod:`mpcform.mpc.tail`)
@@ -146,8 +147,10 @@ class Separation:
         if limits.downwash_kappa is not None:
             self.metric[2] = 1.0 / limits.downwash_kappa
         d_min = limits.d_min_m
-        self.pairs = None if d_min is None else PairSeparation(d_min, self.metric, settings, tail)
-        self.obstacles = ObstacleSeparation(obstacles, settings, tail) if obstacles else None
+        growth = None if dt_s is None else step_growth(limits.tube_growth_m, dt_s, h, tail)
+        self.growth = growth  # per drone and position step (H + T + 1,) [m]: the rows' growth, or None
+        self.pairs = None if d_min is None else PairSeparation(d_min, self.metric, settings, tail, growth)
+        self.obstacles = ObstacleSeparation(obstacles, settings, tail, growth) if obstacles else None
         self.ends, self.n_rows, self.tail_count = row_ends(h, tail), row_segments(h, tail).shape[0], tail
 
     def rows(self, p0: Array, guess: Array, cand: Candidates, stops: Array | None = None) -> SeparationRows:
@@ -186,17 +189,19 @@ class Separation:
         units = [u for u in (self.pairs if p0.shape[0] > 1 else None, self.obstacles) if u is not None]
         for unit in units:
             i, k, slack = unit.doubtful(p0, spread)
+            share = 2.0 if unit is self.pairs else 1.0  # a pair's rows grow for both its drones
             if i.shape[0] > 8 * FIRST_TESTED:  # the least clear first: a miss among them answers early
                 first = np.argpartition(slack, FIRST_TESTED)[:FIRST_TESTED]
-                if not self._passes(*unit.clear_test(guess, positions, i[first], k[first])):
+                if not self._passes(*unit.clear_test(guess, positions, i[first], k[first]), share):
                     return False
-            if i.shape[0] and not self._passes(*unit.clear_test(guess, positions, i, k)):
+            if i.shape[0] and not self._passes(*unit.clear_test(guess, positions, i, k), share):
                 return False  # (no item in doubt: all clear by the spreads)
         return True
 
-    def _passes(self, g: Array, delta: Array, required: Array | float) -> bool:
+    def _passes(self, g: Array, delta: Array, required: Array | float, share: float = 1.0) -> bool:
         """Whether relative positions ``delta`` about the relative guess ``g`` (H + 1, m, d) meet
-        the per-segment bound of :meth:`clear` for every item."""
+        the per-segment bound of :meth:`clear` for every item (with the rows' growth, ``share``
+        times each segment's larger end's)."""
         tail = self.tail_count  # the braking tail's points past x_H (0 without braking)
         head = g if tail <= 1 else g[: g.shape[0] - tail]  # a polyline (with one tail point, too)
         g_norm = vector_norms(head)
@@ -206,6 +211,8 @@ class Separation:
             diameter = vector_norms(hull[:, None] - hull[None]).max(axis=(0, 1))
             seg = np.concatenate([seg, (vector_norms(hull).max(axis=0) - diameter)[None]])
         dev = vector_norms(delta - g).max(axis=0, initial=0.0)
+        if self.growth is not None:  # segment j ends at step j + 1; the tail's hull at its last point
+            seg = seg - share * self.growth[np.minimum(np.arange(1, seg.shape[0] + 1), g.shape[0] - 1), None]
         return not np.any(seg.min(axis=0, initial=np.inf) - dev < required + self.margin_m)
 
     def shortfall(
@@ -281,7 +288,10 @@ class Separation:
         another's (:mod:`mpcform.mpc.liveness`; not obstacles: a moving reference may cross one)."""
         blocked = np.zeros(targets.shape[0], dtype=bool)
         if self.pairs is not None and targets.shape[0] > 1:
-            near = pairs_within(targets * self.metric, self.pairs.d_min_m + self.margin_m + 2.0 * self.tube_m)
+            rest = 0.0 if self.growth is None else 2.0 * self.growth[-1]  # the tail's rows at rest
+            near = pairs_within(
+                targets * self.metric, self.pairs.d_min_m + self.margin_m + 2.0 * self.tube_m + rest
+            )
             blocked[near.ravel()] = True
         return blocked
 

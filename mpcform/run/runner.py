@@ -85,15 +85,16 @@ def plant_record(
 ) -> dict[str, Any]:
     """``summary.json``'s ``plant``: kind, robust margin [m] per drone, the acceleration bound
     [m/s^2] the margin assumes (``planned``: the MPC's, its default included; None: none), the speed
-    it is valid below [m/s], the share of clipped gust samples, and
-    whether the MPC's rows model the plant's velocity loop (``controller.plant_model``); with a
-    wind, its :func:`wind_record`."""
+    it is valid below [m/s], the MPC rows' growth per interval in wind [m], the share of clipped
+    gust samples, and whether the MPC's rows model the plant's velocity loop
+    (``controller.plant_model``); with a wind, its :func:`wind_record`."""
     rob, spec = scenario.robustness, scenario.controller
     return {
         "kind": scenario.plant.kind,
         "margin": rob.margin_m,
         "a_max": rob.a_max_mps2 if planned is None else planned.a_max_mps2,
         "margin_valid_below_speed": rob.valid_speed_mps,
+        "margin_growth": rob.growth_m,
         "wind_clip_fraction": wind_clip_fraction,
         "velocity_loop_modelled": bool(rob.loop) and spec.kind == "mpc" and spec.mpc.plant_model,
     } | ({} if (wind := getattr(scenario.plant, "wind", None)) is None else {"wind": wind_record(wind)})

@@ -72,7 +72,7 @@ def build_controller(
         check_sparse_solver(spec.mpc, "solver", backend)
     rob = scenario.robustness
     with as_scenario_error("plant"):
-        planned, obstacles = tightened(limits, scenario.obstacles, rob.margin_m, rob.a_max_mps2)
+        planned, obstacles = tightened(limits, scenario.obstacles, rob.margin_m, rob.a_max_mps2, rob.growth_m)
     loop = None
     if rob.loop and spec.mpc.plant_model:
         loop = VelocityLoop.from_groups(list(rob.loop), scenario.dim, dt, spec.mpc.horizon)

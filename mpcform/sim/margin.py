@@ -230,6 +230,17 @@ def observed_wind(plant: Plant, dt_s: float) -> Array:
     return out
 
 
+def wind_growth(plant: Plant, dt_s: float) -> float:
+    """How far [m] per control interval the wind's change can move a drone off the plan the
+    planner predicted (the norm of :func:`observed_wind`; the quadrotor's times
+    :data:`QUADROTOR_SAFETY`): the MPC's rows grow by it along the horizon
+    (:func:`mpcform.mpc.rows.step_growth`). 0 in calm air."""
+    if plant.wind is None:
+        return 0.0
+    grow = float(np.linalg.norm(observed_wind(plant, dt_s)))
+    return grow * QUADROTOR_SAFETY if isinstance(plant, QuadrotorPlant) else grow
+
+
 def valid_speed(plant: QuadrotorPlant, a_max: float, w_max: Array) -> float:
     """Largest speed with ``a_max + c (v + w)`` within the tilt (and, d = 3, thrust) authority."""
     pr = plant.params

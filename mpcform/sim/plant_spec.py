@@ -48,6 +48,9 @@ class Robustness:
     loop: tuple[LoopGroup, ...] = ()
     """The plant's velocity loops ``(A, B, c, axes)`` per axis group, which the planner can model
     (:mod:`mpcform.mpc.loop`; the quadrotor's hover linearisation); empty for the ideal plant."""
+    growth_m: float = 0.0
+    """In wind: how far [m] per control interval the wind's change can move a drone off the plan
+    (:func:`mpcform.sim.margin.wind_growth`); the MPC's rows grow by it along the horizon."""
 
 
 def scenario_key(name: str) -> str:
@@ -112,7 +115,7 @@ class PlantSpec(ABC):
                 f"inf (no bound) applies to the ideal plant only: the {self.kind} plant's margin "
                 "assumes a bound on command changes (omit a_max for the platform's default)",
             )
-        from mpcform.sim.margin import default_a_max, modelled_margin, plant_margin
+        from mpcform.sim.margin import default_a_max, modelled_margin, plant_margin, wind_growth
 
         plant = self.build(1, dim)
         a_max = default_a_max(plant) if a_max_mps2 is None else a_max_mps2
@@ -122,7 +125,7 @@ class PlantSpec(ABC):
         if loop_modelled:  # the interval ends are modelled: the wind, the bend within, the remainder
             computed = float(np.linalg.norm(modelled_margin(plant, dt_s, a_max, margin)))
         chosen = computed if self.margin_m is None else self.margin_m
-        return Robustness(chosen, a_max, margin.valid_speed_mps, loop)
+        return Robustness(chosen, a_max, margin.valid_speed_mps, loop, wind_growth(plant, dt_s))
 
     def build(self, n: int, dim: int, seed: int | np.random.SeedSequence = 0) -> Plant:
         """The plant for ``n`` drones in ``dim`` dimensions; ``seed`` feeds its wind and noise."""

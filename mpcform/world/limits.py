@@ -76,9 +76,11 @@ class Limits:
     tracking_m: float = 0.0
     tube_m: float = 0.0
     v_max_z_mps: float | None = None
+    tube_growth_m: float = 0.0
 
     def __post_init__(self) -> None:
         positive("limits.tube", self.tube_m, allow_zero=True)
+        positive("limits.tube_growth", self.tube_growth_m, allow_zero=True)
         if self.v_max_z_mps is not None:
             object.__setattr__(self, "v_max_z_mps", positive("limits.v_max_z", self.v_max_z_mps))
         object.__setattr__(self, "tracking_m", positive("limits.tracking", self.tracking_m, allow_zero=True))
@@ -150,7 +152,11 @@ def _bound(field: str, value: object) -> Array:
 
 
 def tightened(
-    limits: Limits, obstacles: tuple[SphereObstacle, ...], tube_m: float, a_max_mps2: float | None
+    limits: Limits,
+    obstacles: tuple[SphereObstacle, ...],
+    tube_m: float,
+    a_max_mps2: float | None,
+    growth_m: float = 0.0,
 ) -> tuple[Limits, tuple[SphereObstacle, ...]]:
     """The limits a planner keeps so that a plant within ``tube_m`` [m] of every planned segment
     keeps the declared ones (tube MPC with a constant tightening): ``d_min + 2 tube`` between two
@@ -161,14 +167,16 @@ def tightened(
     (the bound on command changes the tube assumes) where the limits set none. The tracking
     allowance ``e = limits.tracking_m`` is added once more, for the flown drone off the planned
     path: ``d_min + 2 (tube + e)``, ``clearance + 2 tube + e``, the fence shrunk by ``2 tube + e``
-    (the result's ``tracking_m`` is 0: applied). The obstacles' clearances must be resolved
-    (:func:`mpcform.world.obstacles.resolve_clearances`). A zero tube, no allowance and no new
-    ``a_max`` return the inputs themselves."""
+    (the result's ``tracking_m`` is 0: applied). ``growth_m`` becomes ``tube_growth_m`` (the
+    plant's per-interval disturbance reach, :attr:`mpcform.sim.plant_spec.Robustness.growth_m`).
+    The obstacles' clearances must be resolved (:func:`mpcform.world.obstacles.resolve_clearances`).
+    A zero tube, no allowance, no growth and no new ``a_max`` return the inputs themselves."""
     obstacles = require_resolved(obstacles)
     tube = positive("plant.margin", tube_m, allow_zero=True)
     e = limits.tracking_m
     a_max = limits.a_max_mps2 if limits.a_max_mps2 is not None else a_max_mps2
-    if tube == 0.0 and e == 0.0 and a_max == limits.a_max_mps2:
+    growth = positive("plant.margin_growth", growth_m, allow_zero=True) or limits.tube_growth_m
+    if tube == 0.0 and e == 0.0 and a_max == limits.a_max_mps2 and growth == limits.tube_growth_m:
         return limits, obstacles
     static = 2.0 * tube + e  # a fence or an obstacle: the plant's tube twice, the tracking once
     lo, hi = limits.geofence_min_m, limits.geofence_max_m
@@ -181,6 +189,7 @@ def tightened(
         limits.downwash_kappa,
         tube_m=tube + e,
         v_max_z_mps=limits.v_max_z_mps,
+        tube_growth_m=growth,
     )
     inflated = tuple(
         SphereObstacle(o.center_m, o.radius_m, o.resolved_clearance_m + static) for o in obstacles

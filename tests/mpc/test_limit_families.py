@@ -19,7 +19,7 @@ from mpcform.mpc.limit_families import (
     velocity_set,
     violators,
 )
-from mpcform.mpc.rows import Layout, positions_of_inputs
+from mpcform.mpc.rows import Layout, positions_of_inputs, step_growth
 from mpcform.mpc.settings import MPCSettings
 from mpcform.world.limits import Limits
 
@@ -195,3 +195,18 @@ def test_a_vertical_bound_squeezes_the_velocity_set_into_its_spheroid(velocity_s
     np.testing.assert_array_equal(limit_rows(3, DT, lim, MPCSettings(horizon=2))[0].scale, scale)
     np.testing.assert_array_equal(Limits(v_max_mps=2.0, v_max_z_mps=0.5).speed_scale(2), [1.0, 1.0])
     np.testing.assert_array_equal(Limits(v_max_mps=2.0, v_max_z_mps=3.0).speed_scale(3), [1.0, 1.0, 1.0])
+
+
+def test_geofence_shrinks_along_the_horizon_by_the_growth() -> None:
+    """With the rows' growth the box at position step e is shrunk by ``min(e - 1, E)`` growths (a
+    drone outside it may still stay); the violators test reads the same boxes."""
+    growth = step_growth(0.01, DT, 3)
+    fam = GeofenceRows(2, 3, DT, np.array([-1.0, -1.0]), np.array([1.0, 1.0]), 0.1, growth=growth)
+    lo, hi = fam.box(np.zeros((1, 2)))
+    np.testing.assert_allclose(hi[:, 0, 0], [0.9, 0.89, 0.88])
+    np.testing.assert_allclose(lo[:, 0, 1], [-0.9, -0.89, -0.88])
+    x = np.zeros((3, 1, 2))
+    x[:, 0, 0] = 0.895  # inside the first box, outside the second
+    assert fam.violators(np.zeros((1, 2)), np.zeros((1, 2)), np.zeros((3, 1, 2)), x)[0]
+    x[1:, 0, 0] = 0.875
+    assert not fam.violators(np.zeros((1, 2)), np.zeros((1, 2)), np.zeros((3, 1, 2)), x)[0]

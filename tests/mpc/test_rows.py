@@ -14,6 +14,7 @@ from mpcform.mpc.rows import (
     row_segments,
     separation_pattern,
     slack_rows,
+    step_growth,
     tail_rows,
 )
 
@@ -77,3 +78,13 @@ def test_the_braking_tail_adds_a_stop_row_on_x_h_and_u_h_minus_1() -> None:
     cols = [sorted(block.cols.ravel()[block.rows.ravel() == r].tolist()) for r in range(3)]
     x, u, s = lay.x_cols()[0, 0].tolist(), lay.u_cols()[0, 0].tolist(), lay.s_cols()[0, 0]
     assert cols[0] == cols[2] == sorted([*x, s]) and cols[1] == sorted([*u, *x, s])
+
+
+def test_step_growth_grows_by_one_growth_per_step_for_at_most_the_growth_time() -> None:
+    """``growth min(e - 1, E)`` at position steps e = 0 .. H + T, E = min(H, ceil(0.6 s / dt))."""
+    assert step_growth(0.0, 0.1, 8) is None
+    np.testing.assert_allclose(
+        step_growth(0.01, 0.1, 8, 2), 0.01 * np.array([0, 0, 1, 2, 3, 4, 5, 6, 6, 6, 6])
+    )
+    np.testing.assert_allclose(step_growth(0.01, 0.05, 6), 0.01 * np.array([0, 0, 1, 2, 3, 4, 5]))  # E = H
+    assert step_growth(0.02, 0.06, 30)[-1] == pytest.approx(0.02 * 10)  # E = ceil(0.6 / 0.06)

@@ -229,3 +229,18 @@ def test_modelled_margin_covers_the_observed_loop(kind, dim, wind):
     else:
         assert np.all(ends < 0.6 * unobserved), (ends, unobserved)  # the estimate takes out most of it
         assert np.all(ends > 0.1 * bound), (ends, bound)  # and the bound is not vacuous
+
+
+def test_the_wind_growth_is_what_the_offset_estimate_misses_per_interval() -> None:
+    """0 in calm air; the norm of :func:`observed_wind` in wind, the quadrotor's times its safety
+    factor (the MPC's rows grow by it along the horizon)."""
+    from mpcform.sim.margin import QUADROTOR_SAFETY, observed_wind, wind_growth
+
+    assert wind_growth(lag_plant(1, 2, 0.2), DT) == 0.0
+    gusty = lag_plant(1, 3, 0.2, wind=GUSTY)
+    assert wind_growth(gusty, DT) == pytest.approx(float(np.linalg.norm(observed_wind(gusty, DT))))
+    assert wind_growth(gusty, DT) > 0.0
+    quad = QuadrotorPlantSpec(wind=GUSTY).build(1, 3)
+    assert wind_growth(quad, DT) == pytest.approx(QUADROTOR_SAFETY * np.linalg.norm(observed_wind(quad, DT)))
+    rob = QuadrotorPlantSpec(wind=GUSTY).robustness(3, DT, None, True)
+    assert rob.growth_m == pytest.approx(wind_growth(quad, DT))

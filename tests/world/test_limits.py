@@ -53,6 +53,11 @@ def test_tightened_limits_inflate_separation_obstacles_and_the_fence_by_the_tube
     assert [o.clearance_m for o in inflated] == pytest.approx([0.25 + 0.1, 0.1 + 0.1])
     kept = tightened(Limits(1.0, 0.5, a_max_mps2=1.0), (), 0.05, 2.0)[0]
     assert kept.a_max_mps2 == 1.0  # a declared a_max stays
+    grown = tightened(lim, obstacles, 0.05, 2.0, 0.01)[0]
+    assert grown.tube_growth_m == 0.01 and grown.d_min_m == planned.d_min_m  # the rows grow, not d_min
+    assert tightened(grown, (), 0.0, None)[0].tube_growth_m == 0.01  # kept when tightened again
+    with pytest.raises(ValidationError, match="plant.margin_growth"):
+        tightened(lim, obstacles, 0.05, 2.0, -0.01)
 
 
 def test_the_tracking_allowance_adds_twice_between_drones_and_once_to_obstacles_and_the_fence():
