@@ -112,9 +112,7 @@ def test_a_decoupled_quadrotor_formation_in_a_steady_wind_needs_no_slack() -> No
 
 
 @pytest.mark.parametrize(("index", "grown"), [(42, True), (42, False), (306, True)])
-def test_quadrotor_swaps_in_gusts_need_no_slack_with_the_rows_grown(
-    index: int, grown: bool, monkeypatch: pytest.MonkeyPatch
-) -> None:
+def test_quadrotor_swaps_in_gusts_need_no_slack_with_the_rows_grown(index: int, grown: bool) -> None:
     """Runs of the completion family in gusts at its bound (joint, planar quadrotors). The gusts
     move the drones off the shifted plan, so without the rows' growth along the horizon the plans
     needed slack (``completion_42``: 14 steps; ``completion_306``: 114 steps and 0.663 m against d_min
@@ -123,9 +121,9 @@ def test_quadrotor_swaps_in_gusts_need_no_slack_with_the_rows_grown(
         pytest.skip("needs drone-models: pip install -e '.[flight]'")
     import completion_family
 
-    if not grown:
-        monkeypatch.setattr("mpcform.sim.margin.wind_growth", lambda plant, dt_s: 0.0)
     data = completion_family.scenario(np.random.default_rng([completion_family.SEED, index]), index)
+    if not grown:
+        data["plant"]["margin_growth"] = 0.0
     m = run_scenario(scenario_from_dict(data)).summary["metrics"]
     if not grown:  # the test can fail: the same run needs slack without the growth
         assert m["slack_steps"] > 0

@@ -126,7 +126,9 @@ def pair_sides(labels: Array) -> tuple[Array, Array]:
 
 
 class Separation:
-    """The pair and obstacle units together: the rows of a candidate set, and the tests on them."""
+    """The pair and obstacle units together: the rows of a candidate set, and the tests on them.
+    ``dt_s``: the control interval, which the rows' growth in wind needs (``limits.tube_growth_m``,
+    :func:`mpcform.mpc.rows.step_growth`; None: no growth)."""
 
     def __init__(
         self,

@@ -122,7 +122,7 @@ class PairSeparation:
         self.joint = settings.coupling == "joint"
         self.tail = tail  # the braking tail's points (:mod:`mpcform.mpc.tail`)
         self.segs, self.ends = row_segments(settings.horizon, tail), row_ends(settings.horizon, tail)
-        self.grow = None if growth is None else growth[self.ends]  # per drone and row (R,) [m]
+        self.grow = np.zeros(self.ends.shape) if growth is None else growth[self.ends]  # per drone, row [m]
         self.near = NearPairs()  # the clear test's neighbour list, kept between steps
 
     def relative(self, points: Array, i: Array, k: Array) -> Array:
@@ -147,8 +147,7 @@ class PairSeparation:
         hard, c0 = inside(rel[:, 0], self.d_min_m)
         coeffs[hard, 0] = self.scaled(c0)
         lower = self.d_min_m + self.margin_m - np.einsum("prd,pd->pr", coeffs, p0[i] - p0[k])
-        if self.grow is not None:
-            lower += 2.0 * self.grow
+        lower += 2.0 * self.grow
         lower[hard, 0] = 0.0
         return (pairs, coeffs, lower, on, hard), None
 
@@ -161,7 +160,7 @@ class PairSeparation:
         sides add up to the joint row)."""
         p, r, d = pairs.shape[0], self.segs.shape[0], path.shape[2]
         coeffs, lower, hard = np.empty((2 * p, r, d)), np.empty((2 * p, r)), np.empty(p, dtype=bool)
-        half = 0.5 * (self.d_min_m + self.margin_m) + (0.0 if self.grow is None else self.grow)
+        half = 0.5 * (self.d_min_m + self.margin_m) + self.grow  # per row (R,)
         for a in range(0, p, BLOCK):
             b = min(a + BLOCK, p)
             i, k = pairs[a:b, 0], pairs[a:b, 1]
@@ -177,8 +176,9 @@ class PairSeparation:
             mid = np.take(mid, self.ends, axis=1)  # at each row's position step (B, R, d)
             if stops is not None:  # the stop row (R - 2): its split towards the rollout's
                 g_stop = path[i, -1], path[k, -1]  # (g_i holds the midpoints now)
-                stop = self._stop_split(coeffs[a:b, -2], *g_stop, mid[:, -2], stops[i], stops[k], half)
-                mid[:, -2] = stop
+                mid[:, -2] = self._stop_split(
+                    coeffs[a:b, -2], *g_stop, mid[:, -2], stops[i], stops[k], half[-2]
+                )
             for side, out, fix in ((i, lower[a:b], np.subtract), (k, lower[p + a : p + b], np.add)):
                 gap = p0[side][:, None] - mid  # -(-c)^T gap = +c^T gap on side k
                 fix(half, np.einsum("prd,prd->pr", coeffs[a:b], gap), out=out)
@@ -187,15 +187,14 @@ class PairSeparation:
         return np.concatenate([pairs, pairs[:, ::-1]]), coeffs, lower, np.concatenate([on, on]), hard2
 
     def _stop_split(
-        self, c: Array, g_i: Array, g_k: Array, m_g: Array, s_i: Array, s_k: Array, half: Array | float
+        self, c: Array, g_i: Array, g_k: Array, m_g: Array, s_i: Array, s_k: Array, half: float
     ) -> Array:
         """Split points (B, d) of the stop rows ``c`` (B, d): from the guess's midpoint ``m_g`` as
         far towards the rollout's stop points' ``(s_i + s_k) / 2`` as the guess's stop points
         ``g_i``, ``g_k`` still meet both sides (so the shifted plan stays feasible: a formation
         speeding up together moves both sides of a split, and the guess's midpoint would throttle
         it). Any common split point is safe: the two sides add up to the joint row. ``half``: each
-        side's bound, per row."""
-        half = half if np.ndim(half) == 0 else half[-2]  # type: ignore[index]
+        side's bound on the stop row."""
         step = 0.5 * (s_i + s_k) - m_g
         along, at = np.einsum("pd,pd->p", c, step), np.einsum("pd,pd->p", c, m_g)
         room = np.where(
@@ -208,7 +207,7 @@ class PairSeparation:
         """The pairs ``(i, k)`` (of the neighbour list) the spread bound of :meth:`Separation.clear`
         leaves in doubt, and by how much their start distance clears it (negative)."""
         scaled = self.scaled(p0)  # the metric only shrinks lengths: world spreads bound it
-        need = self.d_min_m + self.margin_m + (0.0 if self.grow is None else 2.0 * self.grow.max())
+        need = self.d_min_m + self.margin_m + 2.0 * self.grow.max()
         i, k = self.near.within(scaled, need + 2.0 * spread.max()).T
         gap = vector_norms(np.take(scaled, i, axis=0) - np.take(scaled, k, axis=0))
         clearance = gap - np.take(spread, i) - np.take(spread, k)
@@ -242,7 +241,8 @@ class ObstacleSeparation:
         self.center_m, self.required_m = obstacle_arrays(obstacles)
         self.margin_m, self.tail = settings.margin_m, tail  # the braking tail's points
         self.segs = row_segments(settings.horizon, tail)
-        self.grow = None if growth is None else growth[row_ends(settings.horizon, tail)]  # (R,) [m]
+        ends = row_ends(settings.horizon, tail)
+        self.grow = np.zeros(ends.shape) if growth is None else growth[ends]  # per row (R,) [m]
 
     def rows(self, p0: Array, path: Array, items: Array, on: Array) -> RowPart:
         """One-drone rows of the ``(drone, obstacle)`` items (O, 2) about the guess ``path``
@@ -253,8 +253,7 @@ class ObstacleSeparation:
         hard, c0 = inside(p0[drone] - center, required)
         coeffs[hard, 0] = c0
         lower = required[:, None] + self.margin_m - np.einsum("ord,od->or", coeffs, p0[drone] - center)
-        if self.grow is not None:
-            lower += self.grow
+        lower += self.grow
         lower[hard, 0] = 0.0
         return np.column_stack([drone, -1 - ob]), coeffs, lower, on, hard
 
@@ -262,7 +261,7 @@ class ObstacleSeparation:
         """The ``(drone, obstacle)`` items that the per-drone spread bound (see
         :meth:`Separation.clear`) leaves in doubt, and by how much they clear it (negative)."""
         gap = vector_norms(p0[:, None] - self.center_m) - self.required_m - spread[:, None]
-        need = self.margin_m + (0.0 if self.grow is None else self.grow.max())
+        need = self.margin_m + self.grow.max()
         i, m = np.nonzero(gap < need)
         return i, m, gap[i, m] - need
 

@@ -278,6 +278,8 @@ SCHEMA: tuple[Table, ...] = (
             "controller sees.", "m", PlantSpec.measurement_noise_m, bound=">= 0"),
         Key("margin", "float", "Robust margin per drone that tightens the MPC's rows (pairs by "
             "twice it).", "m", shown_default="from the plant, wind and a_max", bound=">= 0"),
+        Key("margin_growth", "float", "How much the MPC's rows grow per control interval along "
+            "the horizon, per drone (0: none).", "m", shown_default="from the wind", bound=">= 0"),
         Key("wind", "table", "`[plant.wind]`: `mean` (d numbers) [m/s], `gust_std` [m/s] (0), "
             "`gust_time` [s] (1), `gust_bound` [m/s] per axis (3 gust_std; `inf`: unclipped), "
             "`gust_field` (`per_drone` or `shared`); seeded Ornstein-Uhlenbeck gusts acting "

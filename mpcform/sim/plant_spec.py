@@ -66,7 +66,9 @@ class PlantSpec(ABC):
     """What every plant kind declares: ``wind`` (None: calm), ``measurement_noise_m`` [m] (std of
     the noise on the positions the controller sees), ``margin_m`` [m] (the robust margin per drone
     the planner tightens its rows by; None computes it from the plant,
-    :func:`mpcform.sim.margin.plant_margin`) and ``samples_per_step`` (the plant's samples per
+    :func:`mpcform.sim.margin.plant_margin`), ``margin_growth_m`` [m] (how much the MPC's rows grow
+    per interval along the horizon; None computes it from the wind,
+    :func:`mpcform.sim.margin.wind_growth`) and ``samples_per_step`` (the plant's samples per
     control step). These common fields are keyword-only (a kind's own may be positional); build a
     kind's subclass, or :func:`plant_spec` by ``kind``."""
 
@@ -74,12 +76,14 @@ class PlantSpec(ABC):
     wind: Wind | None = None
     measurement_noise_m: float = 0.0
     margin_m: float | None = None
+    margin_growth_m: float | None = None
     samples_per_step: int = SAMPLES_PER_STEP
 
     def __post_init__(self) -> None:
         self._positive("measurement_noise_m", allow_zero=True)
-        if self.margin_m is not None:
-            self._positive("margin_m", allow_zero=True)
+        for name in ("margin_m", "margin_growth_m"):
+            if getattr(self, name) is not None:
+                self._positive(name, allow_zero=True)
 
     def _positive(self, name: str, *, allow_zero: bool = False) -> None:
         """Field ``name`` must be a finite number > 0 (>= 0 with ``allow_zero``); errors name its key."""
@@ -106,9 +110,10 @@ class PlantSpec(ABC):
         the plant's margin over one control interval of ``dt_s`` with ``a_max_mps2`` (None: the
         plant's default); with ``loop_modelled`` (the MPC's rows model the plant's velocity loop at
         the interval ends, :mod:`mpcform.mpc.loop`) only what that model leaves out
-        (:func:`mpcform.sim.margin.modelled_margin`). Measurement noise is not part of it."""
+        (:func:`mpcform.sim.margin.modelled_margin`). Measurement noise is not part of it. The rows'
+        growth is ``margin_growth_m`` if given, else the wind's (:func:`mpcform.sim.margin.wind_growth`)."""
         if self.kind == "ideal":
-            return Robustness(self.margin_m or 0.0, a_max_mps2)
+            return Robustness(self.margin_m or 0.0, a_max_mps2, growth_m=self.margin_growth_m or 0.0)
         if a_max_mps2 is not None and not np.isfinite(a_max_mps2):
             raise ValidationError(
                 "limits.a_max",
@@ -125,7 +130,8 @@ class PlantSpec(ABC):
         if loop_modelled:  # the interval ends are modelled: the wind, the bend within, the remainder
             computed = float(np.linalg.norm(modelled_margin(plant, dt_s, a_max, margin)))
         chosen = computed if self.margin_m is None else self.margin_m
-        return Robustness(chosen, a_max, margin.valid_speed_mps, loop, wind_growth(plant, dt_s))
+        growth = wind_growth(plant, dt_s) if self.margin_growth_m is None else self.margin_growth_m
+        return Robustness(chosen, a_max, margin.valid_speed_mps, loop, growth)
 
     def build(self, n: int, dim: int, seed: int | np.random.SeedSequence = 0) -> Plant:
         """The plant for ``n`` drones in ``dim`` dimensions; ``seed`` feeds its wind and noise."""

@@ -175,7 +175,7 @@ def tightened(
     tube = positive("plant.margin", tube_m, allow_zero=True)
     e = limits.tracking_m
     a_max = limits.a_max_mps2 if limits.a_max_mps2 is not None else a_max_mps2
-    growth = positive("plant.margin_growth", growth_m, allow_zero=True) or limits.tube_growth_m
+    growth = positive("limits.tube_growth", growth_m, allow_zero=True) or limits.tube_growth_m
     if tube == 0.0 and e == 0.0 and a_max == limits.a_max_mps2 and growth == limits.tube_growth_m:
         return limits, obstacles
     static = 2.0 * tube + e  # a fence or an obstacle: the plant's tube twice, the tracking once

@@ -70,6 +70,7 @@ def test_scenario_keys_drop_the_units() -> None:
         "wind",
         "measurement_noise",
         "margin",
+        "margin_growth",
         "samples_per_step",
         "time_constant",
         "damping",
@@ -119,6 +120,7 @@ def test_with_kind_keeps_the_common_fields_and_takes_the_new_kinds_defaults() ->
         ("quadrotor", {"altitude_m": -5.0}, "plant.altitude"),
         ("ideal", {"measurement_noise_m": -0.1}, "plant.measurement_noise"),
         ("lag", {"margin_m": -0.1}, "plant.margin"),
+        ("lag", {"margin_growth_m": -0.1}, "plant.margin_growth"),
         ("ideal", {"wind": Wind([1.0, 0.0])}, "plant.wind"),
     ],
 )
@@ -162,3 +164,13 @@ def test_crazyflow_is_planned_as_the_quadrotor_of_its_platform() -> None:
     )
     for (a, b, c, axes), (qa, qb, qc, qaxes) in zip(crazy.loop, quad.loop, strict=True):
         assert axes == qaxes and np.array_equal(a, qa) and np.array_equal(b, qb) and np.array_equal(c, qc)
+
+
+def test_the_rows_growth_comes_from_the_wind_unless_the_file_gives_it() -> None:
+    """``plant.margin_growth`` overrides the wind's growth (0 turns it off); calm air has none."""
+    gusty = Wind([1.0, 0.0], gust_std_mps=0.5)
+    assert LagPlantSpec(0.2).robustness(2, 0.1, None, True).growth_m == 0.0
+    computed = LagPlantSpec(0.2, wind=gusty).robustness(2, 0.1, None, True).growth_m
+    assert computed > 0.0
+    assert LagPlantSpec(0.2, wind=gusty, margin_growth_m=0.0).robustness(2, 0.1, None, True).growth_m == 0.0
+    assert IdealPlantSpec(margin_growth_m=0.01).robustness(2, 0.1, None).growth_m == 0.01

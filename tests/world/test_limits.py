@@ -56,7 +56,7 @@ def test_tightened_limits_inflate_separation_obstacles_and_the_fence_by_the_tube
     grown = tightened(lim, obstacles, 0.05, 2.0, 0.01)[0]
     assert grown.tube_growth_m == 0.01 and grown.d_min_m == planned.d_min_m  # the rows grow, not d_min
     assert tightened(grown, (), 0.0, None)[0].tube_growth_m == 0.01  # kept when tightened again
-    with pytest.raises(ValidationError, match="plant.margin_growth"):
+    with pytest.raises(ValidationError, match="limits.tube_growth"):
         tightened(lim, obstacles, 0.05, 2.0, -0.01)
 
 
