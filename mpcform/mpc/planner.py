@@ -199,14 +199,15 @@ class MPCPlanner(Controller):
         true_path = np.concatenate([p0[None], p0 + x_true])
         about = self._predict.guess(self._plan, p0, self._loop_state)
         off_limits = violators(self._families, p0, self._u_prev, u_nom, x_true)
-        if st.fast_path and not off_limits.any() and sep.clear(about, true_path):
+        growing = sep.growing(targets[0])  # each drone's share of the rows' growth in wind
+        if st.fast_path and not off_limits.any() and sep.clear(about, true_path, growing):
             return self._fast_path(nominal)
         cand = self._candidates.select(p0)
         grouped = st.fast_path and st.grouping
         if grouped or st.solves_per_drone:  # no fixed pattern: rows only within reach
             cand = cand.within_reach()
         stops = true_path[-1] if self.braking is not None and st.coupling == "decoupled" else None
-        rows = sep.rows(p0, about, cand, stops)  # on the true positions (the QP's: on_forced)
+        rows = sep.rows(p0, about, cand, stops, growing)  # on the true positions (the QP's: on_forced)
         values: Array | None = sep.single_values(x_true, rows)  # the rows at the rollout
         if st.coupling == "decoupled" and not off_limits.any() and sep.meets_joint(x_true, rows, values):
             # the rollout meets the limits and the joint rows: the decoupled rows are split about
@@ -214,7 +215,7 @@ class MPCPlanner(Controller):
             if st.fast_path:
                 return self._fast_path(nominal)
             about = true_path
-            rows, values = sep.rows(p0, about, cand, stops), None
+            rows, values = sep.rows(p0, about, cand, stops, growing), None
         conflicted = sep.conflicted(x_true, rows, values)
         if st.fast_path and not (off_limits | conflicted).any():
             return self._fast_path(nominal)
@@ -230,7 +231,7 @@ class MPCPlanner(Controller):
                 about_plain = np.concatenate(
                     [about_plain, np.repeat(about_plain[-1:], max(pad - 1, 0), axis=0)]
                 )
-                plain = sep.rows(p0, about_plain, cand)
+                plain = sep.rows(p0, about_plain, cand, growing=growing)
             x_enc = np.concatenate([x_nom, np.repeat(x_nom[-1:], pad, axis=0)])
             turned = conflicted & sep.conflicted(x_enc, plain, tail=False)
         speed, step = None, 0.0  # with a_max: how fast the drones fly, how much that changes per step

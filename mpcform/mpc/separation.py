@@ -155,18 +155,26 @@ class Separation:
         self.obstacles = ObstacleSeparation(obstacles, settings, tail, growth) if obstacles else None
         self.ends, self.n_rows, self.tail_count = row_ends(h, tail), row_segments(h, tail).shape[0], tail
 
-    def rows(self, p0: Array, guess: Array, cand: Candidates, stops: Array | None = None) -> SeparationRows:
+    def rows(
+        self,
+        p0: Array,
+        guess: Array,
+        cand: Candidates,
+        stops: Array | None = None,
+        growing: Array | None = None,
+    ) -> SeparationRows:
         """Closest-point rows about ``guess`` (H + 1, n, d) for every candidate item; ``stops`` (n, d):
         decoupled with braking, the eq. 14 rollout's stop points (a pair whose rollout keeps its
-        stop row splits that row about their midpoint: a common speed-up moves both sides)."""
+        stop row splits that row about their midpoint: a common speed-up moves both sides);
+        ``growing`` (n,): each drone's share of the rows' growth (:meth:`growing`; None: none)."""
         r, no, singles = self.n_rows, np.empty(0, dtype=bool), []
         joint = empty = (np.empty((0, 2), np.intp), np.empty((0, r, self.dim)), np.empty((0, r)), no, no)
         path = np.ascontiguousarray(guess.transpose(1, 0, 2))  # (n, H + 1, d): items gather rows
         if cand.pairs.shape[0] and self.pairs is not None:
-            two, one = self.pairs.rows(p0, path, cand.pairs, cand.pair_on, stops)
+            two, one = self.pairs.rows(p0, path, cand.pairs, cand.pair_on, stops, growing)
             joint, singles = joint if two is None else two, [] if one is None else [one]
         if cand.obstacles.shape[0] and self.obstacles is not None:
-            singles.append(self.obstacles.rows(p0, path, cand.obstacles, cand.obstacle_on))
+            singles.append(self.obstacles.rows(p0, path, cand.obstacles, cand.obstacle_on, growing))
         parts = singles[0] if len(singles) == 1 else map(np.concatenate, zip(empty, *singles, strict=True))
         labels, s_coeffs, s_lower, s_on, s_hard = parts
         pairs, p_coeffs, p_lower, p_on, p_hard = joint
@@ -174,7 +182,7 @@ class Separation:
             pairs, p_coeffs, p_lower, p_on, labels[:, 0], labels, s_coeffs, s_lower, s_on, p_hard, s_hard
         )
 
-    def clear(self, guess: Array, positions: Array) -> bool:
+    def clear(self, guess: Array, positions: Array, growing: Array | None = None) -> bool:
         """A cheap sufficient test that the plan's ``positions`` (H + 1, n, d) (row 0 the start)
         meet every joint pair row and obstacle row about ``guess`` (so every pair stays ``d_min``
         apart over each step). It does not cover the decoupled pair-side rows: two drones moving
@@ -191,19 +199,26 @@ class Separation:
         units = [u for u in (self.pairs if p0.shape[0] > 1 else None, self.obstacles) if u is not None]
         for unit in units:
             i, k, slack = unit.doubtful(p0, spread)
-            share = 2.0 if unit is self.pairs else 1.0  # a pair's rows grow for both its drones
             if i.shape[0] > 8 * FIRST_TESTED:  # the least clear first: a miss among them answers early
                 first = np.argpartition(slack, FIRST_TESTED)[:FIRST_TESTED]
+                share = self._share(unit, growing, i[first], k[first])
                 if not self._passes(*unit.clear_test(guess, positions, i[first], k[first]), share):
                     return False
+            share = self._share(unit, growing, i, k)
             if i.shape[0] and not self._passes(*unit.clear_test(guess, positions, i, k), share):
                 return False  # (no item in doubt: all clear by the spreads)
         return True
 
-    def _passes(self, g: Array, delta: Array, required: Array | float, share: float = 1.0) -> bool:
+    def _share(self, unit: object, growing: Array | None, i: Array, k: Array) -> Array | None:
+        """The items' shares (m,) of the rows' growth: a pair's both drones', an obstacle item's drone's."""
+        if growing is None:
+            return None
+        return growing[i] + growing[k] if unit is self.pairs else growing[i]
+
+    def _passes(self, g: Array, delta: Array, required: Array | float, share: Array | None = None) -> bool:
         """Whether relative positions ``delta`` about the relative guess ``g`` (H + 1, m, d) meet
         the per-segment bound of :meth:`clear` for every item (with the rows' growth, ``share``
-        times each segment's larger end's)."""
+        (m,) times each segment's larger end's)."""
         tail = self.tail_count  # the braking tail's points past x_H (0 without braking)
         head = g if tail <= 1 else g[: g.shape[0] - tail]  # a polyline (with one tail point, too)
         g_norm = vector_norms(head)
@@ -213,8 +228,8 @@ class Separation:
             diameter = vector_norms(hull[:, None] - hull[None]).max(axis=(0, 1))
             seg = np.concatenate([seg, (vector_norms(hull).max(axis=0) - diameter)[None]])
         dev = vector_norms(delta - g).max(axis=0, initial=0.0)
-        if self.growth is not None:  # segment j ends at step j + 1; the tail's hull at its last point
-            seg = seg - share * self.growth[np.minimum(np.arange(1, seg.shape[0] + 1), g.shape[0] - 1), None]
+        if self.growth is not None and share is not None:  # segment j ends at step j + 1; the hull last
+            seg = seg - self.growth[np.minimum(np.arange(1, seg.shape[0] + 1), g.shape[0] - 1), None] * share
         return not np.any(seg.min(axis=0, initial=np.inf) - dev < required + self.margin_m)
 
     def shortfall(
@@ -290,12 +305,22 @@ class Separation:
         another's (:mod:`mpcform.mpc.liveness`; not obstacles: a moving reference may cross one)."""
         blocked = np.zeros(targets.shape[0], dtype=bool)
         if self.pairs is not None and targets.shape[0] > 1:
-            rest = 0.0 if self.growth is None else 2.0 * self.growth[-1]  # the tail's rows at rest
-            near = pairs_within(
-                targets * self.metric, self.pairs.d_min_m + self.margin_m + 2.0 * self.tube_m + rest
-            )
+            near = pairs_within(targets * self.metric, self.pairs.d_min_m + self.margin_m + 2.0 * self.tube_m)
             blocked[near.ravel()] = True
         return blocked
+
+    def growing(self, targets: Array) -> Array | None:
+        """Each drone's share (n,) of the rows' growth: 1, but 0 for a drone whose target (n, d) lies
+        within the grown rows' distance at rest (``d_min`` + margin + 2 tube + twice the tail's
+        growth) of another's: a tight formation, whose drones could not hold their targets with the
+        growth (they keep the one-interval margin alone). None without growth."""
+        if self.growth is None:
+            return None
+        share = np.ones(targets.shape[0])
+        if self.pairs is not None and targets.shape[0] > 1:
+            rest = self.pairs.d_min_m + self.margin_m + 2.0 * (self.tube_m + self.growth[-1])
+            share[pairs_within(targets * self.metric, rest).ravel()] = 0.0
+        return share
 
     def push_apart(self, p0: Array, cand: Candidates) -> Array:
         """Unit directions (n, d) (zero for a drone with none) away from the partners and

@@ -134,33 +134,42 @@ class PairSeparation:
         return v if self.unit_metric else v * self.metric
 
     def rows(
-        self, p0: Array, path: Array, pairs: Array, on: Array, stops: Array | None = None
+        self,
+        p0: Array,
+        path: Array,
+        pairs: Array,
+        on: Array,
+        stops: Array | None = None,
+        growing: Array | None = None,
     ) -> tuple[RowPart | None, RowPart | None]:
         """The joint rows, or the decoupled one-drone rows (side i of every pair, then side k), of
-        ``pairs`` (P, 2) about the guess ``path`` (n, H + 1, d) (drone-major); ``stops``: see
-        :meth:`mpcform.mpc.separation.Separation.rows`."""
+        ``pairs`` (P, 2) about the guess ``path`` (n, H + 1, d) (drone-major); ``stops``, ``growing``:
+        see :meth:`mpcform.mpc.separation.Separation.rows`."""
+        grows = np.zeros(p0.shape[0]) if growing is None else growing
         if not self.joint:
-            return None, self._sides(p0, path, pairs, on, stops)
+            return None, self._sides(p0, path, pairs, on, stops, grows)
         i, k = pairs[:, 0], pairs[:, 1]
         rel = self.scaled(path[i] - path[k])  # (P, H + 1, d), metric space
         coeffs = self.scaled(segment_normals(rel, self.segs, self.tail))  # (P, R, d), world coordinates
         hard, c0 = inside(rel[:, 0], self.d_min_m)
         coeffs[hard, 0] = self.scaled(c0)
         lower = self.d_min_m + self.margin_m - np.einsum("prd,pd->pr", coeffs, p0[i] - p0[k])
-        lower += 2.0 * self.grow
+        lower += (grows[i] + grows[k])[:, None] * self.grow
         lower[hard, 0] = 0.0
         return (pairs, coeffs, lower, on, hard), None
 
-    def _sides(self, p0: Array, path: Array, pairs: Array, on: Array, stops: Array | None = None) -> RowPart:
+    def _sides(
+        self, p0: Array, path: Array, pairs: Array, on: Array, stops: Array | None, grows: Array
+    ) -> RowPart:
         """The decoupled rows: two per-drone rows about the guess's midpoint ``m_e`` at each row's
         position step, ``+-c^T (p0_side - m_e) >= (d_min + margin) / 2``, side i (+c) of every
         pair, then side k (-c); built :data:`BLOCK` pairs at a time (the temporaries stay small).
         With ``stops`` (n, d), the last row (the braking stop point) of a pair whose ``stops`` meet
         it jointly is split about their midpoint instead (any common split point is safe: the two
-        sides add up to the joint row)."""
+        sides add up to the joint row). Each side's rows grow by its drone's share ``grows`` (n,)."""
         p, r, d = pairs.shape[0], self.segs.shape[0], path.shape[2]
         coeffs, lower, hard = np.empty((2 * p, r, d)), np.empty((2 * p, r)), np.empty(p, dtype=bool)
-        half = 0.5 * (self.d_min_m + self.margin_m) + self.grow  # per row (R,)
+        half = 0.5 * (self.d_min_m + self.margin_m)
         for a in range(0, p, BLOCK):
             b = min(a + BLOCK, p)
             i, k = pairs[a:b, 0], pairs[a:b, 1]
@@ -174,31 +183,44 @@ class PairSeparation:
             mid = np.add(g_i, g_k, out=g_i)  # the midpoints (B, H + 1, d), in place
             mid *= 0.5
             mid = np.take(mid, self.ends, axis=1)  # at each row's position step (B, R, d)
+            bounds = [half + grows[side][:, None] * self.grow for side in (i, k)]  # each side's (B, R)
             if stops is not None:  # the stop row (R - 2): its split towards the rollout's
                 g_stop = path[i, -1], path[k, -1]  # (g_i holds the midpoints now)
+                stop_bounds = bounds[0][:, -2], bounds[1][:, -2]
                 mid[:, -2] = self._stop_split(
-                    coeffs[a:b, -2], *g_stop, mid[:, -2], stops[i], stops[k], half[-2]
+                    coeffs[a:b, -2], *g_stop, mid[:, -2], stops[i], stops[k], *stop_bounds
                 )
-            for side, out, fix in ((i, lower[a:b], np.subtract), (k, lower[p + a : p + b], np.add)):
+            sides = ((i, lower[a:b], np.subtract), (k, lower[p + a : p + b], np.add))
+            for (side, out, fix), bound in zip(sides, bounds, strict=True):
                 gap = p0[side][:, None] - mid  # -(-c)^T gap = +c^T gap on side k
-                fix(half, np.einsum("prd,prd->pr", coeffs[a:b], gap), out=out)
+                fix(bound, np.einsum("prd,prd->pr", coeffs[a:b], gap), out=out)
         hard2 = np.concatenate([hard, hard])
         lower[hard2, 0] = 0.0
         return np.concatenate([pairs, pairs[:, ::-1]]), coeffs, lower, np.concatenate([on, on]), hard2
 
     def _stop_split(
-        self, c: Array, g_i: Array, g_k: Array, m_g: Array, s_i: Array, s_k: Array, half: float
+        self,
+        c: Array,
+        g_i: Array,
+        g_k: Array,
+        m_g: Array,
+        s_i: Array,
+        s_k: Array,
+        half_i: Array,
+        half_k: Array,
     ) -> Array:
         """Split points (B, d) of the stop rows ``c`` (B, d): from the guess's midpoint ``m_g`` as
         far towards the rollout's stop points' ``(s_i + s_k) / 2`` as the guess's stop points
         ``g_i``, ``g_k`` still meet both sides (so the shifted plan stays feasible: a formation
         speeding up together moves both sides of a split, and the guess's midpoint would throttle
-        it). Any common split point is safe: the two sides add up to the joint row. ``half``: each
-        side's bound on the stop row."""
+        it). Any common split point is safe: the two sides add up to the joint row. ``half_i``,
+        ``half_k`` (B,): each side's bound on the stop row."""
         step = 0.5 * (s_i + s_k) - m_g
         along, at = np.einsum("pd,pd->p", c, step), np.einsum("pd,pd->p", c, m_g)
         room = np.where(
-            along > 0, np.einsum("pd,pd->p", c, g_i) - half - at, np.einsum("pd,pd->p", c, g_k) + half - at
+            along > 0,
+            np.einsum("pd,pd->p", c, g_i) - half_i - at,
+            np.einsum("pd,pd->p", c, g_k) + half_k - at,
         )
         t = np.clip(np.divide(room, along, out=np.ones_like(along), where=along != 0), 0.0, 1.0)
         return m_g + t[:, None] * step
@@ -244,16 +266,17 @@ class ObstacleSeparation:
         ends = row_ends(settings.horizon, tail)
         self.grow = np.zeros(ends.shape) if growth is None else growth[ends]  # per row (R,) [m]
 
-    def rows(self, p0: Array, path: Array, items: Array, on: Array) -> RowPart:
+    def rows(self, p0: Array, path: Array, items: Array, on: Array, growing: Array | None = None) -> RowPart:
         """One-drone rows of the ``(drone, obstacle)`` items (O, 2) about the guess ``path``
-        (n, H + 1, d) (drone-major)."""
+        (n, H + 1, d) (drone-major), grown by each drone's share ``growing`` (n,)."""
         drone, ob = items[:, 0], items[:, 1]
         center, required = self.center_m[ob], self.required_m[ob]
         coeffs = segment_normals(path[drone] - center[:, None], self.segs, self.tail)
         hard, c0 = inside(p0[drone] - center, required)
         coeffs[hard, 0] = c0
         lower = required[:, None] + self.margin_m - np.einsum("ord,od->or", coeffs, p0[drone] - center)
-        lower += self.grow
+        if growing is not None:
+            lower += growing[drone][:, None] * self.grow
         lower[hard, 0] = 0.0
         return np.column_stack([drone, -1 - ob]), coeffs, lower, on, hard
 

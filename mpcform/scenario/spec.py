@@ -16,7 +16,6 @@ from mpcform.control.nullspace import NullSpaceSettings
 from mpcform.formation.geometry import min_pair_distance, pairs_within
 from mpcform.formation.state import FormationState
 from mpcform.formation.template import Template
-from mpcform.mpc.rows import step_growth
 from mpcform.mpc.settings import MPCSettings
 from mpcform.reference.base import Reference
 from mpcform.scenario.reachability import TIMES, unreachable_warning
@@ -182,9 +181,7 @@ class Scenario:
         if planned is None:  # (d_min is set: for the type checker)
             return None
         solver = self.controller.mpc.margin_m  # the rows ask for this much more (solver tolerance)
-        growth = step_growth(rob.growth_m, self.simulation.dt_s, self.controller.mpc.horizon, 1)
-        rest = 0.0 if growth is None else float(growth[-1])  # the braking tail's rows grow this much
-        keep = planned + solver + 2.0 * rest
+        keep = planned + solver
         final = self.reference.targets(np.array([self.simulation.duration_s]))[0][0]
         closest = min_pair_distance(final)  # inf for one drone
         if closest >= keep * (1.0 - 1e-12):  # at that distance exactly the rows are met
@@ -205,7 +202,6 @@ class Scenario:
         parts = [f"margin {rob.margin_m:.3g} m"] * (rob.margin_m > 0) + [f"tracking {tracking:.3g} m"] * (
             tracking > 0
         )
-        parts += [f"the wind's growth {rest:.3g} m"] * (rest > 0)
         field = "plant" if rob.margin_m > 0 else "limits.tracking"
         return (
             f"{field}: the final formation's {pair} is {closest:.3g} m apart, below the "

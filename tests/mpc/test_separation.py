@@ -394,30 +394,40 @@ def test_without_the_tail_only_an_obstacles_braking_tail_conflicts() -> None:
 @pytest.mark.parametrize("coupling", ["joint", "decoupled"])
 def test_rows_grow_along_the_horizon_by_the_wind_growth(coupling: str) -> None:
     """With ``tube_growth_m`` the rows at position step e ask for ``min(e - 1, E)`` growths more per
-    drone (a pair twice, a decoupled side and an obstacle once), the first rows none; the clear test
-    grows with them: a plan that meets the plain rows but not the grown ones is not clear."""
+    growing drone (a pair for each of its drones, a decoupled side and an obstacle item for its
+    own), the first rows none; the clear test grows with them: a plan that meets the plain rows but
+    not the grown ones is not clear. A drone whose target is too close to another's to hold with
+    the growth does not grow."""
     p0 = np.array([[0.0, 0.0], [0.9, 0.0], [3.0, 0.0]])
     ob = SphereObstacle(np.array([3.0, 0.6]), 0.2, clearance_m=0.25)
     lim, settings_ = Limits(v_max_mps=1.0, d_min_m=0.5), MPCSettings(horizon=4, coupling=coupling)
     c = cand([[0, 1]], [[2, 0]])
-    plain = Separation(2, lim, settings_, (ob,), dt_s=0.1).rows(p0, still(p0, 4), c)
-    grown_sep = Separation(2, replace(lim, tube_growth_m=0.01), settings_, (ob,), dt_s=0.1)
-    grown = grown_sep.rows(p0, still(p0, 4), c)
-    extra = 0.01 * np.clip(grown_sep.ends - 1, 0, 4)  # E = min(H, ceil(0.6 / 0.1)) = 4
+    plain_sep = Separation(2, lim, settings_, (ob,), dt_s=0.1)
+    plain = plain_sep.rows(p0, still(p0, 4), c)
+    sep = Separation(2, replace(lim, tube_growth_m=0.01), settings_, (ob,), dt_s=0.1)
+    growing = sep.growing(p0 + np.array([0.0, 5.0]))  # targets far apart: every drone grows
+    np.testing.assert_array_equal(growing, [1.0, 1.0, 1.0])
+    grown = sep.rows(p0, still(p0, 4), c, growing=growing)
+    extra = 0.01 * np.clip(sep.ends - 1, 0, 4)  # E = min(H, ceil(0.6 / 0.1)) = 4
     assert extra[0] == 0.0 and extra.max() == 0.03
     np.testing.assert_allclose(
-        grown.pair_lower - plain.pair_lower, 2.0 * extra[None].repeat(len(plain.pairs), 0)
+        grown.pair_lower - plain.pair_lower, 2.0 * np.broadcast_to(extra, plain.pair_lower.shape)
     )
     np.testing.assert_allclose(
         grown.single_lower - plain.single_lower, np.broadcast_to(extra, plain.single_lower.shape)
     )
     x = np.zeros((4, 3, 2))
     x[1:, 1, 0] = -0.39 + 0.005  # pair (0, 1) at 0.515 m from step 2 on: the plain rows hold
-    assert Separation(2, lim, settings_, (ob,)).clear(still(p0, 4), planned(p0, x))
-    assert not grown_sep.clear(still(p0, 4), planned(p0, x))
+    assert plain_sep.clear(still(p0, 4), planned(p0, x))
+    assert sep.clear(still(p0, 4), planned(p0, x))  # no growth given
+    assert not sep.clear(still(p0, 4), planned(p0, x), growing)
+    tight = sep.growing(np.array([[0.0, 0.0], [0.55, 0.0], [3.0, 0.0]]))  # 0.55 < 0.5 + 2e-3 + 0.06
+    np.testing.assert_array_equal(tight, [0.0, 0.0, 1.0])
+    assert sep.clear(still(p0, 4), planned(p0, x), tight)
+    np.testing.assert_allclose(sep.rows(p0, still(p0, 4), c, growing=tight).pair_lower, plain.pair_lower)
 
 
 def test_no_growth_without_dt_or_wind() -> None:
     lim = Limits(v_max_mps=1.0, d_min_m=0.5, tube_growth_m=0.01)
-    assert Separation(2, lim, MPCSettings(), ()).growth is None  # no dt given
+    assert Separation(2, lim, MPCSettings(), ()).growing(np.zeros((2, 2))) is None  # no dt given
     assert Separation(2, replace(lim, tube_growth_m=0.0), MPCSettings(), (), dt_s=0.1).growth is None
