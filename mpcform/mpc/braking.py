@@ -40,8 +40,10 @@ share one loop (a lag, the second-order loop, a planar quadrotor), or their grou
 are built together (a spatial quadrotor's xy and z loops). A quadrotor's polytope is tight only
 after many exact points, whose rows a joint QP cannot afford: there the rows stay on the chord
 to the rest point (:data:`mpcform.mpc.tail.SAMPLED_STATES`), and the margin has to cover the
-path's bend. Wind and model error beyond the margin break assumption (i): the planner then
-reports slack, and the certifier (:mod:`mpcform.mpc.certify`) still guards the first interval.
+path's bend. Wind moves the measured start, and with it the shifted plan, beyond (i): in wind the
+rows grow along the horizon (:func:`mpcform.mpc.rows.step_growth`), which keeps the shifted plan
+feasible for pushes within the growth; beyond it the planner reports slack, and the certifier
+(:mod:`mpcform.mpc.certify`) still guards the first interval.
 When a solve leaves slack on rows the shifted plan meets (an interior-point solver can), the
 planner keeps the shifted plan, as (ii) allows (:meth:`mpcform.mpc.planner.MPCPlanner.step`).
 
