@@ -145,31 +145,33 @@ class PairSeparation:
         """The joint rows, or the decoupled one-drone rows (side i of every pair, then side k), of
         ``pairs`` (P, 2) about the guess ``path`` (n, H + 1, d) (drone-major); ``stops``, ``growing``:
         see :meth:`mpcform.mpc.separation.Separation.rows`."""
-        grows = np.zeros(p0.shape[0]) if growing is None else growing
         if not self.joint:
-            return None, self._sides(p0, path, pairs, on, stops, grows)
+            return None, self._sides(p0, path, pairs, on, stops, growing)
         i, k = pairs[:, 0], pairs[:, 1]
         rel = self.scaled(path[i] - path[k])  # (P, H + 1, d), metric space
         coeffs = self.scaled(segment_normals(rel, self.segs, self.tail))  # (P, R, d), world coordinates
         hard, c0 = inside(rel[:, 0], self.d_min_m)
         coeffs[hard, 0] = self.scaled(c0)
         lower = self.d_min_m + self.margin_m - np.einsum("prd,pd->pr", coeffs, p0[i] - p0[k])
-        lower += (grows[i] + grows[k])[:, None] * self.grow
+        if growing is not None:
+            lower += (growing[i] + growing[k])[:, None] * self.grow
         lower[hard, 0] = 0.0
         return (pairs, coeffs, lower, on, hard), None
 
     def _sides(
-        self, p0: Array, path: Array, pairs: Array, on: Array, stops: Array | None, grows: Array
+        self, p0: Array, path: Array, pairs: Array, on: Array, stops: Array | None, grows: Array | None
     ) -> RowPart:
         """The decoupled rows: two per-drone rows about the guess's midpoint ``m_e`` at each row's
         position step, ``+-c^T (p0_side - m_e) >= (d_min + margin) / 2``, side i (+c) of every
         pair, then side k (-c); built :data:`BLOCK` pairs at a time (the temporaries stay small).
         With ``stops`` (n, d), the last row (the braking stop point) of a pair whose ``stops`` meet
         it jointly is split about their midpoint instead (any common split point is safe: the two
-        sides add up to the joint row). Each side's rows grow by its drone's share ``grows`` (n,)."""
+        sides add up to the joint row). Each side's rows grow by its drone's share ``grows`` (n,)
+        (None: no growth)."""
         p, r, d = pairs.shape[0], self.segs.shape[0], path.shape[2]
         coeffs, lower, hard = np.empty((2 * p, r, d)), np.empty((2 * p, r)), np.empty(p, dtype=bool)
         half = 0.5 * (self.d_min_m + self.margin_m)
+        plain = np.full((1, r), half)  # every side's bound without growth (1, R)
         for a in range(0, p, BLOCK):
             b = min(a + BLOCK, p)
             i, k = pairs[a:b, 0], pairs[a:b, 1]
@@ -183,12 +185,12 @@ class PairSeparation:
             mid = np.add(g_i, g_k, out=g_i)  # the midpoints (B, H + 1, d), in place
             mid *= 0.5
             mid = np.take(mid, self.ends, axis=1)  # at each row's position step (B, R, d)
-            bounds = [half + grows[side][:, None] * self.grow for side in (i, k)]  # each side's (B, R)
+            bounds = [plain] * 2 if grows is None else [half + grows[s][:, None] * self.grow for s in (i, k)]
             if stops is not None:  # the stop row (R - 2): its split towards the rollout's
                 g_stop = path[i, -1], path[k, -1]  # (g_i holds the midpoints now)
-                stop_bounds = bounds[0][:, -2], bounds[1][:, -2]
+                halves = bounds[0][:, -2], bounds[1][:, -2]
                 mid[:, -2] = self._stop_split(
-                    coeffs[a:b, -2], *g_stop, mid[:, -2], stops[i], stops[k], *stop_bounds
+                    coeffs[a:b, -2], *g_stop, mid[:, -2], stops[i], stops[k], *halves
                 )
             sides = ((i, lower[a:b], np.subtract), (k, lower[p + a : p + b], np.add))
             for (side, out, fix), bound in zip(sides, bounds, strict=True):
@@ -214,7 +216,7 @@ class PairSeparation:
         ``g_i``, ``g_k`` still meet both sides (so the shifted plan stays feasible: a formation
         speeding up together moves both sides of a split, and the guess's midpoint would throttle
         it). Any common split point is safe: the two sides add up to the joint row. ``half_i``,
-        ``half_k`` (B,): each side's bound on the stop row."""
+        ``half_k`` (B,) (or (1,)): each side's bound on the stop row."""
         step = 0.5 * (s_i + s_k) - m_g
         along, at = np.einsum("pd,pd->p", c, step), np.einsum("pd,pd->p", c, m_g)
         room = np.where(
