@@ -408,7 +408,7 @@ def test_rows_grow_along_the_horizon_by_the_wind_growth(coupling: str) -> None:
     growing = sep.growing(p0 + np.array([0.0, 5.0]))  # targets far apart: every drone grows
     np.testing.assert_array_equal(growing, [1.0, 1.0, 1.0])
     grown = sep.rows(p0, still(p0, 4), c, growing=growing)
-    extra = 0.01 * np.clip(sep.ends - 1, 0, 4)  # E = min(H, ceil(0.6 / 0.1)) = 4
+    extra = 0.01 * np.clip(sep.ends - 1, 0, 3)  # E = min(H, ceil(0.3 / 0.1)) = 3
     assert extra[0] == 0.0 and extra.max() == 0.03
     np.testing.assert_allclose(
         grown.pair_lower - plain.pair_lower, 2.0 * np.broadcast_to(extra, plain.pair_lower.shape)
