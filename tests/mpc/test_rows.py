@@ -81,10 +81,10 @@ def test_the_braking_tail_adds_a_stop_row_on_x_h_and_u_h_minus_1() -> None:
 
 
 def test_step_growth_grows_by_one_growth_per_step_for_at_most_the_growth_time() -> None:
-    """``growth min(e - 1, E)`` at position steps e = 0 .. H + T, E = min(H, ceil(0.3 s / dt))."""
+    """``growth min(e - 1, E)`` at position steps e = 0 .. H + T, E = min(H, ceil(0.2 s / dt))."""
     assert step_growth(0.0, 0.1, 8) is None
     np.testing.assert_allclose(
-        step_growth(0.01, 0.1, 8, 2), 0.01 * np.array([0, 0, 1, 2, 3, 3, 3, 3, 3, 3, 3])
+        step_growth(0.01, 0.1, 8, 2), 0.01 * np.array([0, 0, 1, 2, 2, 2, 2, 2, 2, 2, 2])
     )
-    np.testing.assert_allclose(step_growth(0.01, 0.1, 2), 0.01 * np.array([0, 0, 1]))  # E = H
-    assert step_growth(0.02, 0.06, 30)[-1] == pytest.approx(0.02 * 5)  # E = ceil(0.3 / 0.06)
+    np.testing.assert_allclose(step_growth(0.01, 0.05, 2), 0.01 * np.array([0, 0, 1]))  # E = H
+    assert step_growth(0.02, 0.06, 30)[-1] == pytest.approx(0.02 * 4)  # E = ceil(0.2 / 0.06)
