@@ -151,6 +151,9 @@ class Separation:
         d_min = limits.d_min_m
         growth = None if dt_s is None else step_growth(limits.tube_growth_m, dt_s, h, tail)
         self.growth = growth  # per drone and position step (H + T + 1,) [m]: the rows' growth, or None
+        segments = h + tail if tail <= 1 else h + 1  # the clear test's: the polyline, then the tail's hull
+        ends = np.minimum(np.arange(1, segments + 1), h + tail)  # each one's last position step
+        self._segment_growth = None if growth is None else growth[ends, None]  # (S, 1) [m]
         self.pairs = None if d_min is None else PairSeparation(d_min, self.metric, settings, tail, growth)
         self.obstacles = ObstacleSeparation(obstacles, settings, tail, growth) if obstacles else None
         self.ends, self.n_rows, self.tail_count = row_ends(h, tail), row_segments(h, tail).shape[0], tail
@@ -228,8 +231,8 @@ class Separation:
             diameter = vector_norms(hull[:, None] - hull[None]).max(axis=(0, 1))
             seg = np.concatenate([seg, (vector_norms(hull).max(axis=0) - diameter)[None]])
         dev = vector_norms(delta - g).max(axis=0, initial=0.0)
-        if self.growth is not None and share is not None:  # segment j ends at step j + 1; the hull last
-            seg = seg - self.growth[np.minimum(np.arange(1, seg.shape[0] + 1), g.shape[0] - 1), None] * share
+        if self._segment_growth is not None and share is not None:
+            seg = seg - self._segment_growth * share
         return not np.any(seg.min(axis=0, initial=np.inf) - dev < required + self.margin_m)
 
     def shortfall(
@@ -303,11 +306,7 @@ class Separation:
     def blocked_targets(self, targets: Array) -> Array:
         """Drones (n,) whose target (n, d) lies within ``d_min`` + margin + 2 tube (in the metric) of
         another's (:mod:`mpcform.mpc.liveness`; not obstacles: a moving reference may cross one)."""
-        blocked = np.zeros(targets.shape[0], dtype=bool)
-        if self.pairs is not None and targets.shape[0] > 1:
-            near = pairs_within(targets * self.metric, self.pairs.d_min_m + self.margin_m + 2.0 * self.tube_m)
-            blocked[near.ravel()] = True
-        return blocked
+        return self._near_targets(targets, 0.0)
 
     def growing(self, targets: Array) -> Array | None:
         """Each drone's share (n,) of the rows' growth: 1, but 0 for a drone whose target (n, d) lies
@@ -316,11 +315,16 @@ class Separation:
         growth (they keep the one-interval margin alone). None without growth."""
         if self.growth is None:
             return None
-        share = np.ones(targets.shape[0])
+        return (~self._near_targets(targets, 2.0 * self.growth[-1])).astype(float)
+
+    def _near_targets(self, targets: Array, extra_m: float) -> Array:
+        """Drones (n,) whose target lies within ``d_min`` + margin + 2 tube + ``extra_m`` (in the
+        metric) of another's."""
+        near = np.zeros(targets.shape[0], dtype=bool)
         if self.pairs is not None and targets.shape[0] > 1:
-            rest = self.pairs.d_min_m + self.margin_m + 2.0 * (self.tube_m + self.growth[-1])
-            share[pairs_within(targets * self.metric, rest).ravel()] = 0.0
-        return share
+            reach = self.pairs.d_min_m + self.margin_m + 2.0 * self.tube_m + extra_m
+            near[pairs_within(targets * self.metric, reach).ravel()] = True
+        return near
 
     def push_apart(self, p0: Array, cand: Candidates) -> Array:
         """Unit directions (n, d) (zero for a drone with none) away from the partners and
