@@ -211,6 +211,7 @@ def outcome(sc: dict[str, Any]) -> dict[str, Any]:
         + (m.get(f"geofence_violations{true}") or 0),
         "min_separation": m[f"min_separation{true}"],
         "slack_steps": m["slack_steps"],
+        "growth_slack_steps": m["growth_slack_steps"],
         "lowered": m["lowered_first_rows"],
         "deadline_misses": m["deadline_misses"],
         "cpu_s": time.process_time() - start,
@@ -252,7 +253,7 @@ def report(results: list[dict[str, Any]]) -> str:
     cpu = np.array([r["cpu_s"] for r in results])
     spread = f"median {np.median(cpu):.2f}, p90 {np.percentile(cpu, 90):.2f}, max {cpu.max():.1f}"
     lines.append(f"CPU per run [s]: {spread}, total {cpu.sum():.0f}")
-    for key in ("slack_steps", "lowered"):
+    for key in ("slack_steps", "growth_slack_steps", "lowered"):
         hit = [r for r in results if r[key]]
         close = sum("close_start" in r["name"] for r in hit)
         lines.append(f"{key}: {len(hit)} runs ({close} close starts), {sum(r[key] for r in hit)} steps")

@@ -342,5 +342,6 @@ def adversarial_outcome(index: int) -> dict[str, Any]:
         "geofence": m["geofence_violations_true"],
         "jumps": int((steps > sc["limits"]["a_max"] * sc["simulation"]["dt"] + 1e-9).sum()),
         "slack_steps": m["slack_steps"],
+        "growth_slack_steps": m["growth_slack_steps"],
         "lowered": m["lowered_first_rows"],
     }

@@ -42,8 +42,10 @@ after many exact points, whose rows a joint QP cannot afford: there the rows sta
 to the rest point (:data:`mpcform.mpc.tail.SAMPLED_STATES`), and the margin has to cover the
 path's bend. Wind moves the measured start, and with it the shifted plan, beyond (i): in wind the
 rows grow along the horizon (:func:`mpcform.mpc.rows.step_growth`), which keeps the shifted plan
-feasible for pushes within the growth; beyond it the planner reports slack, and the certifier
-(:mod:`mpcform.mpc.certify`) still guards the first interval.
+feasible for pushes within the growth up to its window; past the window a plan may reach into
+the growth (a buffer, reported apart from slack: :func:`mpcform.mpc.planner.slack_report`); beyond
+that the planner reports slack, and the certifier (:mod:`mpcform.mpc.certify`) still guards the
+first interval.
 When a solve leaves slack on rows the shifted plan meets (an interior-point solver can), the
 planner keeps the shifted plan, as (ii) allows (:meth:`mpcform.mpc.planner.MPCPlanner.step`).
 

@@ -279,8 +279,8 @@ class MPCPlanner(Controller):
             u0 = self._certifier.certify(p0, u[0], cand, self._u_prev)
             if u0 is not None:
                 x_true = self._predict.points(self._loop_state, u, x)
-                slack_m, items = slack_report(
-                    sep, sol.x, drones, x_true, rows, (inside_m, inside), relaxed, horizon
+                slack_m, items, growth_m = slack_report(
+                    sep, sol.x, drones, x_true, rows, (inside_m, inside), relaxed, horizon, growing
                 )
                 mode = "qp"
 
@@ -289,16 +289,16 @@ class MPCPlanner(Controller):
                     off = violators(self._families, p0, self._u_prev, u, y, SLACK_REPORT_M).any()
                     return not off and sep.shortfall(y, rows, SLACK_REPORT_M, joint=True)[1].shape[0] == 0
 
-                slack = items.shape[0] > inside.shape[0]  # the shifted plan may avoid it (theorem (ii))
+                slack = items.shape[0] > inside.shape[0] or growth_m > 0.0  # the shifted plan may avoid it
                 if slack and (kept := self._certifier.kept(self._plan, p0, cand, self._u_prev, meets)):
                     (u, x), mode, status = kept, "fallback", f"{status}; previous plan (the solve left slack)"
-                    u0, slack_m, items = u[0], inside_m, inside
+                    u0, slack_m, items, growth_m = u[0], inside_m, inside, 0.0
                 self._accept(p0, u, x)
                 self._u_prev = u0.copy()  # the command sent (the solver's tolerance off)
                 info = solve_info(
                     mode, sol, status, active, len(drones), slack_m, items, self._tie_break, relaxed
                 )
-                return ControlStep(u0, info)
+                return ControlStep(u0, replace(info, growth_slack_m=growth_m))
             status, solved = status + "; command failed certification", u[0]
         u, x, note = self._certifier.fallback(self._plan, p0, cand, horizon, solved, self._u_prev)
         self._accept(p0, u, x)
@@ -366,16 +366,22 @@ def slack_report(
     start: tuple[float, Array],
     relaxed: bool,
     horizon: int,
-) -> tuple[float, Array]:
+    growing: Array | None = None,
+) -> tuple[float, Array, float]:
     """The slack a certified solve ``z`` of ``drones`` over ``horizon`` steps needed [m] and its
     items (m, 2): those whose rows the positions ``x`` (H or H + 1, n, d) miss by more than
     :data:`SLACK_REPORT_M`, and the items that ``start`` (shortfall [m], items) inside their
-    required distance."""
+    required distance; then how far [m] the positions reach into the rows' growth in wind
+    (``growing``, :meth:`Separation.ungrown`) while keeping every required distance: the growth
+    is a buffer for the next steps, not a distance to keep, so that is not slack (0 otherwise)."""
     nud = horizon * drones.shape[0] * x.shape[2]
     slack = z[2 * nud : 2 * nud + horizon * drones.shape[0]]
     shortfall, missed = start
     if relaxed or slack.max(initial=0.0) > SLACK_REPORT_M / 2:
         planned, late = sep.shortfall(x, rows, SLACK_REPORT_M, joint=True)
+        if late.shape[0] and growing is not None:  # into the growth only?
+            if sep.shortfall(x, sep.ungrown(rows, growing), SLACK_REPORT_M, joint=True)[1].shape[0] == 0:
+                return max(shortfall, 0.0), missed, planned
         if late.shape[0]:  # a miss within the solver's tolerance is not slack
             shortfall, missed = max(shortfall, planned), np.concatenate([missed, late])
-    return max(shortfall, 0.0), missed
+    return max(shortfall, 0.0), missed, 0.0

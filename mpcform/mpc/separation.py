@@ -25,7 +25,7 @@ gets closer, and every drone holding meets the row, so the hard rows stay feasib
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -302,6 +302,21 @@ class Separation:
             value = np.einsum("mrd,rmd->mr", rows.pair_coeffs, rel) - rows.pair_lower
             pair[rows.pair_on] = value[rows.pair_on, :last].min(axis=1)
         return np.concatenate([pair, single]), np.concatenate([rows.pairs, rows.labels])
+
+    def ungrown(self, rows: SeparationRows, growing: Array | None) -> SeparationRows:
+        """``rows`` (grown by each drone's share ``growing`` (n,), :meth:`growing`) without their
+        growth in wind: the required distances alone (``d_min`` + margin + 2 tube, the clearances).
+        The growth is a buffer that keeps the next steps' plans feasible; a plan may reach into it
+        and still keep every required distance (:func:`mpcform.mpc.planner.slack_report`)."""
+        if growing is None or self.growth is None:
+            return rows
+        grow = self.growth[self.ends]  # per row (R,) [m]
+        pair_share = growing[rows.pairs[:, 0]] + growing[rows.pairs[:, 1]]
+        return replace(
+            rows,
+            pair_lower=rows.pair_lower - pair_share[:, None] * grow,
+            single_lower=rows.single_lower - growing[rows.singles][:, None] * grow,
+        )
 
     def blocked_targets(self, targets: Array) -> Array:
         """Drones (n,) whose target (n, d) lies within ``d_min`` + margin + 2 tube (in the metric) of

@@ -21,8 +21,11 @@ class MPCStepInfo(StepInfo):
     ``resolved`` escalations that ended at this step (the drone left conflict), ``unwound``
     circling drones whose escalation was reset at this step. ``lowered``: with a
     velocity loop, whether a first separation row within reach was lowered to what braking reaches
-    (:func:`mpcform.mpc.first_rows.hard_first_rows`). ``deadline_missed``: the solve ended past the
-    step's deadline (``MPCSettings.step_budget_s``), so the command is the braking fallback."""
+    (:func:`mpcform.mpc.first_rows.hard_first_rows`). ``growth_slack_m`` [m]: in wind, how far the
+    plan reaches into its rows' growth along the horizon while keeping every required distance (a
+    buffer for the next steps, :func:`mpcform.mpc.planner.slack_report`; not slack).
+    ``deadline_missed``: the solve ended past the step's deadline (``MPCSettings.step_budget_s``),
+    so the command is the braking fallback."""
 
     iterations: int = 0
     solve_time_s: float = 0.0
@@ -35,6 +38,7 @@ class MPCStepInfo(StepInfo):
     resolved: int = 0
     unwound: int = 0
     lowered: bool = False
+    growth_slack_m: float = 0.0
     deadline_missed: bool = False
 
 

@@ -262,6 +262,9 @@ def format_summary(summary: dict[str, Any]) -> str:
             f"{m['solver_failures']} failures, max slack {_m(m['max_slack'], 'm')})",
         ),
     ]
+    if m.get("growth_slack_steps"):
+        used = f"{m['growth_slack_steps']} steps, at most {_m(m['max_growth_slack'], 'm')}"
+        rows.append(("growth buffer used", f"{used} (required distances kept)"))
     if "completion" in m:
         done = m["time_to_complete"]
         end = f" from t = {done:.4g} s" if done is not None else f", {m['stalled_drones']} stalled"

@@ -10,7 +10,9 @@ v_max), ``qp_solves``, ``fast_path_steps``, ``solver_failures``, ``max_slack`` [
 ``slack_steps`` (steps whose plan needed slack, or that start inside a required distance, by
 more than :data:`mpcform.mpc.planner.SLACK_REPORT_M`) and
 ``lowered_first_rows`` (steps whose first separation rows were lowered to what braking reaches,
-:func:`mpcform.mpc.first_rows.hard_first_rows`),
+:func:`mpcform.mpc.first_rows.hard_first_rows`), ``max_growth_slack`` [m] and
+``growth_slack_steps`` (in wind, steps whose plan reached into its rows' growth along the horizon
+but kept every required distance: the growth's buffer, not slack),
 ``stall_events``, ``resolutions`` and ``circling_resets`` (drones that started to stall,
 escalated tie-breaks that ended, and circling drones whose escalation was reset,
 :mod:`mpcform.mpc.liveness`), ``deadline_misses`` (steps whose solve ended past
@@ -119,6 +121,10 @@ def run_metrics(
         "max_slack": float(max((getattr(i, "max_slack_m", 0.0) for i in result.infos), default=0.0)),
         "slack_steps": int(sum(getattr(i, "max_slack_m", 0.0) > 0.0 for i in result.infos)),
         "lowered_first_rows": int(sum(getattr(i, "lowered", False) for i in result.infos)),
+        "max_growth_slack": float(
+            max((getattr(i, "growth_slack_m", 0.0) for i in result.infos), default=0.0)
+        ),
+        "growth_slack_steps": int(sum(getattr(i, "growth_slack_m", 0.0) > 0.0 for i in result.infos)),
         "stall_events": int(sum(getattr(i, "stalled", 0) for i in result.infos)),
         "resolutions": int(sum(getattr(i, "resolved", 0) for i in result.infos)),
         "circling_resets": int(sum(getattr(i, "unwound", 0) for i in result.infos)),

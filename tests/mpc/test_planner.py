@@ -518,10 +518,44 @@ def test_a_miss_within_the_solvers_tolerance_is_no_slack(miss_m: float, reported
     x = np.zeros((h, 2, 2))
     x[:, 1, 0] = gap - 2.0  # drone 1 moves to ``gap`` from drone 0
     z = np.zeros(2 * h * 2 * 2 + h * 2)
-    slack_m, items = slack_report(sep, z, np.arange(2), x, rows, (0.0, pairs[:0]), True, h)
+    slack_m, items, growth_m = slack_report(sep, z, np.arange(2), x, rows, (0.0, pairs[:0]), True, h)
     assert items.tolist() == ([[0, 1]] if reported else [])
     assert slack_m == (pytest.approx(miss_m, rel=1e-6) if reported else 0.0)  # 0: not a slack step
-    assert reported == (miss_m > SLACK_REPORT_M)
+    assert reported == (miss_m > SLACK_REPORT_M) and growth_m == 0.0
+
+
+@pytest.mark.parametrize(("gap_m", "slack", "into_growth"), [(0.53, 0.0, 0.005), (0.49, 0.015, 0.0)])
+def test_a_plan_within_the_rows_growth_keeps_every_required_distance(
+    gap_m: float, slack: float, into_growth: float
+) -> None:
+    """slack_report in wind: a pair 0.53 m apart from step 2 on misses its grown rows (0.5 m +
+    margin + up to 2 x 0.02 m of growth: 0.542 m) by 12 mm but keeps its required distance (0.502
+    m): that is the growth's buffer, reported apart, not slack. At 0.49 m it enters the required
+    distance itself: slack, the pair named, by how far it misses the grown rows."""
+    from mpcform.mpc.candidates import Candidates
+    from mpcform.mpc.planner import slack_report
+    from mpcform.mpc.separation import Separation
+
+    h, pairs = 4, np.array([[0, 1]])
+    lim = Limits(v_max_mps=1.0, d_min_m=0.5, tube_growth_m=0.01)
+    sep = Separation(2, lim, MPCSettings(horizon=h), (), dt_s=0.1)  # E = 2: up to 0.02 m per drone
+    p0 = np.array([[0.0, 0.0], [0.9, 0.0]])
+    growing = sep.growing(p0 + np.array([0.0, 5.0]))
+    c = Candidates(pairs, np.ones(1, bool), pairs[:0], np.ones(0, bool), False)
+    rows = sep.rows(p0, np.broadcast_to(p0, (h + 1, 2, 2)), c, growing=growing)
+    x = np.zeros((h, 2, 2))
+    x[1:, 1, 0] = gap_m - 0.9
+    z = np.zeros(2 * h * 2 * 2 + h * 2)
+    z[2 * h * 2 * 2 :] = 0.01  # the solve's slack variables: a report is asked for
+    grown_miss = 0.5 + sep.margin_m + 0.04 - gap_m
+    slack_m, items, growth_m = slack_report(
+        sep, z, np.arange(2), x, rows, (0.0, pairs[:0]), False, h, growing
+    )
+    assert slack_m == pytest.approx(grown_miss if slack else 0.0)
+    assert items.tolist() == ([[0, 1]] if slack else [])
+    assert growth_m == pytest.approx(grown_miss if into_growth else 0.0)
+    no_wind = slack_report(sep, z, np.arange(2), x, rows, (0.0, pairs[:0]), False, h)  # no shares
+    assert no_wind[0] == pytest.approx(grown_miss) and no_wind[2] == 0.0
 
 
 def test_a_solve_that_leaves_slack_the_shifted_plan_avoids_keeps_the_plan() -> None:

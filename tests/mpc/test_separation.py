@@ -425,6 +425,11 @@ def test_rows_grow_along_the_horizon_by_the_wind_growth(coupling: str) -> None:
     np.testing.assert_array_equal(tight, [0.0, 0.0, 1.0])
     assert sep.clear(still(p0, 4), planned(p0, x), tight)
     np.testing.assert_allclose(sep.rows(p0, still(p0, 4), c, growing=tight).pair_lower, plain.pair_lower)
+    for share in (growing, tight):  # the required distances alone: the rows without growth
+        bare = sep.ungrown(sep.rows(p0, still(p0, 4), c, growing=share), share)
+        np.testing.assert_allclose(bare.pair_lower, plain.pair_lower, atol=1e-15)
+        np.testing.assert_allclose(bare.single_lower, plain.single_lower, atol=1e-15)
+    assert sep.ungrown(plain, None) is plain
 
 
 def test_no_growth_without_dt_or_wind() -> None:

@@ -57,6 +57,8 @@ METRIC_KEYS = {
     "deadline_misses",  # online planning (controller.step_budget)
     "slack_steps",
     "lowered_first_rows",  # the separation guarantee's conditions (braking terminal condition)
+    "max_growth_slack",
+    "growth_slack_steps",  # in wind: plans within their rows' growth (not slack)
 }
 
 
@@ -170,6 +172,10 @@ def test_summary_keys_and_values(tmp_path: Path) -> None:
     assert prov["seed"] == 0 and len(prov["scenario_sha256"]) == 64
     assert prov["mpcform"] and prov["python"]
     assert "final tracking error" in format_summary(summary)
+    assert "growth buffer" not in format_summary(summary)  # calm air: no growth
+    summary["metrics"] |= {"growth_slack_steps": 3, "max_growth_slack": 0.012}
+    line = next(r for r in format_summary(summary).splitlines() if r.startswith("growth buffer used"))
+    assert line.endswith(" 3 steps, at most 0.012 m (required distances kept)")
 
 
 def test_unset_and_infinite_values_are_null(tmp_path: Path) -> None:

@@ -48,7 +48,7 @@ RESULT = SimulationResult(
     infos=(
         MPCStepInfo("qp", max_slack_m=0.01),
         StepInfo("fast_path"),
-        MPCStepInfo("fallback", max_slack_m=0.2),
+        MPCStepInfo("fallback", max_slack_m=0.2, growth_slack_m=0.03),
     ),
     step_times_s=np.array([0.003, 0.001, 0.005]),
     controller="test",
@@ -88,7 +88,8 @@ def test_speed_violations_count_step_drones(v_max, violations):
 def test_solver_and_timing_metrics():
     m = run_metrics(RESULT, World(Limits(3.0, 0.5)))
     assert (m["qp_solves"], m["fast_path_steps"], m["solver_failures"]) == (2, 1, 1)
-    assert m["max_slack"] == pytest.approx(0.2)
+    assert m["max_slack"] == pytest.approx(0.2) and m["slack_steps"] == 2
+    assert m["max_growth_slack"] == pytest.approx(0.03) and m["growth_slack_steps"] == 1
     assert set(m["step_time_ms"]) == {"qp", "fast_path", "fallback"}
     assert m["step_time_ms"]["qp"] == pytest.approx({"median": 3.0, "p90": 3.0, "max": 3.0})
     assert m["step_time_ms"]["fallback"]["max"] == pytest.approx(5.0)
