@@ -51,6 +51,7 @@ from mpcform.mpc.liveness import TieBreak
 from mpcform.mpc.loop import VelocityLoop
 from mpcform.mpc.plan import Plan, guess, merge, rollout, warm_start
 from mpcform.mpc.prediction import Prediction
+from mpcform.mpc.premise import GrowthPremise
 from mpcform.mpc.problem import StepQP
 from mpcform.mpc.separation import Separation, SeparationRows
 from mpcform.mpc.settings import MPCSettings
@@ -108,14 +109,11 @@ class MPCPlanner(Controller):
         self.braking = braking = Braking.of(dt_s, limits, settings.braking)  # the plans' terminal condition
         sep = Separation(self.dim, limits, settings, self.obstacles, braking, self.loop, dt_s)
         self._separation = sep
-        gain = 1.0 if self.loop is None else self.loop.speed_gain
-        tail_s = 0.0
-        if braking is not None and sep.tail is not None:  # how far past x_H the tail's points lie
-            tail_s = max(braking.kappa_s * gain, sep.tail.reach_s) + (self.loop.lag_s if self.loop else 0.0)
-        self._predict = Prediction(dt_s, settings.horizon, self.loop, braking, sep.tail)
+        self._predict = predict = Prediction(dt_s, settings.horizon, self.loop, braking, sep.tail)
+        self._premise = GrowthPremise.of(sep.growth, limits.tube_growth_m, predict)  # checked in wind
         grown = 0.0 if sep.growth is None else float(sep.growth[-1])  # the rows' largest growth
         self._candidates = CandidateSelector(
-            self.n, dt_s, limits, settings, self.obstacles, gain, tail_s, grown
+            self.n, dt_s, limits, settings, self.obstacles, predict.speed_gain, predict.tail_s, grown
         )
         scale = limits.speed_scale(self.dim)  # with v_max_z: the velocity set's spheroid
         self._certifier = Certifier(dt_s, limits.v_max_mps, sep, limits.a_max_mps2, braking, scale)
@@ -144,6 +142,7 @@ class MPCPlanner(Controller):
         # drones at rest (no states without a loop); where the loop takes them by the next step
         self._loop_state = np.zeros((self.n, self.dim, 0)) if self.loop is None else self.loop.rest(self.n)
         self._predicted: Array | None = None
+        self._expected: Array | None = None  # in wind, where the last plan takes the drones
 
     @property
     def plan(self) -> Plan | None:
@@ -164,6 +163,7 @@ class MPCPlanner(Controller):
         )
         inner._u_prev, inner._loop_state = self._u_prev[keep], self._loop_state[keep]
         inner._predicted = None if self._predicted is None else self._predicted[keep]
+        inner._expected = None if self._expected is None else self._expected[:, keep]
         if self._plan is not None:
             inner._plan = Plan(self._plan.inputs_mps[:, keep], self._plan.positions_m[:, keep])
         return Survivors(self, lost, inner, len(self.obstacles))
@@ -182,6 +182,8 @@ class MPCPlanner(Controller):
         if self._predicted is not None:  # the velocity offset of the last interval
             self._loop_state = self.loop.observe(self._loop_state, p0 - self._predicted)
         out = self._step(t_s, p0, deadline)
+        if self._premise is not None and self._plan is not None:
+            out, self._expected = self._premise.record(out, self._moved_m, p0, self._loop_state, self._plan)
         u0 = out.command_mps
         self._predicted = p0 + self.dt_s * u0 + self.loop.first(self._loop_state, u0)
         self._loop_state = self.loop.advance(self._loop_state, u0)
@@ -200,6 +202,7 @@ class MPCPlanner(Controller):
         about = self._predict.guess(self._plan, p0, self._loop_state)
         off_limits = violators(self._families, p0, self._u_prev, u_nom, x_true)
         growing = sep.growing(targets[0])  # each drone's share of the rows' growth in wind
+        self._moved_m = None if self._premise is None else self._premise.moved(about, self._expected, growing)
         if st.fast_path and not off_limits.any() and sep.clear(about, true_path, growing):
             return self._fast_path(nominal)
         cand = self._candidates.select(p0)
@@ -372,7 +375,7 @@ def slack_report(
     items (m, 2): those whose rows the positions ``x`` (H or H + 1, n, d) miss by more than
     :data:`SLACK_REPORT_M`, and the items that ``start`` (shortfall [m], items) inside their
     required distance; then how far [m] the positions reach into the rows' growth in wind
-    (``growing``, :meth:`Separation.ungrown`) while keeping every required distance: the growth
+    (``growing``, :meth:`SeparationRows.ungrown`) while keeping every required distance: the growth
     is a buffer for the next steps, not a distance to keep, so that is not slack (0 otherwise)."""
     nud = horizon * drones.shape[0] * x.shape[2]
     slack = z[2 * nud : 2 * nud + horizon * drones.shape[0]]
@@ -380,7 +383,12 @@ def slack_report(
     if relaxed or slack.max(initial=0.0) > SLACK_REPORT_M / 2:
         planned, late = sep.shortfall(x, rows, SLACK_REPORT_M, joint=True)
         if late.shape[0] and growing is not None:  # into the growth only?
-            if sep.shortfall(x, sep.ungrown(rows, growing), SLACK_REPORT_M, joint=True)[1].shape[0] == 0:
+            if (
+                sep.shortfall(x, rows.ungrown(growing, sep.row_growth), SLACK_REPORT_M, joint=True)[1].shape[
+                    0
+                ]
+                == 0
+            ):
                 return max(shortfall, 0.0), missed, planned
         if late.shape[0]:  # a miss within the solver's tolerance is not slack
             shortfall, missed = max(shortfall, planned), np.concatenate([missed, late])

@@ -24,6 +24,19 @@ class Prediction:
     ) -> None:
         self.dt_s, self.horizon, self.loop, self.braking, self.tail = dt_s, horizon, loop, braking, tail
 
+    @property
+    def speed_gain(self) -> float:
+        """How much faster than its commands the loop may fly a drone (1 without a loop)."""
+        return 1.0 if self.loop is None else self.loop.speed_gain
+
+    @property
+    def tail_s(self) -> float:
+        """How far [s] past ``x_H`` the braking tail's points lie (0 without braking)."""
+        if self.braking is None or self.tail is None:
+            return 0.0
+        lag = 0.0 if self.loop is None else self.loop.lag_s
+        return max(self.braking.kappa_s * self.speed_gain, self.tail.reach_s) + lag
+
     def points(self, state: Array, u: Array, x: Array) -> Array:
         """Relative positions (S, n, d) the drones reach with the inputs ``u`` (H, n, d): the single
         integrator's ``x``, plus the loop's offsets; with braking, then the tail's points, the

@@ -89,6 +89,21 @@ class SeparationRows:
             self.single_hard[keep_s],
         )
 
+    def ungrown(self, growing: Array | None, grow: Array | None) -> SeparationRows:
+        """These rows, grown by ``grow`` (R,) [m] per drone and row times each drone's share
+        ``growing`` (n,) (:meth:`Separation.growing`), without their growth in wind: the required
+        distances alone (``d_min`` + margin + 2 tube, the clearances). The growth is a buffer that
+        keeps the next steps' plans feasible; a plan may reach into it and still keep every required
+        distance (:func:`mpcform.mpc.planner.slack_report`)."""
+        if growing is None or grow is None:
+            return self
+        pair_share = growing[self.pairs[:, 0]] + growing[self.pairs[:, 1]]
+        return replace(
+            self,
+            pair_lower=self.pair_lower - pair_share[:, None] * grow,
+            single_lower=self.single_lower - growing[self.singles][:, None] * grow,
+        )
+
     def joint(self) -> SeparationRows:
         """The joint pair rows whose split these decoupled rows are: per pair side i's normal and
         the sum of both sides' lower bounds, after the joint pairs there are (the obstacle items
@@ -157,6 +172,7 @@ class Separation:
         self.pairs = None if d_min is None else PairSeparation(d_min, self.metric, settings, tail, growth)
         self.obstacles = ObstacleSeparation(obstacles, settings, tail, growth) if obstacles else None
         self.ends, self.n_rows, self.tail_count = row_ends(h, tail), row_segments(h, tail).shape[0], tail
+        self.row_growth = None if growth is None else growth[self.ends]  # per drone and row (R,) [m]
 
     def rows(
         self,
@@ -302,21 +318,6 @@ class Separation:
             value = np.einsum("mrd,rmd->mr", rows.pair_coeffs, rel) - rows.pair_lower
             pair[rows.pair_on] = value[rows.pair_on, :last].min(axis=1)
         return np.concatenate([pair, single]), np.concatenate([rows.pairs, rows.labels])
-
-    def ungrown(self, rows: SeparationRows, growing: Array | None) -> SeparationRows:
-        """``rows`` (grown by each drone's share ``growing`` (n,), :meth:`growing`) without their
-        growth in wind: the required distances alone (``d_min`` + margin + 2 tube, the clearances).
-        The growth is a buffer that keeps the next steps' plans feasible; a plan may reach into it
-        and still keep every required distance (:func:`mpcform.mpc.planner.slack_report`)."""
-        if growing is None or self.growth is None:
-            return rows
-        grow = self.growth[self.ends]  # per row (R,) [m]
-        pair_share = growing[rows.pairs[:, 0]] + growing[rows.pairs[:, 1]]
-        return replace(
-            rows,
-            pair_lower=rows.pair_lower - pair_share[:, None] * grow,
-            single_lower=rows.single_lower - growing[rows.singles][:, None] * grow,
-        )
 
     def blocked_targets(self, targets: Array) -> Array:
         """Drones (n,) whose target (n, d) lies within ``d_min`` + margin + 2 tube (in the metric) of

@@ -24,6 +24,9 @@ class MPCStepInfo(StepInfo):
     (:func:`mpcform.mpc.first_rows.hard_first_rows`). ``growth_slack_m`` [m]: in wind, how far the
     plan reaches into its rows' growth along the horizon while keeping every required distance (a
     buffer for the next steps, :func:`mpcform.mpc.planner.slack_report`; not slack).
+    ``wind_shift_m`` [m]: in wind, how far the wind moved the previous plan within the growth's
+    window, and ``growth_exceeded``: farther than the growth per step, its premise
+    (:mod:`mpcform.mpc.premise`).
     ``deadline_missed``: the solve ended past the step's deadline (``MPCSettings.step_budget_s``),
     so the command is the braking fallback."""
 
@@ -39,6 +42,8 @@ class MPCStepInfo(StepInfo):
     unwound: int = 0
     lowered: bool = False
     growth_slack_m: float = 0.0
+    wind_shift_m: float = 0.0
+    growth_exceeded: bool = False
     deadline_missed: bool = False
 
 

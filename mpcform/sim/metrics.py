@@ -12,7 +12,10 @@ more than :data:`mpcform.mpc.planner.SLACK_REPORT_M`) and
 ``lowered_first_rows`` (steps whose first separation rows were lowered to what braking reaches,
 :func:`mpcform.mpc.first_rows.hard_first_rows`), ``max_growth_slack`` [m] and
 ``growth_slack_steps`` (in wind, steps whose plan reached into its rows' growth along the horizon
-but kept every required distance: the growth's buffer, not slack),
+but kept every required distance: the growth's buffer, not slack), ``max_wind_shift`` [m] and
+``growth_exceeded_steps`` (in wind, how far the wind moved the previous plan within the growth's
+window, and the steps it moved farther than the growth per step: the growth's premise,
+:mod:`mpcform.mpc.premise`),
 ``stall_events``, ``resolutions`` and ``circling_resets`` (drones that started to stall,
 escalated tie-breaks that ended, and circling drones whose escalation was reset,
 :mod:`mpcform.mpc.liveness`), ``deadline_misses`` (steps whose solve ended past
@@ -125,6 +128,8 @@ def run_metrics(
             max((getattr(i, "growth_slack_m", 0.0) for i in result.infos), default=0.0)
         ),
         "growth_slack_steps": int(sum(getattr(i, "growth_slack_m", 0.0) > 0.0 for i in result.infos)),
+        "max_wind_shift": float(max((getattr(i, "wind_shift_m", 0.0) for i in result.infos), default=0.0)),
+        "growth_exceeded_steps": int(sum(getattr(i, "growth_exceeded", False) for i in result.infos)),
         "stall_events": int(sum(getattr(i, "stalled", 0) for i in result.infos)),
         "resolutions": int(sum(getattr(i, "resolved", 0) for i in result.infos)),
         "circling_resets": int(sum(getattr(i, "unwound", 0) for i in result.infos)),

@@ -57,3 +57,14 @@ def test_the_guess_ends_in_the_previous_plans_stop_point() -> None:
     assert g.shape == (H + 2, 1, 2)
     np.testing.assert_allclose(g[-1], BRAKING.stop(plan.positions_m[-1], u[-1]))
     assert pred.guess(None, p0, np.zeros((1, 2, 0))).shape == (H + 2, 1, 2)
+
+
+def test_the_tail_lies_as_far_as_braking_and_the_loops_lag_take_it() -> None:
+    """A lag flies no faster than its commands; its tail's points lie past ``x_H`` by the braking
+    time ``kappa`` (or the tail's own reach) plus the lag ``tau``; without braking, nowhere."""
+    loop = VelocityLoop.from_groups([LAG], 2, DT, H)
+    tail = braking_tail(BRAKING, H, 2, loop)
+    with_tail = Prediction(DT, H, loop, BRAKING, tail)
+    assert with_tail.speed_gain == 1.0 and Prediction(DT, H, None, None, None).speed_gain == 1.0
+    assert with_tail.tail_s == max(BRAKING.kappa_s, tail.reach_s) + TAU
+    assert Prediction(DT, H, loop, None, None).tail_s == 0.0

@@ -426,10 +426,10 @@ def test_rows_grow_along_the_horizon_by_the_wind_growth(coupling: str) -> None:
     assert sep.clear(still(p0, 4), planned(p0, x), tight)
     np.testing.assert_allclose(sep.rows(p0, still(p0, 4), c, growing=tight).pair_lower, plain.pair_lower)
     for share in (growing, tight):  # the required distances alone: the rows without growth
-        bare = sep.ungrown(sep.rows(p0, still(p0, 4), c, growing=share), share)
+        bare = sep.rows(p0, still(p0, 4), c, growing=share).ungrown(share, sep.row_growth)
         np.testing.assert_allclose(bare.pair_lower, plain.pair_lower, atol=1e-15)
         np.testing.assert_allclose(bare.single_lower, plain.single_lower, atol=1e-15)
-    assert sep.ungrown(plain, None) is plain
+    assert plain.ungrown(None, sep.row_growth) is plain and plain_sep.row_growth is None
 
 
 def test_no_growth_without_dt_or_wind() -> None:

@@ -59,6 +59,8 @@ METRIC_KEYS = {
     "lowered_first_rows",  # the separation guarantee's conditions (braking terminal condition)
     "max_growth_slack",
     "growth_slack_steps",  # in wind: plans within their rows' growth (not slack)
+    "max_wind_shift",
+    "growth_exceeded_steps",  # in wind: the growth's premise, checked every step
 }
 
 

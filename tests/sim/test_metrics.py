@@ -48,7 +48,9 @@ RESULT = SimulationResult(
     infos=(
         MPCStepInfo("qp", max_slack_m=0.01),
         StepInfo("fast_path"),
-        MPCStepInfo("fallback", max_slack_m=0.2, growth_slack_m=0.03),
+        MPCStepInfo(
+            "fallback", max_slack_m=0.2, growth_slack_m=0.03, wind_shift_m=0.02, growth_exceeded=True
+        ),
     ),
     step_times_s=np.array([0.003, 0.001, 0.005]),
     controller="test",
@@ -90,6 +92,7 @@ def test_solver_and_timing_metrics():
     assert (m["qp_solves"], m["fast_path_steps"], m["solver_failures"]) == (2, 1, 1)
     assert m["max_slack"] == pytest.approx(0.2) and m["slack_steps"] == 2
     assert m["max_growth_slack"] == pytest.approx(0.03) and m["growth_slack_steps"] == 1
+    assert m["max_wind_shift"] == pytest.approx(0.02) and m["growth_exceeded_steps"] == 1
     assert set(m["step_time_ms"]) == {"qp", "fast_path", "fallback"}
     assert m["step_time_ms"]["qp"] == pytest.approx({"median": 3.0, "p90": 3.0, "max": 3.0})
     assert m["step_time_ms"]["fallback"]["max"] == pytest.approx(5.0)
