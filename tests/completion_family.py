@@ -212,6 +212,9 @@ def outcome(sc: dict[str, Any]) -> dict[str, Any]:
         "min_separation": m[f"min_separation{true}"],
         "slack_steps": m["slack_steps"],
         "growth_slack_steps": m["growth_slack_steps"],
+        "growth_exceeded_steps": m["growth_exceeded_steps"],
+        "max_wind_shift": m["max_wind_shift"],
+        "steps": len(sim.infos),
         "lowered": m["lowered_first_rows"],
         "deadline_misses": m["deadline_misses"],
         "cpu_s": time.process_time() - start,
@@ -253,7 +256,7 @@ def report(results: list[dict[str, Any]]) -> str:
     cpu = np.array([r["cpu_s"] for r in results])
     spread = f"median {np.median(cpu):.2f}, p90 {np.percentile(cpu, 90):.2f}, max {cpu.max():.1f}"
     lines.append(f"CPU per run [s]: {spread}, total {cpu.sum():.0f}")
-    for key in ("slack_steps", "growth_slack_steps", "lowered"):
+    for key in ("slack_steps", "growth_slack_steps", "growth_exceeded_steps", "lowered"):
         hit = [r for r in results if r[key]]
         close = sum("close_start" in r["name"] for r in hit)
         lines.append(f"{key}: {len(hit)} runs ({close} close starts), {sum(r[key] for r in hit)} steps")

@@ -262,6 +262,9 @@ def format_summary(summary: dict[str, Any]) -> str:
             f"{m['solver_failures']} failures, max slack {_m(m['max_slack'], 'm')})",
         ),
     ]
+    if m.get("max_wind_shift"):  # in wind: the rows' growth's premise (mpc.premise)
+        over = f"above the growth on {m['growth_exceeded_steps']} steps"
+        rows.append(("wind shift", f"at most {_m(m['max_wind_shift'], 'm')} per step, {over}"))
     if m.get("growth_slack_steps"):
         used = f"{m['growth_slack_steps']} steps, at most {_m(m['max_growth_slack'], 'm')}"
         rows.append(("growth buffer used", f"{used} (required distances kept)"))

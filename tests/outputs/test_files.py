@@ -174,10 +174,14 @@ def test_summary_keys_and_values(tmp_path: Path) -> None:
     assert prov["seed"] == 0 and len(prov["scenario_sha256"]) == 64
     assert prov["mpcform"] and prov["python"]
     assert "final tracking error" in format_summary(summary)
-    assert "growth buffer" not in format_summary(summary)  # calm air: no growth
+    assert "growth buffer" not in format_summary(summary) and "wind" not in format_summary(summary)
     summary["metrics"] |= {"growth_slack_steps": 3, "max_growth_slack": 0.012}
-    line = next(r for r in format_summary(summary).splitlines() if r.startswith("growth buffer used"))
-    assert line.endswith(" 3 steps, at most 0.012 m (required distances kept)")
+    summary["metrics"] |= {"max_wind_shift": 0.011, "growth_exceeded_steps": 2}
+    lines = format_summary(summary).splitlines()
+    used = next(r for r in lines if r.startswith("growth buffer used"))
+    assert used.endswith(" 3 steps, at most 0.012 m (required distances kept)")
+    shift = next(r for r in lines if r.startswith("wind shift"))
+    assert shift.endswith(" at most 0.011 m per step, above the growth on 2 steps")
 
 
 def test_unset_and_infinite_values_are_null(tmp_path: Path) -> None:
