@@ -383,12 +383,8 @@ def slack_report(
     if relaxed or slack.max(initial=0.0) > SLACK_REPORT_M / 2:
         planned, late = sep.shortfall(x, rows, SLACK_REPORT_M, joint=True)
         if late.shape[0] and growing is not None:  # into the growth only?
-            if (
-                sep.shortfall(x, rows.ungrown(growing, sep.row_growth), SLACK_REPORT_M, joint=True)[1].shape[
-                    0
-                ]
-                == 0
-            ):
+            bare = rows.ungrown(growing, sep.row_growth)
+            if sep.shortfall(x, bare, SLACK_REPORT_M, joint=True)[1].shape[0] == 0:
                 return max(shortfall, 0.0), missed, planned
         if late.shape[0]:  # a miss within the solver's tolerance is not slack
             shortfall, missed = max(shortfall, planned), np.concatenate([missed, late])

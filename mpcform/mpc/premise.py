@@ -66,7 +66,7 @@ class GrowthPremise:
             return step, expected
         info = step.info
         assert isinstance(info, MPCStepInfo)  # the planner's own record
-        over = moved_m > self.growth_m * (1.0 + PREMISE_TOL)
-        return ControlStep(
-            step.command_mps, replace(info, wind_shift_m=moved_m, growth_exceeded=over)
-        ), expected
+        info = replace(
+            info, wind_shift_m=moved_m, growth_exceeded=moved_m > self.growth_m * (1.0 + PREMISE_TOL)
+        )
+        return ControlStep(step.command_mps, info), expected
