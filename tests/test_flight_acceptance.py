@@ -51,13 +51,21 @@ def with_plant(data: dict, plant: dict) -> dict:
 
 
 def check(data: dict, open_reason: str | None = None) -> dict:
-    """Safety always (no slack, no lowered first row: no pair starts inside its distance here);
-    completion too, unless the run is a known open one (``open_reason``): then its completion must
-    still fall short, so a fix shows up as a failure to update the list."""
-    run = run_scenario(scenario_from_dict(data))
+    """Safety always: d_min on the true path, and no slack and no lowered first row (no pair starts
+    inside its distance here), unless the wind is too strong for the final formation to hold with
+    the rows' growth, which the scenario warns of (``growth_warning``: formation_flight_100 in the
+    gusts, 0.6 m apart against 0.685 m); completion too, unless the run is a known open one
+    (``open_reason``): then its completion must still fall short, so a fix shows up as a failure to
+    update the list."""
+    scenario = scenario_from_dict(data)
+    run = run_scenario(scenario)
     m = run.summary["metrics"]
     assert m["separation_violations_true"] == 0, (m["min_separation_true"], run.summary["plant"])
-    assert m["slack_steps"] == 0 and m["lowered_first_rows"] == 0, (m["slack_steps"], m["lowered_first_rows"])
+    if scenario.growth_warning() is None:
+        assert m["slack_steps"] == 0 and m["lowered_first_rows"] == 0, (
+            m["slack_steps"],
+            m["lowered_first_rows"],
+        )
     assert m.get("obstacle_violations_true", 0) == 0, m.get("min_obstacle_clearance_true")
     assert m["geofence_violations_true"] == 0
     assert m["speed_violations"] == 0  # the certified command; the true speed may exceed v_max

@@ -16,6 +16,7 @@ from mpcform.control.nullspace import NullSpaceSettings
 from mpcform.formation.geometry import min_pair_distance, pairs_within
 from mpcform.formation.state import FormationState
 from mpcform.formation.template import Template
+from mpcform.mpc.rows import step_growth
 from mpcform.mpc.settings import MPCSettings
 from mpcform.reference.base import Reference
 from mpcform.scenario.reachability import TIMES, unreachable_warning
@@ -132,7 +133,8 @@ class Scenario:
             )
         if (controller or self.controller.kind) != "mpc":
             return old
-        lines = (self.spacing_warning(controller), self.speed_warning(), self.unreachable_warning())
+        spacing = self.spacing_warning(controller) or self.growth_warning()
+        lines = (spacing, self.speed_warning(), self.unreachable_warning())
         return old + [w for w in lines if w is not None]
 
     def goal_after_end(self) -> Array | None:
@@ -177,26 +179,17 @@ class Scenario:
         rob = self.robustness
         if (controller or self.controller.kind) != "mpc" or self.limits.d_min_m is None:
             return None
-        planned = tightened(self.limits, (), rob.margin_m, rob.a_max_mps2)[0].d_min_m
-        if planned is None:  # (d_min is set: for the type checker)
+        keep, solver = self._kept_m()
+        near = self._closer_than(keep)
+        if near is None:
             return None
-        solver = self.controller.mpc.margin_m  # the rows ask for this much more (solver tolerance)
-        keep = planned + solver
-        final = self.reference.targets(np.array([self.simulation.duration_s]))[0][0]
-        closest = min_pair_distance(final)  # inf for one drone
-        if closest >= keep * (1.0 - 1e-12):  # at that distance exactly the rows are met
-            return None
-        near = pairs_within(final, keep * (1.0 - 1e-12))
-        gaps = np.linalg.norm(final[near[:, 0]] - final[near[:, 1]], axis=1)
-        i, k = near[int(np.argmin(gaps))].tolist()
-        more = f", {near.shape[0] - 1} more pairs closer than it" if near.shape[0] > 1 else ""
-        pair = f"closest pair (drones {i} and {k}{more})"
+        closest, pair = near
         tracking = self.limits.tracking_m
         rows = f" + controller.margin {solver:.3g} m" if solver > 0 else ""
         if rob.margin_m == 0.0 and tracking == 0.0:
             return (
                 f"limits.d_min: the final formation's {pair} is {closest:.3g} m apart, below "
-                f"d_min = {planned:.3g} m{rows}: those drones stop short of their targets (widen the "
+                f"d_min = {keep - solver:.3g} m{rows}: those drones stop short of their targets (widen the "
                 "formation or lower limits.d_min)"
             )
         parts = [f"margin {rob.margin_m:.3g} m"] * (rob.margin_m > 0) + [f"tracking {tracking:.3g} m"] * (
@@ -209,6 +202,49 @@ class Scenario:
             "stop short of their targets (widen the formation, lower limits.a_max or limits.tracking, "
             "or set plant.margin)"
         )
+
+    def growth_warning(self) -> str | None:
+        """A line when, in wind, the final formation's closest pair is nearer than the distance at
+        which the MPC's rows grow along the horizon: the distance it keeps plus twice the growth at
+        the horizon's end (:meth:`mpcform.mpc.separation.Separation.growing`). Those drones hold
+        their targets with the one-interval margin alone, and gusts may need slack there (the
+        theorem's premise needs the growth). None otherwise."""
+        g = self.robustness.growth_m
+        if self.controller.kind != "mpc" or self.limits.d_min_m is None or g <= 0.0:
+            return None
+        end = step_growth(g, self.simulation.dt_s, self.controller.mpc.horizon, 1)
+        keep, grown = self._kept_m()[0], 0.0 if end is None else 2.0 * float(end[-1])
+        near = self._closer_than(keep + grown)
+        if near is None:
+            return None
+        closest, pair = near
+        return (
+            f"plant: in this wind the final formation's {pair} is {closest:.3g} m apart, below the "
+            f"{keep + grown:.4g} m ({keep:.4g} m kept + {grown:.3g} m of the rows' growth) at which the "
+            "MPC's rows grow: those drones hold their targets with the one-interval margin alone, and "
+            "the gusts may need slack there (widen the formation or lower the wind's bound)"
+        )
+
+    def _kept_m(self) -> tuple[float, float]:
+        """The distance [m] the MPC keeps between two drones, ``d_min + 2 (margin + tracking)`` plus
+        its rows' solver margin, and that margin."""
+        rob = self.robustness
+        planned = tightened(self.limits, (), rob.margin_m, rob.a_max_mps2)[0].d_min_m
+        solver = self.controller.mpc.margin_m  # the rows ask for this much more (solver tolerance)
+        return (planned or 0.0) + solver, solver
+
+    def _closer_than(self, distance_m: float) -> tuple[float, str] | None:
+        """The final formation's closest distance [m] and its pair's description when some pair is
+        nearer than ``distance_m`` (at that distance exactly the rows are met); None otherwise."""
+        final = self.reference.targets(np.array([self.simulation.duration_s]))[0][0]
+        closest = min_pair_distance(final)  # inf for one drone
+        if closest >= distance_m * (1.0 - 1e-12):
+            return None
+        near = pairs_within(final, distance_m * (1.0 - 1e-12))
+        gaps = np.linalg.norm(final[near[:, 0]] - final[near[:, 1]], axis=1)
+        i, k = near[int(np.argmin(gaps))].tolist()
+        more = f", {near.shape[0] - 1} more pairs closer than it" if near.shape[0] > 1 else ""
+        return closest, f"closest pair (drones {i} and {k}{more})"
 
     @property
     def steps(self) -> int:
