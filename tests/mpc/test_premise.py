@@ -77,3 +77,21 @@ def test_tight_targets_and_calm_air_check_nothing() -> None:
     for k in range(3):
         info = tight.step(0.1 * k, p + 0.01 * k).info
         assert info.wind_shift_m == 0.0 and not info.growth_exceeded  # type: ignore[attr-defined]
+
+
+def test_the_survivors_keep_checking_where_the_plan_takes_them() -> None:
+    """A lost drone's planner keeps what the last step expected of the others: drones that go on as
+    modelled still move the plan by nothing."""
+    planner = _planner()
+    p = np.array([[-1.0, 0.0], [1.0, 0.0]])
+    planner.reset(0.0, p)
+    for k in range(3):
+        planner.step(0.1 * k, p)
+        p = planner._predicted.copy()
+    survivors = planner.lose([0], p)
+    assert survivors.inner._expected.shape[1] == 1  # type: ignore[attr-defined]
+    info = survivors.step(0.3, p).info
+    assert info.wind_shift_m < 1e-10 and not info.growth_exceeded  # type: ignore[attr-defined]
+    p[1] = survivors.inner._predicted[0] + np.array([0.0, 0.003])  # type: ignore[attr-defined]
+    info = survivors.step(0.4, p).info
+    assert info.wind_shift_m == pytest.approx(0.006, abs=1e-9)  # type: ignore[attr-defined]
