@@ -213,8 +213,6 @@ def outcome(sc: dict[str, Any]) -> dict[str, Any]:
         "slack_steps": m["slack_steps"],
         "growth_slack_steps": m["growth_slack_steps"],
         "growth_exceeded_steps": m["growth_exceeded_steps"],
-        "max_wind_shift": m["max_wind_shift"],
-        "steps": len(sim.infos),
         "lowered": m["lowered_first_rows"],
         "deadline_misses": m["deadline_misses"],
         "cpu_s": time.process_time() - start,

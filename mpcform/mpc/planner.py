@@ -178,19 +178,19 @@ class MPCPlanner(Controller):
         p0 = self._check_positions(positions_m)
         deadline = None if (b := self.settings.step_budget_s) is None else time.perf_counter() + b
         if self.loop is None:
-            return self._step(t_s, p0, deadline)
+            return ControlStep(*self._step(t_s, p0, deadline))
         if self._predicted is not None:  # the velocity offset of the last interval
             self._loop_state = self.loop.observe(self._loop_state, p0 - self._predicted)
-        out = self._step(t_s, p0, deadline)
+        u0, info = self._step(t_s, p0, deadline)
         if self._premise is not None and self._plan is not None:
-            out, self._expected = self._premise.record(out, self._moved_m, p0, self._loop_state, self._plan)
-        u0 = out.command_mps
+            info, self._expected = self._premise.record(info, self._moved_m, p0, self._loop_state, self._plan)
         self._predicted = p0 + self.dt_s * u0 + self.loop.first(self._loop_state, u0)
         self._loop_state = self.loop.advance(self._loop_state, u0)
-        return out
+        return ControlStep(u0, info)
 
-    def _step(self, t_s: float, p0: Array, deadline: float | None) -> ControlStep:
-        """:meth:`step` from ``p0``, due at ``time.perf_counter() == deadline`` (None: no deadline)."""
+    def _step(self, t_s: float, p0: Array, deadline: float | None) -> tuple[Array, MPCStepInfo]:
+        """:meth:`step` from ``p0``, due at ``time.perf_counter() == deadline`` (None: no deadline):
+        the command and the step's record."""
         st, sep = self.settings, self._separation
         k, dt, horizon = st.gain_per_s, self.dt_s, st.horizon
         targets, ff = feedforward_targets(self.reference, t_s, dt, horizon, st.feedforward)
@@ -301,22 +301,22 @@ class MPCPlanner(Controller):
                 info = solve_info(
                     mode, sol, status, active, len(drones), slack_m, items, self._tie_break, relaxed
                 )
-                return ControlStep(u0, replace(info, growth_slack_m=growth_m))
+                return u0, replace(info, growth_slack_m=growth_m)
             status, solved = status + "; command failed certification", u[0]
         u, x, note = self._certifier.fallback(self._plan, p0, cand, horizon, solved, self._u_prev)
         self._accept(p0, u, x)
         info = solve_info(
             "fallback", sol, f"{status}; {note}", 0, 0, inside_m, inside, self._tie_break, relaxed
         )
-        return ControlStep(u[0].copy(), replace(info, deadline_missed=late))
+        return u[0].copy(), replace(info, deadline_missed=late)
 
-    def _fast_path(self, nominal: Plan) -> ControlStep:
+    def _fast_path(self, nominal: Plan) -> tuple[Array, MPCStepInfo]:
         """Accept the rollout's plan: its first input is the command."""
         self._tie_break.clear()
         self._plan, self._u_prev = nominal, nominal.inputs_mps[0].copy()
         resolved = self._tie_break.resolved
         info = MPCStepInfo("fast_path", resolved=resolved) if resolved else FAST_PATH
-        return ControlStep(nominal.inputs_mps[0].copy(), info)
+        return nominal.inputs_mps[0].copy(), info
 
     def _accept(self, p0: Array, u: Array, x: Array) -> None:
         self._plan = Plan.from_relative(p0, u, x)

@@ -16,7 +16,6 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from mpcform._validate import Array
-from mpcform.control.base import ControlStep
 from mpcform.formation.geometry import vector_norms
 from mpcform.mpc.plan import Plan
 from mpcform.mpc.prediction import Prediction
@@ -56,17 +55,13 @@ class GrowthPremise:
         return float(moves[:, growing > 0].max())
 
     def record(
-        self, step: ControlStep, moved_m: float | None, p0: Array, state: Array, plan: Plan
-    ) -> tuple[ControlStep, Array]:
-        """``step`` with the move ``moved_m`` (:meth:`moved`) and whether it exceeded the growth in
-        its record, and where its accepted ``plan`` takes the drones (S, n, d) (steps 1..S) from
-        ``p0`` (n, d) and the loop's ``state`` (n, d, s): what the next step expects."""
+        self, info: MPCStepInfo, moved_m: float | None, p0: Array, state: Array, plan: Plan
+    ) -> tuple[MPCStepInfo, Array]:
+        """The step's record ``info`` with the move ``moved_m`` (:meth:`moved`) and whether it
+        exceeded the growth, and where its accepted ``plan`` takes the drones (S, n, d) (steps
+        1..S) from ``p0`` (n, d) and the loop's ``state`` (n, d, s): what the next step expects."""
         expected = p0 + self.predict.points(state, plan.inputs_mps, plan.positions_m[1:] - p0)
         if moved_m is None:
-            return step, expected
-        info = step.info
-        assert isinstance(info, MPCStepInfo)  # the planner's own record
-        info = replace(
-            info, wind_shift_m=moved_m, growth_exceeded=moved_m > self.growth_m * (1.0 + PREMISE_TOL)
-        )
-        return ControlStep(step.command_mps, info), expected
+            return info, expected
+        over = moved_m > self.growth_m * (1.0 + PREMISE_TOL)
+        return replace(info, wind_shift_m=moved_m, growth_exceeded=over), expected

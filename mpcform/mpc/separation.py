@@ -166,13 +166,14 @@ class Separation:
         d_min = limits.d_min_m
         growth = None if dt_s is None else step_growth(limits.tube_growth_m, dt_s, h, tail)
         self.growth = growth  # per drone and position step (H + T + 1,) [m]: the rows' growth, or None
+        self.ends, self.n_rows, self.tail_count = row_ends(h, tail), row_segments(h, tail).shape[0], tail
+        self.row_growth = None if growth is None else growth[self.ends]  # per drone and row (R,) [m]
         segments = h + tail if tail <= 1 else h + 1  # the clear test's: the polyline, then the tail's hull
         ends = np.minimum(np.arange(1, segments + 1), h + tail)  # each one's last position step
         self._segment_growth = None if growth is None else growth[ends, None]  # (S, 1) [m]
-        self.pairs = None if d_min is None else PairSeparation(d_min, self.metric, settings, tail, growth)
-        self.obstacles = ObstacleSeparation(obstacles, settings, tail, growth) if obstacles else None
-        self.ends, self.n_rows, self.tail_count = row_ends(h, tail), row_segments(h, tail).shape[0], tail
-        self.row_growth = None if growth is None else growth[self.ends]  # per drone and row (R,) [m]
+        grow = self.row_growth
+        self.pairs = None if d_min is None else PairSeparation(d_min, self.metric, settings, tail, grow)
+        self.obstacles = ObstacleSeparation(obstacles, settings, tail, grow) if obstacles else None
 
     def rows(
         self,

@@ -115,14 +115,14 @@ class PairSeparation:
     """``d_min`` [m] between drone pairs in the metric ``W = diag(metric)``, joint or decoupled."""
 
     def __init__(
-        self, d_min_m: float, metric: Array, settings: MPCSettings, tail: int = 0, growth: Array | None = None
+        self, d_min_m: float, metric: Array, settings: MPCSettings, tail: int = 0, grow: Array | None = None
     ) -> None:
         self.d_min_m, self.metric, self.margin_m = d_min_m, metric, settings.margin_m
         self.unit_metric = bool(np.all(metric == 1.0))  # W = I: no scaling
         self.joint = settings.coupling == "joint"
         self.tail = tail  # the braking tail's points (:mod:`mpcform.mpc.tail`)
         self.segs, self.ends = row_segments(settings.horizon, tail), row_ends(settings.horizon, tail)
-        self.grow = np.zeros(self.ends.shape) if growth is None else growth[self.ends]  # per drone, row [m]
+        self.grow = np.zeros(self.ends.shape) if grow is None else grow  # per drone and row (R,) [m]
         self.near = NearPairs()  # the clear test's neighbour list, kept between steps
 
     def relative(self, points: Array, i: Array, k: Array) -> Array:
@@ -260,13 +260,12 @@ class ObstacleSeparation:
         obstacles: tuple[SphereObstacle, ...],
         settings: MPCSettings,
         tail: int = 0,
-        growth: Array | None = None,
+        grow: Array | None = None,
     ) -> None:
         self.center_m, self.required_m = obstacle_arrays(obstacles)
         self.margin_m, self.tail = settings.margin_m, tail  # the braking tail's points
         self.segs = row_segments(settings.horizon, tail)
-        ends = row_ends(settings.horizon, tail)
-        self.grow = np.zeros(ends.shape) if growth is None else growth[ends]  # per row (R,) [m]
+        self.grow = np.zeros(self.segs.shape) if grow is None else grow  # per drone and row (R,) [m]
 
     def rows(self, p0: Array, path: Array, items: Array, on: Array, growing: Array | None = None) -> RowPart:
         """One-drone rows of the ``(drone, obstacle)`` items (O, 2) about the guess ``path``
