@@ -250,7 +250,7 @@ def adversarial(rng: np.random.Generator, index: int) -> dict[str, Any]:
     ``v_max`` 0.5-8 m/s (a quadrotor's 0.3-1.5, below its valid speed), horizon 5-30 at dt
     0.05-0.1, a lag up to 0.3 s, a second-order loop or the quadrotor in gusts at their bound, and a
     corridor (geofence) or a sphere in the way. The braking terminal condition's family
-    (:mod:`mpcform.mpc.braking`)."""
+    (:mod:`mpcform.mpc.constraints.braking`)."""
     dim, n = int(rng.choice([2, 3])), int(rng.integers(2, 5))
     d_min, dt = float(rng.uniform(0.3, 0.6)), float(rng.choice([0.05, 0.1]))
     plant_kind = str(rng.choice(["lag", "lag", "second_order", "quadrotor"]))

@@ -9,7 +9,7 @@ from scipy.spatial.transform import Rotation
 
 from mpcform.formation.state import FormationState
 from mpcform.formation.template import Template
-from mpcform.mpc.rows import Layout, RowBlock
+from mpcform.mpc.constraints.rows import Layout, RowBlock
 from mpcform.reference.base import ConstantReference
 
 

@@ -19,7 +19,7 @@ OPEN_BREACHES: tuple[str, ...] = ()
 """Runs whose true path breaks d_min, each a known open failure: none. completion_14 (18 drones,
 second-order loop, horizon 7 at dt 0.05) came to 0.476-0.482 m of its 0.547 m while the braking
 tail's rows held only on the chord from the horizon's end to the rest point; the tail's hull
-(:mod:`mpcform.mpc.tail`) keeps it at 0.551 m with no slack."""
+(:mod:`mpcform.mpc.constraints.tail`) keeps it at 0.551 m with no slack."""
 
 
 def test_the_family_draws_what_it_promises() -> None:

@@ -1,4 +1,5 @@
-"""``mpcform bench split``: the iterated split's QP cost against rounds and time (:mod:`mpcform.mpc.split`).
+"""``mpcform bench split``: the iterated split's QP cost against rounds and time
+(:mod:`mpcform.mpc.solve.split`).
 
 Each scenario is flown by the decoupled planner with ``split_iterations = max(rounds)`` (ideal
 plant) for ``steps`` steps; every QP it solves is solved again with its split history recorded
@@ -20,9 +21,9 @@ import numpy as np
 
 from mpcform.errors import ScenarioError
 from mpcform.mpc.planner import MPCPlanner
-from mpcform.mpc.problem import StepQP
-from mpcform.mpc.sparse import SparseSolver
-from mpcform.mpc.split import SplitQP
+from mpcform.mpc.solve.problem import StepQP
+from mpcform.mpc.solve.sparse import SparseSolver
+from mpcform.mpc.solve.split import SplitQP
 from mpcform.mpc.strategy import PerDroneSolve, SplitPolicy, as_sparse
 from mpcform.scenario.build import build_controller
 from mpcform.scenario.load import load_scenario

@@ -60,7 +60,7 @@ class Controller(ABC):
 
     def lose(self, drones: Array, positions_m: Array) -> Controller:
         """The controller that stops planning for ``drones`` (lost: flipped or on the floor), the
-        drones at ``positions_m`` (n, d) now: the planner's (:mod:`mpcform.mpc.survivors`); this
+        drones at ``positions_m`` (n, d) now: the planner's (:mod:`mpcform.mpc.safety.survivors`); this
         one itself for the others, which keep commanding every drone."""
         return self
 

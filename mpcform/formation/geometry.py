@@ -49,7 +49,7 @@ def vector_norms(v: Array) -> Array:
 def drone_spreads(guess: Array, positions: Array) -> Array:
     """Per drone (n,): its largest distance along ``guess`` (T, n, d) from ``positions[0]`` plus the
     largest distance of ``positions`` (T, n, d) from ``guess`` (the clear test of
-    :meth:`mpcform.mpc.separation.Separation.clear`)."""
+    :meth:`mpcform.mpc.constraints.separation.Separation.clear`)."""
     dev = np.empty((2,) + guess.shape)
     np.subtract(guess, positions[0], out=dev[0])
     np.subtract(positions, guess, out=dev[1])

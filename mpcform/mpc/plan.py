@@ -11,7 +11,7 @@ from functools import lru_cache
 import numpy as np
 
 from mpcform._validate import Array
-from mpcform.mpc.braking import Braking
+from mpcform.mpc.constraints.braking import Braking
 
 
 @dataclass(frozen=True)
@@ -63,7 +63,7 @@ def _decay(h: int, k: float, dt: float) -> Array:
 def guess(plan: Plan | None, p0: Array, horizon: int, braking: Braking | None = None) -> Array:
     """Absolute guess positions (H + 1, n, d) about which the separation rows are linearised: the
     previous plan shifted one step, ending in a hold (at the first step every drone holding).
-    With ``braking`` (:mod:`mpcform.mpc.braking`) the shifted plan brakes at its last step and the
+    With ``braking`` (:mod:`mpcform.mpc.constraints.braking`) the shifted plan brakes at its last step and the
     guess ends in its stop point (H + 2 positions), the previous plan's own."""
     steps = horizon + 1 + (braking is not None)
     if plan is None:
@@ -81,7 +81,7 @@ def warm_start(
 ) -> Array:
     """Primal warm start (2, H, n, d): inputs and relative positions of the previous plan shifted
     one step (or of the rollout ``u_nom``, ``x_nom`` at the first step); with ``braking`` its last
-    step brakes (:meth:`mpcform.mpc.braking.Braking.shifted`)."""
+    step brakes (:meth:`mpcform.mpc.constraints.braking.Braking.shifted`)."""
     if plan is None:
         return np.stack([u_nom, x_nom])
     if braking is None:

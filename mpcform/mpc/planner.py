@@ -2,11 +2,11 @@
 
 Every step: targets over the horizon and the eq. 14 rollout (:mod:`mpcform.mpc.plan`); the
 fast path when the rollout meets every row (it then *is* the QP's optimum); else the candidate
-items (:mod:`mpcform.mpc.candidates`), their rows linearised about the guess
-(:mod:`mpcform.mpc.separation`), the tie-break (:mod:`mpcform.mpc.liveness`), and a solve of the
-QP over the conflicted drones' groups: the sparse QP with a backend (:mod:`mpcform.mpc.sparse`),
-or in decoupled mode each drone's block with DAQP (:mod:`mpcform.mpc.per_drone`). The command is
-certified, or replaced by the safe fallback (:mod:`mpcform.mpc.certify`), and reported.
+items (:mod:`mpcform.mpc.constraints.candidates`), their rows linearised about the guess
+(:mod:`mpcform.mpc.constraints.separation`), the tie-break (:mod:`mpcform.mpc.liveness`), and a solve of the
+QP over the conflicted drones' groups: the sparse QP with a backend (:mod:`mpcform.mpc.solve.sparse`),
+or in decoupled mode each drone's block with DAQP (:mod:`mpcform.mpc.solve.per_drone`). The command is
+certified, or replaced by the safe fallback (:mod:`mpcform.mpc.safety.certify`), and reported.
 
 In decoupled mode the pair rows are split about the guess's midpoints, unless the rollout meets
 the limit rows and the joint pair rows (and the obstacle rows) about the guess: then every pair of
@@ -15,7 +15,7 @@ the rollout itself, which meets them exactly; so the rollout is the decoupled QP
 the fast path (which tests the joint rows) returns the same command as a solve. A rollout that
 breaks a limit row is never a linearisation point (the plan could not follow it).
 
-With a velocity loop (``loop``, :mod:`mpcform.mpc.loop`: a linear plant's, or the quadrotor's
+With a velocity loop (``loop``, :mod:`mpcform.mpc.velocity_loop`: a linear plant's, or the quadrotor's
 hover linearisation) every separation test
 is on where the loop takes the drones: the rows (the forced response in the QP, the free one in
 their bounds), the rollout's tests, the guess (the true path of the shifted plan) and the
@@ -27,7 +27,7 @@ then hard, lowered at most to what braking or the previous plan reaches: the fir
 mostly the loop's free response, and a slack there would let a drone approach one partner while
 another forces it.
 
-With ``a_max`` every plan ends in its braking tail (:mod:`mpcform.mpc.braking`): the separation
+With ``a_max`` every plan ends in its braking tail (:mod:`mpcform.mpc.constraints.braking`): the separation
 and geofence rows also hold at the stop point, so the previous plan's tail stays a feasible,
 certified fallback (:mod:`mpcform.mpc.prediction` gives the positions the rows are written on).
 """
@@ -43,23 +43,23 @@ from mpcform._validate import Array, positive
 from mpcform.control.base import Controller, ControlStep, feedforward_targets
 from mpcform.control.laws import check_gain_dt
 from mpcform.errors import ValidationError
-from mpcform.mpc.braking import Braking
-from mpcform.mpc.candidates import CandidateSelector, qp_drones
-from mpcform.mpc.certify import Certifier
-from mpcform.mpc.limit_families import admitted, limit_rows, violators
+from mpcform.mpc.constraints.braking import Braking
+from mpcform.mpc.constraints.candidates import CandidateSelector, qp_drones
+from mpcform.mpc.constraints.limits import admitted, limit_rows, violators
+from mpcform.mpc.constraints.separation import Separation, SeparationRows
 from mpcform.mpc.liveness import TieBreak
-from mpcform.mpc.loop import VelocityLoop
 from mpcform.mpc.plan import Plan, guess, merge, rollout, warm_start
 from mpcform.mpc.prediction import Prediction
-from mpcform.mpc.premise import GrowthPremise
-from mpcform.mpc.problem import StepQP
-from mpcform.mpc.separation import Separation, SeparationRows
+from mpcform.mpc.safety.certify import Certifier
+from mpcform.mpc.safety.premise import GrowthPremise
+from mpcform.mpc.safety.survivors import Survivors, lost_spheres, split_lost
 from mpcform.mpc.settings import MPCSettings
-from mpcform.mpc.split import SplitQP
+from mpcform.mpc.solve.factory import build_step_solvers
+from mpcform.mpc.solve.problem import StepQP
+from mpcform.mpc.solve.split import SplitQP
 from mpcform.mpc.step_info import FAST_PATH, MPCStepInfo, solve_info
-from mpcform.mpc.step_solvers import build_step_solvers
 from mpcform.mpc.strategy import with_backend
-from mpcform.mpc.survivors import Survivors, lost_spheres, split_lost
+from mpcform.mpc.velocity_loop import VelocityLoop
 from mpcform.reference.base import Reference
 from mpcform.reference.subset import SubsetReference
 from mpcform.solvers.base import QPBackend
@@ -150,7 +150,7 @@ class MPCPlanner(Controller):
         return self._plan
 
     def lose(self, drones: Array, positions_m: Array) -> Controller:
-        """Stop planning for ``drones`` (:mod:`mpcform.mpc.survivors`): the planner of the others,
+        """Stop planning for ``drones`` (:mod:`mpcform.mpc.safety.survivors`): the planner of the others,
         which keep ``d_min`` from where the lost drones are (``positions_m`` (n, d)) and go on
         from this planner's plan."""
         lost, keep = split_lost(drones, self.n)

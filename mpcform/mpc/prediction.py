@@ -1,5 +1,5 @@
 """Where a plan takes the drones: the single integrator, the velocity loop's offsets
-(:mod:`mpcform.mpc.loop`) and the braking tail's points (:mod:`mpcform.mpc.tail`)."""
+(:mod:`mpcform.mpc.velocity_loop`) and the braking tail's points (:mod:`mpcform.mpc.constraints.tail`)."""
 
 from __future__ import annotations
 
@@ -8,11 +8,11 @@ from dataclasses import replace
 import numpy as np
 
 from mpcform._validate import Array
-from mpcform.mpc.braking import Braking
-from mpcform.mpc.loop import VelocityLoop
+from mpcform.mpc.constraints.braking import Braking
+from mpcform.mpc.constraints.separation import SeparationRows
+from mpcform.mpc.constraints.tail import Tail
 from mpcform.mpc.plan import Plan, guess
-from mpcform.mpc.separation import SeparationRows
-from mpcform.mpc.tail import Tail
+from mpcform.mpc.velocity_loop import VelocityLoop
 
 
 class Prediction:
@@ -40,7 +40,7 @@ class Prediction:
     def points(self, state: Array, u: Array, x: Array) -> Array:
         """Relative positions (S, n, d) the drones reach with the inputs ``u`` (H, n, d): the single
         integrator's ``x``, plus the loop's offsets; with braking, then the tail's points, the
-        stop point last (with the loop, where it comes to rest; :mod:`mpcform.mpc.tail`)."""
+        stop point last (with the loop, where it comes to rest; :mod:`mpcform.mpc.constraints.tail`)."""
         y = x if self.loop is None else x + self.loop.offsets(state, u)[1:]
         if self.tail is None:
             return y

@@ -2,16 +2,16 @@
 
 ``MPCSettings.coupling`` chooses the rows; the strategy how they are solved:
 
-- :class:`SparseSolve`: the sparse QP of :mod:`mpcform.mpc.qp` with a backend of
+- :class:`SparseSolve`: the sparse QP of :mod:`mpcform.mpc.solve.sparse_qp` with a backend of
   :data:`~mpcform.solvers.registry.FAMILIES` (either coupling; decoupled rows then make one
   block-diagonal sparse QP), with its tolerances;
 - :class:`PerDroneSolve` (decoupled rows only): each conflicted drone's small dense QP with a
   per-drone backend of :data:`~mpcform.solvers.registry.PER_DRONE_FAMILIES` (DAQP by default,
-  :mod:`mpcform.mpc.per_drone`), and the :class:`SplitPolicy` of its pair rows' split points
-  (:mod:`mpcform.mpc.split`).
+  :mod:`mpcform.mpc.solve.per_drone`), and the :class:`SplitPolicy` of its pair rows' split points
+  (:mod:`mpcform.mpc.solve.split`).
 
 A setting that a strategy would ignore has no place in it, so it cannot be written.
-:func:`mpcform.mpc.step_solvers.build_step_solvers` is the one factory of the planner's step
+:func:`mpcform.mpc.solve.factory.build_step_solvers` is the one factory of the planner's step
 solvers.
 """
 
@@ -52,7 +52,7 @@ class SparseSolve:
 @dataclass(frozen=True)
 class SplitPolicy:
     """Rounds that move each pair row's split point from the midpoint towards the joint optimum
-    (:mod:`mpcform.mpc.split`): ``iterations`` at every step (0: the midpoint split), else
+    (:mod:`mpcform.mpc.solve.split`): ``iterations`` at every step (0: the midpoint split), else
     ``stalled`` in the steps where a drone is stalled in conflict (:mod:`mpcform.mpc.liveness`;
     0: never); no new round starts after ``budget_s`` of a step's solve [s] (None: no limit)."""
 

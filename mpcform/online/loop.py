@@ -8,14 +8,14 @@ positions), which a Crazyflie's ``cmdFullState`` takes as they are.
 
 The deadline is the planner's ``step_budget_s`` (:class:`mpcform.mpc.settings.MPCSettings`): no
 optional split round starts after it, and a step whose solve ends after it sends the certified
-braking fallback instead (the previous plan's tail, :mod:`mpcform.mpc.braking`), reported as
+braking fallback instead (the previous plan's tail, :mod:`mpcform.mpc.constraints.braking`), reported as
 ``deadline_missed``. The check is cooperative: a solver call is bounded by its iteration cap
 (``controller.solve.max_iter``), not interrupted, so a step can end later than its budget by one
 solver call; :attr:`OnlineStep.wall_s` records it.
 
 A drone that can no longer follow its setpoints (flipped, on the floor: the Crazyflie's
 supervisor reports it tumbled) is given up with :meth:`OnlineLoop.lose`: the planner stops
-planning for it, the others keep ``d_min`` from where it lies (:mod:`mpcform.mpc.survivors`),
+planning for it, the others keep ``d_min`` from where it lies (:mod:`mpcform.mpc.safety.survivors`),
 and its command is zero from then on (its setpoints hold it where it is: stop or land it).
 """
 

@@ -8,9 +8,9 @@ from mpcform.control.graph import GRAPH_KINDS
 from mpcform.control.nullspace import NullSpaceController, NullSpaceSettings
 from mpcform.control.tracking import ProportionalController, TrackingController
 from mpcform.errors import ScenarioError, SolverError, ValidationError
-from mpcform.mpc.loop import VelocityLoop
 from mpcform.mpc.settings import MPCSettings
 from mpcform.mpc.strategy import with_backend
+from mpcform.mpc.velocity_loop import VelocityLoop
 from mpcform.scenario.parse import as_scenario_error
 from mpcform.scenario.schema import CONTROLLER_KINDS, did_you_mean, listing
 from mpcform.scenario.spec import Scenario

@@ -16,7 +16,7 @@ from mpcform.control.nullspace import NullSpaceSettings
 from mpcform.formation.geometry import min_pair_distance, pairs_within
 from mpcform.formation.state import FormationState
 from mpcform.formation.template import Template
-from mpcform.mpc.rows import step_growth
+from mpcform.mpc.constraints.rows import step_growth
 from mpcform.mpc.settings import MPCSettings
 from mpcform.reference.base import Reference
 from mpcform.scenario.reachability import TIMES, unreachable_warning
@@ -206,7 +206,7 @@ class Scenario:
     def growth_warning(self) -> str | None:
         """A line when, in wind, the final formation's closest pair is nearer than the distance at
         which the MPC's rows grow along the horizon: the distance it keeps plus twice the growth at
-        the horizon's end (:meth:`mpcform.mpc.separation.Separation.growing`). Those drones hold
+        the horizon's end (:meth:`mpcform.mpc.constraints.separation.Separation.growing`). Those drones hold
         their targets with the one-interval margin alone, and gusts may need slack there (the
         theorem's premise needs the growth). None otherwise."""
         g = self.robustness.growth_m

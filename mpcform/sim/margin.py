@@ -33,7 +33,7 @@ quadrotor's bound holds while the commanded speed stays below :attr:`Margin.vali
 without bound); it covers velocity tracking (no planned positions passed to the plant). Position
 noise is not included: the planner's measured start is off by the noise on top of this margin.
 
-When the planner models the velocity loop (:mod:`mpcform.mpc.loop`, the default), its rows hold at
+When the planner models the velocity loop (:mod:`mpcform.mpc.velocity_loop`, the default), its rows hold at
 the interval ends up to what that model misses, and :func:`modelled_margin` is the margin instead.
 """
 
@@ -165,7 +165,7 @@ def plant_margin(plant: Plant, dt_s: float, a_max_mps2: float | None = None, *, 
 def chord_margin(plant: Plant, dt_s: float, a_max_mps2: float) -> Array:
     """Per-axis bound (d,) [m] on how far a linear plant's true path strays from the chord between
     its positions at the ends of an interval, for command changes within ``a_max dt``: what is
-    left of the margin when the planner models the loop (:mod:`mpcform.mpc.loop`), whose rows hold
+    left of the margin when the planner models the loop (:mod:`mpcform.mpc.velocity_loop`), whose rows hold
     at the interval ends. A step ``Delta`` at ``t_j`` bends the interval ``[t_k, t_k + dt]`` by
     ``Delta (S(tau + s) - S(tau) - s/dt (S(tau + dt) - S(tau)))``, ``tau = t_k - t_j``; summing the
     worst of each over the past steps bounds it."""
@@ -183,7 +183,7 @@ def chord_margin(plant: Plant, dt_s: float, a_max_mps2: float) -> Array:
 
 def modelled_margin(plant: Plant, dt_s: float, a_max_mps2: float, margin: Margin | None = None) -> Array:
     """Per-axis margin (d,) [m] left when the planner models the plant's velocity loop with its
-    velocity-offset estimate (:mod:`mpcform.mpc.loop`): the rows then hold at the interval ends up
+    velocity-offset estimate (:mod:`mpcform.mpc.velocity_loop`): the rows then hold at the interval ends up
     to the wind's change since the last interval (:func:`observed_wind`), plus the bend within an
     interval (:func:`chord_margin`) and, for the quadrotor, whose loop is its hover linearisation,
     both times :data:`QUADROTOR_SAFETY` plus :data:`LINEARISATION_REMAINDER` of the command part
@@ -198,7 +198,7 @@ def modelled_margin(plant: Plant, dt_s: float, a_max_mps2: float, margin: Margin
 def observed_wind(plant: Plant, dt_s: float) -> Array:
     r"""Per-axis bound (d,) [m] on the wind's share of ``|p(t_k + s) - p_model(t_k + s)|``,
     ``0 < s <= dt``, when the model's velocity offset is the last interval's mean (deadbeat,
-    :meth:`mpcform.mpc.loop.VelocityLoop.observe`). With ``H(t)`` the wind-to-velocity step
+    :meth:`mpcform.mpc.velocity_loop.VelocityLoop.observe`). With ``H(t)`` the wind-to-velocity step
     response and ``I = \int H``, a wind impulse ``u`` before ``t_k`` errs by ``K_s(u) = H(u + s) -
     H(u) - s/dt (H(u) - H(u - dt))``: the gusts (within ``gust_bound``, any history) add
     ``||K_s||_1 gust_bound``; the constant mean (on from ``t = 0``, the drone at rest) adds
@@ -234,7 +234,7 @@ def wind_growth(plant: Plant, dt_s: float) -> float:
     """How far [m] per control interval the wind's change can move a drone off the plan the
     planner predicted (the norm of :func:`observed_wind`; the quadrotor's times
     :data:`QUADROTOR_SAFETY`): the MPC's rows grow by it along the horizon
-    (:func:`mpcform.mpc.rows.step_growth`). 0 in calm air."""
+    (:func:`mpcform.mpc.constraints.rows.step_growth`). 0 in calm air."""
     if plant.wind is None:
         return 0.0
     grow = float(np.linalg.norm(observed_wind(plant, dt_s)))

@@ -10,12 +10,12 @@ v_max), ``qp_solves``, ``fast_path_steps``, ``solver_failures``, ``max_slack`` [
 ``slack_steps`` (steps whose plan needed slack, or that start inside a required distance, by
 more than :data:`mpcform.mpc.planner.SLACK_REPORT_M`) and
 ``lowered_first_rows`` (steps whose first separation rows were lowered to what braking reaches,
-:func:`mpcform.mpc.first_rows.hard_first_rows`), ``max_growth_slack`` [m] and
+:func:`mpcform.mpc.safety.first_rows.hard_first_rows`), ``max_growth_slack`` [m] and
 ``growth_slack_steps`` (in wind, steps whose plan reached into its rows' growth along the horizon
 but kept every required distance: the growth's buffer, not slack), ``max_wind_shift`` [m] and
 ``growth_exceeded_steps`` (in wind, how far the wind moved the previous plan within the growth's
 window, and the steps it moved farther than the growth per step: the growth's premise,
-:mod:`mpcform.mpc.premise`),
+:mod:`mpcform.mpc.safety.premise`),
 ``stall_events``, ``resolutions`` and ``circling_resets`` (drones that started to stall,
 escalated tie-breaks that ended, and circling drones whose escalation was reset,
 :mod:`mpcform.mpc.liveness`), ``deadline_misses`` (steps whose solve ended past

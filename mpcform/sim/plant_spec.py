@@ -29,7 +29,7 @@ from mpcform.sim.crazyflow import CrazyflowPlant, check_settings
 from mpcform.sim.plants import KINDS, SAMPLES_PER_STEP, IdealPlant, Plant, lag_plant, second_order_plant
 from mpcform.sim.quadrotor import QuadrotorPlant, QuadrotorSpec
 from mpcform.sim.wind import Wind
-from mpcform.world.loop import LoopGroup
+from mpcform.world.loop_groups import LoopGroup
 
 UNIT_SUFFIXES = ("_rad_s", "_hz", "_s", "_m")
 """The unit suffixes of field names that scenario keys leave out."""
@@ -47,7 +47,7 @@ class Robustness:
     valid_speed_mps: float = float("inf")
     loop: tuple[LoopGroup, ...] = ()
     """The plant's velocity loops ``(A, B, c, axes)`` per axis group, which the planner can model
-    (:mod:`mpcform.mpc.loop`; the quadrotor's hover linearisation); empty for the ideal plant."""
+    (:mod:`mpcform.mpc.velocity_loop`; the quadrotor's hover linearisation); empty for the ideal plant."""
     growth_m: float = 0.0
     """In wind: how far [m] per control interval the wind's change can move a drone off the plan
     (:func:`mpcform.sim.margin.wind_growth`); the MPC's rows grow by it along the horizon."""
@@ -109,7 +109,7 @@ class PlantSpec(ABC):
         :mod:`mpcform.sim.margin`): zero for the ideal plant; otherwise ``margin_m`` if given, else
         the plant's margin over one control interval of ``dt_s`` with ``a_max_mps2`` (None: the
         plant's default); with ``loop_modelled`` (the MPC's rows model the plant's velocity loop at
-        the interval ends, :mod:`mpcform.mpc.loop`) only what that model leaves out
+        the interval ends, :mod:`mpcform.mpc.velocity_loop`) only what that model leaves out
         (:func:`mpcform.sim.margin.modelled_margin`). Measurement noise is not part of it. The rows'
         growth is ``margin_growth_m`` if given, else the wind's (:func:`mpcform.sim.margin.wind_growth`)."""
         if self.kind == "ideal":

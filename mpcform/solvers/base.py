@@ -66,7 +66,7 @@ def given(**values: Any) -> dict[str, Any]:
 class QPContext:
     """What the planner's QP means, for backends that need more than its matrices.
 
-    Variables (see :mod:`mpcform.mpc.qp`): ``z = [u_0 .. u_{H-1} | x_1 .. x_H | s_1 .. s_H]``,
+    Variables (see :mod:`mpcform.mpc.solve.sparse_qp`): ``z = [u_0 .. u_{H-1} | x_1 .. x_H | s_1 .. s_H]``,
     inputs and positions relative to the start (``x_j = p_j - p0``), each block (H, n, d) stacked
     step-major, then one slack per step and drone (H, n). Rows ``separation_rows`` (start, stop)
     are the linearised separation rows. The exact (non-convex) separation they stand for, at every

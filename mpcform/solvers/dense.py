@@ -6,9 +6,9 @@ Problem form (DAQP's)::
 
 with ``H`` positive definite, the first ``s = len(upper) - rows(A)`` bounds simple bounds on the
 first ``s`` variables and :data:`NO_BOUND` for an absent bound. The per-drone planner
-(:mod:`mpcform.mpc.per_drone`) takes from a solve its primal point, its cost, whether it is
+(:mod:`mpcform.mpc.solve.per_drone`) takes from a solve its primal point, its cost, whether it is
 optimal (an infeasible hard QP sends the drone to its soft QP) and the multipliers of every
-bound in DAQP's sign convention, which its split rounds (:mod:`mpcform.mpc.split`) and working
+bound in DAQP's sign convention, which its split rounds (:mod:`mpcform.mpc.solve.split`) and working
 sets rely on. The backends and their names are in :mod:`mpcform.solvers.registry`.
 """
 

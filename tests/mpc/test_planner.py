@@ -57,7 +57,7 @@ def test_first_input_is_eq14_when_no_row_is_active(
     """Without the acceleration bound (``a_max = inf``; the default's ramp is tested below), also
     with a lag's velocity loop in the rows (the cost is still eq. 14's, the loop moved by earlier
     commands)."""
-    from mpcform.mpc.loop import VelocityLoop
+    from mpcform.mpc.velocity_loop import VelocityLoop
 
     rng = np.random.default_rng(dim)
     lag = (np.array([[-5.0]]), np.array([5.0]), np.array([1.0]), (0, 1, 2))
@@ -461,7 +461,7 @@ def test_with_a_loop_every_first_row_is_hard_and_braking_meets_it(coupling: str)
     """With a velocity loop the QP's first rows carry no slack (a drone's slack at the first step
     would let it approach one partner as far as another forces it to): each is lowered at most to
     what the braking command reaches, which meets them all, and a lowered bound is reported."""
-    from mpcform.mpc.loop import VelocityLoop
+    from mpcform.mpc.velocity_loop import VelocityLoop
 
     lag = (np.array([[-5.0]]), np.array([5.0]), np.array([1.0]), (0, 1))
     tpl = Template(np.array([[-1.0, 0.0], [0.0, 0.0], [1.0, 0.0]]))
@@ -501,9 +501,9 @@ def test_with_a_loop_every_first_row_is_hard_and_braking_meets_it(coupling: str)
 def test_a_miss_within_the_solvers_tolerance_is_no_slack(miss_m: float, reported: bool) -> None:
     """slack_report (a solve with lowered first rows): a plan that misses a row by 1 nm needed no
     slack; by 1 mm it did, and the pair is named."""
-    from mpcform.mpc.candidates import Candidates
+    from mpcform.mpc.constraints.candidates import Candidates
+    from mpcform.mpc.constraints.separation import Separation
     from mpcform.mpc.planner import SLACK_REPORT_M, slack_report
-    from mpcform.mpc.separation import Separation
 
     d_min, h = 0.5, 3
     sep = Separation(2, Limits(v_max_mps=1.0, d_min_m=d_min), MPCSettings(horizon=h), ())
@@ -532,9 +532,9 @@ def test_a_plan_within_the_rows_growth_keeps_every_required_distance(
     margin + up to 2 x 0.02 m of growth: 0.542 m) by 12 mm but keeps its required distance (0.502
     m): that is the growth's buffer, reported apart, not slack. At 0.49 m it enters the required
     distance itself: slack, the pair named, by how far it misses the grown rows."""
-    from mpcform.mpc.candidates import Candidates
+    from mpcform.mpc.constraints.candidates import Candidates
+    from mpcform.mpc.constraints.separation import Separation
     from mpcform.mpc.planner import slack_report
-    from mpcform.mpc.separation import Separation
 
     h, pairs = 4, np.array([[0, 1]])
     lim = Limits(v_max_mps=1.0, d_min_m=0.5, tube_growth_m=0.01)

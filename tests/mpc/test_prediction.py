@@ -5,11 +5,11 @@ from __future__ import annotations
 import numpy as np
 from scipy.linalg import expm
 
-from mpcform.mpc.braking import Braking
-from mpcform.mpc.loop import VelocityLoop
+from mpcform.mpc.constraints.braking import Braking
+from mpcform.mpc.constraints.tail import braking_tail
 from mpcform.mpc.plan import Plan
 from mpcform.mpc.prediction import Prediction
-from mpcform.mpc.tail import braking_tail
+from mpcform.mpc.velocity_loop import VelocityLoop
 from mpcform.world.limits import Limits
 
 DT, H, TAU = 0.1, 5, 0.3

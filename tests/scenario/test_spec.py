@@ -176,7 +176,7 @@ def test_growth_warning_names_the_drones_whose_rows_do_not_grow_in_wind() -> Non
     import math
     import tomllib
 
-    from mpcform.mpc.rows import GROWTH_TIME_S
+    from mpcform.mpc.constraints.rows import GROWTH_TIME_S
     from mpcform.scenario.build import build_controller
     from mpcform.scenario.load import scenario_from_dict
 

@@ -190,12 +190,12 @@ MODELLED = [
 @pytest.mark.parametrize(("kind", "dim", "wind"), MODELLED)
 def test_modelled_margin_covers_the_observed_loop(kind, dim, wind):
     """The planner models the plant's velocity loop (the quadrotor's hover linearisation), run on
-    the commands sent, plus the last interval's velocity offset (:mod:`mpcform.mpc.loop`): on the
+    the commands sent, plus the last interval's velocity offset (:mod:`mpcform.mpc.velocity_loop`): on the
     real plant, per axis, the interval ends' deviation from that model plus the bend within an
     interval stay within :func:`modelled_margin`, on random and worst-case command sequences, and
     the offset estimate takes out most of the wind. Without wind the quadrotor's deviation is a few
     per cent of its unmodelled command margin (:data:`LINEARISATION_REMAINDER` is 0.1 of it)."""
-    from mpcform.mpc.loop import VelocityLoop
+    from mpcform.mpc.velocity_loop import VelocityLoop
     from mpcform.sim.margin import LINEARISATION_REMAINDER, modelled_margin
 
     if wind is not None:

@@ -9,11 +9,11 @@ import pytest
 from mpcform.errors import SolverError
 from mpcform.formation.state import FormationState
 from mpcform.formation.template import Template
-from mpcform.mpc.per_drone import PerDroneQP
 from mpcform.mpc.planner import MPCPlanner
-from mpcform.mpc.problem import StepQP
 from mpcform.mpc.settings import MPCSettings
-from mpcform.mpc.split import SplitQP
+from mpcform.mpc.solve.per_drone import PerDroneQP
+from mpcform.mpc.solve.problem import StepQP
+from mpcform.mpc.solve.split import SplitQP
 from mpcform.mpc.strategy import PerDroneSolve, SplitPolicy
 from mpcform.reference.base import ConstantReference
 from mpcform.sim.simulation import simulate

@@ -1,0 +1,156 @@
+r"""The planner's model of a drone's velocity loop: where a lagging drone really goes.
+
+The planner's single integrator predicts ``p0 + x_e`` with ``x_e = dt sum_{j<e} u_j``. A drone
+whose velocity loop is linear, per axis ``xi' = A xi + B u``, ``v = c^T xi`` (first-order lag:
+``xi = v``, ``A = -1/tau``, ``B = 1/tau``; second order: ``xi = (v, v')``), flown with each
+command held over its interval (the quadrotor: its hover linearisation), is instead at
+
+.. math::
+    p_e = p_0 + x_e + F_e \xi_0 + \sum_{j<e} G_{e,j} u_j        \qquad \text{(per axis)},
+
+exactly (one matrix exponential of the system ``(p, xi)`` per axis group). ``F_e xi_0`` is the
+*free* response (the velocity the drone already has, e.g. the lag's overshoot ``tau (1 - a^e)
+v_0``) and ``G`` the *forced* one (a lag lags its commands: ``G_{e,j} = -tau (1 - a) a^{e-1-j}``,
+``a = e^{-dt/tau}``). The planner keeps its cost on ``x`` (so eq. 14 is unchanged when nothing is
+active) and writes its separation rows on these true positions: rows linear in ``u``, exact for
+the plant without wind, so a braking plan no longer overshoots into a partner.
+
+The loop state ``xi_0`` is not measured: :meth:`VelocityLoop.advance` runs the model on the
+commands sent (a drone at rest at the start), exact for a linear plant without wind. Wind (and a
+quadrotor's departure from its hover linearisation) moves the drone by ``r_k`` more than the model
+predicted over the last interval. The state's last component is a velocity offset ``delta``
+[m/s] over the next interval (``F_e`` carries ``dt`` for it, ``e >= 1``), set by
+:meth:`VelocityLoop.observe` to the last interval's mean, ``delta += r_k / dt`` (a deadbeat
+disturbance estimate). It is not extrapolated further: a loop with integral action takes a
+wind's offset out within about a second, and extrapolated gusts would only raise spurious
+conflicts. The margin covers what the estimate misses (:func:`mpcform.sim.margin.modelled_margin`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.linalg import expm
+
+from mpcform._validate import Array
+from mpcform.errors import ValidationError
+from mpcform.world.loop_groups import LoopGroup
+
+
+@dataclass(frozen=True, eq=False)
+class VelocityLoop:
+    """Per-axis linear velocity loop discretised at ``dt_s`` over ``horizon`` intervals.
+
+    ``free_m`` (H + 1, d, s): ``F_e``; ``forced`` (H + 1, H, d): ``G_{e,j}`` (zero for ``j >= e``);
+    ``step_state`` (d, s, s) and ``step_input`` (d, s): one interval of the loop state, whose last
+    component is the velocity offset ``delta`` (module docstring);
+    ``speed_gain``: the L1 norm of the velocity's impulse response (the total variation of its step
+    response), so ``|v| <= speed_gain v_max`` for commands within ``v_max`` (1 for a lag);
+    ``rest_m`` (d, s): ``F_rest``, the free response once the loop has come to rest (the lag's
+    ``tau v_0``; the offset ``delta`` moves it ``dt``); ``dc_gain`` (d,): how far the loop carries a
+    drone per metre of commanded travel once at rest (1 for every loop here, whose velocity
+    settles on the command), so a plan braking to rest ends at ``dc_gain x_stop + F_rest xi_0``
+    (:mod:`mpcform.mpc.constraints.braking`); ``lag_s``: how far behind its commands the loop comes to rest
+    from a steady command, per m/s (``tau`` for a lag).
+    """
+
+    dt_s: float
+    free_m: Array
+    forced: Array
+    step_state: Array
+    step_input: Array
+    speed_gain: float
+    rest_m: Array
+    dc_gain: Array
+    lag_s: float
+
+    @classmethod
+    def from_groups(cls, groups: list[LoopGroup], dim: int, dt_s: float, horizon: int) -> VelocityLoop:
+        """The loop of per-axis groups ``(A, B, c, axes)`` (axes beyond ``dim`` ignored)."""
+        s = max(a.shape[0] for a, _, _, _ in groups) + 1  # the loops' states, then delta
+        free, forced = np.zeros((horizon + 1, dim, s)), np.zeros((horizon + 1, horizon, dim))
+        step_state, step_input = np.zeros((dim, s, s)), np.zeros((dim, s))
+        covered, gain = np.zeros(dim, dtype=bool), 1.0
+        rest, dc, lag = np.zeros((dim, s)), np.ones(dim), 0.0
+        for a, b, c, axes in groups:
+            k = a.shape[0]
+            m = np.zeros((k + 2, k + 2))  # (p, xi, u): p' = c^T xi, xi' = A xi + B u, u' = 0
+            m[0, 1 : k + 1], m[1 : k + 1, 1 : k + 1], m[1 : k + 1, k + 1] = c, a, b
+            ex = expm(m * dt_s)
+            phi, gam = ex[: k + 1, : k + 1], ex[: k + 1, k + 1]
+            powers = [np.eye(k + 1)]
+            for _ in range(horizon):
+                powers.append(phi @ powers[-1])
+            f_e = np.array([pw[0, 1:] for pw in powers])  # (H + 1, k): e_p^T phi^e on xi
+            g_m = np.array([pw[0] @ gam for pw in powers[:horizon]]) - dt_s  # input m steps back
+            for ax in (x for x in axes if x < dim):
+                covered[ax] = True
+                free[:, ax, :k] = f_e
+                for e in range(1, horizon + 1):
+                    forced[e, :e, ax] = g_m[e - 1 :: -1][:e]
+                step_state[ax, :k, :k], step_input[ax, :k] = phi[1:, 1:], gam[1:]
+                rest[ax, :k] = -np.linalg.solve(a.T, c)  # c^T (-A)^-1: the integral of c^T e^{At}
+                dc[ax] = rest[ax, :k] @ b
+                lag = max(lag, abs(float(rest[ax, :k] @ np.linalg.solve(a, -b))))  # from the steady state
+            gain = max(gain, _step_variation(a, b, c))
+        free[1:, :, -1] = rest[:, -1] = dt_s  # delta moves the drone dt delta in the first interval
+        step_state[:, -1, -1] = 1.0
+        if not covered.all():
+            axes_given = np.flatnonzero(covered).tolist()
+            raise ValidationError("plant", f"the loop covers axes {axes_given}, expected 0..{dim - 1}")
+        return cls(dt_s, free, forced, step_state, step_input, gain, rest, dc, lag)
+
+    @property
+    def reach_factor(self) -> float:
+        """How much farther than the single integrator (``e v_max dt``) the forced response can
+        carry a drone in ``e`` steps, at most (1 for a lag; above 1 for a loop that overshoots)."""
+        h = self.forced.shape[1]
+        steps = self.forced[1:] + self.dt_s  # (H, H, d): displacement at step e per unit input j < e
+        mask = np.tril(np.ones((h, h), dtype=bool))[:, :, None]
+        per = np.abs(np.where(mask, steps, 0.0)).sum(axis=1) / (np.arange(1, h + 1)[:, None] * self.dt_s)
+        return max(1.0, float(per.max()))
+
+    def rest(self, n: int) -> Array:
+        """The loop state (n, d, s) of drones at rest."""
+        return np.zeros((n,) + self.step_input.shape)
+
+    def advance(self, state: Array, u: Array) -> Array:
+        """The loop state (n, d, s) one interval after ``state`` with the commands ``u`` (n, d)."""
+        return np.einsum("dst,ndt->nds", self.step_state, state) + u[..., None] * self.step_input
+
+    def observe(self, state: Array, residual_m: Array) -> Array:
+        """The state (n, d, s) with its velocity offset moved by ``residual_m / dt`` (n, d): where
+        the drones are minus where the model took them over the last interval."""
+        out = state.copy()
+        out[..., -1] += residual_m / self.dt_s
+        return out
+
+    def free(self, state: Array) -> Array:
+        """The free response ``F_e xi_0`` (H + 1, n, d) [m] of drones in loop ``state`` (n, d, s)."""
+        return np.einsum("eds,nds->end", self.free_m, state)
+
+    def first(self, state: Array, u0: Array) -> Array:
+        """The offset (n, d) [m] at the end of the first interval for the commands ``u0`` (n, d)."""
+        return np.einsum("ds,nds->nd", self.free_m[1], state) + self.forced[1, 0] * u0
+
+    def offsets(self, state: Array, u: Array) -> Array:
+        """``p_e - p0 - x_e`` (H + 1, n, d) [m] for the inputs ``u`` (H, n, d) from ``state``."""
+        return self.free(state) + self.forced_response(u)
+
+    def forced_response(self, u: Array) -> Array:
+        """``sum_{j<e} G_{e,j} u_j`` (H + 1, n, d) [m] of the inputs ``u`` (H, n, d)."""
+        return np.einsum("ejd,jnd->end", self.forced, u)
+
+
+def _step_variation(a: Array, b: Array, c: Array, samples: int = 4000) -> float:
+    """Total variation of the velocity's unit step response ``c^T xi`` from rest (until it settles:
+    20 of the slowest time constants), sampled finely."""
+    slowest = 1.0 / min(abs(np.linalg.eigvals(a).real))
+    phi = expm(np.block([[a, b[:, None]], [np.zeros((1, a.shape[0] + 1))]]) * (20.0 * slowest / samples))
+    z, g = np.zeros(a.shape[0] + 1), np.empty(samples + 1)
+    z[-1] = 1.0
+    for i in range(samples + 1):
+        g[i] = c @ z[:-1]
+        z = phi @ z
+    return float(np.abs(np.diff(g)).sum())

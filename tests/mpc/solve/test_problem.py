@@ -1,0 +1,45 @@
+"""Both step solvers take a StepQP and answer in the sparse layout: with no row active, the eq. 14 rollout."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from mpcform.mpc.constraints.candidates import Candidates
+from mpcform.mpc.constraints.limits import limit_rows
+from mpcform.mpc.constraints.separation import Separation
+from mpcform.mpc.plan import rollout
+from mpcform.mpc.settings import MPCSettings
+from mpcform.mpc.solve.per_drone import PerDroneQP
+from mpcform.mpc.solve.problem import StepQP, StepSolver
+from mpcform.mpc.solve.sparse import SparseSolver
+from mpcform.solvers.base import SolverOptions
+from mpcform.solvers.daqp_dense import DaqpBackend
+from mpcform.solvers.registry import make_backend
+from mpcform.world.limits import Limits
+
+DT = 0.1
+
+
+@pytest.mark.parametrize("kind", ["sparse", "per drone"])
+def test_solvers_return_the_rollout_when_no_row_is_active(kind: str) -> None:
+    options = SolverOptions(1e-9, 1e-9, 4000)
+    st = MPCSettings(horizon=4, gain_per_s=2.0, coupling="decoupled")
+    lim = Limits(v_max_mps=10.0, d_min_m=0.5)
+    families, sep = limit_rows(2, DT, lim, st), Separation(2, lim, st, ())
+    solver: StepSolver
+    if kind == "sparse":
+        solver = SparseSolver(make_backend("piqp", options), 2, DT, lim, st, families, sep)
+    else:
+        solver = PerDroneQP(2, DT, lim, st, families, DaqpBackend())
+    p0 = np.array([[0.0, 0.0], [2.0, 0.0], [4.0, 1.0]])
+    c = np.random.default_rng(0).uniform(-1.0, 1.0, (4, 3, 2))
+    cand = Candidates(np.array([[0, 1]]), np.ones(1, bool), np.empty((0, 2), int), np.empty(0, bool), True)
+    rows = sep.rows(p0, np.broadcast_to(p0, (5, 3, 2)), cand)  # far apart: the rows hold slack
+    u_nom, x_nom = rollout(c, st.gain_per_s, DT)
+    warm = np.stack([u_nom, x_nom]) if solver.warm_starts else None
+    sol, _ = solver.solve(StepQP(3, np.arange(3), p0, c, np.zeros((3, 2)), rows, True, warm))
+    assert sol.success and sol.x is not None and sol.x.shape == (2 * 24 + 12,)
+    np.testing.assert_allclose(sol.x[:24].reshape(4, 3, 2), u_nom, atol=1e-6)
+    np.testing.assert_allclose(sol.x[24:48].reshape(4, 3, 2), x_nom, atol=1e-6)
+    np.testing.assert_allclose(sol.x[48:], 0.0, atol=1e-6)
