@@ -34,7 +34,7 @@ from mpcform.sim.metrics import run_metrics
 from mpcform.sim.simulation import simulate
 from mpcform.solvers.base import SolverOptions
 from mpcform.world.limits import Limits
-from mpcform.world.obstacles import SphereObstacle
+from mpcform.world.shapes import Box, Cylinder, Sphere, SphereObstacle
 from mpcform.world.world import World
 
 try:
@@ -43,9 +43,11 @@ except metadata.PackageNotFoundError:
     __version__ = "0+unknown"
 
 __all__ = [
+    "Box",
     "ConsensusController",
     "ConsensusSettings",
     "ConstantReference",
+    "Cylinder",
     "ExponentialReference",
     "FormationState",
     "Graph",
@@ -65,6 +67,7 @@ __all__ = [
     "SolverOptions",
     "SparseSolve",
     "SpeedBudget",
+    "Sphere",
     "SphereObstacle",
     "SplitPolicy",
     "Template",

@@ -199,9 +199,9 @@ def outcome(sc: dict[str, Any], tol_m: float = 0.1) -> dict[str, Any]:
     start inside d_min and get closer along a segment / are not d_min apart at the end),
     ``obstacle_violations`` (drones inside a sphere's keep-out along a segment), and the run's
     ``infos``."""
-    from mpcform.formation.geometry import closest_on_segments
     from mpcform.run.runner import run_scenario
     from mpcform.scenario.load import scenario_from_dict
+    from mpcform.world.closest import closest_on_segments
 
     s = scenario_from_dict(sc)
     res = run_scenario(s).simulation

@@ -51,7 +51,7 @@ from mpcform.scenario.load import load_scenario
 from mpcform.solvers.base import QPBackend, QPSolution, SolverOptions
 from mpcform.solvers.registry import make_backend
 from mpcform.world.limits import Limits, tightened
-from mpcform.world.obstacles import SphereObstacle
+from mpcform.world.obstacles import Obstacle
 
 DEFAULT_CVXPY_BUDGET_S = 60.0
 """cvxpy's time budget per case [s] (wall, compilation included)."""
@@ -102,7 +102,7 @@ class MPCCase:
     steps: int
     limits: Limits
     settings: MPCSettings
-    obstacles: tuple[SphereObstacle, ...] = ()
+    obstacles: tuple[Obstacle, ...] = ()
 
     def planner(self, settings: MPCSettings, solver: str | QPBackend | None) -> MPCPlanner:
         return MPCPlanner(

@@ -13,37 +13,10 @@ from scipy.spatial import ConvexHull, QhullError, cKDTree
 from scipy.spatial.distance import pdist, squareform
 
 from mpcform._validate import Array
+from mpcform.world.closest import closest_on_segments, squared_norms, vector_norms
 
 BRUTE_FORCE_MAX_N = 48
 PATH_BLOCK = 4096  # drone samples per block of the whole-path measures (bounds their temporaries)
-
-
-def closest_on_segments(start: Array, end: Array) -> Array:
-    """Point closest to the origin on each segment ``start -> end``; inputs and output (..., d)."""
-    delta = end - start
-    den = np.einsum("...j,...j->...", delta, delta)
-    tau = np.negative(np.einsum("...j,...j->...", start, delta))
-    tau /= np.where(den > 0, den, 1.0)
-    np.clip(tau, 0.0, 1.0, out=tau)
-    delta *= tau[..., None]
-    delta += start
-    return delta
-
-
-def squared_norms(v: Array, overwrite: bool = False) -> Array:
-    """Squared Euclidean norms over the last axis of ``v`` (..., d), summed in order (faster than
-    ``np.einsum("...d,...d")`` over a short axis); ``overwrite``: ``v`` holds the squares after."""
-    squares = np.square(v, out=v if overwrite else None)
-    sq = squares[..., 0]
-    for a in range(1, v.shape[-1]):
-        sq += squares[..., a]
-    return sq
-
-
-def vector_norms(v: Array) -> Array:
-    """Euclidean norms over the last axis of ``v`` (..., d), summed in order: bitwise
-    ``np.linalg.norm(v, axis=-1)``, without its slow reduction over a short axis."""
-    return np.sqrt(squared_norms(v))
 
 
 def drone_spreads(guess: Array, positions: Array) -> Array:

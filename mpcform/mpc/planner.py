@@ -46,7 +46,8 @@ from mpcform.errors import ValidationError
 from mpcform.mpc.constraints.braking import Braking
 from mpcform.mpc.constraints.candidates import CandidateSelector, qp_drones
 from mpcform.mpc.constraints.limits import admitted, limit_rows, violators
-from mpcform.mpc.constraints.separation import Separation, SeparationRows
+from mpcform.mpc.constraints.separation import Separation
+from mpcform.mpc.constraints.separation_rows import SeparationRows
 from mpcform.mpc.liveness import TieBreak
 from mpcform.mpc.plan import Plan, guess, merge, rollout, warm_start
 from mpcform.mpc.prediction import Prediction
@@ -64,7 +65,8 @@ from mpcform.reference.base import Reference
 from mpcform.reference.subset import SubsetReference
 from mpcform.solvers.base import QPBackend
 from mpcform.world.limits import Limits, planning_limits, tightened
-from mpcform.world.obstacles import SphereObstacle, resolve_clearances
+from mpcform.world.obstacles import Obstacle, resolve_clearances
+from mpcform.world.shapes.shape_set import ShapeSet
 
 SLACK_REPORT_M = 1e-6  # slack above this is reported
 DEADLINE_RESERVE = 0.25
@@ -88,7 +90,7 @@ class MPCPlanner(Controller):
         dt_s: float,
         limits: Limits | None = None,
         settings: MPCSettings | None = None,
-        obstacles: tuple[SphereObstacle, ...] = (),
+        obstacles: tuple[Obstacle, ...] = (),
         solver: str | QPBackend | None = None,
         loop: VelocityLoop | None = None,
     ) -> None:
@@ -104,16 +106,17 @@ class MPCPlanner(Controller):
         limits, obstacles = tightened(limits, obstacles, 0.0, None)  # the tracking allowance, if any
         self.limits, self.obstacles = limits, obstacles
         _check_limits(self.dim, limits, self.obstacles)
+        shapes = ShapeSet(self.obstacles, self.dim)  # every consumer asks these
         self.loop = _check_loop(loop, self.dim, settings)
         self._families = limit_rows(self.dim, dt_s, limits, settings, self.loop)
         self.braking = braking = Braking.of(dt_s, limits, settings.braking)  # the plans' terminal condition
-        sep = Separation(self.dim, limits, settings, self.obstacles, braking, self.loop, dt_s)
+        sep = Separation(self.dim, limits, settings, shapes, braking, self.loop, dt_s)
         self._separation = sep
         self._predict = predict = Prediction(dt_s, settings.horizon, self.loop, braking, sep.tail)
         self._premise = GrowthPremise.of(sep.growth, limits.tube_growth_m, predict)  # checked in wind
         grown = 0.0 if sep.growth is None else float(sep.growth[-1])  # the rows' largest growth
         self._candidates = CandidateSelector(
-            self.n, dt_s, limits, settings, self.obstacles, predict.speed_gain, predict.tail_s, grown
+            self.n, dt_s, limits, settings, shapes, predict.speed_gain, predict.tail_s, grown
         )
         scale = limits.speed_scale(self.dim)  # with v_max_z: the velocity set's spheroid
         self._certifier = Certifier(dt_s, limits.v_max_mps, sep, limits.a_max_mps2, braking, scale)
@@ -338,13 +341,11 @@ def _check_loop(loop: VelocityLoop | None, dim: int, settings: MPCSettings) -> V
 def _check_limits(
     dim: int,
     limits: Limits,
-    obstacles: tuple[SphereObstacle, ...],
+    obstacles: tuple[Obstacle, ...],
 ) -> None:
     """The limits and obstacles fit a ``dim``-dimensional formation and each other."""
     for idx, ob in enumerate(obstacles):
-        if ob.center_m.shape != (dim,):
-            got = ob.center_m.tolist()
-            raise ValidationError(f"obstacles[{idx}].center", f"expected {dim} numbers, got {got}")
+        ob.check_dim(dim, f"obstacles[{idx}]")
     if (limits.d_min_m is not None or obstacles) and limits.v_max_mps is None:
         raise ValidationError(
             "limits.v_max",

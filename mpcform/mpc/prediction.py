@@ -9,7 +9,7 @@ import numpy as np
 
 from mpcform._validate import Array
 from mpcform.mpc.constraints.braking import Braking
-from mpcform.mpc.constraints.separation import SeparationRows
+from mpcform.mpc.constraints.separation_rows import SeparationRows
 from mpcform.mpc.constraints.tail import Tail
 from mpcform.mpc.plan import Plan, guess
 from mpcform.mpc.velocity_loop import VelocityLoop

@@ -15,7 +15,7 @@ from matplotlib import colormaps
 from matplotlib.axes import Axes
 from matplotlib.colors import ListedColormap, Normalize
 from matplotlib.figure import Figure
-from matplotlib.patches import Circle
+from matplotlib.patches import Circle, Polygon
 from matplotlib.ticker import MaxNLocator
 from matplotlib.transforms import offset_copy
 from scipy.spatial import ConvexHull, QhullError
@@ -313,29 +313,36 @@ def plan_size(
     run: RunData, width_in: float = 6.5, legend_in: float = 0.0, min_height_in: float = 4.2
 ) -> tuple[float, float]:
     """Figure size for an equal-aspect x-y plot of the run: the height follows the data."""
-    traj, obstacles, d = run.trajectory, run.formation.obstacles, run.dim
+    traj, d = run.trajectory, run.dim
     xy = np.concatenate([traj.positions_m[..., :2].reshape(-1, 2), traj.reference_m[..., :2].reshape(-1, 2)])
     lo, hi = xy.min(axis=0), xy.max(axis=0)
-    for row in obstacles:
-        reach = float(row[d]) + (float(row[d + 1]) if np.isfinite(row[d + 1]) else 0.0)
-        lo, hi = np.minimum(lo, row[:2] - reach), np.maximum(hi, row[:2] + reach)
+    for ob in run.obstacles:
+        ring = ob.outline_m(d, (0, 1), ob.resolved_clearance_m)
+        lo, hi = np.minimum(lo, ring.min(axis=0)), np.maximum(hi, ring.max(axis=0))
     span = np.maximum(hi - lo, 1.0)
     height = float(np.clip(width_in * span[1] / span[0] + 1.6, min_height_in, 9.0))
     return width_in + legend_in, height
 
 
 def draw_obstacles(ax: Axes, run: RunData, axes: tuple[int, int] = (0, 1)) -> None:
-    """Each obstacle as a grey disc in the plane of ``axes``, its clearance as a dotted ring."""
+    """Each obstacle as a grey patch in the plane of ``axes`` (its projection), its clearance as a
+    dotted outline around it."""
+    pts = np.concatenate([run.trajectory.positions_m, run.trajectory.reference_m])[..., list(axes)]
+    lo, hi = pts.reshape(-1, 2).min(axis=0), pts.reshape(-1, 2).max(axis=0)
+    pad = 0.5 * float(np.max(hi - lo)) + 1.0  # an unbounded obstacle stops beyond the data
+
+    def clipped(ring: Array) -> Array:
+        return np.clip(ring, lo - pad, hi + pad)
+
     for k, ob in enumerate(run.obstacles):  # clearances resolved (older runs' NaN: d_min / 2)
-        centre, radius, clearance = ob.center_m[list(axes)], ob.radius_m, ob.resolved_clearance_m
-        ax.add_patch(
-            Circle(tuple(centre), radius, color="0.75", zorder=1, label="obstacle" if k == 0 else None)
-        )
-        if clearance > 0:
+        body = clipped(ob.outline_m(run.dim, axes))
+        ax.add_patch(Polygon(body, closed=True, color="0.75", zorder=1, label="obstacle" if k == 0 else None))
+        if ob.resolved_clearance_m > 0:
+            ring = clipped(ob.outline_m(run.dim, axes, ob.resolved_clearance_m))
             ax.add_patch(
-                Circle(
-                    tuple(centre),
-                    radius + clearance,
+                Polygon(
+                    ring,
+                    closed=True,
                     fill=False,
                     ls=":",
                     color="0.3",

@@ -54,6 +54,7 @@ from mpcform.outputs.plan_views import new_figure, top_view, view_3d
 from mpcform.outputs.rundata import RunData
 from mpcform.sim.metrics import command_speeds_mps, min_separations_m, tracking_errors_m
 from mpcform.sim.safety import obstacle_distances_along
+from mpcform.world.shapes.shape_set import ShapeSet
 
 FIGURE_FILES = (
     "top_view.png",
@@ -87,7 +88,7 @@ def plot_run(run: RunData, out_dir: str | Path, fmt: str = "png", dpi: int = DPI
     if run.dim == 3:
         figures.append(("view_3d.png", view_3d(run)))
     figures += [("tracking_error.png", tracking_error(run)), ("speed.png", speeds(run))]
-    if run.formation.obstacles.shape[0]:
+    if run.formation.obstacles:
         figures.append(("clearance.png", clearance(run)))
     if run.n >= 2:  # one drone has neither separation nor scale
         figures += [("separation.png", separation(run)), ("scale.png", scale(run))]
@@ -175,16 +176,17 @@ def speed_axis_top(data_max: float, v_max: float | None) -> float:
 
 def clearance(run: RunData) -> Figure:
     """Distance [m] of the drones to each obstacle's surface along the segments (min over drones),
-    against its required clearance (radius + clearance from the centre; default d_min / 2)."""
+    against its required clearance (default d_min / 2)."""
     traj = run.trajectory
     obstacles = run.obstacles  # clearances resolved (older runs' NaN: d_min / 2)
-    dist = obstacle_distances_along(traj.positions_m, obstacles)  # (T - 1, n, m) to the centres
+    dist = obstacle_distances_along(traj.positions_m, obstacles)  # (T - 1, n, m) to the cores
+    rounding = ShapeSet(obstacles, run.dim).rounding_m  # the cores grown by it: the surfaces
     t_mid = 0.5 * (traj.t_s[1:] + traj.t_s[:-1])  # one value per segment, at its middle
     fig, ax = _series_axes()
     colours = colormaps["tab10"]
-    required = [ob.required_distance_m - ob.radius_m for ob in obstacles]
-    for k, ob in enumerate(obstacles):
-        surface = dist[:, :, k].min(axis=1) - ob.radius_m
+    required = [ob.resolved_clearance_m for ob in obstacles]
+    for k in range(len(obstacles)):
+        surface = dist[:, :, k].min(axis=1) - rounding[k]
         tag = f"obstacle {k}" if len(obstacles) > 1 else "obstacle"
         ax.plot(
             t_mid,

@@ -5,8 +5,10 @@ The figures and the exports also need what only the scenario knows: the template
 the best-fit scale and the formation's edges), the reference's scale and the obstacles.
 ``mpcform run --plot/--export`` takes them from the scenario in memory (:func:`formation_data`)
 and saves them as ``formation.npz`` beside the other files: ``offsets`` (n, d) [m],
-``scale_ref`` (T,), ``obstacles`` (k, d + 2) [m] (centre, radius, clearance as resolved; a NaN
-clearance, as runs saved before the clearance was resolved on loading have it: d_min / 2),
+``scale_ref`` (T,), ``obstacle_records``: the obstacles as a JSON list of their scenario keys
+(:meth:`mpcform.world.shapes.base.Shape.to_keys`, every kind; runs saved before shapes had kinds
+hold spheres as ``obstacles`` (k, d + 2) [m], centre, radius and clearance, a NaN clearance being
+d_min / 2, and still load),
 ``geofence`` (2, d) [m] when the run has one, and for a consensus run ``graph_edges`` (m, 2) and
 ``leaders`` (k,) (the communication graph's links
 and the drones that see the commanded scale; absent otherwise).
@@ -29,7 +31,8 @@ from mpcform._validate import Array
 from mpcform.errors import ValidationError
 from mpcform.outputs.files import SCALE_ESTIMATES, SUMMARY_JSON, TRAJECTORY_NPZ, TRUE_ARRAYS
 from mpcform.sim.trajectory import Trajectory, TrueTrajectory
-from mpcform.world.obstacles import SphereObstacle, resolve_clearances
+from mpcform.world.obstacles import Obstacle, resolve_clearances
+from mpcform.world.shapes import Sphere, shape_from_keys
 
 if TYPE_CHECKING:
     from mpcform.scenario.spec import Scenario
@@ -45,15 +48,15 @@ class RunDirError(ValidationError):
 class FormationData:
     """The scenario's side of a run: ``offsets_m`` (n, d), the template (or, without
     ``formation.npz``, the reference's start shape ``s0 R0 r_i``); ``scale_ref`` (T,), the
-    reference's scale, or None when unknown; ``obstacles`` (k, d + 2): centre, radius,
-    clearance (NaN in older runs: d_min / 2, :attr:`RunData.obstacles`) of each sphere;
+    reference's scale, or None when unknown; ``obstacles``: the obstacles as saved (an unset
+    clearance: d_min / 2, :attr:`RunData.obstacles`);
     ``graph_edges`` (m, 2), the communication graph of a consensus run (None: no graph),
     ``leaders``, its drones that see the commanded scale, and ``geofence_m`` (2, d), the box's
     min and max corners (None: no fence)."""
 
     offsets_m: Array
     scale_ref: Array | None
-    obstacles: Array
+    obstacles: tuple[Obstacle, ...]
     graph_edges: Array | None = None
     leaders: tuple[int, ...] = ()
     geofence_m: Array | None = None
@@ -110,15 +113,10 @@ class RunData:
         return _limit(self.summary, "v_max")
 
     @property
-    def obstacles(self) -> tuple[SphereObstacle, ...]:
-        """The saved obstacles with their clearances resolved: a NaN clearance (a run saved before
-        the clearance was resolved on loading) is half of the run's d_min."""
-        d, rows = self.dim, self.formation.obstacles
-        saved = tuple(
-            SphereObstacle(row[:d], float(row[d]), float(row[d + 1]) if np.isfinite(row[d + 1]) else None)
-            for row in rows
-        )
-        return resolve_clearances(saved, self.d_min_m)
+    def obstacles(self) -> tuple[Obstacle, ...]:
+        """The saved obstacles with their clearances resolved: an unset clearance (a run saved
+        before the clearance was resolved on loading) is half of the run's d_min."""
+        return resolve_clearances(self.formation.obstacles, self.d_min_m)
 
     @property
     def flown(self) -> TrueTrajectory | None:
@@ -146,17 +144,11 @@ class RunData:
 
 def formation_data(scenario: Scenario, t_s: Array) -> FormationData:
     """The formation data of ``scenario`` with the reference's scale sampled at ``t_s``."""
-    k, d = len(scenario.obstacles), scenario.dim
-    obstacles = np.full((k, d + 2), np.nan)
-    for row, obstacle in zip(obstacles, scenario.obstacles, strict=True):
-        row[:d], row[d] = obstacle.center_m, obstacle.radius_m
-        if obstacle.clearance_m is not None:
-            row[d + 1] = obstacle.clearance_m
     consensus = scenario.controller.consensus if scenario.controller.kind == "consensus" else None
     return FormationData(
         offsets_m=np.array(scenario.template.offsets),
         scale_ref=np.asarray(scenario.reference.profile(np.asarray(t_s, dtype=float)).scale, dtype=float),
-        obstacles=obstacles,
+        obstacles=tuple(scenario.obstacles),
         graph_edges=None if scenario.graph is None else np.array(scenario.graph.edges, dtype=int),
         leaders=() if consensus is None else tuple(int(i) for i in consensus.leaders),
         geofence_m=_fence(scenario),
@@ -171,7 +163,7 @@ def _fence(scenario: Scenario) -> Array | None:
 
 
 def write_formation_npz(out_dir: str | Path, formation: FormationData) -> Path:
-    """Write ``formation.npz`` (offsets (n, d) [m], scale_ref (T,), obstacles (k, d + 2) [m]; with a
+    """Write ``formation.npz`` (offsets (n, d) [m], scale_ref (T,), obstacle_records (JSON); with a
     communication graph also graph_edges (m, 2) and leaders (k,))."""
     if formation.scale_ref is None:
         raise ValidationError("formation.scale_ref", "unknown (a run read back without formation.npz)")
@@ -179,7 +171,7 @@ def write_formation_npz(out_dir: str | Path, formation: FormationData) -> Path:
     arrays: dict[str, Any] = {
         "offsets": formation.offsets_m,
         "scale_ref": formation.scale_ref,
-        "obstacles": formation.obstacles,
+        "obstacle_records": np.array(json.dumps([ob.to_keys() for ob in formation.obstacles])),
     }
     if formation.graph_edges is not None:
         arrays |= {"graph_edges": formation.graph_edges, "leaders": np.array(formation.leaders, dtype=int)}
@@ -226,8 +218,8 @@ def _load_formation(path: Path, trajectory: Trajectory) -> FormationData:
     n, d = trajectory.n, trajectory.dim
     if not path.exists():
         ref0 = trajectory.reference_m[0]
-        return FormationData(ref0 - ref0.mean(axis=0), None, np.empty((0, d + 2)))
-    extra = _npz(path, ("offsets", "scale_ref", "obstacles"), optional=("graph_edges", "leaders", "geofence"))
+        return FormationData(ref0 - ref0.mean(axis=0), None, ())
+    extra = _npz(path, ("offsets", "scale_ref"), optional=("obstacles", "graph_edges", "leaders", "geofence"))
     if extra["offsets"].shape != (n, d) or extra["scale_ref"].shape != trajectory.t_s.shape:
         shapes = f"offsets {extra['offsets'].shape} or scale_ref {extra['scale_ref'].shape}"
         raise RunDirError(str(path), f"{shapes} do not match p {trajectory.positions_m.shape}")
@@ -235,11 +227,29 @@ def _load_formation(path: Path, trajectory: Trajectory) -> FormationData:
     return FormationData(
         extra["offsets"],
         extra["scale_ref"],
-        extra["obstacles"].reshape(-1, d + 2),
+        _load_obstacles(path, extra.get("obstacles"), d),
         graph_edges=None if graph is None else graph.astype(int).reshape(-1, 2),
         leaders=tuple(int(i) for i in extra.get("leaders", np.empty(0))),
         geofence_m=None if "geofence" not in extra else extra["geofence"].reshape(2, d),
     )
+
+
+def _load_obstacles(path: Path, legacy: Array | None, d: int) -> tuple[Obstacle, ...]:
+    """The obstacles of ``formation.npz``: its ``obstacle_records``, or an older run's sphere rows."""
+    try:
+        with np.load(path) as npz:
+            text = str(npz["obstacle_records"]) if "obstacle_records" in npz.files else None
+        if text is None:
+            rows = np.empty((0, d + 2)) if legacy is None else legacy.reshape(-1, d + 2)
+            return tuple(
+                Sphere(r[:d], float(r[d]), float(r[d + 1]) if np.isfinite(r[d + 1]) else None) for r in rows
+            )
+        records = json.loads(text)
+        if not isinstance(records, list) or not all(isinstance(r, dict) for r in records):
+            raise ValueError("expected a JSON list of tables")
+        return tuple(shape_from_keys(r) for r in records)
+    except (ValueError, TypeError, KeyError) as exc:
+        raise RunDirError(str(path), f"cannot read its obstacles: {exc}") from None
 
 
 def _npz(path: Path, keys: tuple[str, ...], optional: tuple[str, ...] = ()) -> dict[str, Array]:

@@ -30,8 +30,10 @@ import numpy as np
 from mpcform._validate import Array, finite_array, positive
 from mpcform.errors import ValidationError
 from mpcform.formation.geometry import closest_pair, min_pair_distances, pairs_within
+from mpcform.outputs.viewer_obstacles import obstacle_payload
 from mpcform.sim.metrics import REL_TOL
 from mpcform.sim.trajectory import TrueTrajectory
+from mpcform.world.obstacles import Obstacle
 
 SEPARATION_KEY = "min_separation_m"
 SPEED_KEY = "max_speed_mps"
@@ -53,7 +55,7 @@ def write_viewer_html(
     d_min_m: float | None = None,
     v_max_mps: float | None = None,
     edges: Array | Sequence[tuple[int, int]] = (),
-    obstacles: Array | None = None,
+    obstacles: tuple[Obstacle, ...] | None = (),
     geofence: tuple[Array, Array] | None = None,
     reference_m: Array | None = None,
     title: str = "mpcform run",
@@ -65,8 +67,8 @@ def write_viewer_html(
     """Write the viewer of a run to ``path`` (parents created); returns the path.
 
     ``t_s`` (T,) increasing; ``positions_m`` and ``reference_m`` (T, n, d), d = 2 or 3;
-    ``edges`` (E, 2) drone index pairs; ``obstacles`` (k, d + 1 or d + 2): centre, radius
-    and clearance from the surface (missing or NaN: d_min / 2); ``geofence``: (min, max)
+    ``edges`` (E, 2) drone index pairs; ``obstacles``: shapes of :mod:`mpcform.world.shapes` (an unset
+    clearance: d_min / 2, :mod:`mpcform.outputs.viewer_obstacles`); ``geofence``: (min, max)
     corners (d,) of a box, +-inf for open sides; ``curves``: name -> (T,) values (NaN: none);
     ``flown``: a plant run's dense true path, drawn dotted (at most :data:`FLOWN_PER_STEP`
     samples per control interval: :func:`flown_samples`); ``wind``: the plant's mean wind [m/s]
@@ -150,7 +152,7 @@ def viewer_payload(
     d_min_m: float | None = None,
     v_max_mps: float | None = None,
     edges: Array | Sequence[tuple[int, int]] = (),
-    obstacles: Array | None = None,
+    obstacles: tuple[Obstacle, ...] | None = (),
     geofence: tuple[Array, Array] | None = None,
     reference_m: Array | None = None,
     title: str = "mpcform run",
@@ -173,7 +175,7 @@ def viewer_payload(
         "p_mm": _millimetres(p),
         "ref_mm": None,
         "edges": _edges(edges, n),
-        "obstacles": _obstacles(obstacles, d, d_min),
+        "obstacles": obstacle_payload(obstacles, d, d_min, p),
         "fence": _geofence(geofence, d),
         "d_min_m": d_min,
         "v_max_mps": v_max,
@@ -248,27 +250,6 @@ def _edges(edges: Array | Sequence[tuple[int, int]], n: int) -> list[list[int]]:
     if np.any(arr != np.round(arr)) or np.any((arr < 0) | (arr >= n)):
         raise ValidationError("edges", f"expected (E, 2) drone indices in [0, {n}), got {arr.tolist()}")
     return arr.astype(int).tolist()
-
-
-def _obstacles(obstacles: Array | None, d: int, d_min: float | None) -> list[list[float | None]]:
-    if obstacles is None or np.size(obstacles) == 0:
-        return []
-    arr = np.array(obstacles, dtype=float)
-    if arr.ndim != 2 or arr.shape[1] not in (d + 1, d + 2):
-        raise ValidationError(
-            "obstacles",
-            f"expected (k, {d + 1} or {d + 2}) rows of centre, radius[, clearance], got shape {arr.shape}",
-        )
-    if not np.all(np.isfinite(arr[:, : d + 1])) or np.any(arr[:, d] <= 0):
-        raise ValidationError("obstacles", f"expected finite centres and radii > 0, got {arr.tolist()}")
-    clearance = arr[:, d + 1] if arr.shape[1] == d + 2 else np.full(arr.shape[0], np.nan)
-    default = np.nan if d_min is None else d_min / 2.0
-    clearance = np.where(np.isnan(clearance), default, clearance)
-    rows: list[list[float | None]] = []
-    for row, c in zip(arr, clearance, strict=True):
-        centre_radius: list[float | None] = [round(float(v), 3) for v in row[: d + 1]]
-        rows.append([*centre_radius, _sig(float(c))])
-    return rows
 
 
 def _geofence(geofence: tuple[Array, Array] | None, d: int) -> dict[str, list[float | None]] | None:

@@ -73,8 +73,10 @@ def _object(table: Table) -> dict[str, Any]:
         "additionalProperties": False,
     }
     if table.selector is not None:
-        out["required"] = list(dict.fromkeys([*out["required"], table.selector]))
-        variants = table.key(table.selector).choices
+        selector = table.key(table.selector)
+        if selector.default is None:  # a selector with a default ([[obstacles]] shape) may be left out
+            out["required"] = list(dict.fromkeys([*out["required"], table.selector]))
+        variants = selector.choices
         rules = []
         for variant in variants:
             needs = [k.name for k in table.keys if k.required and variant in k.when]
@@ -89,7 +91,7 @@ def _object(table: Table) -> dict[str, Any]:
                     {
                         "if": {
                             "properties": {table.selector: {"const": variant}},
-                            "required": [table.selector],
+                            **({} if variant == selector.default else {"required": [table.selector]}),
                         },
                         "then": then,
                     }

@@ -8,6 +8,8 @@ from collections.abc import Iterable
 from dataclasses import dataclass
 from typing import Any
 
+from mpcform.world.shapes import SHAPES
+
 
 @dataclass(frozen=True)
 class Key:
@@ -83,3 +85,34 @@ def did_you_mean(word: str, choices: Iterable[object]) -> str:
     """``"; did you mean 'x'?"`` for the closest of ``choices`` to a misspelt ``word``, else ``""``."""
     close = difflib.get_close_matches(word, [str(c) for c in choices], n=1)
     return f"; did you mean {close[0]!r}?" if close else ""
+
+
+def obstacle_keys() -> tuple[Key, ...]:
+    """The keys of ``[[obstacles]]``: ``shape`` (the kind, ``sphere`` by default), then every kind's
+    keys (:data:`mpcform.world.shapes.SHAPES`), each applying to the kinds that have it."""
+    kinds = tuple(SHAPES)
+    docs = "; ".join(f"`{k}`: {SHAPES[k].summary}" for k in kinds)
+    keys = [Key("shape", "string", f"The obstacle's kind ({docs}).", default=kinds[0], choices=kinds)]
+    seen: dict[str, list[str]] = {}
+    spec: dict[str, Any] = {}
+    for kind, cls in SHAPES.items():
+        for key in cls.keys:
+            seen.setdefault(key.name, []).append(kind)
+            spec.setdefault(key.name, key)
+    for name, where in seen.items():
+        k = spec[name]
+        keys.append(
+            Key(
+                name,
+                k.type,
+                k.doc,
+                k.unit,
+                k.default,
+                required=k.required,
+                when=() if len(where) == len(kinds) else tuple(where),
+                bound=k.bound,
+                shown_default=k.shown_default,
+                inf=k.inf,
+            )
+        )
+    return tuple(keys)

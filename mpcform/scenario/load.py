@@ -40,7 +40,8 @@ from mpcform.scenario.size import MAX_STEPS, REFERENCE_SAMPLES, check_drone_coun
 from mpcform.scenario.solve import solve_strategy
 from mpcform.scenario.spec import ControllerSpec, Scenario, SimulationSpec
 from mpcform.world.limits import Limits, crazyswarm_downwash
-from mpcform.world.obstacles import SphereObstacle, resolve_clearances
+from mpcform.world.obstacles import Obstacle, resolve_clearances
+from mpcform.world.shapes import shape_from_keys
 
 
 def load_scenario(path: str | Path, *, max_memory_gib: float | None = None) -> Scenario:
@@ -355,7 +356,7 @@ def _graph(data: Mapping[str, Any], tpl: Template, positions: Array, seed: int) 
     return {"graph": graph, "network": network, "allow_disconnected": g["allow_disconnected"]}
 
 
-def _obstacles(raw: Any, dim: int) -> tuple[SphereObstacle, ...]:
+def _obstacles(raw: Any, dim: int) -> tuple[Obstacle, ...]:
     if raw is None:
         return ()
     if not isinstance(raw, list) or not all(isinstance(o, dict) for o in raw):
@@ -365,7 +366,9 @@ def _obstacles(raw: Any, dim: int) -> tuple[SphereObstacle, ...]:
         prefix = f"obstacles[{i}]"
         o = parse_keys(TABLES["obstacles"], item, prefix, dim, None)
         with as_scenario_error(prefix):
-            out.append(SphereObstacle(o["center"], o["radius"], o["clearance"]))
+            shape = shape_from_keys(o)
+            shape.check_dim(dim, prefix)
+            out.append(shape)
     return tuple(out)
 
 

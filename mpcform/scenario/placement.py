@@ -4,8 +4,8 @@ Checked when a scenario is loaded, each as a :class:`~mpcform.errors.ScenarioErr
 
 - two template offsets (or two explicit start positions) at one point: no separation d_min > 0
   can hold between them, and a template whose offsets are all zero has no shape;
-- a start (before the seeded perturbation) inside an obstacle, closer to its centre than
-  ``radius + clearance`` (the obstacles' clearances resolved, an unset one to d_min / 2 as for
+- a start (before the seeded perturbation) inside an obstacle, closer to its surface than
+  its ``clearance`` (the obstacles' clearances resolved, an unset one to d_min / 2 as for
   the planner's obstacle rows: :func:`mpcform.world.obstacles.resolve_clearances`), or outside
   the geofence box;
 - a constant reference whose goal puts a drone inside an obstacle or outside the geofence: it
@@ -22,11 +22,11 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from mpcform._validate import Array
-from mpcform.errors import ScenarioError
+from mpcform.errors import ScenarioError, ValidationError
 from mpcform.world.limits import Limits
-from mpcform.world.obstacles import SphereObstacle
+from mpcform.world.obstacles import Obstacle
 
-Obstacles = tuple[SphereObstacle, ...]
+Obstacles = tuple[Obstacle, ...]
 MAX_EXTENT_M = 1e6  # the farthest a drone may be from the origin (as a vector key's magnitude)
 COINCIDENT_RTOL = 1e-9  # points closer than this times max(1 m, their extent) coincide
 
@@ -99,18 +99,20 @@ def _inside_geofence(points_m: Array, field: str, verb: str, every: str, limits:
 
 def _clear_of_obstacles(points_m: Array, field: str, verb: str, obstacles: Obstacles, note: str = "") -> None:
     for k, ob in enumerate(obstacles):
-        if ob.center_m.shape != points_m.shape[1:]:
+        try:
+            ob.check_dim(points_m.shape[1], f"obstacles[{k}]")
+        except ValidationError:
             continue  # reported elsewhere (obstacles[k].center has the wrong length)
-        need = ob.required_distance_m
-        dist = np.linalg.norm(points_m - ob.center_m, axis=1)
+        need = ob.resolved_clearance_m
+        dist = ob.distance_m(points_m)  # to the surface, negative inside
         inside = np.flatnonzero(dist < need)
         if inside.size:
             i = int(inside[np.argmin(dist[inside])])
+            where = f"{dist[i]:.4g} m from the surface of" if dist[i] >= 0 else f"{-dist[i]:.4g} m inside"
             raise ScenarioError(
                 field,
-                f"drone {i}{_more(inside)} {verb} at {_point(points_m[i])}, "
-                f"{dist[i]:.4g} m from the centre of obstacles[{k}], inside its radius + "
-                f"clearance = {need:.4g} m; expected every drone at least that "
+                f"drone {i}{_more(inside)} {verb} at {_point(points_m[i])}, {where} obstacles[{k}] "
+                f"({ob.kind}), within its clearance {need:.4g} m; expected every drone at least that "
                 f"far{note}",
             )
 

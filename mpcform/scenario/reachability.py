@@ -16,14 +16,14 @@ import numpy as np
 from mpcform._validate import Array
 from mpcform.world.free_space import FreeSpace
 from mpcform.world.limits import Limits, tightened
-from mpcform.world.obstacles import SphereObstacle
+from mpcform.world.obstacles import Obstacle
 
 TIMES = 200  # reference samples searched for the time a target becomes unreachable
 
 
 def unreachable_warning(
     limits: Limits,
-    obstacles: tuple[SphereObstacle, ...],
+    obstacles: tuple[Obstacle, ...],
     tube_m: float,
     a_max_mps2: float | None,
     start_m: Array,
@@ -47,22 +47,22 @@ def unreachable_warning(
     i = int(drones[0])
     reached = np.flatnonzero(region[:, i] == home[i])
     since = times_s[reached[-1] + 1] if reached.size else times_s[0]
-    spheres, fence = space.walls(int(home[i]), int(region[-1, i])) if region[-1, i] > 0 else ([], False)
-    what = [f"obstacles[{k}]" for k in spheres] + ["the geofence"] * fence
+    walls, fence = space.walls(int(home[i]), int(region[-1, i])) if region[-1, i] > 0 else ([], False)
+    what = [f"obstacles[{k}]" for k in walls] + ["the geofence"] * fence
     inside = int(space.blocker(targets_m[-1, i : i + 1])[0])
     where = (
         f"inside obstacles[{inside}]'s keep-out"
         if region[-1, i] == 0 and inside >= 0
         else "outside the geofence"
         if region[-1, i] == 0
-        else f"closed off from its start by {_listed(what) or 'the spheres'}"
+        else f"closed off from its start by {_listed(what) or 'the obstacles'}"
     )
     more = f" (and drones {', '.join(map(str, drones[1:].tolist()))})" if drones.size > 1 else ""
     return (
         f"reference: drone {i}{more} cannot reach its goal {_point(targets_m[-1, i])}: from t = "
-        f"{since:.3g} s its target lies {where}, with the planner's tightening (radius + clearance + "
+        f"{since:.3g} s its target lies {where}, with the planner's tightening (clearance + "
         f"{2.0 * tube_m + limits.tracking_m:.3g} m); the run will end incomplete (move the goal, the "
-        "spheres or the fence)"
+        "obstacles or the fence)"
     )
 
 

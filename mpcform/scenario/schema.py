@@ -15,7 +15,7 @@ from mpcform.control.consensus import CONSENSUS_LAWS, RELATIVE_POSITIONS, Consen
 from mpcform.control.graph import GRAPH_KINDS
 from mpcform.control.nullspace import OBJECTIVES, NullSpaceSettings
 from mpcform.reference.keyframes import DEFAULT_SPEED_FRACTION
-from mpcform.scenario.key_types import Key, Table, did_you_mean, listing
+from mpcform.scenario.key_types import Key, Table, did_you_mean, listing, obstacle_keys
 from mpcform.scenario.mpc_keys import MPC_KEYS, SOLVE_TABLE
 from mpcform.sim.crazyflow import DRONES
 from mpcform.sim.plant_spec import (
@@ -285,15 +285,11 @@ SCHEMA: tuple[Table, ...] = (
             "`gust_field` (`per_drone` or `shared`); seeded Ornstein-Uhlenbeck gusts acting "
             "through drag.", when=("lag", "second_order", "quadrotor")),
     ), required=False, selector="kind"),
-    Table("obstacles", "Static spheres (discs when planar); repeat the table for more. No drone "
-          "may start inside one (closer to its centre than radius + clearance), nor may a `constant` "
-          "reference's goal put one there; a moving reference (`exponential`, `mission`) may pass "
-          "through obstacles: the MPC goes around them.", (
-        Key("center", "vector", "Centre.", "m", required=True),
-        Key("radius", "float", "Radius.", "m", required=True, bound="> 0"),
-        Key("clearance", "float", "Distance kept from the surface.", "m",
-            shown_default="d_min / 2", bound=">= 0"),
-    ), required=False, array=True),
+    Table("obstacles", "Static obstacles; repeat the table for more, `shape` choosing each one's "
+          "kind. No drone may start within an obstacle's clearance of "
+          "its surface, nor may a `constant` reference's goal put one there; a moving reference "
+          "(`exponential`, `mission`) may pass through obstacles: the MPC goes around them.",
+          obstacle_keys(), required=False, array=True, selector="shape"),
 )  # fmt: skip # the tables of keys read best with each key's text aligned under it
 TABLES = {t.name: t for t in SCHEMA}
 

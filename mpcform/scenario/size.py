@@ -39,6 +39,7 @@ from mpcform._validate import Array
 from mpcform.errors import ScenarioError
 from mpcform.mpc.settings import MPCSettings
 from mpcform.scenario.spec import Scenario
+from mpcform.world.shapes.shape_set import ShapeSet
 
 GIB = 2.0**30
 DEFAULT_MAX_MEMORY_GIB = 4.0
@@ -261,12 +262,10 @@ def _candidates(scenario: Scenario) -> tuple[int, int]:
             pairs = max(pairs, (int(tree.count_neighbors(tree, radius)) - scenario.n) // 2)
     items = 0
     if scenario.obstacles:
-        centres = np.array([o.center_m for o in scenario.obstacles])
-        required = np.array([o.required_distance_m for o in scenario.obstacles])
-        reach = required + st.margin_m + 2.0 * travel
+        shapes = ShapeSet(scenario.obstacles, scenario.dim)
+        reach = shapes.required_m + st.margin_m + 2.0 * travel
         for points in samples:
-            near = cKDTree(points).query_ball_point(centres, reach, return_length=True)
-            items = max(items, int(near.sum()))
+            items = max(items, int((shapes.core_distances(points) <= reach).sum()))
     return pairs, items
 
 

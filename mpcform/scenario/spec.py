@@ -22,7 +22,7 @@ from mpcform.reference.base import Reference
 from mpcform.scenario.reachability import TIMES, unreachable_warning
 from mpcform.sim.plant_spec import IdealPlantSpec, PlantSpec, Robustness
 from mpcform.world.limits import PLATFORM_TRACKING_M, Limits, tightened
-from mpcform.world.obstacles import SphereObstacle, resolve_clearances
+from mpcform.world.obstacles import Obstacle, resolve_clearances
 from mpcform.world.world import World
 
 
@@ -71,7 +71,7 @@ class Scenario:
     initial_positions_m: Array
     reference: Reference
     limits: Limits
-    obstacles: tuple[SphereObstacle, ...]
+    obstacles: tuple[Obstacle, ...]
     controller: ControllerSpec
     simulation: SimulationSpec
     source: Path | None = None

@@ -46,7 +46,7 @@ from mpcform.sim.safety import (
 from mpcform.sim.simulation import SimulationResult
 from mpcform.sim.trajectory import Trajectory, TrueTrajectory
 from mpcform.world.limits import Limits
-from mpcform.world.obstacles import SphereObstacle
+from mpcform.world.obstacles import Obstacle
 from mpcform.world.world import World
 
 REL_TOL = 1e-9  # violations are counted beyond this relative tolerance
@@ -144,7 +144,7 @@ def run_metrics(
 
 
 def _path_metrics(
-    path: Array, suffix: str, limits: Limits | None, obstacles: tuple[SphereObstacle, ...]
+    path: Array, suffix: str, limits: Limits | None, obstacles: tuple[Obstacle, ...]
 ) -> dict[str, Any]:
     """Obstacle, geofence and downwash separation of a path (straight between its samples)."""
     out: dict[str, Any] = {}
@@ -160,7 +160,7 @@ def _path_metrics(
 
 
 def _true_metrics(
-    true: TrueTrajectory, limits: Limits | None, obstacles: tuple[SphereObstacle, ...]
+    true: TrueTrajectory, limits: Limits | None, obstacles: tuple[Obstacle, ...]
 ) -> dict[str, Any]:
     """The safety and tracking metrics of the plant's dense true motion (distances linear between
     dense samples)."""

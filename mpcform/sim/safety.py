@@ -10,9 +10,10 @@ from __future__ import annotations
 import numpy as np
 
 from mpcform._validate import Array
-from mpcform.formation.geometry import closest_on_segments, count_pairs_within, min_path_distance
+from mpcform.formation.geometry import count_pairs_within, min_path_distance
 from mpcform.world.limits import Limits
-from mpcform.world.obstacles import SphereObstacle
+from mpcform.world.obstacles import Obstacle
+from mpcform.world.shapes.shape_set import ShapeSet
 
 TOL_M = 1e-9
 """A distance short of its requirement by at most this much [m] is not a violation."""
@@ -31,28 +32,25 @@ def separation_violations(path_m: Array, d_min_m: float, metric: Array | None = 
     return count_pairs_within(p, d_min_m - TOL_M)
 
 
-def obstacle_distances_along(path_m: Array, obstacles: tuple[SphereObstacle, ...]) -> Array:
-    """Smallest distance [m] of each drone's segment to each obstacle's centre, (T - 1, n, m)."""
+def obstacle_distances_along(path_m: Array, obstacles: tuple[Obstacle, ...]) -> Array:
+    """Smallest distance [m] of each drone's segment to each obstacle's core, (T - 1, n, m) (a
+    sphere's: its centre; :mod:`mpcform.world.shapes`)."""
     t, n, d = path_m.shape
-    out = np.empty((t - 1, n, len(obstacles)))
-    for k, ob in enumerate(obstacles):
-        rel = path_m - ob.center_m
-        closest = closest_on_segments(rel[:-1].reshape(-1, d), rel[1:].reshape(-1, d))
-        out[..., k] = np.linalg.norm(closest, axis=1).reshape(t - 1, n)
-    return out
+    shapes = ShapeSet(obstacles, d)
+    dist = shapes.segment_distances(path_m[:-1].reshape(-1, d), path_m[1:].reshape(-1, d))
+    return dist.reshape(t - 1, n, len(shapes))
 
 
-def obstacle_metrics(path_m: Array, obstacles: tuple[SphereObstacle, ...]) -> tuple[float | None, int]:
+def obstacle_metrics(path_m: Array, obstacles: tuple[Obstacle, ...]) -> tuple[float | None, int]:
     """``(min clearance from any obstacle's surface along the segments [m], violations)``; a violation
-    is a (segment, drone, obstacle) that comes closer than its required distance, radius plus
-    resolved clearance (:func:`mpcform.world.obstacles.resolve_clearances`; None, 0 without
+    is a (segment, drone, obstacle) that comes closer than its clearance to the surface (its
+    resolved clearance, :func:`mpcform.world.obstacles.resolve_clearances`; None, 0 without
     obstacles)."""
     if not obstacles:
         return None, 0
     dist = obstacle_distances_along(path_m, obstacles)
-    radius = np.array([ob.radius_m for ob in obstacles])
-    required = np.array([ob.required_distance_m for ob in obstacles])
-    return float((dist - radius).min()), int((dist < required - TOL_M).sum())
+    shapes = ShapeSet(obstacles, path_m.shape[2])
+    return float((dist - shapes.rounding_m).min()), int((dist < shapes.required_m - TOL_M).sum())
 
 
 def geofence_violations(path_m: Array, limits: Limits) -> int:

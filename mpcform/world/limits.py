@@ -9,7 +9,7 @@ import numpy as np
 
 from mpcform._validate import Array, positive
 from mpcform.errors import ValidationError, shown
-from mpcform.world.obstacles import SphereObstacle, require_resolved
+from mpcform.world.obstacles import Obstacle, require_resolved
 
 PLATFORM_TILT_RAD = float(np.radians(20.0))
 """Tilt of the airframe a plan is flown on when nothing says otherwise (a Crazyflie 2.x)."""
@@ -153,11 +153,11 @@ def _bound(field: str, value: object) -> Array:
 
 def tightened(
     limits: Limits,
-    obstacles: tuple[SphereObstacle, ...],
+    obstacles: tuple[Obstacle, ...],
     tube_m: float,
     a_max_mps2: float | None,
     growth_m: float = 0.0,
-) -> tuple[Limits, tuple[SphereObstacle, ...]]:
+) -> tuple[Limits, tuple[Obstacle, ...]]:
     """The limits a planner keeps so that a plant within ``tube_m`` [m] of every planned segment
     keeps the declared ones (tube MPC with a constant tightening): ``d_min + 2 tube`` between two
     drones (each may be off by the tube; in the downwash metric too, which only shrinks lengths),
@@ -191,7 +191,5 @@ def tightened(
         v_max_z_mps=limits.v_max_z_mps,
         tube_growth_m=growth,
     )
-    inflated = tuple(
-        SphereObstacle(o.center_m, o.radius_m, o.resolved_clearance_m + static) for o in obstacles
-    )
+    inflated = tuple(o.with_clearance(o.resolved_clearance_m + static) for o in obstacles)
     return planned, inflated

@@ -5,7 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from mpcform.world.limits import Limits
-from mpcform.world.obstacles import SphereObstacle, resolve_clearances
+from mpcform.world.obstacles import Obstacle, resolve_clearances
 
 
 @dataclass(frozen=True, eq=False)
@@ -15,7 +15,7 @@ class World:
     (:func:`~mpcform.world.obstacles.resolve_clearances`), so ``obstacles`` are always resolved."""
 
     limits: Limits = field(default_factory=Limits)
-    obstacles: tuple[SphereObstacle, ...] = ()
+    obstacles: tuple[Obstacle, ...] = ()
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "obstacles", resolve_clearances(tuple(self.obstacles), self.limits.d_min_m))

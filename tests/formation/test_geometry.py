@@ -8,7 +8,6 @@ from scipy.spatial.distance import pdist
 
 from mpcform.formation.geometry import (
     NearPairs,
-    closest_on_segments,
     count_pairs_within,
     drone_spreads,
     min_pair_distance,
@@ -16,9 +15,8 @@ from mpcform.formation.geometry import (
     min_path_distance,
     min_segment_distance,
     pairs_within,
-    squared_norms,
-    vector_norms,
 )
+from mpcform.world.closest import closest_on_segments, squared_norms, vector_norms
 
 TAU = np.linspace(0.0, 1.0, 2001)
 seeds = st.integers(0, 2**32 - 1)

@@ -12,7 +12,7 @@ from hypothesis import strategies as st
 from mpcform.control.base import ControlStep
 from mpcform.control.tracking import TrackingController
 from mpcform.errors import ValidationError
-from mpcform.formation.geometry import closest_on_segments, min_segment_distance
+from mpcform.formation.geometry import min_segment_distance
 from mpcform.formation.kinematics import forward_kinematics
 from mpcform.formation.state import FormationState
 from mpcform.formation.template import Template
@@ -22,8 +22,9 @@ from mpcform.mpc.strategy import SparseSolve
 from mpcform.reference.base import ConstantReference, ExponentialReference, Profile
 from mpcform.sim.simulation import SimulationResult, simulate
 from mpcform.solvers.base import QPBackend, QPSolution, SolverOptions
+from mpcform.world.closest import closest_on_segments
 from mpcform.world.limits import Limits
-from mpcform.world.obstacles import SphereObstacle
+from mpcform.world.shapes import SphereObstacle
 
 SOLVERS = ["osqp", "piqp"]
 

@@ -182,7 +182,7 @@ def test_clearance_against_the_required_clearance(tmp_path: Path) -> None:
     run = load_run(tmp_path)
     ax = figures.clearance(run).axes[0]
     labels = ax.get_legend_handles_labels()[1]
-    assert sum("closest drone" in label for label in labels) == run.formation.obstacles.shape[0]
+    assert sum("closest drone" in label for label in labels) == len(run.formation.obstacles)
     assert "required clearance 0.25 m" in labels  # d_min / 2 with d_min = 0.5 m
     lowest = min(
         float(np.nanmin(line.get_ydata())) for line in ax.get_lines() if "closest" in str(line.get_label())

@@ -20,6 +20,7 @@ from mpcform.outputs.rundata import (
     write_formation_npz,
 )
 from mpcform.run.runner import run_scenario
+from mpcform.world.shapes import Box, Cylinder
 from mpcform.scenario.load import load_scenario
 
 
@@ -36,24 +37,47 @@ def test_round_trip_with_formation_data(tmp_path: Path) -> None:
     formation = data.formation
     assert not formation.scale_is_relative and formation.scale_ref is not None
     assert np.allclose(formation.scale_ref, 1.0)
-    assert formation.obstacles.shape == (2, 4)  # centre (2), radius, clearance
-    assert np.allclose(formation.obstacles[:, 2:], [[1.0, 0.25], [1.0, 0.25]])
+    assert [ob.kind for ob in formation.obstacles] == ["sphere", "sphere"]  # saved by kind
+    assert [(ob.radius_m, ob.clearance_m) for ob in formation.obstacles] == [(1.0, 0.25), (1.0, 0.25)]
     assert np.allclose(formation.offsets_m.mean(axis=0), 0.0)
 
 
-def test_an_older_runs_unset_clearance_reads_as_half_of_d_min(tmp_path: Path) -> None:
-    """Runs saved before the clearance was resolved on loading hold NaN for an unset one."""
+def test_an_older_runs_sphere_rows_read_as_spheres_an_unset_clearance_as_half_of_d_min(
+    tmp_path: Path,
+) -> None:
+    """Runs saved before obstacles had kinds hold spheres as rows (centre, radius, clearance), and
+    those saved before the clearance was resolved on loading NaN for an unset one."""
     run = short_run("mission_obstacle_gap", tmp_path, steps=3)
     data = load_run(tmp_path)
     d_min = data.d_min_m
     assert d_min is not None and run.simulation.t_s.shape[0] == 4
     assert [o.clearance_m for o in data.obstacles] == [0.5 * d_min] * len(data.obstacles)  # saved resolved
-    saved = data.formation.obstacles.copy()
-    saved[:, -1] = np.nan  # as an older run saved it
-    write_formation_npz(tmp_path, FormationData(data.formation.offsets_m, data.formation.scale_ref, saved))
+    rows = np.array([[*ob.center_m, ob.radius_m, np.nan] for ob in data.formation.obstacles])
+    np.savez(
+        tmp_path / FORMATION_NPZ,
+        offsets=data.formation.offsets_m,
+        scale_ref=data.formation.scale_ref,
+        obstacles=rows,
+    )
     old = load_run(tmp_path)
-    assert np.isnan(old.formation.obstacles[:, -1]).all()
+    assert [ob.clearance_m for ob in old.formation.obstacles] == [None] * len(rows)
     assert [o.clearance_m for o in old.obstacles] == [0.5 * d_min] * len(old.obstacles)
+    assert [tuple(o.center_m) for o in old.obstacles] == [tuple(o.center_m) for o in data.obstacles]
+
+
+def test_cylinders_and_boxes_round_trip(tmp_path: Path) -> None:
+    short_run("worked_example", tmp_path, steps=3)
+    data = load_run(tmp_path)
+    shapes = (Cylinder([1.0, 2.0], 0.3, clearance_m=0.1), Box([0.0, -1.0], [1.0, 0.5]))
+    write_formation_npz(tmp_path, FormationData(data.formation.offsets_m, data.formation.scale_ref, shapes))
+    back = load_run(tmp_path).formation.obstacles
+    assert [ob.to_keys() for ob in back] == [ob.to_keys() for ob in shapes]
+    with np.load(tmp_path / FORMATION_NPZ) as npz:
+        npz_files = dict(npz)
+    npz_files["obstacle_records"] = np.array('[{"shape": "cone"}]')
+    np.savez(tmp_path / FORMATION_NPZ, **npz_files)
+    with pytest.raises(RunDirError, match="formation.npz: cannot read its obstacles"):
+        load_run(tmp_path)
 
 
 def test_the_run_in_memory_is_the_run_read_back(tmp_path: Path) -> None:
@@ -65,14 +89,17 @@ def test_the_run_in_memory_is_the_run_read_back(tmp_path: Path) -> None:
     saved = load_run(tmp_path)
     for key in ("t_s", "positions_m", "commands_mps", "reference_m"):
         assert np.array_equal(getattr(memory.trajectory, key), getattr(saved.trajectory, key)), key
-    for key in ("offsets_m", "scale_ref", "obstacles"):
+    for key in ("offsets_m", "scale_ref"):
         assert np.array_equal(getattr(memory.formation, key), getattr(saved.formation, key), equal_nan=True)
+    assert [o.to_keys() for o in memory.formation.obstacles] == [
+        o.to_keys() for o in saved.formation.obstacles
+    ]
     assert memory.summary == saved.summary and memory.directory == saved.directory
     assert memory.label == saved.label
     limits = (scenario.limits.d_min_m, scenario.limits.v_max_mps)
     assert (memory.d_min_m, memory.v_max_mps) == (saved.d_min_m, saved.v_max_mps) == limits
     assert np.ptp(memory.formation.scale_ref) > 0  # the mission starts shrinking the formation for the gap
-    assert (memory.formation.obstacles[:, 3] == 0.5 * scenario.limits.d_min_m).all()  # unset: resolved
+    assert all(o.clearance_m == 0.5 * scenario.limits.d_min_m for o in memory.formation.obstacles)  # resolved
 
 
 def test_without_formation_data_the_start_shape_is_used(tmp_path: Path) -> None:
@@ -80,7 +107,7 @@ def test_without_formation_data_the_start_shape_is_used(tmp_path: Path) -> None:
     assert not (tmp_path / FORMATION_NPZ).exists()
     data = load_run(tmp_path)
     formation, ref = data.formation, data.trajectory.reference_m
-    assert formation.scale_is_relative and formation.scale_ref is None and formation.obstacles.shape == (0, 4)
+    assert formation.scale_is_relative and formation.scale_ref is None and formation.obstacles == ()
     assert np.allclose(formation.offsets_m, ref[0] - ref[0].mean(axis=0))
     with pytest.raises(ValidationError, match="formation.scale_ref: unknown"):
         write_formation_npz(tmp_path, formation)
@@ -130,7 +157,7 @@ def test_formation_data_of_a_scenario_without_obstacles() -> None:
     scenario = load_scenario(SCENARIOS / "swap_spatial_12.toml")
     formation = formation_data(scenario, np.linspace(0.0, 1.0, 3))
     assert isinstance(formation, FormationData) and not formation.scale_is_relative
-    assert formation.offsets_m.shape == (12, 3) and formation.obstacles.shape == (0, 5)
+    assert formation.offsets_m.shape == (12, 3) and formation.obstacles == ()
     assert formation.scale_ref is not None and formation.scale_ref.shape == (3,)
 
 
@@ -148,7 +175,7 @@ def test_consensus_graph_and_leaders_round_trip(tmp_path: Path) -> None:
     assert mpc.graph_edges is None and mpc.leaders == ()
     assert load_run(tmp_path / "mpc").trajectory.scale_estimates is None
     with np.load(tmp_path / "mpc" / FORMATION_NPZ) as npz:
-        assert sorted(npz.files) == ["obstacles", "offsets", "scale_ref"]  # unchanged without a graph
+        assert sorted(npz.files) == ["obstacle_records", "offsets", "scale_ref"]  # unchanged without a graph
 
 
 @pytest.mark.parametrize("cut", ["head", "middle"])

@@ -24,6 +24,7 @@ from mpcform.errors import ValidationError
 from mpcform.outputs import viewer
 from mpcform.outputs.rundata import RunData, load_run
 from mpcform.sim.trajectory import TrueTrajectory
+from mpcform.world.shapes import Sphere
 
 ROOT = Path(__file__).resolve().parents[2]
 MAX_BYTES = 8 * 2**20  # the 20-drone swap's page must stay below this (it is ~0.1 MB)
@@ -47,7 +48,7 @@ def synthetic() -> dict:
         "d_min_m": 0.5,
         "v_max_mps": 1.2,
         "edges": [(0, 2), (1, 2), (1, 3)],
-        "obstacles": np.array([[0.0, 2.0, 0.4]]),  # centre, radius; clearance d_min / 2
+        "obstacles": (Sphere([0.0, 2.0], 0.4),),  # clearance d_min / 2
         "geofence": ([-3.0, -np.inf], [3.0, 2.8]),
         "reference_m": ref,
         "title": "synthetic </script> crossing & pass",
@@ -62,7 +63,7 @@ def test_payload_is_rounded_and_marks_pairs_closer_than_d_min() -> None:
     assert data["n"] == 4 and data["dim"] == 2 and len(data["t_s"]) == 41
     assert data["p_mm"][:2] == [-2000, 150] and all(isinstance(v, int) for v in data["p_mm"])
     assert set(data["below"]) == {"19", "20", "21"} and data["below"]["20"] == [0, 1]  # 0.5 m at 18, 22
-    assert data["obstacles"] == [[0.0, 2.0, 0.4, 0.25]]
+    assert data["obstacles"] == [{"kind": "sphere", "clear": 0.25, "c": [0.0, 2.0], "r": 0.4}]
     assert data["closest"]["pair"] == [0, 1] and data["closest"]["m"] < 0.5  # its sample's distance
     assert data["fence"] == {"min_m": [-3.0, None], "max_m": [3.0, 2.8]}
     curves = {c["key"]: c for c in data["curves"]}
@@ -93,8 +94,8 @@ def test_viewer_curves() -> None:
         ({"positions_m": np.zeros((41, 4, 4))}, "positions_m"),
         ({"reference_m": np.zeros((41, 3, 2))}, "reference_m"),
         ({"edges": [(0, 4)]}, "edges"),
-        ({"obstacles": np.zeros((1, 5))}, "obstacles"),
-        ({"obstacles": np.array([[0.0, 0.0, -1.0]])}, "obstacles"),
+        ({"obstacles": (Sphere([0.0, 0.0, 0.0], 1.0),)}, "obstacles[0].center"),
+        ({"obstacles": (np.zeros(3),)}, "obstacles[0]"),
         ({"geofence": ([0.0, 0.0], [1.0, -1.0])}, "geofence"),
         ({"d_min_m": 0.0}, "d_min_m"),
         ({"v_max_mps": "fast"}, "v_max_mps"),

@@ -14,7 +14,8 @@ from mpcform.errors import ScenarioError
 from mpcform.scenario.load import scenario_from_dict
 from mpcform.scenario.placement import check_distinct, check_extent, check_goal, check_start
 from mpcform.world.limits import Limits
-from mpcform.world.obstacles import SphereObstacle, resolve_clearances
+from mpcform.world.obstacles import resolve_clearances
+from mpcform.world.shapes import SphereObstacle
 
 
 def obstacles_doc(**changes: Any) -> dict[str, Any]:
@@ -41,7 +42,7 @@ def error(data: dict[str, Any]) -> ScenarioError:
 def test_a_start_inside_an_obstacle_names_the_start_key_drone_and_obstacle() -> None:
     exc = error(obstacles_doc(**{"initial.centroid": [0.0, 1.0]}))  # drone 1 at (0.46, 2.43)
     assert exc.field == "initial.centroid"
-    assert "obstacles[0]" in str(exc) and "radius + clearance = 1.25 m" in str(exc)
+    assert "obstacles[0] (sphere), within its clearance 0.25 m" in str(exc)
 
 
 def test_the_clearance_defaults_to_half_of_d_min() -> None:
@@ -49,7 +50,10 @@ def test_the_clearance_defaults_to_half_of_d_min() -> None:
     resolved = resolve_clearances((ob,), lim.d_min_m)
     assert resolved[0].required_distance_m == 1.25
     check_start(np.array([[1.25, 0.0]]), "initial.positions", lim, resolved)  # on the boundary: fine
-    with pytest.raises(ScenarioError, match=r"clearance = 1.25 m"):
+    with pytest.raises(
+        ScenarioError,
+        match=r"0.24 m from the surface of obstacles\[0\] \(sphere\), within its clearance 0.25 m",
+    ):
         check_start(np.array([[1.24, 0.0]]), "initial.positions", lim, resolved)
     no_d_min = resolve_clearances((ob,), None)
     check_start(np.array([[1.01, 0.0]]), "initial.positions", Limits(), no_d_min)  # radius only

@@ -50,7 +50,7 @@ def test_the_tracking_allowance_can_close_a_gap_the_ideal_plan_passes() -> None:
     plain = scenario_from_dict(changed(obstacles=gap))
     assert plain.unreachable_warning() is None
     line = plain.flyable().unreachable_warning()
-    assert line is not None and "radius + clearance + 0.05 m" in line
+    assert line is not None and "(clearance + 0.05 m)" in line
 
 
 def test_a_mission_that_ends_in_a_closed_pocket_says_when() -> None:

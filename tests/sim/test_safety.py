@@ -12,7 +12,7 @@ from mpcform.sim.safety import (
     separation_violations,
 )
 from mpcform.world.limits import Limits
-from mpcform.world.obstacles import SphereObstacle
+from mpcform.world.shapes import SphereObstacle
 
 
 def crossing() -> np.ndarray:

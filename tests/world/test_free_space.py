@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from mpcform.world.free_space import FreeSpace
-from mpcform.world.obstacles import SphereObstacle
+from mpcform.world.shapes import SphereObstacle
 
 
 def ring(radius: float, count: int = 8) -> tuple[SphereObstacle, ...]:

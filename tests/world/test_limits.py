@@ -5,7 +5,7 @@ import pytest
 
 from mpcform.errors import ValidationError
 from mpcform.world.limits import DEFAULT_A_MAX_MPS2, Limits, crazyswarm_downwash, planning_limits, tightened
-from mpcform.world.obstacles import SphereObstacle
+from mpcform.world.shapes import SphereObstacle
 
 
 def test_limits_store_validated_values():

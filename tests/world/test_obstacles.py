@@ -9,7 +9,9 @@ from mpcform.formation.template import Template
 from mpcform.mpc.planner import MPCPlanner
 from mpcform.reference.base import ConstantReference
 from mpcform.world.limits import Limits
-from mpcform.world.obstacles import SphereObstacle, obstacle_arrays, require_resolved, resolve_clearances
+from mpcform.world.obstacles import require_resolved, resolve_clearances
+from mpcform.world.shapes import SphereObstacle
+from mpcform.world.shapes.shape_set import ShapeSet
 
 
 def test_sphere_obstacle():
@@ -29,20 +31,20 @@ def test_resolving_fills_in_half_of_d_min_once():
     assert resolved[0].required_distance_m == 0.5 + 0.5 * 0.6  # the same arithmetic as before
 
 
-def test_obstacle_arrays_keep_radius_plus_clearance():
+def test_a_shape_set_keeps_radius_plus_clearance_from_a_spheres_centre():
     obstacles = resolve_clearances(
         (SphereObstacle([1.0, 2.0], 0.5), SphereObstacle([3.0, 4.0], 1.0, clearance_m=0.1)), 0.6
     )
-    center, required = obstacle_arrays(obstacles)
-    np.testing.assert_array_equal(center, [[1.0, 2.0], [3.0, 4.0]])
-    np.testing.assert_allclose(required, [0.5 + 0.3, 1.0 + 0.1])
-    assert obstacle_arrays(())[1].shape == (0,)
+    shapes = ShapeSet(obstacles, 2)
+    np.testing.assert_array_equal(shapes.centers_m, [[1.0, 2.0], [3.0, 4.0]])
+    np.testing.assert_array_equal(shapes.required_m, [0.5 + 0.3, 1.0 + 0.1])
+    assert ShapeSet((), 2).required_m.shape == (0,)
 
 
 def test_consumers_refuse_unresolved_clearances():
     unset = SphereObstacle([1.0, 2.0], 0.5)
     with pytest.raises(ValidationError, match="obstacles.clearance"):
-        obstacle_arrays((unset,))
+        ShapeSet((unset,), 2)
     with pytest.raises(ValidationError, match=r"obstacles\[1\]\.clearance"):
         require_resolved((unset.resolved(0.5), unset))
     assert require_resolved([unset.resolved(None)])[0].clearance_m == 0.0

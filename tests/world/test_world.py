@@ -3,7 +3,7 @@
 import numpy as np
 
 from mpcform.world.limits import Limits
-from mpcform.world.obstacles import SphereObstacle
+from mpcform.world.shapes import SphereObstacle
 from mpcform.world.world import World
 
 

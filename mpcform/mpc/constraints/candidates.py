@@ -16,10 +16,10 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
 from mpcform._validate import Array
-from mpcform.formation.geometry import pairs_within, vector_norms
+from mpcform.formation.geometry import pairs_within
 from mpcform.mpc.settings import MPCSettings
 from mpcform.world.limits import Limits
-from mpcform.world.obstacles import SphereObstacle, obstacle_arrays
+from mpcform.world.shapes.shape_set import ShapeSet
 
 
 @dataclass(frozen=True)
@@ -44,7 +44,7 @@ class CandidateSelector:
 
     Reach over the horizon: a pair within ``d_min kappa + margin + 2 v_max H dt`` (both drones
     fly towards each other), a drone within ``margin + v_max H dt`` of its required distance from
-    an obstacle's centre; ``v_max`` times ``speed_gain`` for a velocity loop that overshoots
+    an obstacle's core; ``v_max`` times ``speed_gain`` for a velocity loop that overshoots
     (:attr:`mpcform.mpc.velocity_loop.VelocityLoop.speed_gain`); plus ``v_max tail_s`` past the horizon (the
     braking tail to the stop point, :mod:`mpcform.mpc.constraints.braking`), plus the rows' largest growth per
     drone ``growth_m`` (:func:`mpcform.mpc.constraints.rows.step_growth`). The obstacles' clearances are
@@ -58,7 +58,7 @@ class CandidateSelector:
         dt_s: float,
         limits: Limits,
         settings: MPCSettings,
-        obstacles: tuple[SphereObstacle, ...],
+        obstacles: ShapeSet,
         speed_gain: float = 1.0,
         tail_s: float = 0.0,
         growth_m: float = 0.0,
@@ -66,7 +66,7 @@ class CandidateSelector:
         self.n, self.limits, self.settings = n, limits, settings
         look_ahead_s = speed_gain * settings.horizon * dt_s + tail_s
         self.travel_m = (limits.v_max_mps or 0.0) * look_ahead_s + growth_m  # farthest [m]
-        self.ob_center_m, self.ob_required_m = obstacle_arrays(obstacles)
+        self.obstacles = obstacles
         self.reset()
 
     def reset(self) -> None:
@@ -91,11 +91,12 @@ class CandidateSelector:
                 self._pairs = pairs_within(p0, reach + 2.0 * travel)
                 self._pair_codes, rebuilt = self._pairs[:, 0] * self.n + self._pairs[:, 1], True
                 pair_on = mask_of(self._pair_codes, need_codes)
-        m = self.ob_required_m.shape[0]
+        m = len(self.obstacles)
         ob_on: Array | None = np.zeros(self._obstacle_items.shape[0], dtype=bool)
         if m:
-            dist = vector_norms(p0[:, None, :] - self.ob_center_m[None])
-            gap = (dist - self.ob_required_m).ravel()  # item code: drone * m + obstacle
+            gap = (
+                self.obstacles.core_distances(p0) - self.obstacles.required_m
+            ).ravel()  # drone * m + obstacle
             need_codes = np.flatnonzero(gap <= st.margin_m + travel)
             ob_on = mask_of(self._ob_codes, need_codes)
             if ob_on is None:

@@ -15,12 +15,12 @@ import numpy as np
 from scipy.spatial import HalfspaceIntersection
 
 from mpcform._validate import Array
-from mpcform.formation.geometry import squared_norms
 from mpcform.mpc.constraints.braking import Braking
 from mpcform.mpc.constraints.rows import INF, Layout, RowBlock, positions_of_inputs, step_growth
 from mpcform.mpc.constraints.tail import Tail, planner_tail
 from mpcform.mpc.settings import MPCSettings
 from mpcform.mpc.velocity_loop import VelocityLoop
+from mpcform.world.closest import squared_norms
 from mpcform.world.limits import Limits
 
 INSCRIBED = 1.0 - 1e-9  # ||u||^2 below this times h^2: inside the velocity set, rounding included

@@ -25,119 +25,26 @@ gets closer, and every drone holding meets the row, so the hard rows stay feasib
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
-
 import numpy as np
 
 from mpcform._validate import Array
-from mpcform.formation.geometry import drone_spreads, pairs_within, vector_norms
+from mpcform.formation.geometry import drone_spreads, pairs_within
 from mpcform.mpc.constraints.braking import Braking
 from mpcform.mpc.constraints.candidates import Candidates
+from mpcform.mpc.constraints.half_spaces import BLOCK, ClearTest, SegmentTest, inside, path_bounds
+from mpcform.mpc.constraints.obstacles import ObstacleSeparation
+from mpcform.mpc.constraints.pairs import PairSeparation
 from mpcform.mpc.constraints.rows import row_ends, row_segments, step_growth
+from mpcform.mpc.constraints.separation_rows import SeparationRows
 from mpcform.mpc.constraints.tail import planner_tail
-from mpcform.mpc.constraints.units import BLOCK, ObstacleSeparation, PairSeparation, Test, inside
 from mpcform.mpc.settings import MPCSettings
 from mpcform.mpc.velocity_loop import VelocityLoop
+from mpcform.world.closest import vector_norms
 from mpcform.world.limits import Limits
-from mpcform.world.obstacles import SphereObstacle
+from mpcform.world.obstacles import Obstacle
+from mpcform.world.shapes.shape_set import ShapeSet
 
 FIRST_TESTED = 32  # the clear test tries this many of the least clear items first
-
-
-@dataclass(frozen=True)
-class SeparationRows:
-    """Linearised separation rows of one step, in QP order (R rows per item).
-
-    Two-drone items (joint pairs) first, then one-drone items (decoupled pair sides, obstacles);
-    ``labels`` (S, 2) names what a one-drone item reports: ``(i, k)`` or ``(i, -1 - obstacle)``;
-    ``*_hard`` marks the items that start inside their required distance: their first row is a hard
-    no-approach row (no slack).
-    """
-
-    pairs: Array  # (P, 2)
-    pair_coeffs: Array  # (P, R, d)
-    pair_lower: Array  # (P, R)
-    pair_on: Array  # (P,)
-    singles: Array  # (S,) drone index
-    labels: Array  # (S, 2)
-    single_coeffs: Array  # (S, R, d)
-    single_lower: Array  # (S, R)
-    single_on: Array  # (S,)
-    pair_hard: Array  # (P,)
-    single_hard: Array  # (S,)
-
-    def subset(self, drones: Array, n: int, on_only: bool) -> SeparationRows:
-        """The rows of the items within ``drones`` (only those within reach with ``on_only``), with
-        drone indices renumbered 0..len(drones)-1 (``labels`` keep the global ones)."""
-        local = np.full(n, -1)
-        local[drones] = np.arange(drones.shape[0])
-        keep_p = (local[self.pairs] >= 0).all(axis=1) & (self.pair_on | (not on_only))
-        keep_s = (local[self.singles] >= 0) & (self.single_on | (not on_only))
-        if drones.shape[0] == n and keep_p.all() and keep_s.all():  # everything: no copies
-            return self
-        return SeparationRows(
-            local[self.pairs[keep_p]],
-            self.pair_coeffs[keep_p],
-            self.pair_lower[keep_p],
-            self.pair_on[keep_p],
-            local[self.singles[keep_s]],
-            self.labels[keep_s],
-            self.single_coeffs[keep_s],
-            self.single_lower[keep_s],
-            self.single_on[keep_s],
-            self.pair_hard[keep_p],
-            self.single_hard[keep_s],
-        )
-
-    def ungrown(self, growing: Array | None, grow: Array | None) -> SeparationRows:
-        """These rows, grown by ``grow`` (R,) [m] per drone and row times each drone's share
-        ``growing`` (n,) (:meth:`Separation.growing`), without their growth in wind: the required
-        distances alone (``d_min`` + margin + 2 tube, the clearances). The growth is a buffer that
-        keeps the next steps' plans feasible; a plan may reach into it and still keep every required
-        distance (:func:`mpcform.mpc.planner.slack_report`)."""
-        if growing is None or grow is None:
-            return self
-        pair_share = growing[self.pairs[:, 0]] + growing[self.pairs[:, 1]]
-        return replace(
-            self,
-            pair_lower=self.pair_lower - pair_share[:, None] * grow,
-            single_lower=self.single_lower - growing[self.singles][:, None] * grow,
-        )
-
-    def joint(self) -> SeparationRows:
-        """The joint pair rows whose split these decoupled rows are: per pair side i's normal and
-        the sum of both sides' lower bounds, after the joint pairs there are (the obstacle items
-        stay one-drone items)."""
-        first, second = pair_sides(self.labels)
-        ob = np.flatnonzero(self.labels[:, 1] < 0)
-        return SeparationRows(
-            np.concatenate([self.pairs, np.column_stack([self.singles[first], self.singles[second]])]),
-            np.concatenate([self.pair_coeffs, self.single_coeffs[first]]),
-            np.concatenate([self.pair_lower, self.single_lower[first] + self.single_lower[second]]),
-            np.concatenate([self.pair_on, self.single_on[first]]),
-            self.singles[ob],
-            self.labels[ob],
-            self.single_coeffs[ob],
-            self.single_lower[ob],
-            self.single_on[ob],
-            np.concatenate([self.pair_hard, self.single_hard[first]]),
-            self.single_hard[ob],
-        )
-
-
-def pair_sides(labels: Array) -> tuple[Array, Array]:
-    """The pair sides among one-drone items of ``labels`` (S, 2): side i (``(i, k)``, i < k) and
-    side k (``(k, i)``) of each pair, in the same pair order."""
-    n = int(labels.max(initial=0)) + 1
-    key = np.where(labels[:, 1] >= 0, np.minimum(labels[:, 0], labels[:, 1]) * n + labels.max(axis=1), -1)
-    first = np.flatnonzero((labels[:, 1] >= 0) & (labels[:, 0] < labels[:, 1]))
-    second = np.flatnonzero((labels[:, 1] >= 0) & (labels[:, 0] > labels[:, 1]))
-    if first.shape == second.shape and np.array_equal(key[first], key[second]):  # the rows' own layout
-        order = np.argsort(key[first])
-        return first[order], second[order]
-    both = np.intersect1d(key[first], key[second])  # a side whose partner is not solved stays put
-    first, second = first[np.isin(key[first], both)], second[np.isin(key[second], both)]
-    return first[np.argsort(key[first])], second[np.argsort(key[second])]
 
 
 class Separation:
@@ -150,7 +57,7 @@ class Separation:
         dim: int,
         limits: Limits,
         settings: MPCSettings,
-        obstacles: tuple[SphereObstacle, ...],
+        obstacles: ShapeSet | tuple[Obstacle, ...],
         braking: Braking | None = None,
         loop: VelocityLoop | None = None,
         dt_s: float | None = None,
@@ -173,7 +80,8 @@ class Separation:
         self._segment_growth = None if growth is None else growth[ends, None]  # (S, 1) [m]
         grow = self.row_growth
         self.pairs = None if d_min is None else PairSeparation(d_min, self.metric, settings, tail, grow)
-        self.obstacles = ObstacleSeparation(obstacles, settings, tail, grow) if obstacles else None
+        shapes = obstacles if isinstance(obstacles, ShapeSet) else ShapeSet(obstacles, dim)
+        self.obstacles = ObstacleSeparation(shapes, settings, tail, grow) if len(shapes) else None
 
     def rows(
         self,
@@ -208,9 +116,12 @@ class Separation:
         apart over each step). It does not cover the decoupled pair-side rows: two drones moving
         side by side can pass it while crossing the guess's midpoint plane.
 
-        A row's normal c is a unit vector with ``c^T g >= |closest point of its guess segment|
-        >= max(|g_j|, |g_j+1|) - |g_j+1 - g_j|`` (the braking tail's hull: its points' largest
-        norm less its diameter), so ``c^T delta_e >= that - |delta_e - g_e|``.
+        A row's normal c is a unit vector with ``c^T (g - a) >= dist(guess segment) >= max(dist(g_j),
+        dist(g_j+1)) - |g_j+1 - g_j|`` for the distance to the forbidden set (a pair's: ``|g|``
+        relative; an obstacle's: to its core, ``a`` the core's point the row is anchored at), which
+        is 1-Lipschitz (the braking tail's hull: its points' largest distance less its diameter,
+        :func:`~mpcform.mpc.constraints.half_spaces.path_bounds`), so ``c^T (delta_e - a) >= that -
+        |delta_e - g_e|``.
         Before that per-segment bound, a per-drone one: drone i's guess stays within ``spread_i``
         of its start and its positions within ``spread_i`` of the guess, so an item whose start
         distance clears the requirement by the spreads of its drones is clear. No row is built.
@@ -222,10 +133,10 @@ class Separation:
             if i.shape[0] > 8 * FIRST_TESTED:  # the least clear first: a miss among them answers early
                 first = np.argpartition(slack, FIRST_TESTED)[:FIRST_TESTED]
                 share = self._share(unit, growing, i[first], k[first])
-                if not self._passes(*unit.clear_test(guess, positions, i[first], k[first]), share):
+                if not self._passes(unit.clear_test(guess, positions, i[first], k[first]), share):
                     return False
             share = self._share(unit, growing, i, k)
-            if i.shape[0] and not self._passes(*unit.clear_test(guess, positions, i, k), share):
+            if i.shape[0] and not self._passes(unit.clear_test(guess, positions, i, k), share):
                 return False  # (no item in doubt: all clear by the spreads)
         return True
 
@@ -235,19 +146,12 @@ class Separation:
             return None
         return growing[i] + growing[k] if unit is self.pairs else growing[i]
 
-    def _passes(self, g: Array, delta: Array, required: Array | float, share: Array | None = None) -> bool:
-        """Whether relative positions ``delta`` about the relative guess ``g`` (H + 1, m, d) meet
-        the per-segment bound of :meth:`clear` for every item (with the rows' growth, ``share``
-        (m,) times each segment's larger end's)."""
-        tail = self.tail_count  # the braking tail's points past x_H (0 without braking)
-        head = g if tail <= 1 else g[: g.shape[0] - tail]  # a polyline (with one tail point, too)
-        g_norm = vector_norms(head)
-        seg = np.maximum(g_norm[:-1], g_norm[1:]) - vector_norms(np.diff(head, axis=0))
-        if tail > 1:  # the tail's hull: its points' largest norm less its diameter
-            hull = g[-tail - 1 :]
-            diameter = vector_norms(hull[:, None] - hull[None]).max(axis=(0, 1))
-            seg = np.concatenate([seg, (vector_norms(hull).max(axis=0) - diameter)[None]])
-        dev = vector_norms(delta - g).max(axis=0, initial=0.0)
+    def _passes(self, test: ClearTest, share: Array | None = None) -> bool:
+        """Whether the items of the clear ``test`` (a unit's :meth:`clear_test`) meet the
+        per-segment bound of :meth:`clear` (with the rows' growth, ``share`` (m,) times each
+        segment's larger end's)."""
+        dist, points, dev, required = test
+        seg = path_bounds(dist, points, self.tail_count)
         if self._segment_growth is not None and share is not None:
             seg = seg - self._segment_growth * share
         return not np.any(seg.min(axis=0, initial=np.inf) - dev < required + self.margin_m)
@@ -354,8 +258,9 @@ class Separation:
             np.add.at(push, k[hard], -c0)
         if cand.obstacle_on.any() and self.obstacles is not None:
             i, m = cand.obstacles[cand.obstacle_on].T
-            hard, c0 = inside(p0[i] - self.obstacles.center_m[m], self.obstacles.required_m[m])
-            np.add.at(push, i[hard], c0)
+            dist, c0 = self.obstacles.start_normals(p0[i], m)
+            hard = dist < self.obstacles.required_m[m]
+            np.add.at(push, i[hard], c0[hard])
         norm = np.linalg.norm(push, axis=1, keepdims=True)
         return np.divide(push, norm, out=np.zeros_like(push), where=norm > 1e-12)
 
@@ -376,12 +281,13 @@ class Separation:
             short[pair] = self.pairs.d_min_m - vector_norms(self.pairs.relative(p0, i, k))
         if (~pair).any() and self.obstacles is not None:
             i, m = labels[~pair, 0], -1 - labels[~pair, 1]
-            short[~pair] = self.obstacles.required_m[m] - vector_norms(p0[i] - self.obstacles.center_m[m])
+            short[~pair] = self.obstacles.required_m[m] - self.obstacles.start_distance(p0[i], m)
         inside = short > tol_m
         return float(short[inside].max(initial=0.0)), labels[inside]
 
-    def first_segment(self, p0: Array, p1: Array, cand: Candidates) -> list[Test]:
-        """For the items within reach: relative positions at ``p0`` and ``p1`` and the distance required."""
+    def first_segment(self, p0: Array, p1: Array, cand: Candidates) -> list[SegmentTest]:
+        """For the items within reach: their distance at ``p0``, along the segment to ``p1``, and
+        the distance required."""
         tests = []
         if cand.pair_on.any() and self.pairs is not None:
             tests.append(self.pairs.first_segment(p0, p1, cand.pairs[cand.pair_on]))

@@ -32,10 +32,10 @@ import numpy as np
 
 from mpcform._validate import Array
 from mpcform.control.laws import saturate
-from mpcform.formation.geometry import closest_on_segments, vector_norms
 from mpcform.mpc.constraints.braking import Braking
 from mpcform.mpc.constraints.candidates import Candidates
-from mpcform.mpc.constraints.separation import Separation, SeparationRows
+from mpcform.mpc.constraints.separation import Separation
+from mpcform.mpc.constraints.separation_rows import SeparationRows
 from mpcform.mpc.plan import Plan
 from mpcform.mpc.safety.first_rows import hard_first_rows
 
@@ -81,11 +81,11 @@ class Certifier:
             p1 = p1 + self.drift(u0)
             brake = np.zeros_like(u0) if self.floor_command is None else self.floor_command
             free = self.separation.first_segment(p0, p0 + self.dt_s * brake + self.drift(brake), cand)
-        for j, (a, b, required) in enumerate(self.separation.first_segment(p0, p1, cand)):
-            floor = np.minimum(required, vector_norms(a))
+        for j, (start, along, required) in enumerate(self.separation.first_segment(p0, p1, cand)):
+            floor = np.minimum(required, start)
             if free is not None:  # as close as the free response takes it
-                floor = np.minimum(floor, vector_norms(closest_on_segments(a, free[j][1])))
-            if np.any(vector_norms(closest_on_segments(a, b)) < floor - CERTIFY_TOL_M):
+                floor = np.minimum(floor, free[j][1])
+            if np.any(along < floor - CERTIFY_TOL_M):
                 return False
         return True
 

@@ -11,7 +11,7 @@ from dataclasses import replace
 import numpy as np
 
 from mpcform._validate import Array
-from mpcform.mpc.constraints.separation import SeparationRows
+from mpcform.mpc.constraints.separation_rows import SeparationRows
 
 LOWERED_TOL_M = 1e-6
 """A first row lowered by more than this is reported: the previous plan meets its rows only to the

@@ -18,10 +18,10 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from mpcform._validate import Array
-from mpcform.formation.geometry import vector_norms
 from mpcform.mpc.plan import Plan
 from mpcform.mpc.prediction import Prediction
 from mpcform.mpc.step_info import MPCStepInfo
+from mpcform.world.closest import vector_norms
 
 PREMISE_TOL = 1e-9
 """Relative tolerance [-] of the check (a move of exactly ``g`` meets it)."""

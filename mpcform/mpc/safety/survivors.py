@@ -20,7 +20,7 @@ from mpcform._validate import Array
 from mpcform.control.base import Controller, ControlStep
 from mpcform.errors import ValidationError
 from mpcform.mpc.step_info import MPCStepInfo
-from mpcform.world.obstacles import SphereObstacle
+from mpcform.world.shapes.sphere import Sphere
 
 EVERY_DRONE_LOST = MPCStepInfo("fallback", status="every drone is lost: nothing to plan, commands zero")
 
@@ -86,10 +86,10 @@ def split_lost(drones: Array, n: int) -> tuple[Array, Array]:
     return lost, np.setdiff1d(np.arange(n), lost)
 
 
-def lost_spheres(positions_m: Array, d_min_m: float | None) -> tuple[SphereObstacle, ...]:
+def lost_spheres(positions_m: Array, d_min_m: float | None) -> tuple[Sphere, ...]:
     """A sphere of radius and clearance ``d_min / 2`` at each lost drone's position (k, d): a
     drone keeps ``d_min`` from its centre, as from a partner (none without ``d_min``)."""
     if not d_min_m:
         return ()
     r = 0.5 * d_min_m
-    return tuple(SphereObstacle(p, r, r) for p in positions_m)
+    return tuple(Sphere(p, r, r) for p in positions_m)

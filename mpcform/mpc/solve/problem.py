@@ -12,7 +12,7 @@ from abc import ABC, abstractmethod
 from dataclasses import dataclass
 
 from mpcform._validate import Array
-from mpcform.mpc.constraints.separation import SeparationRows
+from mpcform.mpc.constraints.separation_rows import SeparationRows
 from mpcform.solvers.base import QPSolution
 
 ACTIVE_TOL = 1e-6  # a row whose multiplier exceeds this is reported active

@@ -22,7 +22,8 @@ import numpy as np
 from mpcform._validate import Array
 from mpcform.errors import ValidationError
 from mpcform.mpc.constraints.limits import AccelerationRows, LimitRows
-from mpcform.mpc.constraints.separation import Separation, SeparationRows
+from mpcform.mpc.constraints.separation import Separation
+from mpcform.mpc.constraints.separation_rows import SeparationRows
 from mpcform.mpc.settings import MPCSettings
 from mpcform.mpc.solve.problem import ACTIVE_TOL, StepQP, StepSolver
 from mpcform.mpc.solve.sparse_qp import MPCQP
@@ -60,6 +61,12 @@ class SparseSolver(StepSolver):
                 f"{backend.name!r} models the separation itself "
                 "and cannot take the plant's velocity loop; set controller.plant_model "
                 "= false",
+            )
+        if backend.needs_context and separation.obstacles and not separation.obstacles.shapes.point_cores:
+            raise ValidationError(
+                "controller.solver",
+                f"{backend.name!r} models the exact separation from obstacles as spheres only; "
+                "choose another solver for cylinders and boxes",
             )
         if backend.stagewise and any(isinstance(f, AccelerationRows) for f in families):
             raise ValidationError(
@@ -182,7 +189,8 @@ class SparseSolver(StepSolver):
         obstacle = -1 - rows.labels[ob, 1]
         margin, center, required = self.settings.margin_m, np.empty((0, self.dim)), np.empty(0)
         if ob.any() and sep.obstacles is not None:
-            center, required = sep.obstacles.center_m[obstacle], sep.obstacles.required_m[obstacle] + margin
+            center = sep.obstacles.shapes.centers_m[obstacle]
+            required = sep.obstacles.required_m[obstacle] + margin
         return QPContext(
             drones.shape[0],
             self.dim,

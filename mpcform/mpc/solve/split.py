@@ -35,7 +35,7 @@ import numpy as np
 
 from mpcform._validate import Array
 from mpcform.errors import ValidationError
-from mpcform.mpc.constraints.separation import pair_sides
+from mpcform.mpc.constraints.separation_rows import pair_sides
 from mpcform.mpc.solve.drone_solves import DroneSolves
 from mpcform.mpc.solve.per_drone import PerDroneQP
 from mpcform.mpc.solve.problem import StepQP, StepSolver

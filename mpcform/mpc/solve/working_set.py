@@ -20,7 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from mpcform._validate import Array
-from mpcform.formation.geometry import vector_norms
+from mpcform.world.closest import vector_norms
 
 WORKING_MARGIN = 0.1  # rows this close to a bound [m/s or m] go to DAQP first
 WORKING_MIN_ROWS = 5000  # ... in a call whose drones to solve times constant rows reach this (the

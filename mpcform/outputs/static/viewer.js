@@ -51,9 +51,9 @@
   const LO = new Array(dim).fill(Infinity), HI = new Array(dim).fill(-Infinity);
   const grow = (a, v) => { LO[a] = Math.min(LO[a], v); HI[a] = Math.max(HI[a], v); };
   for (const arr of [P, R, F]) if (arr) for (let j = 0; j < arr.length; j++) grow(j % dim, arr[j]);
-  for (const ob of D.obstacles) {
-    const r = ob[dim] + (ob[dim + 1] || 0);
-    for (let a = 0; a < dim; a++) { grow(a, ob[a] - r); grow(a, ob[a] + r); }
+  for (const ob of D.obstacles) { // a ball: centre and radius; else its points (outline, surface)
+    if (ob.c) { const r = ob.r + ob.clear; for (let a = 0; a < dim; a++) { grow(a, ob.c[a] - r); grow(a, ob.c[a] + r); } }
+    for (const q of ob.grown || (ob.mesh ? ob.mesh.v : [])) for (let a = 0; a < dim; a++) grow(a, q[a]);
   }
   let S = Math.max(1e-3, ...LO.map((l, a) => HI[a] - l));
   if (D.fence) {
@@ -263,6 +263,35 @@
       circle(g, q[0], q[1], clearPx); g.stroke(); g.restore();
     }
   }
+  function polygon(g, pts) {
+    g.beginPath(); g.moveTo(pts[0][0], pts[0][1]);
+    for (let i = 1; i < pts.length; i++) g.lineTo(pts[i][0], pts[i][1]);
+    g.closePath();
+  }
+  function outlined(g, body, grown) { // a planar obstacle: its outline, its clearance dashed
+    polygon(g, body); g.fillStyle = "rgba(160,166,174,0.75)"; g.fill();
+    g.strokeStyle = "#5f6368"; g.lineWidth = 0.9; g.stroke();
+    g.save(); g.setLineDash([4, 4]); g.strokeStyle = "#80868b"; g.lineWidth = 1;
+    polygon(g, grown); g.stroke(); g.restore();
+  }
+  function area2(pts) { // a screen polygon's area
+    let a = 0;
+    for (let i = 0; i < pts.length; i++) { const p = pts[i], q = pts[(i + 1) % pts.length]; a += p[0] * q[1] - q[0] * p[1]; }
+    return Math.abs(a) / 2;
+  }
+  function areaOf(pts) { // a planar polygon's area in space (Newell's normal)
+    const nrm = [0, 0, 0];
+    for (let i = 0; i < pts.length; i++) {
+      const p = pts[i], q = pts[(i + 1) % pts.length];
+      nrm[0] += (p[1] - q[1]) * (p[2] + q[2]); nrm[1] += (p[2] - q[2]) * (p[0] + q[0]); nrm[2] += (p[0] - q[0]) * (p[1] + q[1]);
+    }
+    return Math.hypot(...nrm) / 2;
+  }
+  function facet(g, pts, light) { // one face of a spatial obstacle: the more it faces the screen, the lighter
+    const c = Math.round(140 + 95 * light);
+    polygon(g, pts); g.fillStyle = "rgba(" + c + "," + (c + 3) + "," + (c + 8) + ",0.85)"; g.fill();
+    g.strokeStyle = "rgba(95,99,104,0.5)"; g.lineWidth = 0.6; g.stroke();
+  }
   function drawScene(g, w, h, time) {
     const k = nearest(time), pr = projector(w, h);
     interpolate(P, time, pos); if (R) interpolate(R, time, ref);
@@ -283,8 +312,20 @@
     const q = []; for (let i = 0; i < n; i++) q.push(pr.f(...at(pos, i)));
     const items = []; // painter's algorithm: far first
     for (const ob of D.obstacles) {
-      const c = pr.f(...ob.slice(0, dim)), rp = pr.s * c[3] * ob[dim], cp = pr.s * c[3] * (ob[dim] + (ob[dim + 1] || 0));
-      items.push([c[2], () => sphere(g, c, rp, cp)]);
+      if (ob.c) {
+        const c = pr.f(...ob.c), rp = pr.s * c[3] * ob.r, cp = pr.s * c[3] * (ob.r + ob.clear);
+        items.push([c[2], () => sphere(g, c, rp, cp)]);
+      } else if (ob.outline) {
+        items.push([-Infinity, () => outlined(g, ob.outline.map((q) => pr.f(...q)), ob.grown.map((q) => pr.f(...q)))]);
+      } else {
+        const v = ob.mesh.v.map((q) => pr.f(...q));
+        for (const face of ob.mesh.f) {
+          const pts = face.map((i) => v[i]), depth = pts.reduce((a, q) => a + q[2], 0) / pts.length;
+          const px = pr.s * pts.reduce((a, q) => a + q[3], 0) / pts.length; // pixels per metre there
+          const share = area2(pts) / Math.max(1e-12, px * px * areaOf(face.map((i) => ob.mesh.v[i])));
+          items.push([depth, () => facet(g, pts, Math.min(1, share))]);
+        }
+      }
     }
     for (const [a, b] of D.edges) {
       items.push([(q[a][2] + q[b][2]) / 2 - 1e-6, () => { g.strokeStyle = COL.edge; g.lineWidth = 1.3; seg(g, q[a], q[b]); }]);

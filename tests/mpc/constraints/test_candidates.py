@@ -7,7 +7,8 @@ import numpy as np
 from mpcform.mpc.constraints.candidates import Candidates, CandidateSelector, mask_of, qp_drones
 from mpcform.mpc.settings import MPCSettings
 from mpcform.world.limits import Limits
-from mpcform.world.obstacles import SphereObstacle
+from mpcform.world.shapes import SphereObstacle
+from mpcform.world.shapes.shape_set import ShapeSet
 
 # v_max 1, horizon 2, dt 0.1: travel 0.2 m; pairs within reach 0.5 + 0.002 + 0.4 = 0.902 m, kept
 # within one more horizon of reach, 1.302 m
@@ -20,7 +21,7 @@ def line(*xs: float) -> np.ndarray:
 
 
 def test_pairs_within_reach_and_hysteresis() -> None:
-    sel = CandidateSelector(3, 0.1, LIMITS, SETTINGS, ())
+    sel = CandidateSelector(3, 0.1, LIMITS, SETTINGS, ShapeSet((), 2))
     first = sel.select(line(0.0, 1.0, 2.5))
     assert first.rebuilt and first.pairs.shape == (0, 2)  # nothing within reach
     near = sel.select(line(0.0, 0.8, 2.5))  # (0, 1) within reach: the set is rebuilt with (0, 1) only
@@ -42,15 +43,15 @@ def test_pairs_within_reach_and_hysteresis() -> None:
 def test_downwash_widens_the_reach() -> None:
     lim = Limits(v_max_mps=1.0, d_min_m=0.5, downwash_kappa=2.0)  # reach 1.0 + 0.002 + 0.4
     p0 = np.array([[0.0, 0.0, 0.0], [0.0, 0.0, 1.3]])
-    assert CandidateSelector(2, 0.1, lim, SETTINGS, ()).select(p0).pair_on.all()
-    assert not CandidateSelector(2, 0.1, LIMITS, SETTINGS, ()).select(p0).pair_on.any()
+    assert CandidateSelector(2, 0.1, lim, SETTINGS, ShapeSet((), 2)).select(p0).pair_on.all()
+    assert not CandidateSelector(2, 0.1, LIMITS, SETTINGS, ShapeSet((), 2)).select(p0).pair_on.any()
 
 
 def test_obstacle_items() -> None:
     """Obstacle radius 1 at (3, 0), required 1 + 0.25; gaps within 0.202 are in reach, within
     0.402 kept: drone 0 (gap 0.15) within reach, drone 1 (0.35) only kept, drone 2 (1.75) neither."""
     ob = SphereObstacle(np.array([3.0, 0.0]), 1.0, clearance_m=0.25)  # d_min / 2
-    sel = CandidateSelector(3, 0.1, LIMITS, SETTINGS, (ob,))
+    sel = CandidateSelector(3, 0.1, LIMITS, SETTINGS, ShapeSet((ob,), 2))
     cand = sel.select(np.array([[1.6, 0.0], [3.0, 1.6], [3.0, -3.0]]))
     np.testing.assert_array_equal(cand.obstacles, [[0, 0], [1, 0]])
     np.testing.assert_array_equal(cand.obstacle_on, [True, False])

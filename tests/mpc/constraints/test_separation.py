@@ -8,15 +8,17 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from mpcform.mpc.constraints.half_spaces import segment_normals
+from mpcform.mpc.constraints.pairs import PairSeparation
 from scipy import sparse
 
 from mpcform.mpc.constraints.braking import Braking
 from mpcform.mpc.constraints.candidates import Candidates
 from mpcform.mpc.constraints.separation import Separation
-from mpcform.mpc.constraints.units import PairSeparation, closest_in_hull, segment_normals
 from mpcform.mpc.settings import MPCSettings
+from mpcform.world.closest import closest_in_hull
 from mpcform.world.limits import Limits
-from mpcform.world.obstacles import SphereObstacle
+from mpcform.world.shapes import SphereObstacle
 
 MARGIN = 2e-3  # the default margin
 
@@ -229,11 +231,11 @@ def test_first_segment_items_within_reach() -> None:
     sep = Separation(2, Limits(v_max_mps=1.0, d_min_m=0.4), MPCSettings(), (ob,))
     c = cand([[0, 1]], [[1, 0]])
     (a, b, d_pair), (oa, ob_, d_ob) = sep.first_segment(p0, p0 + 0.1, c)
-    np.testing.assert_allclose(a, [[-1.0, 0.0]])
-    np.testing.assert_allclose(b, [[-1.0, 0.0]])
+    np.testing.assert_allclose(a, [1.0])  # the pair's distance at the start, and along the segment
+    np.testing.assert_allclose(b, [1.0])
     assert d_pair == 0.4
-    np.testing.assert_allclose(oa, [[1.0, -2.0]])
-    np.testing.assert_allclose(ob_, [[1.1, -1.9]])
+    np.testing.assert_allclose(oa, [np.hypot(1.0, 2.0)])  # drone 1 from the centre (0, 2)
+    np.testing.assert_allclose(ob_, [np.hypot(1.1, 1.9)])  # at its segment's end, the nearest
     np.testing.assert_allclose(d_ob, [0.5 + 0.2])  # radius + half of d_min
     off = Candidates(c.pairs, np.zeros(1, bool), c.obstacles, np.zeros(1, bool), False)
     assert sep.first_segment(p0, p0, off) == []

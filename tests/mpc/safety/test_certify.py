@@ -10,7 +10,7 @@ from mpcform.mpc.plan import Plan
 from mpcform.mpc.safety.certify import Certifier
 from mpcform.mpc.settings import MPCSettings
 from mpcform.world.limits import Limits
-from mpcform.world.obstacles import SphereObstacle
+from mpcform.world.shapes import SphereObstacle
 
 DT = 0.1
 

@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from mpcform.mpc.constraints.separation import SeparationRows
+from mpcform.mpc.constraints.separation_rows import SeparationRows
 from mpcform.mpc.safety.first_rows import hard_first_rows
 
 

@@ -14,7 +14,7 @@ from mpcform.mpc.safety.survivors import EVERY_DRONE_LOST, Survivors, lost_spher
 from mpcform.mpc.settings import MPCSettings
 from mpcform.reference.base import ConstantReference
 from mpcform.world.limits import Limits
-from mpcform.world.obstacles import SphereObstacle
+from mpcform.world.shapes import SphereObstacle
 
 DT, D_MIN, V_MAX = 0.1, 0.5, 1.0
 

@@ -23,7 +23,7 @@ from mpcform.solvers.base import QPBackend, QPSolution, SolverOptions
 from mpcform.solvers.daqp_dense import DaqpBackend
 from mpcform.solvers.registry import make_backend
 from mpcform.world.limits import Limits
-from mpcform.world.obstacles import SphereObstacle
+from mpcform.world.shapes import SphereObstacle
 
 # The sparse reference: Clarabel at tight tolerances (PIQP stops ~3e-6 away at any tolerance here).
 # Where plans differ by more than ~1e-6 (an optimum at a vertex of the velocity polygon), the

@@ -11,14 +11,15 @@ from helpers import crowd_and_swap
 
 from mpcform.mpc.constraints.candidates import Candidates
 from mpcform.mpc.constraints.limits import limit_rows
-from mpcform.mpc.constraints.separation import Separation, SeparationRows
+from mpcform.mpc.constraints.separation import Separation
+from mpcform.mpc.constraints.separation_rows import SeparationRows
 from mpcform.mpc.settings import MPCSettings
 from mpcform.mpc.solve.problem import StepQP
 from mpcform.mpc.solve.sparse import SparseSolver
 from mpcform.mpc.strategy import SparseSolve
 from mpcform.solvers.base import QPBackend, QPContext, QPSolution, SolverOptions
 from mpcform.world.limits import Limits
-from mpcform.world.obstacles import SphereObstacle
+from mpcform.world.shapes import SphereObstacle
 
 DT = 0.1
 LIMITS = Limits(v_max_mps=1.0, d_min_m=0.5)
