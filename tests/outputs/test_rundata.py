@@ -20,8 +20,8 @@ from mpcform.outputs.rundata import (
     write_formation_npz,
 )
 from mpcform.run.runner import run_scenario
-from mpcform.world.shapes import Box, Cylinder
 from mpcform.scenario.load import load_scenario
+from mpcform.world.shapes import Box, Cylinder
 
 
 def test_round_trip_with_formation_data(tmp_path: Path) -> None:

@@ -14,6 +14,7 @@ from __future__ import annotations
 import numpy as np
 
 from mpcform._validate import Array
+from mpcform.mpc.constraints.family import SeparationFamily
 from mpcform.mpc.constraints.half_spaces import ClearTest, RowPart, SegmentTest
 from mpcform.mpc.constraints.rows import row_segments
 from mpcform.mpc.settings import MPCSettings
@@ -21,7 +22,7 @@ from mpcform.world.closest import vector_norms
 from mpcform.world.shapes.shape_set import ShapeSet
 
 
-class ObstacleSeparation:
+class ObstacleSeparation(SeparationFamily):
     """Drones keep ``shapes.required_m`` (m,) [m] from the obstacles' cores (the rounding plus each
     obstacle's resolved clearance, :func:`mpcform.world.obstacles.resolve_clearances`)."""
 

@@ -14,6 +14,7 @@ import numpy as np
 
 from mpcform._validate import Array
 from mpcform.formation.geometry import NearPairs
+from mpcform.mpc.constraints.family import SeparationFamily
 from mpcform.mpc.constraints.half_spaces import (
     BLOCK,
     ClearTest,
@@ -27,7 +28,7 @@ from mpcform.mpc.settings import MPCSettings
 from mpcform.world.closest import closest_on_segments, vector_norms
 
 
-class PairSeparation:
+class PairSeparation(SeparationFamily):
     """``d_min`` [m] between drone pairs in the metric ``W = diag(metric)``, joint or decoupled."""
 
     def __init__(

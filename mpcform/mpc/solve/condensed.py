@@ -25,7 +25,7 @@ from scipy.linalg import solve_triangular
 
 from mpcform._validate import Array
 from mpcform.mpc.constraints.braking import Braking
-from mpcform.mpc.constraints.limits import LimitRows
+from mpcform.mpc.constraints.family import LimitRows
 from mpcform.mpc.constraints.rows import position_table, positions_of_inputs, row_ends
 from mpcform.mpc.constraints.tail import planner_tail
 from mpcform.mpc.settings import MPCSettings

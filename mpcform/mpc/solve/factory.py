@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from mpcform.mpc.constraints.limits import LimitRows
+from mpcform.mpc.constraints.family import LimitRows
 from mpcform.mpc.constraints.separation import Separation
 from mpcform.mpc.settings import MPCSettings
 from mpcform.mpc.solve.per_drone import PerDroneQP

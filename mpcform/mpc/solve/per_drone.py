@@ -21,7 +21,7 @@ from dataclasses import replace
 import numpy as np
 
 from mpcform._validate import Array
-from mpcform.mpc.constraints.limits import LimitRows
+from mpcform.mpc.constraints.family import LimitRows
 from mpcform.mpc.settings import MPCSettings
 from mpcform.mpc.solve.condensed import CondensedDroneQP, dense_bounds
 from mpcform.mpc.solve.drone_solves import DroneSolves

@@ -21,7 +21,8 @@ import numpy as np
 
 from mpcform._validate import Array
 from mpcform.errors import ValidationError
-from mpcform.mpc.constraints.limits import AccelerationRows, LimitRows
+from mpcform.mpc.constraints.acceleration import AccelerationRows
+from mpcform.mpc.constraints.family import LimitRows
 from mpcform.mpc.constraints.separation import Separation
 from mpcform.mpc.constraints.separation_rows import SeparationRows
 from mpcform.mpc.settings import MPCSettings

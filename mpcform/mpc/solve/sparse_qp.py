@@ -30,7 +30,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from mpcform._validate import Array
-from mpcform.mpc.constraints.limits import LimitRows
+from mpcform.mpc.constraints.family import LimitRows
 from mpcform.mpc.constraints.rows import (
     Layout,
     RowBlock,

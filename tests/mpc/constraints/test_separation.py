@@ -8,12 +8,12 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from mpcform.mpc.constraints.half_spaces import segment_normals
-from mpcform.mpc.constraints.pairs import PairSeparation
 from scipy import sparse
 
 from mpcform.mpc.constraints.braking import Braking
 from mpcform.mpc.constraints.candidates import Candidates
+from mpcform.mpc.constraints.half_spaces import segment_normals
+from mpcform.mpc.constraints.pairs import PairSeparation
 from mpcform.mpc.constraints.separation import Separation
 from mpcform.mpc.settings import MPCSettings
 from mpcform.world.closest import closest_in_hull
