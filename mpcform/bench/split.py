@@ -50,13 +50,13 @@ def record(path: str, rounds: int, steps: int | None) -> tuple[MPCPlanner, list[
     if not isinstance(planner, MPCPlanner):  # build_controller makes the kind asked for
         raise ScenarioError("controller.kind", f"bench split flies the mpc planner, got {planner.name!r}")
     qps: list[StepQP] = []
-    solve = planner._solver.solve
+    solve = planner.step_solver.solve
 
     def keep(qp: StepQP) -> Any:
         qps.append(qp)
         return solve(qp)
 
-    planner._solver.solve = keep  # type: ignore[method-assign]
+    planner.step_solver.solve = keep  # type: ignore[method-assign]
     dt = sc.simulation.dt_s
     count = sc.steps if steps is None else steps
     p = sc.initial_positions_m.copy()
@@ -70,10 +70,17 @@ def curves(planner: MPCPlanner, qps: list[StepQP], rounds: int) -> dict[str, Arr
     """Per QP (Q,) and round (rounds + 1): the best cost, wall and CPU seconds; the joint optimum
     and the joint backend's wall seconds (Q,)."""
     st = planner.settings
-    split = SplitQP(planner._solver.per_drone, rounds, None)  # type: ignore[attr-defined]
+    split = SplitQP(planner.step_solver.per_drone, rounds, None)  # type: ignore[attr-defined]
     sparse = as_sparse(st.strategy)
     joint_st = replace(st, coupling="joint", solve=sparse)
-    args = (planner.dim, planner.dt_s, planner.limits, joint_st, planner._families, planner._separation)
+    args = (
+        planner.dim,
+        planner.dt_s,
+        planner.limits,
+        joint_st,
+        planner.steps.families,
+        planner.steps.separation,
+    )
     accurate = SparseSolver(make_backend("qpsolvers:clarabel", ACCURATE), *args)
     fast = SparseSolver(make_backend(DEFAULT_SOLVER, sparse.options), *args)
     out: dict[str, list[Any]] = {"cost": [], "wall": [], "cpu": [], "joint": [], "joint_wall": []}

@@ -41,6 +41,27 @@ class Plan:
         return np.concatenate([self.inputs_mps[1:], last])
 
 
+@dataclass(frozen=True, eq=False)
+class Nominal:
+    """One step's eq. 14 rollout: the targets (H + 1, n, d) and the cost's ``c`` (H, n, d) [m/s],
+    its inputs ``u`` and relative positions ``x`` (H, n, d), where it takes the drones ``x_true``
+    (S, n, d) (with a loop and the braking tail), as a ``plan``, its ``true_path`` (S + 1, n, d)
+    from the start, the ``guess`` (S + 1, n, d) the rows are linearised about, the drones it takes
+    off a limit row ``off_limits`` (n,), and each drone's share of the rows' growth ``growing``
+    (n,) (None: no growth)."""
+
+    targets: Array
+    c: Array
+    u: Array
+    x: Array
+    x_true: Array
+    plan: Plan
+    true_path: Array
+    guess: Array
+    off_limits: Array
+    growing: Array | None
+
+
 def rollout(c: Array, k: float, dt: float) -> tuple[Array, Array]:
     """Eq. 14 over the horizon in relative coordinates: ``u_j = c_j - k x_j``, ``x_{j+1} = x_j + dt u_j``,
     in closed form ``x_{j+1} = sum_{i <= j} dt (1 - k dt)^(j - i) c_i`` (one product; ``u_0 = c_0``)."""

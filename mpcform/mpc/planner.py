@@ -40,25 +40,14 @@ from dataclasses import replace
 import numpy as np
 
 from mpcform._validate import Array, positive
-from mpcform.control.base import Controller, ControlStep, feedforward_targets
+from mpcform.control.base import Controller, ControlStep
 from mpcform.control.laws import check_gain_dt
 from mpcform.errors import ValidationError
-from mpcform.mpc.constraints.braking import Braking
-from mpcform.mpc.constraints.candidates import CandidateSelector, qp_drones
-from mpcform.mpc.constraints.limits import admitted, limit_rows, violators
-from mpcform.mpc.constraints.separation import Separation
-from mpcform.mpc.constraints.separation_rows import SeparationRows
-from mpcform.mpc.liveness import TieBreak
-from mpcform.mpc.plan import Plan, guess, merge, rollout, warm_start
-from mpcform.mpc.prediction import Prediction
-from mpcform.mpc.safety.certify import Certifier
-from mpcform.mpc.safety.premise import GrowthPremise
+from mpcform.mpc.pipeline import PlanState, StepPipeline
+from mpcform.mpc.plan import Plan
 from mpcform.mpc.safety.survivors import Survivors, lost_spheres, split_lost
 from mpcform.mpc.settings import MPCSettings
-from mpcform.mpc.solve.factory import build_step_solvers
-from mpcform.mpc.solve.problem import StepQP
-from mpcform.mpc.solve.split import SplitQP
-from mpcform.mpc.step_info import FAST_PATH, MPCStepInfo, solve_info
+from mpcform.mpc.solve.problem import StepSolver
 from mpcform.mpc.strategy import with_backend
 from mpcform.mpc.velocity_loop import VelocityLoop
 from mpcform.reference.base import Reference
@@ -68,7 +57,6 @@ from mpcform.world.limits import Limits, planning_limits, tightened
 from mpcform.world.obstacles import Obstacle, resolve_clearances
 from mpcform.world.shapes.shape_set import ShapeSet
 
-SLACK_REPORT_M = 1e-6  # slack above this is reported
 DEADLINE_RESERVE = 0.25
 """Share of ``step_budget_s`` no optional solver work is planned into: it is kept for what follows
 the solve and for the machine's jitter (the scheduler, the garbage collector, a plant's process)."""
@@ -106,51 +94,39 @@ class MPCPlanner(Controller):
         limits, obstacles = tightened(limits, obstacles, 0.0, None)  # the tracking allowance, if any
         self.limits, self.obstacles = limits, obstacles
         _check_limits(self.dim, limits, self.obstacles)
-        shapes = ShapeSet(self.obstacles, self.dim)  # every consumer asks these
         self.loop = _check_loop(loop, self.dim, settings)
-        self._families = limit_rows(self.dim, dt_s, limits, settings, self.loop)
-        self.braking = braking = Braking.of(dt_s, limits, settings.braking)  # the plans' terminal condition
-        sep = Separation(self.dim, limits, settings, shapes, braking, self.loop, dt_s)
-        self._separation = sep
-        self._predict = predict = Prediction(dt_s, settings.horizon, self.loop, braking, sep.tail)
-        self._premise = GrowthPremise.of(sep.growth, limits.tube_growth_m, predict)  # checked in wind
-        grown = 0.0 if sep.growth is None else float(sep.growth[-1])  # the rows' largest growth
-        self._candidates = CandidateSelector(
-            self.n, dt_s, limits, settings, shapes, predict.speed_gain, predict.tail_s, grown
-        )
-        scale = limits.speed_scale(self.dim)  # with v_max_z: the velocity set's spheroid
-        self._certifier = Certifier(dt_s, limits.v_max_mps, sep, limits.a_max_mps2, braking, scale)
-        self._loop_state: Array  # the velocity loop's state (n, d, s), set by reset
-        if self.loop is not None:  # certify where the loop takes the drones in the interval
-            loop = self.loop
-            self._certifier.drift = lambda u0: loop.first(self._loop_state, u0)
-        # the sparse QP with a backend, or each drone's QP; the split rounds while a drone is stalled
         instance = solver if isinstance(solver, QPBackend) else None
-        self._solver, self._stalled_solver = build_step_solvers(
-            settings, self.dim, dt_s, limits, self._families, sep, loop, instance
-        )
-        self._splits = isinstance(self._solver, SplitQP)  # a pair's split moves both its drones
-        self.solver_name = self._solver.name
-        self._tie_break = TieBreak(self.n, settings.tie_break_rad, dt_s)
+        shapes = ShapeSet(self.obstacles, self.dim)  # every consumer asks these
+        self._steps = StepPipeline(reference, self.dt_s, limits, settings, shapes, self.loop, instance)
+        self.braking, self.solver_name = self._steps.braking, self._steps.solvers.name
         self.reset(0.0, np.zeros((self.n, self.dim)))
 
     # ---- state ----------------------------------------------------------------------------
     def reset(self, t_s: float, positions_m: Array) -> None:
         """Forget the previous plan, the candidate set and the liveness state (a new run)."""
-        self._candidates.reset()
-        self._solver.reset()
-        self._plan: Plan | None = None
-        self._u_prev = np.zeros((self.n, self.dim))
-        self._tie_break.reset()
-        # drones at rest (no states without a loop); where the loop takes them by the next step
-        self._loop_state = np.zeros((self.n, self.dim, 0)) if self.loop is None else self.loop.rest(self.n)
-        self._predicted: Array | None = None
-        self._expected: Array | None = None  # in wind, where the last plan takes the drones
+        self._steps.reset()
+        self._predicted: Array | None = None  # with a loop, where the last command takes the drones
+
+    @property
+    def steps(self) -> StepPipeline:
+        """What the planner is built of and runs each step (:mod:`mpcform.mpc.pipeline`)."""
+        return self._steps
+
+    @property
+    def state(self) -> PlanState:
+        """What the planner carries from one step to the next
+        (:class:`~mpcform.mpc.pipeline.PlanState`)."""
+        return self._steps.state
+
+    @property
+    def step_solver(self) -> StepSolver:
+        """The solver of every step (:mod:`mpcform.mpc.solve`)."""
+        return self._steps.solvers.every
 
     @property
     def plan(self) -> Plan | None:
         """The plan of the last step (None before the first)."""
-        return self._plan
+        return self._steps.state.plan
 
     def lose(self, drones: Array, positions_m: Array) -> Controller:
         """Stop planning for ``drones`` (:mod:`mpcform.mpc.safety.survivors`): the planner of the others,
@@ -164,11 +140,12 @@ class MPCPlanner(Controller):
         inner = MPCPlanner(
             ref, self.dt_s, self.limits, self.settings, obstacles, self._solver_given, self.loop
         )
-        inner._u_prev, inner._loop_state = self._u_prev[keep], self._loop_state[keep]
+        mine, theirs = self.state, inner.state
+        theirs.u_prev, theirs.loop_state = mine.u_prev[keep], mine.loop_state[keep]
         inner._predicted = None if self._predicted is None else self._predicted[keep]
-        inner._expected = None if self._expected is None else self._expected[:, keep]
-        if self._plan is not None:
-            inner._plan = Plan(self._plan.inputs_mps[:, keep], self._plan.positions_m[:, keep])
+        theirs.expected = None if mine.expected is None else mine.expected[:, keep]
+        if mine.plan is not None:
+            theirs.plan = Plan(mine.plan.inputs_mps[:, keep], mine.plan.positions_m[:, keep])
         return Survivors(self, lost, inner, len(self.obstacles))
 
     # ---- one step -------------------------------------------------------------------------
@@ -181,149 +158,16 @@ class MPCPlanner(Controller):
         p0 = self._check_positions(positions_m)
         deadline = None if (b := self.settings.step_budget_s) is None else time.perf_counter() + b
         if self.loop is None:
-            return ControlStep(*self._step(t_s, p0, deadline))
+            return ControlStep(*self._steps.run(t_s, p0, deadline))
+        state, premise = self.state, self._steps.premise
         if self._predicted is not None:  # the velocity offset of the last interval
-            self._loop_state = self.loop.observe(self._loop_state, p0 - self._predicted)
-        u0, info = self._step(t_s, p0, deadline)
-        if self._premise is not None and self._plan is not None:
-            info, self._expected = self._premise.record(info, self._moved_m, p0, self._loop_state, self._plan)
-        self._predicted = p0 + self.dt_s * u0 + self.loop.first(self._loop_state, u0)
-        self._loop_state = self.loop.advance(self._loop_state, u0)
+            state.loop_state = self.loop.observe(state.loop_state, p0 - self._predicted)
+        u0, info = self._steps.run(t_s, p0, deadline)
+        if premise is not None and state.plan is not None:
+            info, state.expected = premise.record(info, state.moved_m, p0, state.loop_state, state.plan)
+        self._predicted = p0 + self.dt_s * u0 + self.loop.first(state.loop_state, u0)
+        state.loop_state = self.loop.advance(state.loop_state, u0)
         return ControlStep(u0, info)
-
-    def _step(self, t_s: float, p0: Array, deadline: float | None) -> tuple[Array, MPCStepInfo]:
-        """:meth:`step` from ``p0``, due at ``time.perf_counter() == deadline`` (None: no deadline):
-        the command and the step's record."""
-        st, sep = self.settings, self._separation
-        k, dt, horizon = st.gain_per_s, self.dt_s, st.horizon
-        targets, ff = feedforward_targets(self.reference, t_s, dt, horizon, st.feedforward)
-        c = ff + k * (targets[:-1] - p0)  # u_j = c_j - k x_j is the eq. 14 rollout
-        u_nom, x_nom = rollout(c, k, dt)
-        x_true = self._predict.points(self._loop_state, u_nom, x_nom)  # where the rollout takes the drones
-        nominal = Plan.from_relative(p0, u_nom, x_nom)  # the fast path's plan
-        true_path = np.concatenate([p0[None], p0 + x_true])
-        about = self._predict.guess(self._plan, p0, self._loop_state)
-        off_limits = violators(self._families, p0, self._u_prev, u_nom, x_true)
-        growing = sep.growing(targets[0])  # each drone's share of the rows' growth in wind
-        self._moved_m = None if self._premise is None else self._premise.moved(about, self._expected, growing)
-        if st.fast_path and not off_limits.any() and sep.clear(about, true_path, growing):
-            return self._fast_path(nominal)
-        cand = self._candidates.select(p0)
-        grouped = st.fast_path and st.grouping
-        if grouped or st.solves_per_drone:  # no fixed pattern: rows only within reach
-            cand = cand.within_reach()
-        stops = true_path[-1] if self.braking is not None and st.coupling == "decoupled" else None
-        rows = sep.rows(p0, about, cand, stops, growing)  # on the true positions (the QP's: on_forced)
-        values: Array | None = sep.single_values(x_true, rows)  # the rows at the rollout
-        if st.coupling == "decoupled" and not off_limits.any() and sep.meets_joint(x_true, rows, values):
-            # the rollout meets the limits and the joint rows: the decoupled rows are split about
-            # the rollout itself, which meets them, so it is the optimum (see the module docstring)
-            if st.fast_path:
-                return self._fast_path(nominal)
-            about = true_path
-            rows, values = sep.rows(p0, about, cand, stops, growing), None
-        conflicted = sep.conflicted(x_true, rows, values)
-        if st.fast_path and not (off_limits | conflicted).any():
-            return self._fast_path(nominal)
-        blocked = sep.blocked_targets(targets[0]) if conflicted.any() else None
-        turned = conflicted
-        if (self.loop is not None or self.braking is not None) and conflicted.any():
-            # encounters: the single integrator's conflicts within the horizon (a stop point's
-            # conflict is the QP's to brake for, not one to turn away from)
-            pad = 0 if sep.tail is None else sep.tail.count  # the tail's rows: not counted here
-            plain = rows
-            if self.loop is not None:
-                about_plain = guess(self._plan, p0, horizon, self.braking)
-                about_plain = np.concatenate(
-                    [about_plain, np.repeat(about_plain[-1:], max(pad - 1, 0), axis=0)]
-                )
-                plain = sep.rows(p0, about_plain, cand, growing=growing)
-            x_enc = np.concatenate([x_nom, np.repeat(x_nom[-1:], pad, axis=0)])
-            turned = conflicted & sep.conflicted(x_enc, plain, tail=False)
-        speed, step = None, 0.0  # with a_max: how fast the drones fly, how much that changes per step
-        if self.limits.a_max_mps2 is not None:
-            speed = np.sqrt(np.einsum("nd,nd->n", self._u_prev, self._u_prev))
-            step = self.limits.a_max_mps2 * dt * np.sqrt(self.dim)
-        to_target = targets[0] - p0
-        c = self._tie_break.turn(c, turned, p0, to_target, self._plan is not None, blocked, speed, step)
-        bad = off_limits | conflicted
-        linked = rows.pairs[rows.pair_on]
-        solver = self._solver
-        if self._stalled_solver is not None and self._tie_break.resolving:
-            solver = self._stalled_solver
-        if solver is not self._solver or self._splits:  # a pair's split moves both its drones
-            linked = rows.labels[(rows.labels[:, 1] >= 0) & rows.single_on]
-        drones = qp_drones(bad, linked) if grouped else np.arange(self.n)
-        qp_rows, relaxed, brake = self._predict.on_forced(rows, self._loop_state, sep.ends), False, None
-        if self.loop is not None:  # every first row hard (mpc.certify.Certifier.hard_first_rows)
-            qp_rows, relaxed, brake = self._certifier.hard_first_rows(
-                qp_rows, self._plan, self._u_prev, horizon, self.loop.forced[1, 0]
-            )
-        sub = qp_rows.subset(drones, self.n, on_only=grouped)  # grouped: the pattern follows the groups
-        warm = None
-        if self._solver.warm_starts:
-            warm = warm_start(self._plan, p0, u_nom, x_nom, self.braking)[:, :, drones]
-        free = None if self.loop is None else self._predict.free(self._loop_state)[1:]  # the geofence's
-        qp = StepQP(self.n, drones, p0[drones], c[:, drones], self._u_prev[drones], sub, cand.rebuilt, warm)
-        if free is not None:
-            qp = replace(qp, free_m=free[:, drones])
-        if deadline is not None:
-            qp = replace(qp, deadline_s=deadline - DEADLINE_RESERVE * (self.settings.step_budget_s or 0.0))
-        sol, active = solver.solve(qp)
-        late = deadline is not None and time.perf_counter() > deadline
-        if late:  # the command had to be sent: the solution came too late
-            sol = replace(sol, success=False, status=f"{sol.status}; past the step's deadline")
-        elif not sol.success and brake is not None and free is not None:  # wind: no plan in the fence
-            path = self._predict.points(self._loop_state, brake, dt * np.cumsum(brake, axis=0))
-            wider = admitted(self._families, p0, free, path)
-            if not np.array_equal(wider, free):
-                sol, active = solver.solve(replace(qp, free_m=wider[:, drones]))
-        status, solved = sol.status, None
-        inside_m, inside = sep.start_shortfall(p0, rows, SLACK_REPORT_M)  # items that start too close
-        if sol.success and sol.x is not None:
-            u, x = merge(drones, sol.x, u_nom, x_nom)
-            u0 = self._certifier.certify(p0, u[0], cand, self._u_prev)
-            if u0 is not None:
-                x_true = self._predict.points(self._loop_state, u, x)
-                slack_m, items, growth_m = slack_report(
-                    sep, sol.x, drones, x_true, rows, (inside_m, inside), relaxed, horizon, growing
-                )
-                mode = "qp"
-
-                def meets(u: Array, x: Array) -> bool:  # this step's rows, to the solver's tolerance
-                    y = self._predict.points(self._loop_state, u, x)
-                    off = violators(self._families, p0, self._u_prev, u, y, SLACK_REPORT_M).any()
-                    return not off and sep.shortfall(y, rows, SLACK_REPORT_M, joint=True)[1].shape[0] == 0
-
-                slack = items.shape[0] > inside.shape[0] or growth_m > 0.0  # the shifted plan may avoid it
-                if slack and (kept := self._certifier.kept(self._plan, p0, cand, self._u_prev, meets)):
-                    (u, x), mode, status = kept, "fallback", f"{status}; previous plan (the solve left slack)"
-                    u0, slack_m, items, growth_m = u[0], inside_m, inside, 0.0
-                self._accept(p0, u, x)
-                self._u_prev = u0.copy()  # the command sent (the solver's tolerance off)
-                info = solve_info(
-                    mode, sol, status, active, len(drones), slack_m, items, self._tie_break, relaxed
-                )
-                return u0, replace(info, growth_slack_m=growth_m)
-            status, solved = status + "; command failed certification", u[0]
-        u, x, note = self._certifier.fallback(self._plan, p0, cand, horizon, solved, self._u_prev)
-        self._accept(p0, u, x)
-        info = solve_info(
-            "fallback", sol, f"{status}; {note}", 0, 0, inside_m, inside, self._tie_break, relaxed
-        )
-        return u[0].copy(), replace(info, deadline_missed=late)
-
-    def _fast_path(self, nominal: Plan) -> tuple[Array, MPCStepInfo]:
-        """Accept the rollout's plan: its first input is the command."""
-        self._tie_break.clear()
-        self._plan, self._u_prev = nominal, nominal.inputs_mps[0].copy()
-        resolved = self._tie_break.resolved
-        info = MPCStepInfo("fast_path", resolved=resolved) if resolved else FAST_PATH
-        return nominal.inputs_mps[0].copy(), info
-
-    def _accept(self, p0: Array, u: Array, x: Array) -> None:
-        self._plan = Plan.from_relative(p0, u, x)
-        self._u_prev = u[0].copy()
 
 
 def _check_loop(loop: VelocityLoop | None, dim: int, settings: MPCSettings) -> VelocityLoop | None:
@@ -359,34 +203,3 @@ def _check_limits(
         raise ValidationError(
             "limits.geofence_min", f"expected {dim} numbers, got {limits.geofence_min_m.tolist()}"
         )
-
-
-def slack_report(
-    sep: Separation,
-    z: Array,
-    drones: Array,
-    x: Array,
-    rows: SeparationRows,
-    start: tuple[float, Array],
-    relaxed: bool,
-    horizon: int,
-    growing: Array | None = None,
-) -> tuple[float, Array, float]:
-    """The slack a certified solve ``z`` of ``drones`` over ``horizon`` steps needed [m] and its
-    items (m, 2): those whose rows the positions ``x`` (H or H + 1, n, d) miss by more than
-    :data:`SLACK_REPORT_M`, and the items that ``start`` (shortfall [m], items) inside their
-    required distance; then how far [m] the positions reach into the rows' growth in wind
-    (``growing``, :meth:`SeparationRows.ungrown`) while keeping every required distance: the growth
-    is a buffer for the next steps, not a distance to keep, so that is not slack (0 otherwise)."""
-    nud = horizon * drones.shape[0] * x.shape[2]
-    slack = z[2 * nud : 2 * nud + horizon * drones.shape[0]]
-    shortfall, missed = start
-    if relaxed or slack.max(initial=0.0) > SLACK_REPORT_M / 2:
-        planned, late = sep.shortfall(x, rows, SLACK_REPORT_M, joint=True)
-        if late.shape[0] and growing is not None:  # into the growth only?
-            bare = rows.ungrown(growing, sep.row_growth)
-            if sep.shortfall(x, bare, SLACK_REPORT_M, joint=True)[1].shape[0] == 0:
-                return max(shortfall, 0.0), missed, planned
-        if late.shape[0]:  # a miss within the solver's tolerance is not slack
-            shortfall, missed = max(shortfall, planned), np.concatenate([missed, late])
-    return max(shortfall, 0.0), missed, 0.0

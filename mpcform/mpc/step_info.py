@@ -23,7 +23,7 @@ class MPCStepInfo(StepInfo):
     velocity loop, whether a first separation row within reach was lowered to what braking reaches
     (:func:`mpcform.mpc.safety.first_rows.hard_first_rows`). ``growth_slack_m`` [m]: in wind, how far the
     plan reaches into its rows' growth along the horizon while keeping every required distance (a
-    buffer for the next steps, :func:`mpcform.mpc.planner.slack_report`; not slack).
+    buffer for the next steps, :func:`mpcform.mpc.safety.slack.slack_report`; not slack).
     ``wind_shift_m`` [m]: in wind, how far the wind moved the previous plan within the growth's
     window, and ``growth_exceeded``: farther than the growth per step, its premise
     (:mod:`mpcform.mpc.safety.premise`).

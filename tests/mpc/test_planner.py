@@ -477,20 +477,21 @@ def test_with_a_loop_every_first_row_is_hard_and_braking_meets_it(coupling: str)
     )
     p0 = np.array([[-0.3, 0.0], [0.0, 0.02], [0.3, 0.0]])  # the middle drone squeezed, moving at both
     planner.reset(0.0, p0)
-    planner._u_prev = np.array([[0.8, 0.0], [0.0, 0.0], [-0.8, 0.0]])
-    planner._loop_state[..., 0] = planner._u_prev  # the lag's velocity
-    cand = planner._candidates.select(p0)
-    state = planner._loop_state
-    rows = planner._separation.rows(p0, planner._predict.guess(planner._plan, p0, state), cand)
-    rows = planner._predict.on_forced(rows, state, planner._separation.ends)
-    hard, relaxed, _ = planner._certifier.hard_first_rows(
-        rows, None, planner._u_prev, 6, planner.loop.forced[1, 0]
+    steps = planner.steps
+    steps.state.u_prev = np.array([[0.8, 0.0], [0.0, 0.0], [-0.8, 0.0]])
+    steps.state.loop_state[..., 0] = steps.state.u_prev  # the lag's velocity
+    cand = steps.candidates.select(p0)
+    state = steps.state.loop_state
+    rows = steps.separation.rows(p0, steps.predict.guess(steps.state.plan, p0, state), cand)
+    rows = steps.predict.on_forced(rows, state, steps.separation.ends)
+    hard, relaxed, _ = steps.certifier.hard_first_rows(
+        rows, None, steps.state.u_prev, 6, planner.loop.forced[1, 0]
     )
     assert hard.pair_hard.all() and hard.single_hard.all() and relaxed
     assert np.all(hard.pair_lower <= rows.pair_lower) and np.all(hard.single_lower <= rows.single_lower)
     assert np.array_equal(hard.pair_lower[:, 1:], rows.pair_lower[:, 1:])
     assert np.array_equal(hard.single_lower[:, 1:], rows.single_lower[:, 1:])
-    brake = planner._u_prev - np.clip(planner._u_prev, -0.2, 0.2)
+    brake = steps.state.u_prev - np.clip(steps.state.u_prev, -0.2, 0.2)
     first = (0.1 + planner.loop.forced[1, 0]) * brake
     at_p = np.einsum("pd,pd->p", hard.pair_coeffs[:, 0], first[hard.pairs[:, 0]] - first[hard.pairs[:, 1]])
     at_s = np.einsum("sd,sd->s", hard.single_coeffs[:, 0], first[hard.singles])
@@ -504,7 +505,7 @@ def test_a_miss_within_the_solvers_tolerance_is_no_slack(miss_m: float, reported
     slack; by 1 mm it did, and the pair is named."""
     from mpcform.mpc.constraints.candidates import Candidates
     from mpcform.mpc.constraints.separation import Separation
-    from mpcform.mpc.planner import SLACK_REPORT_M, slack_report
+    from mpcform.mpc.safety.slack import SLACK_REPORT_M, slack_report
 
     d_min, h = 0.5, 3
     sep = Separation(2, Limits(v_max_mps=1.0, d_min_m=d_min), MPCSettings(horizon=h), ())
@@ -535,7 +536,7 @@ def test_a_plan_within_the_rows_growth_keeps_every_required_distance(
     distance itself: slack, the pair named, by how far it misses the grown rows."""
     from mpcform.mpc.constraints.candidates import Candidates
     from mpcform.mpc.constraints.separation import Separation
-    from mpcform.mpc.planner import slack_report
+    from mpcform.mpc.safety.slack import slack_report
 
     h, pairs = 4, np.array([[0, 1]])
     lim = Limits(v_max_mps=1.0, d_min_m=0.5, tube_growth_m=0.01)

@@ -195,8 +195,8 @@ def test_growth_warning_names_the_drones_whose_rows_do_not_grow_in_wind() -> Non
     assert any(text in w for w in spec.warnings())
     final = spec.reference.targets(np.array([spec.simulation.duration_s]))[0][0]
     planner = build_controller(spec)
-    np.testing.assert_array_equal(planner._separation.growing(final), np.zeros(100))
+    np.testing.assert_array_equal(planner.steps.separation.growing(final), np.zeros(100))
     data["plant"]["wind"] = {"mean": [0.3, 0.0], "gust_std": 0.05}  # gentler: the rows grow
     gentle = scenario_from_dict(data)
     assert gentle.growth_warning() is None
-    np.testing.assert_array_equal(build_controller(gentle)._separation.growing(final), np.ones(100))
+    np.testing.assert_array_equal(build_controller(gentle).steps.separation.growing(final), np.ones(100))

@@ -33,7 +33,7 @@ def swap_qps(n: int, dim: int, seed: int, steps: int) -> tuple[PerDroneQP, list[
     ref = ConstantReference(Template(ring - ring.mean(axis=0)), FormationState.from_param(np.zeros(dim)))
     settings = MPCSettings(coupling="decoupled", solve=PerDroneSolve(split=SplitPolicy(ROUNDS)))
     planner = MPCPlanner(ref, DT, LIMITS, settings)
-    split = planner._solver
+    split = planner.step_solver
     assert isinstance(split, SplitQP)
     qps: list[StepQP] = []
     solve = split.solve

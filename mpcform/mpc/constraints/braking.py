@@ -43,7 +43,7 @@ to the rest point (:data:`mpcform.mpc.constraints.tail.SAMPLED_STATES`), and the
 path's bend. Wind moves the measured start, and with it the shifted plan, beyond (i): in wind the
 rows grow along the horizon (:func:`mpcform.mpc.constraints.rows.step_growth`), which keeps the shifted plan
 feasible for pushes within the growth up to its window; past the window a plan may reach into
-the growth (a buffer, reported apart from slack: :func:`mpcform.mpc.planner.slack_report`); beyond
+the growth (a buffer, reported apart from slack: :func:`mpcform.mpc.safety.slack.slack_report`); beyond
 that the planner reports slack, and the certifier (:mod:`mpcform.mpc.safety.certify`) still guards the
 first interval.
 When a solve leaves slack on rows the shifted plan meets (an interior-point solver can), the

@@ -25,7 +25,7 @@ from __future__ import annotations
 from abc import ABC, abstractmethod
 
 from mpcform._validate import Array
-from mpcform.mpc.constraints.half_spaces import ClearTest, SegmentTest
+from mpcform.mpc.constraints.half_spaces import ClearInputs, SegmentTest
 from mpcform.mpc.constraints.rows import Layout, RowBlock
 
 
@@ -73,9 +73,9 @@ class SeparationFamily(ABC):
         the starts ``p0`` (n, d) and the spreads (n,), and by how much they clear it (negative)."""
 
     @abstractmethod
-    def clear_test(self, guess: Array, pos: Array, i: Array, k: Array) -> ClearTest:
+    def clear_test(self, guess: Array, pos: Array, i: Array, k: Array) -> ClearInputs:
         """The clear test's inputs for the items ``(i, k)``
-        (:data:`~mpcform.mpc.constraints.half_spaces.ClearTest`)."""
+        (:data:`~mpcform.mpc.constraints.half_spaces.ClearInputs`)."""
 
     @abstractmethod
     def first_segment(self, p0: Array, p1: Array, items: Array) -> SegmentTest:

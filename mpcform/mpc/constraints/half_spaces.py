@@ -16,7 +16,7 @@ from mpcform.world.closest import path_closest, vector_norms
 
 BLOCK = 1024  # pairs whose decoupled rows are built at once (bounds the temporaries' size)
 RowPart = tuple[Array, Array, Array, Array, Array]  # (items or labels, coefficients, lower bounds, on, hard)
-ClearTest = tuple[Array, Array, Array, Array | float]
+ClearInputs = tuple[Array, Array, Array, Array | float]
 """The clear test's inputs for m items: distance at the guess's points (S + 1, m), the points it is
 measured on (S + 1, m, d), how far the plan strays from the guess (m,), the required distance."""
 SegmentTest = tuple[Array, Array, Array | float]

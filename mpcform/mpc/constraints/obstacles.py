@@ -15,7 +15,7 @@ import numpy as np
 
 from mpcform._validate import Array
 from mpcform.mpc.constraints.family import SeparationFamily
-from mpcform.mpc.constraints.half_spaces import ClearTest, RowPart, SegmentTest
+from mpcform.mpc.constraints.half_spaces import ClearInputs, RowPart, SegmentTest
 from mpcform.mpc.constraints.rows import row_segments
 from mpcform.mpc.settings import MPCSettings
 from mpcform.world.closest import vector_norms
@@ -71,7 +71,7 @@ class ObstacleSeparation(SeparationFamily):
         i, m = np.nonzero(gap < need)
         return i, m, gap[i, m] - need
 
-    def clear_test(self, guess: Array, pos: Array, i: Array, m: Array) -> ClearTest:
+    def clear_test(self, guess: Array, pos: Array, i: Array, m: Array) -> ClearInputs:
         """The items' core distance at the guess (H + 1, m), the points it is measured on, how far
         their drones' positions stray from the guess (m,), and the required distances. Point cores
         are measured relative to their centres (the distance is then the norm)."""

@@ -17,7 +17,7 @@ from mpcform.formation.geometry import NearPairs
 from mpcform.mpc.constraints.family import SeparationFamily
 from mpcform.mpc.constraints.half_spaces import (
     BLOCK,
-    ClearTest,
+    ClearInputs,
     RowPart,
     SegmentTest,
     inside,
@@ -157,7 +157,7 @@ class PairSeparation(SeparationFamily):
             return i[:0], k[:0], clearance[:0]
         return i[near], k[near], clearance[near] - need
 
-    def clear_test(self, guess: Array, pos: Array, i: Array, k: Array) -> ClearTest:
+    def clear_test(self, guess: Array, pos: Array, i: Array, k: Array) -> ClearInputs:
         """The pairs' ``(i, k)`` distance at the guess (H + 1, m), the relative guess (H + 1, m, d)
         it is measured on, how far their relative positions stray from it (m,), and ``d_min``."""
         g, x = (self.scaled(np.take(v, i, axis=1) - np.take(v, k, axis=1)) for v in (guess, pos))

@@ -204,7 +204,7 @@ def step_growth(growth_m: float, dt_s: float, horizon: int, tail: int = 0) -> Ar
     step's rows at every step up to E (``e + 1`` had one growth more than ``e`` needs), the
     first rows included, so none has to be lowered; rows beyond E (and the tail) may be missed by one
     growth, which the plan has E steps to win back: a plan may reach into the growth there, which is
-    not slack (:func:`mpcform.mpc.planner.slack_report`). Without wind the growth is 0 and nothing
+    not slack (:func:`mpcform.mpc.safety.slack.slack_report`). Without wind the growth is 0 and nothing
     changes."""
     if growth_m <= 0.0:
         return None

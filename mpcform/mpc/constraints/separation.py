@@ -25,13 +25,16 @@ gets closer, and every drone holding meets the row, so the hard rows stay feasib
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from mpcform._validate import Array
-from mpcform.formation.geometry import drone_spreads, pairs_within
+from mpcform.formation.geometry import pairs_within
 from mpcform.mpc.constraints.braking import Braking
 from mpcform.mpc.constraints.candidates import Candidates
-from mpcform.mpc.constraints.half_spaces import BLOCK, ClearTest, SegmentTest, inside, path_bounds
+from mpcform.mpc.constraints.clear import ClearTest
+from mpcform.mpc.constraints.half_spaces import BLOCK, SegmentTest, inside
 from mpcform.mpc.constraints.obstacles import ObstacleSeparation
 from mpcform.mpc.constraints.pairs import PairSeparation
 from mpcform.mpc.constraints.rows import row_ends, row_segments, step_growth
@@ -44,7 +47,15 @@ from mpcform.world.limits import Limits
 from mpcform.world.obstacles import Obstacle
 from mpcform.world.shapes.shape_set import ShapeSet
 
-FIRST_TESTED = 32  # the clear test tries this many of the least clear items first
+
+@dataclass(frozen=True, eq=False)
+class Conflict:
+    """A step's candidate items ``cand``, their ``rows`` about the guess and the drones (n,) whose
+    rollout misses one, ``conflicted``."""
+
+    cand: Candidates
+    rows: SeparationRows
+    conflicted: Array
 
 
 class Separation:
@@ -77,11 +88,12 @@ class Separation:
         self.row_growth = None if growth is None else growth[self.ends]  # per drone and row (R,) [m]
         segments = h + tail if tail <= 1 else h + 1  # the clear test's: the polyline, then the tail's hull
         ends = np.minimum(np.arange(1, segments + 1), h + tail)  # each one's last position step
-        self._segment_growth = None if growth is None else growth[ends, None]  # (S, 1) [m]
+        segment_growth = None if growth is None else growth[ends, None]  # (S, 1) [m]
         grow = self.row_growth
         self.pairs = None if d_min is None else PairSeparation(d_min, self.metric, settings, tail, grow)
         shapes = obstacles if isinstance(obstacles, ShapeSet) else ShapeSet(obstacles, dim)
         self.obstacles = ObstacleSeparation(shapes, settings, tail, grow) if len(shapes) else None
+        self._clear = ClearTest(self.pairs, self.obstacles, self.margin_m, tail, segment_growth)
 
     def rows(
         self,
@@ -111,50 +123,10 @@ class Separation:
         )
 
     def clear(self, guess: Array, positions: Array, growing: Array | None = None) -> bool:
-        """A cheap sufficient test that the plan's ``positions`` (H + 1, n, d) (row 0 the start)
-        meet every joint pair row and obstacle row about ``guess`` (so every pair stays ``d_min``
-        apart over each step). It does not cover the decoupled pair-side rows: two drones moving
-        side by side can pass it while crossing the guess's midpoint plane.
-
-        A row's normal c is a unit vector with ``c^T (g - a) >= dist(guess segment) >= max(dist(g_j),
-        dist(g_j+1)) - |g_j+1 - g_j|`` for the distance to the forbidden set (a pair's: ``|g|``
-        relative; an obstacle's: to its core, ``a`` the core's point the row is anchored at), which
-        is 1-Lipschitz (the braking tail's hull: its points' largest distance less its diameter,
-        :func:`~mpcform.mpc.constraints.half_spaces.path_bounds`), so ``c^T (delta_e - a) >= that -
-        |delta_e - g_e|``.
-        Before that per-segment bound, a per-drone one: drone i's guess stays within ``spread_i``
-        of its start and its positions within ``spread_i`` of the guess, so an item whose start
-        distance clears the requirement by the spreads of its drones is clear. No row is built.
-        """
-        p0, spread = positions[0], drone_spreads(guess, positions)  # spread (n,) [m]
-        units = [u for u in (self.pairs if p0.shape[0] > 1 else None, self.obstacles) if u is not None]
-        for unit in units:
-            i, k, slack = unit.doubtful(p0, spread)
-            if i.shape[0] > 8 * FIRST_TESTED:  # the least clear first: a miss among them answers early
-                first = np.argpartition(slack, FIRST_TESTED)[:FIRST_TESTED]
-                share = self._share(unit, growing, i[first], k[first])
-                if not self._passes(unit.clear_test(guess, positions, i[first], k[first]), share):
-                    return False
-            share = self._share(unit, growing, i, k)
-            if i.shape[0] and not self._passes(unit.clear_test(guess, positions, i, k), share):
-                return False  # (no item in doubt: all clear by the spreads)
-        return True
-
-    def _share(self, unit: object, growing: Array | None, i: Array, k: Array) -> Array | None:
-        """The items' shares (m,) of the rows' growth: a pair's both drones', an obstacle item's drone's."""
-        if growing is None:
-            return None
-        return growing[i] + growing[k] if unit is self.pairs else growing[i]
-
-    def _passes(self, test: ClearTest, share: Array | None = None) -> bool:
-        """Whether the items of the clear ``test`` (a unit's :meth:`clear_test`) meet the
-        per-segment bound of :meth:`clear` (with the rows' growth, ``share`` (m,) times each
-        segment's larger end's)."""
-        dist, points, dev, required = test
-        seg = path_bounds(dist, points, self.tail_count)
-        if self._segment_growth is not None and share is not None:
-            seg = seg - self._segment_growth * share
-        return not np.any(seg.min(axis=0, initial=np.inf) - dev < required + self.margin_m)
+        """Whether the plan's ``positions`` (H + 1, n, d) (row 0 the start) surely meet every joint
+        pair row and obstacle row about ``guess``, with the rows' growth shares ``growing`` (n,)
+        (the fast path's test, :class:`~mpcform.mpc.constraints.clear.ClearTest`)."""
+        return self._clear(guess, positions, growing)
 
     def shortfall(
         self, x: Array, rows: SeparationRows, tol: float, joint: bool = False
@@ -223,6 +195,21 @@ class Separation:
             value = np.einsum("mrd,rmd->mr", rows.pair_coeffs, rel) - rows.pair_lower
             pair[rows.pair_on] = value[rows.pair_on, :last].min(axis=1)
         return np.concatenate([pair, single]), np.concatenate([rows.pairs, rows.labels])
+
+    def encounters(
+        self, p0: Array, conflict: Conflict, x_nom: Array, plain: Array | None, growing: Array | None
+    ) -> Array:
+        """Drones (n,) in an encounter: the single integrator's rollout ``x_nom`` (H, n, d) conflicts
+        within the horizon (a stop point's conflict is the QP's to brake for, not one to turn away
+        from), on the ``conflict``'s rows, or with a velocity loop on rows about the single
+        integrator's guess ``plain`` (H + 1, n, d) (the rows' own are on the loop's positions)."""
+        pad = 0 if self.tail is None else self.tail.count  # the tail's rows: not counted here
+        rows = conflict.rows
+        if plain is not None:
+            about = np.concatenate([plain, np.repeat(plain[-1:], max(pad - 1, 0), axis=0)])
+            rows = self.rows(p0, about, conflict.cand, growing=growing)
+        x_enc = np.concatenate([x_nom, np.repeat(x_nom[-1:], pad, axis=0)])
+        return self.conflicted(x_enc, rows, tail=False)
 
     def blocked_targets(self, targets: Array) -> Array:
         """Drones (n,) whose target (n, d) lies within ``d_min`` + margin + 2 tube (in the metric) of

@@ -60,7 +60,7 @@ class SeparationRows:
         ``growing`` (n,) (:meth:`Separation.growing`), without their growth in wind: the required
         distances alone (``d_min`` + margin + 2 tube, the clearances). The growth is a buffer that
         keeps the next steps' plans feasible; a plan may reach into it and still keep every required
-        distance (:func:`mpcform.mpc.planner.slack_report`)."""
+        distance (:func:`mpcform.mpc.safety.slack.slack_report`)."""
         if growing is None or grow is None:
             return self
         pair_share = growing[self.pairs[:, 0]] + growing[self.pairs[:, 1]]

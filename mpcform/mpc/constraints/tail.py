@@ -252,27 +252,8 @@ def tail_hull(systems: list[tuple[Array, Array]]) -> TailHull:
     in its polygon, widened P times when P groups have one (the hull of the P polygons, each alone
     in its group: their sum lies in it, and each maps into itself)."""
     q = systems[0][0].shape[0]
-    reals, pairs = [], []
-    for m, _ in systems:
-        eig = np.linalg.eigvals(m)
-        real, pair = np.sort(eig.real[np.abs(eig.imag) <= REAL_TOL]), eig[eig.imag > REAL_TOL]
-        if real.size and (real.min() < 0.0 or real.max() >= 1.0) or np.any(np.abs(pair) >= 1.0):
-            raise ValidationError(
-                "plant", f"the braking tail needs a stable loop with poles in [0, 1): {eig}"
-            )
-        if pair.size > 1:
-            raise ValidationError(
-                "plant", "the braking tail's hull takes at most one complex pole pair per axis"
-            )
-        reals.append(real)
-        pairs.append(pair)
-    steps: list[float] = []  # every group's real poles, each as often as the group that has it most
-    for real in reals:
-        for d in real:
-            most = max(int(np.sum(np.abs(r - d) <= SAME_POLE)) for r in reals)
-            if sum(abs(d - e) <= SAME_POLE for e in steps) < most:
-                steps.append(float(d))
-    steps.sort()  # the real chain, fastest first
+    reals, pairs = _poles(systems)
+    steps = _real_chain(reals)
     rows = [np.array([rest for _, rest in systems])]
     for d in steps:
         rows.append(
@@ -300,6 +281,38 @@ def tail_hull(systems: list[tuple[Array, Array]]) -> TailHull:
         else:  # into the polygons: the pairs' part is a convex combination of their vertices
             lam[j, v:] = (1.0 - d) * into
     return TailHull(vertices, lam)
+
+
+def _poles(systems: list[tuple[Array, Array]]) -> tuple[list[Array], list[Array]]:
+    """Each group's real poles (sorted) and its complex pair (its upper pole, or none); a
+    :class:`ValidationError` for poles the construction does not cover."""
+    reals, pairs = [], []
+    for m, _ in systems:
+        eig = np.linalg.eigvals(m)
+        real, pair = np.sort(eig.real[np.abs(eig.imag) <= REAL_TOL]), eig[eig.imag > REAL_TOL]
+        if real.size and (real.min() < 0.0 or real.max() >= 1.0) or np.any(np.abs(pair) >= 1.0):
+            raise ValidationError(
+                "plant", f"the braking tail needs a stable loop with poles in [0, 1): {eig}"
+            )
+        if pair.size > 1:
+            raise ValidationError(
+                "plant", "the braking tail's hull takes at most one complex pole pair per axis"
+            )
+        reals.append(real)
+        pairs.append(pair)
+    return reals, pairs
+
+
+def _real_chain(reals: list[Array]) -> list[float]:
+    """The real chain's poles, fastest first: every group's real poles, each as often as the group
+    that has it most."""
+    steps: list[float] = []
+    for real in reals:
+        for d in real:
+            most = max(int(np.sum(np.abs(r - d) <= SAME_POLE)) for r in reals)
+            if sum(abs(d - e) <= SAME_POLE for e in steps) < most:
+                steps.append(float(d))
+    return sorted(steps)
 
 
 def _polygon(base: Array, m: Array, pole: complex) -> tuple[Array, Array]:

@@ -48,6 +48,7 @@ class StepSolver(ABC):
 
     name: str
     warm_starts: bool  # whether :meth:`solve` uses ``StepQP.warm`` (the planner builds it only then)
+    splits_pairs = False  # whether it moves a decoupled pair's split point (both drones then move)
 
     def reset(self) -> None:  # noqa: B027 - stateless default
         """Start a new run."""

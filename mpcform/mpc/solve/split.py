@@ -95,6 +95,7 @@ class SplitQP(StepSolver):
     after which no new round starts (None: none)."""
 
     warm_starts = True
+    splits_pairs = True
 
     def __init__(self, per_drone: PerDroneQP, iterations: int, budget_s: float | None) -> None:
         self.per_drone, self.iterations, self.budget_s = per_drone, iterations, budget_s

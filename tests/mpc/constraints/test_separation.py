@@ -353,7 +353,7 @@ def test_the_clear_test_answers_the_same_when_it_tries_the_least_clear_first(see
     sep = Separation(2, Limits(v_max_mps=1.0, d_min_m=0.35), MPCSettings(horizon=h), (ob,))
     answers = []
     for first in (1, 10_000):
-        monkey.setattr("mpcform.mpc.constraints.separation.FIRST_TESTED", first)
+        monkey.setattr("mpcform.mpc.constraints.clear.FIRST_TESTED", first)
         answers.append(sep.clear(guess, planned(p0, x)))
     monkey.undo()
     assert answers[0] == answers[1]

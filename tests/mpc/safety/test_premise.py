@@ -89,7 +89,7 @@ def test_the_survivors_keep_checking_where_the_plan_takes_them() -> None:
         planner.step(0.1 * k, p)
         p = planner._predicted.copy()
     survivors = planner.lose([0], p)
-    assert survivors.inner._expected.shape[1] == 1  # type: ignore[attr-defined]
+    assert survivors.inner.state.expected.shape[1] == 1  # type: ignore[attr-defined]
     info = survivors.step(0.3, p).info
     assert info.wind_shift_m < 1e-10 and not info.growth_exceeded  # type: ignore[attr-defined]
     p[1] = survivors.inner._predicted[0] + np.array([0.0, 0.003])  # type: ignore[attr-defined]

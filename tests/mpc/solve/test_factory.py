@@ -21,7 +21,10 @@ LIMITS = Limits(v_max_mps=1.0, d_min_m=0.5)
 
 def build(settings: MPCSettings, backend=None):  # noqa: ANN001, ANN201 - a test helper
     families, sep = limit_rows(2, 0.1, LIMITS, settings), Separation(2, LIMITS, settings, ())
-    return build_step_solvers(settings, 2, 0.1, LIMITS, families, sep, None, backend)
+    solvers = build_step_solvers(settings, 2, 0.1, LIMITS, families, sep, None, backend)
+    assert solvers.pick(False) is solvers.every and solvers.name == solvers.every.name
+    assert solvers.pick(True) is (solvers.stalled or solvers.every)  # while a drone is stalled
+    return solvers.every, solvers.stalled
 
 
 def test_sparse_with_the_named_backend_and_options() -> None:

@@ -121,15 +121,15 @@ def test_per_drone_solves_the_sparse_qp(seed: int, variant: str, n: int) -> None
     per, sparse, qps = pair(ref, lim, obstacles, **kw)
     assert per.solver_name == PER_DRONE_SOLVER and sparse.solver_name == REFERENCE
     mine = {}
-    assert isinstance(per._solver, PerDroneQP)
-    solve = per._solver.solve
+    assert isinstance(per.step_solver, PerDroneQP)
+    solve = per.step_solver.solve
 
     def keep(*args: Any) -> Any:
         out = solve(*args)
         mine["x"], mine["objective"] = out[0].x, out[0].objective
         return out
 
-    per._solver.solve = keep  # type: ignore[method-assign]
+    per.step_solver.solve = keep  # type: ignore[method-assign]
     for planner in (per, sparse):
         planner.reset(0.0, p)
     for j in range(4):
@@ -144,7 +144,7 @@ def test_per_drone_solves_the_sparse_qp(seed: int, variant: str, n: int) -> None
             assert per.plan is not None and sparse.plan is not None
             np.testing.assert_allclose(per.plan.inputs_mps, sparse.plan.inputs_mps, atol=PLAN_TOL, rtol=0)
         p = p + 0.1 * a.command_mps
-        sparse._plan, sparse._u_prev = per._plan, per._u_prev  # the same guess next step
+        sparse.state.plan, sparse.state.u_prev = per.state.plan, per.state.u_prev  # the same guess next step
 
 
 def test_a_weak_penalty_still_gives_the_hard_optimum() -> None:
@@ -177,7 +177,7 @@ def test_infeasible_start_separates_with_slack() -> None:
 def test_a_failed_drone_solve_falls_back(monkeypatch: pytest.MonkeyPatch) -> None:
     ref, start = crowd(3, 5, 2)
     planner = MPCPlanner(ref, 0.1, Limits(v_max_mps=1.0, d_min_m=0.5), MPCSettings(coupling="decoupled"))
-    solver = planner._solver
+    solver = planner.step_solver
     assert isinstance(solver, PerDroneQP)
 
     class Failing:
@@ -295,7 +295,7 @@ def _recorded_calls(
     loop = _lag_loop(dim, 10) if "loop" in case else None
     settings = MPCSettings(coupling="decoupled", grouping=False, fast_path=False)
     planner = MPCPlanner(ref, 0.1, lim, settings, obstacles, loop=loop)
-    qp = planner._solver
+    qp = planner.step_solver
     assert isinstance(qp, PerDroneQP)
     calls: list[tuple[Any, ...]] = []
     solve_each = qp.solve_each
@@ -385,7 +385,7 @@ def test_separation_multipliers_are_each_drones_multipliers(monkeypatch: pytest.
     tpl = Template.line(2, 2.0)  # a start inside d_min: soft solves
     ref = ConstantReference(tpl, FormationState.from_param([0.0, 0.0]))
     planner = MPCPlanner(ref, 0.1, Limits(v_max_mps=0.5, d_min_m=0.5), MPCSettings(coupling="decoupled"))
-    qp = planner._solver
+    qp = planner.step_solver
     assert isinstance(qp, PerDroneQP)
     solve_each, close = qp.solve_each, []
     monkeypatch.setattr(qp, "solve_each", lambda *args: close.append(args) or solve_each(*args))

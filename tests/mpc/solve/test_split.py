@@ -46,13 +46,13 @@ def step_qps(n: int, dim: int, seed: int, steps: int) -> tuple[MPCPlanner, list[
         ref, DT, LIMITS, MPCSettings(coupling="decoupled", solve=PerDroneSolve(split=SplitPolicy(200)))
     )
     qps: list[StepQP] = []
-    solve = planner._solver.solve
+    solve = planner.step_solver.solve
 
     def keep(qp: StepQP) -> object:
         qps.append(qp)
         return solve(qp)
 
-    planner._solver.solve = keep  # type: ignore[method-assign]
+    planner.step_solver.solve = keep  # type: ignore[method-assign]
     simulate(planner, start, steps * DT)
     return planner, [qp for qp in qps if (qp.rows.labels[:, 1] >= 0).any()]
 
@@ -71,7 +71,9 @@ def joint_optimum(planner: MPCPlanner, qp: StepQP) -> float:
     """The joint QP with the same rows (same normals, the sides' bounds added), by Clarabel."""
     settings = MPCSettings(coupling="joint", solve=SparseSolve(options=SolverOptions(1e-10, 1e-10, 4000)))
     backend = make_backend("qpsolvers:clarabel", SolverOptions(1e-10, 1e-10, 4000, 0.0))
-    solver = SparseSolver(backend, planner.dim, DT, LIMITS, settings, planner._families, planner._separation)
+    solver = SparseSolver(
+        backend, planner.dim, DT, LIMITS, settings, planner.steps.families, planner.steps.separation
+    )
     joint = replace(qp, rows=qp.rows.joint(), warm=None, rebuilt=True)
     sol, _ = solver.solve(joint)
     assert sol.success and sol.x is not None
@@ -86,7 +88,7 @@ def test_every_iterate_meets_the_joint_rows_and_the_cost_falls_to_no_less_than_t
 ) -> None:
     planner, qps = step_qps(n, dim, seed, 12)
     assert qps and planner.solver_name == "daqp (per drone, iterated split)"
-    split = SplitQP(planner._solver.per_drone, 30, None)  # type: ignore[attr-defined]
+    split = SplitQP(planner.step_solver.per_drone, 30, None)  # type: ignore[attr-defined]
     ends = row_ends(planner.settings.horizon)
     for qp in qps:
         run = split.run(qp, record=True)
@@ -109,7 +111,7 @@ def test_small_encounters_reach_the_joint_optimum(n: int, dim: int, seed: int, s
     """Every step's iterated split ends within 1e-4 of the joint optimum (the midpoint split is
     up to 40 % above it at the encounter's first step)."""
     planner, qps = step_qps(n, dim, seed, steps)
-    split = SplitQP(planner._solver.per_drone, 200, None)  # type: ignore[attr-defined]
+    split = SplitQP(planner.step_solver.per_drone, 200, None)  # type: ignore[attr-defined]
     gaps = []
     for qp in qps:
         run = split.run(qp)
@@ -136,8 +138,8 @@ def test_the_planner_reports_the_rounds_and_keeps_the_pairs_apart() -> None:
 
 def test_a_budget_stops_the_rounds() -> None:
     planner, qps = step_qps(4, 3, 2, 6)
-    unbounded = SplitQP(planner._solver.per_drone, 50, None)  # type: ignore[attr-defined]
-    none_left = SplitQP(planner._solver.per_drone, 50, 1e-9)  # type: ignore[attr-defined]
+    unbounded = SplitQP(planner.step_solver.per_drone, 50, None)  # type: ignore[attr-defined]
+    none_left = SplitQP(planner.step_solver.per_drone, 50, 1e-9)  # type: ignore[attr-defined]
     assert any(unbounded.run(qp).rounds > 0 for qp in qps)
     assert all(none_left.run(qp).rounds == 0 for qp in qps)
 
@@ -168,7 +170,7 @@ def test_a_newton_step_keeps_frozen_rows_put() -> None:
     planner, qps = step_qps(6, 3, 3, 6)
     checked = 0
     for qp in qps:
-        step_qp = SplitStep(planner._solver.per_drone, qp)
+        step_qp = SplitStep(planner.step_solver.per_drone, qp)
         m = qp.start_m.shape[0]
         best = step_qp.solve(np.arange(m), step_qp.midpoint(), np.zeros_like(qp.targets_mps), None)
         free = step_qp.direction(best)
@@ -192,7 +194,7 @@ def test_the_newton_model_matches_finite_differences_of_the_drone_solves() -> No
 
     planner, qps = step_qps(4, 3, 2, 6)
     qp, h = qps[0], 1e-6
-    step = SplitStep(planner._solver.per_drone, qp)
+    step = SplitStep(planner.step_solver.per_drone, qp)
     m = qp.start_m.shape[0]
     it = step.solve(np.arange(m), step.midpoint(), np.zeros_like(qp.targets_mps), None)
     checked = 0
