@@ -3,6 +3,8 @@ modules (seeded numpy)."""
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 import scipy.sparse as sp
 from scipy.spatial.transform import Rotation
@@ -11,6 +13,8 @@ from mpcform.formation.state import FormationState
 from mpcform.formation.template import Template
 from mpcform.mpc.constraints.rows import Layout, RowBlock
 from mpcform.reference.base import ConstantReference
+from mpcform.world.bounds import PlanningBounds
+from mpcform.world.limits import Limits
 
 
 def random_template(rng: np.random.Generator, n: int, dim: int) -> Template:
@@ -77,3 +81,9 @@ def dense_matrix(block: RowBlock, lay: Layout) -> np.ndarray:
 
 def z_of(lay: Layout, u: np.ndarray, x: np.ndarray, s: np.ndarray) -> np.ndarray:
     return np.concatenate([u.ravel(), x.ravel(), s.ravel()])
+
+
+def bounds_of(tube_m: float = 0.0, growth_m: float = 0.0, **limits: Any) -> PlanningBounds:
+    """Planning bounds exactly as these limits state them (no default a_max, nothing tightened):
+    what the planner's parts are built with."""
+    return PlanningBounds.of(Limits(**limits), tube_m, growth_m)

@@ -50,7 +50,8 @@ from mpcform.reference.base import ConstantReference, Reference
 from mpcform.scenario.load import load_scenario
 from mpcform.solvers.base import QPBackend, QPSolution, SolverOptions
 from mpcform.solvers.registry import make_backend
-from mpcform.world.limits import Limits, tightened
+from mpcform.world.bounds import PlanningBounds
+from mpcform.world.limits import Limits
 from mpcform.world.obstacles import Obstacle
 
 DEFAULT_CVXPY_BUDGET_S = 60.0
@@ -100,7 +101,7 @@ class MPCCase:
     start_m: Array
     dt_s: float
     steps: int
-    limits: Limits
+    limits: Limits | PlanningBounds
     settings: MPCSettings
     obstacles: tuple[Obstacle, ...] = ()
 
@@ -142,8 +143,7 @@ def scenario_case(path: str | Path, coupling: str) -> MPCCase:
     settings = replace(
         sc.controller.mpc, coupling=mode.coupling, grouping=mode.grouping, solve=solve or mode.strategy
     )
-    rob = sc.robustness
-    limits, obstacles = tightened(sc.limits, sc.obstacles, rob.margin_m, rob.a_max_mps2, rob.growth_m)
+    limits, obstacles = sc.planned()
     dt = sc.simulation.dt_s
     steps = int(round(sc.simulation.duration_s / dt))
     return MPCCase(sc.name, sc.reference, sc.initial_positions_m, dt, steps, limits, settings, obstacles)

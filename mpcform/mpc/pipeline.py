@@ -38,7 +38,7 @@ from mpcform.mpc.step_info import FAST_PATH, MPCStepInfo, solve_info
 from mpcform.mpc.velocity_loop import VelocityLoop
 from mpcform.reference.base import Reference
 from mpcform.solvers.base import QPBackend, QPSolution
-from mpcform.world.limits import Limits
+from mpcform.world.bounds import PlanningBounds
 from mpcform.world.shapes.shape_set import ShapeSet
 
 DEADLINE_RESERVE = 0.25
@@ -70,7 +70,7 @@ class StepPipeline:
         self,
         reference: Reference,
         dt_s: float,
-        limits: Limits,
+        limits: PlanningBounds,
         settings: MPCSettings,
         shapes: ShapeSet,
         loop: VelocityLoop | None,
@@ -88,7 +88,7 @@ class StepPipeline:
         self.braking = braking = Braking.of(dt_s, limits, settings.braking)  # the plans' terminal condition
         self.separation = sep = Separation(self.dim, limits, settings, shapes, braking, loop, dt_s)
         self.predict = predict = Prediction(dt_s, settings.horizon, loop, braking, sep.tail)
-        self.premise = GrowthPremise.of(sep.growth, limits.tube_growth_m, predict)  # checked in wind
+        self.premise = GrowthPremise.of(sep.growth, limits.growth_m, predict)  # checked in wind
         grown = 0.0 if sep.growth is None else float(sep.growth[-1])  # the rows' largest growth
         self.candidates = CandidateSelector(
             self.n, dt_s, limits, settings, shapes, predict.speed_gain, predict.tail_s, grown

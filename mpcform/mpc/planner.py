@@ -42,7 +42,7 @@ import numpy as np
 from mpcform._validate import Array, positive
 from mpcform.control.base import Controller, ControlStep
 from mpcform.control.laws import check_gain_dt
-from mpcform.errors import ValidationError
+from mpcform.errors import ValidationError, shown
 from mpcform.mpc.pipeline import PlanState, StepPipeline
 from mpcform.mpc.plan import Plan
 from mpcform.mpc.safety.survivors import Survivors, lost_spheres, split_lost
@@ -53,8 +53,9 @@ from mpcform.mpc.velocity_loop import VelocityLoop
 from mpcform.reference.base import Reference
 from mpcform.reference.subset import SubsetReference
 from mpcform.solvers.base import QPBackend
-from mpcform.world.limits import Limits, planning_limits, tightened
-from mpcform.world.obstacles import Obstacle, resolve_clearances
+from mpcform.world.bounds import PlanningBounds, planning_bounds
+from mpcform.world.limits import Limits
+from mpcform.world.obstacles import Obstacle, require_resolved, resolve_clearances
 from mpcform.world.shapes.shape_set import ShapeSet
 
 DEADLINE_RESERVE = 0.25
@@ -76,22 +77,28 @@ class MPCPlanner(Controller):
         self,
         reference: Reference,
         dt_s: float,
-        limits: Limits | None = None,
+        limits: Limits | PlanningBounds | None = None,
         settings: MPCSettings | None = None,
         obstacles: tuple[Obstacle, ...] = (),
         solver: str | QPBackend | None = None,
         loop: VelocityLoop | None = None,
     ) -> None:
         self.reference, self.dt_s = reference, positive("simulation.dt", dt_s)
-        limits = planning_limits(limits or Limits())  # a_max: the platform's default
         settings = settings or MPCSettings()
+        if not isinstance(settings, MPCSettings):
+            raise ValidationError("settings", f"expected mpcform.MPCSettings, got {shown(settings)}")
         if solver is not None:  # the sparse strategy's backend replaced (a per-drone one refuses)
             settings = replace(settings, solve=with_backend(settings.strategy, solver, "controller.solver"))
         self.settings, self._solver_given = settings, solver
         check_gain_dt(settings.gain_per_s, dt_s)
         self.n, self.dim = reference.template.n, reference.template.dim
-        obstacles = resolve_clearances(tuple(obstacles), limits.d_min_m)  # unset: d_min / 2
-        limits, obstacles = tightened(limits, obstacles, 0.0, None)  # the tracking allowance, if any
+        if isinstance(limits, PlanningBounds):  # derived by the caller, its obstacles with them
+            obstacles = require_resolved(obstacles)
+        else:  # the user's limits: the tracking allowance, if any, and a_max's default
+            user = Limits() if limits is None else limits
+            limits, obstacles = planning_bounds(
+                user, resolve_clearances(obstacles, getattr(user, "d_min_m", None))
+            )
         self.limits, self.obstacles = limits, obstacles
         _check_limits(self.dim, limits, self.obstacles)
         self.loop = _check_loop(loop, self.dim, settings)
@@ -184,7 +191,7 @@ def _check_loop(loop: VelocityLoop | None, dim: int, settings: MPCSettings) -> V
 
 def _check_limits(
     dim: int,
-    limits: Limits,
+    limits: PlanningBounds,
     obstacles: tuple[Obstacle, ...],
 ) -> None:
     """The limits and obstacles fit a ``dim``-dimensional formation and each other."""

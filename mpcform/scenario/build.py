@@ -16,7 +16,6 @@ from mpcform.scenario.schema import CONTROLLER_KINDS, did_you_mean, listing
 from mpcform.scenario.spec import Scenario
 from mpcform.solvers.base import QPBackend
 from mpcform.solvers.registry import check_solver_name
-from mpcform.world.limits import tightened
 
 
 def build_controller(
@@ -27,7 +26,7 @@ def build_controller(
     ``solver`` is a backend name (checked like the ``controller.solver`` key) or a
     :class:`~mpcform.solvers.base.QPBackend` instance the MPC planner solves with as it is
     (e.g. a recording wrapper). The MPC planner keeps the limits tightened by the plant's robust
-    margin (:func:`mpcform.world.limits.tightened`; nothing changes for the ideal plant).
+    margin (:func:`mpcform.world.bounds.planning_bounds`; nothing changes for the ideal plant).
     """
     spec = scenario.controller
     kind = spec.kind if kind is None else kind
@@ -72,7 +71,7 @@ def build_controller(
         check_sparse_solver(spec.mpc, "solver", backend)
     rob = scenario.robustness
     with as_scenario_error("plant"):
-        planned, obstacles = tightened(limits, scenario.obstacles, rob.margin_m, rob.a_max_mps2, rob.growth_m)
+        planned, obstacles = scenario.planned()
     loop = None
     if rob.loop and spec.mpc.plant_model:
         loop = VelocityLoop.from_groups(list(rob.loop), scenario.dim, dt, spec.mpc.horizon)

@@ -1,6 +1,6 @@
 """Goals the MPC cannot reach, said before a run: closed off by spheres and the geofence.
 
-With the planner's own tightening (:func:`mpcform.world.limits.tightened`: radius + clearance +
+With the planner's own tightening (:func:`mpcform.world.bounds.planning_bounds`: radius + clearance +
 twice the plant's margin + the tracking allowance), each drone's final target must lie in the
 same free region as its start (:class:`mpcform.world.free_space.FreeSpace`, a grid flood fill
 that never calls a passable gap closed). A target that lies in another region is reported with
@@ -14,8 +14,9 @@ from __future__ import annotations
 import numpy as np
 
 from mpcform._validate import Array
+from mpcform.world.bounds import planning_bounds
 from mpcform.world.free_space import FreeSpace
-from mpcform.world.limits import Limits, tightened
+from mpcform.world.limits import Limits
 from mpcform.world.obstacles import Obstacle
 
 TIMES = 200  # reference samples searched for the time a target becomes unreachable
@@ -35,7 +36,7 @@ def unreachable_warning(
     last at the end; the limits and (resolved) obstacles tightened by the plant's ``tube_m``."""
     if not obstacles:
         return None
-    planned, inflated = tightened(limits, obstacles, tube_m, a_max_mps2)
+    planned, inflated = planning_bounds(limits, obstacles, tube_m, a_max_mps2)
     points = np.concatenate([start_m, targets_m.reshape(-1, start_m.shape[1])])
     space = FreeSpace(inflated, planned.geofence_min_m, planned.geofence_max_m, points)
     home = space.region(start_m)

@@ -21,7 +21,8 @@ from mpcform.mpc.settings import MPCSettings
 from mpcform.reference.base import Reference
 from mpcform.scenario.reachability import TIMES, unreachable_warning
 from mpcform.sim.plant_spec import IdealPlantSpec, PlantSpec, Robustness
-from mpcform.world.limits import PLATFORM_TRACKING_M, Limits, tightened
+from mpcform.world.bounds import PlanningBounds, planning_bounds
+from mpcform.world.limits import PLATFORM_TRACKING_M, Limits
 from mpcform.world.obstacles import Obstacle, resolve_clearances
 from mpcform.world.world import World
 
@@ -93,6 +94,12 @@ class Scenario:
     def world(self) -> World:
         """The limits and the (resolved) obstacles together."""
         return World(self.limits, self.obstacles)
+
+    def planned(self) -> tuple[PlanningBounds, tuple[Obstacle, ...]]:
+        """The bounds and obstacles its MPC keeps on its plant
+        (:func:`mpcform.world.bounds.planning_bounds`)."""
+        rob = self.robustness
+        return planning_bounds(self.limits, self.obstacles, rob.margin_m, rob.a_max_mps2, rob.growth_m)
 
     @functools.cached_property
     def robustness(self) -> Robustness:
@@ -172,7 +179,7 @@ class Scenario:
     def spacing_warning(self, controller: str | None = None) -> str | None:
         """A line when the MPC cannot reach the final formation: its closest pair is nearer than
         ``d_min + 2 (margin + tracking) + controller.margin``, the distance the planner keeps
-        between two drones (:func:`mpcform.world.limits.tightened`, then its rows' solver margin;
+        between two drones (:func:`mpcform.world.bounds.planning_bounds`, then its rows' solver margin;
         ``d_min + controller.margin`` on the ideal plant); those drones then stop short of their
         targets. None otherwise (no d_min, a controller other than ``controller`` or the file's
         ``mpc``)."""
@@ -229,7 +236,7 @@ class Scenario:
         """The distance [m] the MPC keeps between two drones, ``d_min + 2 (margin + tracking)`` plus
         its rows' solver margin, and that margin."""
         rob = self.robustness
-        planned = tightened(self.limits, (), rob.margin_m, rob.a_max_mps2)[0].d_min_m
+        planned = planning_bounds(self.limits, (), rob.margin_m, rob.a_max_mps2)[0].d_min_m
         solver = self.controller.mpc.margin_m  # the rows ask for this much more (solver tolerance)
         return (planned or 0.0) + solver, solver
 

@@ -32,6 +32,8 @@ from mpcform.sim.wind import Wind
 from mpcform.world.loop_groups import LoopGroup
 
 UNIT_SUFFIXES = ("_rad_s", "_hz", "_s", "_m")
+COMMON_FIELDS = ("wind", "measurement_noise_m", "margin_m", "margin_growth_m", "samples_per_step")
+"""The fields every plant kind shares (:class:`PlantSpec`); the others are its own."""
 """The unit suffixes of field names that scenario keys leave out."""
 
 
@@ -131,7 +133,26 @@ class PlantSpec(ABC):
             computed = float(np.linalg.norm(modelled_margin(plant, dt_s, a_max, margin)))
         chosen = computed if self.margin_m is None else self.margin_m
         growth = wind_growth(plant, dt_s) if self.margin_growth_m is None else self.margin_growth_m
+        if not (np.isfinite(chosen) and np.isfinite(growth)):
+            raise self._unbounded(dt_s)
         return Robustness(chosen, a_max, margin.valid_speed_mps, loop, growth)
+
+    def _unbounded(self, dt_s: float) -> ValidationError:
+        """The error of a plant that leaves the MPC no finite robust margin, naming the key that
+        does: an unclipped gust, else the plant's own loop."""
+        if self.wind is not None and not np.all(np.isfinite(self.wind.speed_bound_mps())):
+            return ValidationError(
+                "plant.wind.gust_bound",
+                "an unclipped gust (inf) leaves the MPC no finite robust margin: give a bound "
+                "(the default is 3 gust_std) or set plant.margin and plant.margin_growth",
+            )
+        own = [f.name for f in dataclasses.fields(self) if f.name not in COMMON_FIELDS]
+        params = ", ".join(f"{scenario_key(name)} = {getattr(self, name)!r}" for name in own)
+        return ValidationError(
+            f"plant.{scenario_key(own[0])}" if own else "plant",
+            f"the {self.kind} plant ({params}) leaves the MPC no finite robust margin at dt = {dt_s:g} s: "
+            "expected a velocity loop a drone can follow (or set plant.margin)",
+        )
 
     def build(self, n: int, dim: int, seed: int | np.random.SeedSequence = 0) -> Plant:
         """The plant for ``n`` drones in ``dim`` dimensions; ``seed`` feeds its wind and noise."""

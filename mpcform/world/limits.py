@@ -1,15 +1,15 @@
-"""Physical limits shared by the controllers, the MPC planner and the metrics, and the limits a
-planner keeps for a plant that may be off its plan by a tube (:func:`tightened`)."""
+"""The limits a user asks for (a scenario's ``[limits]``, or :class:`Limits` in Python), shared by
+the controllers, the MPC planner and the metrics; what a planner derives from them for a plant
+that may be off its plan is :mod:`mpcform.world.bounds`."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 
 from mpcform._validate import Array, positive
 from mpcform.errors import ValidationError, shown
-from mpcform.world.obstacles import Obstacle, require_resolved
 
 PLATFORM_TILT_RAD = float(np.radians(20.0))
 """Tilt of the airframe a plan is flown on when nothing says otherwise (a Crazyflie 2.x)."""
@@ -55,14 +55,14 @@ class Limits:
     ``v_max_mps``: speed bound per drone [m/s]; ``d_min_m``: minimum distance between two drones
     [m]; ``a_max_mps2``: componentwise bound on command changes, ``|u_j - u_{j-1}| <= a_max dt``
     [m/s^2] (inf: no bound; the MPC takes :data:`DEFAULT_A_MAX_MPS2` for None, see
-    :func:`planning_limits`); ``geofence_min_m`` / ``geofence_max_m``: axis-aligned box (d,) the
-    drones stay in (a floor is ``geofence_min_m[2]``; use +-inf for open sides);
+    :func:`mpcform.world.bounds.planning_bounds`); ``geofence_min_m`` / ``geofence_max_m``:
+    axis-aligned box (d,) the drones stay in (a floor is ``geofence_min_m[2]``; use +-inf for open sides);
     ``downwash_kappa``: separation is measured as ``||diag(1, 1, 1/kappa) (p_i - p_k)||``
     (spatial only, kappa >= 1);
     ``tracking_m``: room per drone for the position controller's tracking error when the plan is
     flown as setpoints (:data:`PLATFORM_TRACKING_M` for a Crazyflie; 0: none, and ``export``
-    refuses the run), applied by :func:`tightened`; ``tube_m``: the plant's margin and tracking
-    allowance these limits are already tightened by; ``v_max_z_mps``: vertical speed bound [m/s]
+    refuses the run), applied by :func:`mpcform.world.bounds.planning_bounds`; ``v_max_z_mps``:
+    vertical speed bound [m/s]
     (spatial, with ``v_max``): the velocity set is squeezed along z into the spheroid of semi-axes
     ``v_max, v_max, v_max_z`` (:meth:`speed_scale`).
     """
@@ -74,13 +74,11 @@ class Limits:
     geofence_max_m: Array | None = None
     downwash_kappa: float | None = None
     tracking_m: float = 0.0
-    tube_m: float = 0.0
     v_max_z_mps: float | None = None
-    tube_growth_m: float = 0.0
 
     def __post_init__(self) -> None:
-        positive("limits.tube", self.tube_m, allow_zero=True)
-        positive("limits.tube_growth", self.tube_growth_m, allow_zero=True)
+        for name in ("v_max_mps", "d_min_m", "a_max_mps2", "downwash_kappa", "tracking_m", "v_max_z_mps"):
+            _number(f"limits.{_key(name)}", getattr(self, name))
         if self.v_max_z_mps is not None:
             object.__setattr__(self, "v_max_z_mps", positive("limits.v_max_z", self.v_max_z_mps))
         object.__setattr__(self, "tracking_m", positive("limits.tracking", self.tracking_m, allow_zero=True))
@@ -123,21 +121,19 @@ class Limits:
         return self.a_max_mps2 is not None and np.isfinite(self.a_max_mps2)
 
 
-def planning_limits(limits: Limits) -> Limits:
-    """The limits an MPC plans with: ``a_max`` unset takes the platform's
-    :data:`DEFAULT_A_MAX_MPS2`, ``a_max = inf`` turns the bound off (None)."""
-    if limits.a_max_mps2 is None:
-        return replace(limits, a_max_mps2=DEFAULT_A_MAX_MPS2)
-    if not limits.a_max_bounded:
-        return replace(limits, a_max_mps2=None)
-    return limits
-
-
 def _is_inf(value: object) -> bool:
     try:
         return float(value) == float("inf")  # type: ignore[arg-type]
     except (TypeError, ValueError):
         return False
+
+
+def _number(field: str, value: object) -> None:
+    """``value`` is None or a real number (not a string, a bool or a complex): no silent coercion."""
+    if value is None or isinstance(value, np.floating | np.integer):
+        return
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise ValidationError(field, f"expected a number, got {shown(value)}")
 
 
 def _key(attr: str) -> str:
@@ -149,47 +145,3 @@ def _bound(field: str, value: object) -> Array:
     if arr.ndim != 1 or arr.shape[0] not in (2, 3) or np.any(np.isnan(arr)):
         raise ValidationError(field, f"expected 2 or 3 numbers (inf allowed), got {shown(value)}")
     return arr
-
-
-def tightened(
-    limits: Limits,
-    obstacles: tuple[Obstacle, ...],
-    tube_m: float,
-    a_max_mps2: float | None,
-    growth_m: float = 0.0,
-) -> tuple[Limits, tuple[Obstacle, ...]]:
-    """The limits a planner keeps so that a plant within ``tube_m`` [m] of every planned segment
-    keeps the declared ones (tube MPC with a constant tightening): ``d_min + 2 tube`` between two
-    drones (each may be off by the tube; in the downwash metric too, which only shrinks lengths),
-    ``clearance + 2 tube`` from every obstacle and the geofence shrunk by ``2 tube`` (the plan starts
-    from a measured position up to a tube off the previous plan, and the next interval adds up to
-    another: a static obstacle, unlike a pair, has no second drone to share it), and ``a_max_mps2``
-    (the bound on command changes the tube assumes) where the limits set none. The tracking
-    allowance ``e = limits.tracking_m`` is added once more, for the flown drone off the planned
-    path: ``d_min + 2 (tube + e)``, ``clearance + 2 tube + e``, the fence shrunk by ``2 tube + e``
-    (the result's ``tracking_m`` is 0: applied). ``growth_m`` becomes ``tube_growth_m`` (the
-    plant's per-interval disturbance reach, :attr:`mpcform.sim.plant_spec.Robustness.growth_m`).
-    The obstacles' clearances must be resolved (:func:`mpcform.world.obstacles.resolve_clearances`).
-    A zero tube, no allowance, no growth and no new ``a_max`` return the inputs themselves."""
-    obstacles = require_resolved(obstacles)
-    tube = positive("plant.margin", tube_m, allow_zero=True)
-    e = limits.tracking_m
-    a_max = limits.a_max_mps2 if limits.a_max_mps2 is not None else a_max_mps2
-    growth = positive("limits.tube_growth", growth_m, allow_zero=True) or limits.tube_growth_m
-    if tube == 0.0 and e == 0.0 and a_max == limits.a_max_mps2 and growth == limits.tube_growth_m:
-        return limits, obstacles
-    static = 2.0 * tube + e  # a fence or an obstacle: the plant's tube twice, the tracking once
-    lo, hi = limits.geofence_min_m, limits.geofence_max_m
-    planned = Limits(
-        limits.v_max_mps,
-        None if limits.d_min_m is None else limits.d_min_m + 2.0 * (tube + e),
-        a_max,
-        None if lo is None else lo + static,
-        None if hi is None else hi - static,
-        limits.downwash_kappa,
-        tube_m=tube + e,
-        v_max_z_mps=limits.v_max_z_mps,
-        tube_growth_m=growth,
-    )
-    inflated = tuple(o.with_clearance(o.resolved_clearance_m + static) for o in obstacles)
-    return planned, inflated

@@ -6,6 +6,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+from helpers import bounds_of
 from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
@@ -508,7 +509,7 @@ def test_a_miss_within_the_solvers_tolerance_is_no_slack(miss_m: float, reported
     from mpcform.mpc.safety.slack import SLACK_REPORT_M, slack_report
 
     d_min, h = 0.5, 3
-    sep = Separation(2, Limits(v_max_mps=1.0, d_min_m=d_min), MPCSettings(horizon=h), ())
+    sep = Separation(2, bounds_of(v_max_mps=1.0, d_min_m=d_min), MPCSettings(horizon=h), ())
     p0 = np.array([[0.0, 0.0], [2.0, 0.0]])
     pairs = np.array([[0, 1]])
     rows = sep.rows(
@@ -539,7 +540,7 @@ def test_a_plan_within_the_rows_growth_keeps_every_required_distance(
     from mpcform.mpc.safety.slack import slack_report
 
     h, pairs = 4, np.array([[0, 1]])
-    lim = Limits(v_max_mps=1.0, d_min_m=0.5, tube_growth_m=0.01)
+    lim = bounds_of(v_max_mps=1.0, d_min_m=0.5, growth_m=0.01)
     sep = Separation(2, lim, MPCSettings(horizon=h), (), dt_s=0.1)  # E = 2: up to 0.02 m per drone
     p0 = np.array([[0.0, 0.0], [0.9, 0.0]])
     growing = sep.growing(p0 + np.array([0.0, 5.0]))
@@ -572,3 +573,15 @@ def test_a_solve_that_leaves_slack_the_shifted_plan_avoids_keeps_the_plan() -> N
     assert len(kept) >= 3 and res.infos[0].max_slack_m > 0.01
     assert all(i.max_slack_m == 0.0 for i in res.infos[1:])
     check_limits(res, 1.0, 0.5)
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "field"),
+    [({"limits": {"v_max": 1.0}}, "limits"), ({"settings": {"horizon": 5}}, "settings")],
+)
+def test_a_planner_refuses_what_is_not_its_types(kwargs: dict, field: str) -> None:
+    """``MPCPlanner(ref, 0.1, {"v_max": 1.0})``: a ValidationError naming the argument, not an
+    AttributeError deep inside."""
+    ref = ConstantReference(Template.polygon(3, 1.0), FormationState.from_param([0.0, 0.0]))
+    with pytest.raises(ValidationError, match=rf"^{field}: expected mpcform\."):
+        MPCPlanner(ref, 0.1, **kwargs)

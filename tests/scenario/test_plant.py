@@ -102,7 +102,8 @@ def test_lag_second_order_and_quadrotor_with_wind() -> None:
     np.testing.assert_array_equal(quad.wind.gust_bound_mps, [1.5, 1.5])  # 3 gust_std
     unclipped = scenario('[plant]\nkind = "lag"\n[plant.wind]\nmean = [0.0, 0.0]\ngust_std = 0.5\n')
     unclipped["plant"]["wind"]["gust_bound"] = math.inf
-    unclipped["plant"]["margin"] = 0.1  # the MPC needs a finite one: no gust bound gives none
+    unclipped["plant"]["margin"] = 0.1  # the MPC needs finite ones: no gust bound gives none
+    unclipped["plant"]["margin_growth"] = 0.01
     assert np.all(np.isinf(scenario_from_dict(unclipped).plant.wind.gust_bound_mps))
 
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import math
 
 import numpy as np
 import pytest
@@ -174,3 +175,21 @@ def test_the_rows_growth_comes_from_the_wind_unless_the_file_gives_it() -> None:
     assert computed > 0.0
     assert LagPlantSpec(0.2, wind=gusty, margin_growth_m=0.0).robustness(2, 0.1, None, True).growth_m == 0.0
     assert IdealPlantSpec(margin_growth_m=0.01).robustness(2, 0.1, None).growth_m == 0.01
+
+
+@pytest.mark.parametrize(
+    ("spec", "field"),
+    [
+        (LagPlantSpec(time_constant_s=1e-300), "plant.time_constant"),  # no wind: not the gust's key
+        (LagPlantSpec(0.3, wind=Wind([1.0, 0.0], 0.3, gust_bound_mps=math.inf)), "plant.wind.gust_bound"),
+        (
+            LagPlantSpec(0.3, wind=Wind([1.0, 0.0], 0.3, gust_bound_mps=math.inf), margin_m=0.1),
+            "plant.wind.gust_bound",
+        ),
+    ],
+)
+def test_a_plant_that_leaves_no_finite_margin_names_its_own_key(spec: PlantSpec, field: str) -> None:
+    """The margin and the rows' growth are derived from the plant: an error names the key the user
+    wrote (never ``limits.tube_growth``, a bound the planner derives)."""
+    with pytest.raises(ValidationError, match=rf"^{field}: .*no finite robust margin"):
+        spec.robustness(2, 0.1, None)

@@ -61,7 +61,7 @@ import numpy as np
 
 from mpcform._validate import Array
 from mpcform.errors import ValidationError
-from mpcform.world.limits import Limits
+from mpcform.world.bounds import PlanningBounds
 
 MAX_STOP_M = 1e6
 """The longest braking distance ``v_max^2 / (2 a_max)`` taken [m] (a scenario's extent bound too):
@@ -77,7 +77,7 @@ class Braking:
     kappa_s: float
 
     @classmethod
-    def of(cls, dt_s: float, limits: Limits, enabled: bool = True) -> Braking | None:
+    def of(cls, dt_s: float, limits: PlanningBounds, enabled: bool = True) -> Braking | None:
         """The braking of ``limits`` (None without a finite ``a_max`` and ``v_max``, or when
         ``enabled`` is False: :attr:`mpcform.mpc.settings.MPCSettings.braking`)."""
         a_max, v_max = limits.a_max_mps2, limits.v_max_mps

@@ -18,7 +18,7 @@ from scipy.sparse.csgraph import connected_components
 from mpcform._validate import Array
 from mpcform.formation.geometry import pairs_within
 from mpcform.mpc.settings import MPCSettings
-from mpcform.world.limits import Limits
+from mpcform.world.bounds import PlanningBounds
 from mpcform.world.shapes.shape_set import ShapeSet
 
 
@@ -56,7 +56,7 @@ class CandidateSelector:
         self,
         n: int,
         dt_s: float,
-        limits: Limits,
+        limits: PlanningBounds,
         settings: MPCSettings,
         obstacles: ShapeSet,
         speed_gain: float = 1.0,

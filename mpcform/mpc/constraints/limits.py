@@ -16,11 +16,11 @@ from mpcform.mpc.constraints.tail import planner_tail
 from mpcform.mpc.constraints.velocity import VelocityRows
 from mpcform.mpc.settings import MPCSettings
 from mpcform.mpc.velocity_loop import VelocityLoop
-from mpcform.world.limits import Limits
+from mpcform.world.bounds import PlanningBounds
 
 
 def limit_rows(
-    dim: int, dt_s: float, limits: Limits, settings: MPCSettings, loop: VelocityLoop | None = None
+    dim: int, dt_s: float, limits: PlanningBounds, settings: MPCSettings, loop: VelocityLoop | None = None
 ) -> tuple[LimitRows, ...]:
     """The families the limits ask for, in the QP's row order: velocity, acceleration, geofence
     (on the ``loop``'s positions with one; shrunk along the horizon by the rows' growth,
@@ -35,7 +35,7 @@ def limit_rows(
         fence = limits.geofence_min_m, limits.geofence_max_m
         braking = Braking.of(dt_s, limits, settings.braking)
         tail = planner_tail(braking, settings, dim, loop)
-        growth = step_growth(limits.tube_growth_m, dt_s, h, 0 if tail is None else tail.count)
+        growth = step_growth(limits.growth_m, dt_s, h, 0 if tail is None else tail.count)
         families.append(GeofenceRows(dim, h, dt_s, *fence, settings.margin_m, tail, loop, growth))
     return tuple(families)
 

@@ -42,8 +42,8 @@ from mpcform.mpc.constraints.separation_rows import SeparationRows
 from mpcform.mpc.constraints.tail import planner_tail
 from mpcform.mpc.settings import MPCSettings
 from mpcform.mpc.velocity_loop import VelocityLoop
+from mpcform.world.bounds import PlanningBounds
 from mpcform.world.closest import vector_norms
-from mpcform.world.limits import Limits
 from mpcform.world.obstacles import Obstacle
 from mpcform.world.shapes.shape_set import ShapeSet
 
@@ -60,13 +60,13 @@ class Conflict:
 
 class Separation:
     """The pair and obstacle units together: the rows of a candidate set, and the tests on them.
-    ``dt_s``: the control interval, which the rows' growth in wind needs (``limits.tube_growth_m``,
+    ``dt_s``: the control interval, which the rows' growth in wind needs (``limits.growth_m``,
     :func:`mpcform.mpc.constraints.rows.step_growth`; None: no growth)."""
 
     def __init__(
         self,
         dim: int,
-        limits: Limits,
+        limits: PlanningBounds,
         settings: MPCSettings,
         obstacles: ShapeSet | tuple[Obstacle, ...],
         braking: Braking | None = None,
@@ -82,7 +82,7 @@ class Separation:
         if limits.downwash_kappa is not None:
             self.metric[2] = 1.0 / limits.downwash_kappa
         d_min = limits.d_min_m
-        growth = None if dt_s is None else step_growth(limits.tube_growth_m, dt_s, h, tail)
+        growth = None if dt_s is None else step_growth(limits.growth_m, dt_s, h, tail)
         self.growth = growth  # per drone and position step (H + T + 1,) [m]: the rows' growth, or None
         self.ends, self.n_rows, self.tail_count = row_ends(h, tail), row_segments(h, tail).shape[0], tail
         self.row_growth = None if growth is None else growth[self.ends]  # per drone and row (R,) [m]

@@ -33,7 +33,7 @@ from mpcform.mpc.solve.drone_solves import DroneSolves
 from mpcform.mpc.solve.sensitivity import Sensitivity, drone_sensitivity
 from mpcform.mpc.velocity_loop import VelocityLoop
 from mpcform.solvers.dense import NO_BOUND
-from mpcform.world.limits import Limits
+from mpcform.world.bounds import PlanningBounds
 
 MIN_SLACK_QUADRATIC = 1e-6  # keeps the soft QP's Hessian positive definite when w2 = 0
 
@@ -46,7 +46,7 @@ class CondensedDroneQP:
         self,
         dim: int,
         dt_s: float,
-        limits: Limits,
+        limits: PlanningBounds,
         settings: MPCSettings,
         families: tuple[LimitRows, ...],
         loop: VelocityLoop | None = None,

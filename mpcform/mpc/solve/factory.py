@@ -17,7 +17,7 @@ from mpcform.mpc.strategy import PerDroneSolve
 from mpcform.mpc.velocity_loop import VelocityLoop
 from mpcform.solvers.base import QPBackend
 from mpcform.solvers.registry import make_backend, make_per_drone_backend
-from mpcform.world.limits import Limits
+from mpcform.world.bounds import PlanningBounds
 
 
 class StepSolvers:
@@ -50,7 +50,7 @@ def build_step_solvers(
     settings: MPCSettings,
     dim: int,
     dt_s: float,
-    limits: Limits,
+    limits: PlanningBounds,
     families: tuple[LimitRows, ...],
     separation: Separation,
     loop: VelocityLoop | None = None,

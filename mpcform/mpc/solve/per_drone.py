@@ -39,7 +39,7 @@ from mpcform.mpc.solve.working_set import (
 from mpcform.mpc.velocity_loop import VelocityLoop
 from mpcform.solvers.base import QPSolution, failed
 from mpcform.solvers.dense import NO_BOUND, DenseQPBackend, DenseSolution
-from mpcform.world.limits import Limits
+from mpcform.world.bounds import PlanningBounds
 
 Solved = tuple[QPSolution, int]  # a solution and its number of active rows
 
@@ -54,7 +54,7 @@ class PerDroneQP(CondensedDroneQP, StepSolver):
         self,
         dim: int,
         dt_s: float,
-        limits: Limits,
+        limits: PlanningBounds,
         settings: MPCSettings,
         families: tuple[LimitRows, ...],
         backend: DenseQPBackend,

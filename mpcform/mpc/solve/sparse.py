@@ -30,7 +30,7 @@ from mpcform.mpc.solve.problem import ACTIVE_TOL, StepQP, StepSolver
 from mpcform.mpc.solve.sparse_qp import MPCQP
 from mpcform.mpc.velocity_loop import VelocityLoop
 from mpcform.solvers.base import QPBackend, QPContext, QPSolution
-from mpcform.world.limits import Limits
+from mpcform.world.bounds import PlanningBounds
 
 RAISE = 30.0  # the slack weight is raised this many fold per re-solve
 MAX_RAISES = 3  # at most this many re-solves (w1 up to 27,000 times the setting)
@@ -47,7 +47,7 @@ class SparseSolver(StepSolver):
         backend: QPBackend,
         dim: int,
         dt_s: float,
-        limits: Limits,
+        limits: PlanningBounds,
         settings: MPCSettings,
         families: tuple[LimitRows, ...],
         separation: Separation,

@@ -43,7 +43,7 @@ from mpcform.mpc.constraints.rows import (
 from mpcform.mpc.constraints.tail import Tail
 from mpcform.mpc.settings import MPCSettings
 from mpcform.mpc.velocity_loop import VelocityLoop
-from mpcform.world.limits import Limits
+from mpcform.world.bounds import PlanningBounds
 
 
 class MPCQP:
@@ -60,7 +60,7 @@ class MPCQP:
         n: int,
         dim: int,
         dt_s: float,
-        limits: Limits,
+        limits: PlanningBounds,
         settings: MPCSettings,
         pairs: Array,
         singles: Array,

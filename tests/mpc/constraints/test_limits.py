@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
-from helpers import dense_matrix, z_of
+from helpers import bounds_of, dense_matrix, z_of
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -14,19 +14,18 @@ from mpcform.mpc.constraints.limits import limit_rows, violators
 from mpcform.mpc.constraints.rows import Layout
 from mpcform.mpc.constraints.velocity import VelocityRows
 from mpcform.mpc.settings import MPCSettings
-from mpcform.world.limits import Limits
 
 DT = 0.1
 
 
 def _families() -> tuple[LimitRows, ...]:
-    lim = Limits(v_max_mps=1.0, a_max_mps2=4.0, geofence_min_m=[-1.0, -1.0], geofence_max_m=[1.0, 1.0])
+    lim = bounds_of(v_max_mps=1.0, a_max_mps2=4.0, geofence_min_m=[-1.0, -1.0], geofence_max_m=[1.0, 1.0])
     return limit_rows(2, DT, lim, MPCSettings(horizon=4))
 
 
 def test_limit_rows_in_qp_order() -> None:
     assert [type(f) for f in _families()] == [VelocityRows, AccelerationRows, GeofenceRows]
-    assert limit_rows(2, DT, Limits(), MPCSettings()) == ()
+    assert limit_rows(2, DT, bounds_of(), MPCSettings()) == ()
 
 
 @settings(max_examples=25, deadline=None)

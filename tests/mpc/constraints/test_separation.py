@@ -6,6 +6,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+from helpers import bounds_of
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy import sparse
@@ -84,7 +85,7 @@ def test_joint_pair_row_by_hand() -> None:
     """Drones at (0, 0) and (1, 0), guess holding: normal (-1, 0),
     ``-(x_0 - x_1)_x >= d_min + margin - 1``."""
     p0 = np.array([[0.0, 0.0], [1.0, 0.0]])
-    sep = Separation(2, Limits(v_max_mps=1.0, d_min_m=0.5), MPCSettings(horizon=1), ())
+    sep = Separation(2, bounds_of(v_max_mps=1.0, d_min_m=0.5), MPCSettings(horizon=1), ())
     rows = sep.rows(p0, still(p0, 1), cand([[0, 1]]))
     np.testing.assert_allclose(rows.pair_coeffs, [[[-1.0, 0.0]]])
     np.testing.assert_allclose(rows.pair_lower, [[0.5 + MARGIN - 1.0]])
@@ -94,7 +95,9 @@ def test_joint_pair_row_by_hand() -> None:
 def test_decoupled_pair_rows_by_hand() -> None:
     """The same pair decoupled: each drone keeps half of d_min from the midpoint (0.5, 0)."""
     p0 = np.array([[0.0, 0.0], [1.0, 0.0]])
-    sep = Separation(2, Limits(v_max_mps=1.0, d_min_m=0.5), MPCSettings(horizon=1, coupling="decoupled"), ())
+    sep = Separation(
+        2, bounds_of(v_max_mps=1.0, d_min_m=0.5), MPCSettings(horizon=1, coupling="decoupled"), ()
+    )
     rows = sep.rows(p0, still(p0, 1), cand([[0, 1]]))
     assert rows.pairs.shape == (0, 2)
     np.testing.assert_array_equal(rows.labels, [[0, 1], [1, 0]])
@@ -107,7 +110,7 @@ def test_decoupled_pair_rows_by_hand() -> None:
 def test_downwash_pair_row_by_hand() -> None:
     """Stacked 1 m apart in z, kappa 2: metric distance 0.5, row ``-0.5 (x_0 - x_1)_z >= 0.502 - 0.5``."""
     p0 = np.array([[0.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
-    sep = Separation(3, Limits(v_max_mps=1.0, d_min_m=0.5, downwash_kappa=2.0), MPCSettings(horizon=1), ())
+    sep = Separation(3, bounds_of(v_max_mps=1.0, d_min_m=0.5, downwash_kappa=2.0), MPCSettings(horizon=1), ())
     rows = sep.rows(p0, still(p0, 1), cand([[0, 1]]))
     np.testing.assert_allclose(rows.pair_coeffs, [[[0.0, 0.0, -0.5]]])
     np.testing.assert_allclose(rows.pair_lower, [[MARGIN]], atol=1e-15)
@@ -117,7 +120,7 @@ def test_obstacle_row_by_hand() -> None:
     """Drone at (3, 0), obstacle radius 1 at the origin, clearance 0.5: ``x_x >= 1.5 + margin - 3``."""
     p0 = np.array([[3.0, 0.0]])
     ob = SphereObstacle(np.zeros(2), 1.0, clearance_m=0.5)
-    sep = Separation(2, Limits(v_max_mps=1.0), MPCSettings(horizon=1), (ob,))
+    sep = Separation(2, bounds_of(v_max_mps=1.0), MPCSettings(horizon=1), (ob,))
     rows = sep.rows(p0, still(p0, 1), cand([], [[0, 0]]))
     np.testing.assert_array_equal(rows.labels, [[0, -1]])
     np.testing.assert_allclose(rows.single_coeffs, [[[1.0, 0.0]]])
@@ -140,7 +143,7 @@ def test_rows_at_both_segment_ends() -> None:
 def test_shortfall_and_conflicted_drones() -> None:
     """Drone 0 moves 0.6 m towards drone 1 (1 m away): its row is missed by 0.6 - 0.498."""
     p0 = np.array([[0.0, 0.0], [1.0, 0.0], [5.0, 5.0]])
-    sep = Separation(2, Limits(v_max_mps=1.0, d_min_m=0.5), MPCSettings(horizon=1), ())
+    sep = Separation(2, bounds_of(v_max_mps=1.0, d_min_m=0.5), MPCSettings(horizon=1), ())
     rows = sep.rows(p0, still(p0, 1), cand([[0, 1]]))
     x = np.zeros((1, 3, 2))
     x[0, 0] = [0.6, 0.0]
@@ -161,7 +164,7 @@ def test_a_decoupled_pairs_shortfall_taken_jointly_is_the_joint_rows() -> None:
     p0 = np.array([[0.0, 0.0], [1.0, 0.0]])
     settings = MPCSettings(horizon=1, coupling="decoupled")
     sphere = (SphereObstacle(np.array([0.0, 3.0]), 0.5, 0.25),)
-    sep = Separation(2, Limits(v_max_mps=1.0, d_min_m=0.5), settings, sphere)
+    sep = Separation(2, bounds_of(v_max_mps=1.0, d_min_m=0.5), settings, sphere)
     rows = sep.rows(p0, still(p0, 1), cand([[0, 1]], [[0, 0]]))
     x = np.full((1, 2, 2), [0.4, 0.0])
     assert sep.shortfall(x, rows, 0.0)[0] == pytest.approx(0.4 - (0.5 - 0.5 * (0.5 + MARGIN)))
@@ -177,7 +180,7 @@ def test_a_decoupled_pairs_shortfall_taken_jointly_is_the_joint_rows() -> None:
 
 def test_subset_renumbers_drones() -> None:
     p0 = np.array([[0.0, 0.0], [1.0, 0.0], [9.0, 0.0], [9.0, 1.0]])
-    lim, st_ = Limits(v_max_mps=1.0, d_min_m=0.5), MPCSettings(horizon=2, coupling="decoupled")
+    lim, st_ = bounds_of(v_max_mps=1.0, d_min_m=0.5), MPCSettings(horizon=2, coupling="decoupled")
     rows = Separation(2, lim, st_, ()).rows(p0, still(p0, 2), cand([[0, 1], [2, 3]]))
     sub = rows.subset(np.array([2, 3]), 4, on_only=True)
     np.testing.assert_array_equal(sub.singles, [0, 1])  # drones 2, 3 renumbered
@@ -197,7 +200,7 @@ def test_clear_means_no_joint_or_obstacle_row_is_missed(seed: int) -> None:
     guess = p0 + np.cumsum(np.concatenate([np.zeros((1, n, 2)), rng.uniform(-0.1, 0.1, (h, n, 2))]), axis=0)
     x = np.cumsum(rng.uniform(-0.1, 0.1, (h, n, 2)), axis=0)
     ob = SphereObstacle(np.array([0.0, 0.0]), 0.3, clearance_m=0.25)  # d_min / 2
-    sep = Separation(2, Limits(v_max_mps=1.0, d_min_m=0.5), MPCSettings(horizon=h), (ob,))
+    sep = Separation(2, bounds_of(v_max_mps=1.0, d_min_m=0.5), MPCSettings(horizon=h), (ob,))
     everything = cand([[i, k] for i in range(n) for k in range(i + 1, n)], [[i, 0] for i in range(n)])
     rows = sep.rows(p0, guess, everything)
     if sep.clear(guess, planned(p0, x)):
@@ -210,7 +213,9 @@ def test_clear_does_not_cover_the_decoupled_rows() -> None:
     p0 = np.array([[0.0, 0.0], [0.6, 0.0]])
     x = np.broadcast_to([0.1, 0.0], (2, 2, 2)) * np.array([1.0, 2.0])[:, None, None]
     for coupling, missed in (("joint", False), ("decoupled", True)):
-        sep = Separation(2, Limits(v_max_mps=1.0, d_min_m=0.5), MPCSettings(horizon=2, coupling=coupling), ())
+        sep = Separation(
+            2, bounds_of(v_max_mps=1.0, d_min_m=0.5), MPCSettings(horizon=2, coupling=coupling), ()
+        )
         assert sep.clear(still(p0, 2), planned(p0, x))
         rows = sep.rows(p0, still(p0, 2), cand([[0, 1]]))
         assert (sep.shortfall(x, rows, 0.0)[0] > 0) == missed
@@ -218,7 +223,7 @@ def test_clear_does_not_cover_the_decoupled_rows() -> None:
 
 def test_clear_fails_head_on() -> None:
     p0 = np.array([[0.0, 0.0], [1.0, 0.0]])
-    sep = Separation(2, Limits(v_max_mps=1.0, d_min_m=0.5), MPCSettings(horizon=2), ())
+    sep = Separation(2, bounds_of(v_max_mps=1.0, d_min_m=0.5), MPCSettings(horizon=2), ())
     apart = np.zeros((2, 2, 2))
     assert sep.clear(still(p0, 2), planned(p0, apart))
     towards = np.array([[[0.2, 0.0], [-0.2, 0.0]], [[0.4, 0.0], [-0.4, 0.0]]])
@@ -228,7 +233,7 @@ def test_clear_fails_head_on() -> None:
 def test_first_segment_items_within_reach() -> None:
     p0 = np.array([[0.0, 0.0], [1.0, 0.0]])
     ob = SphereObstacle(np.array([0.0, 2.0]), 0.5, clearance_m=0.2)  # d_min / 2
-    sep = Separation(2, Limits(v_max_mps=1.0, d_min_m=0.4), MPCSettings(), (ob,))
+    sep = Separation(2, bounds_of(v_max_mps=1.0, d_min_m=0.4), MPCSettings(), (ob,))
     c = cand([[0, 1]], [[1, 0]])
     (a, b, d_pair), (oa, ob_, d_ob) = sep.first_segment(p0, p0 + 0.1, c)
     np.testing.assert_allclose(a, [1.0])  # the pair's distance at the start, and along the segment
@@ -245,7 +250,7 @@ def test_first_segment_items_within_reach() -> None:
 def test_a_pair_inside_d_min_gets_a_hard_no_approach_row(coupling: str) -> None:
     """0.3 m apart (d_min 0.5) along x: row 0 (at x_1) is ``c0^T (x_0 - x_1) >= 0``, c0 = (-1, 0), hard."""
     p0 = np.array([[0.0, 0.0], [0.3, 0.0], [5.0, 0.0]])
-    sep = Separation(2, Limits(v_max_mps=1.0, d_min_m=0.5), MPCSettings(horizon=3, coupling=coupling), ())
+    sep = Separation(2, bounds_of(v_max_mps=1.0, d_min_m=0.5), MPCSettings(horizon=3, coupling=coupling), ())
     rows = sep.rows(p0, still(p0, 3), cand([[0, 1], [1, 2]]))
     if coupling == "joint":
         np.testing.assert_array_equal(rows.pair_hard, [True, False])
@@ -263,7 +268,7 @@ def test_a_start_a_solver_tolerance_inside_is_no_shortfall() -> None:
     """A pair that starts 1e-9 m inside d_min (the last plan met its row to the solver's tolerance)
     gets the hard row, but only a shortfall beyond ``tol_m`` is reported."""
     p0 = np.array([[0.0, 0.0], [0.5 - 1e-9, 0.0]])
-    sep = Separation(2, Limits(v_max_mps=1.0, d_min_m=0.5), MPCSettings(horizon=3), ())
+    sep = Separation(2, bounds_of(v_max_mps=1.0, d_min_m=0.5), MPCSettings(horizon=3), ())
     rows = sep.rows(p0, still(p0, 3), cand([[0, 1]]))
     assert rows.pair_hard.tolist() == [True]
     assert sep.start_shortfall(p0, rows)[0] == pytest.approx(1e-9, abs=1e-12)
@@ -274,7 +279,7 @@ def test_a_start_a_solver_tolerance_inside_is_no_shortfall() -> None:
 def test_a_drone_inside_an_obstacles_clearance_gets_a_hard_row_and_a_push() -> None:
     ob = SphereObstacle(np.zeros(2), 1.0, clearance_m=0.5)
     p0 = np.array([[0.0, 1.2]])  # 0.3 m inside
-    sep = Separation(2, Limits(v_max_mps=1.0), MPCSettings(horizon=2), (ob,))
+    sep = Separation(2, bounds_of(v_max_mps=1.0), MPCSettings(horizon=2), (ob,))
     rows = sep.rows(p0, still(p0, 2), cand([], [[0, 0]]))
     assert rows.single_hard.tolist() == [True]
     np.testing.assert_allclose(rows.single_coeffs[0, 0], [0.0, 1.0])
@@ -288,10 +293,10 @@ def test_blocked_targets_are_the_pairs_within_d_min_in_the_metric() -> None:
     (kappa 2) a vertical 0.8 m counts as 0.4 m; obstacles never block (a moving reference may pass
     through one)."""
     ob = SphereObstacle(np.array([5.0, 5.0, 0.0]), 1.0, clearance_m=0.25)
-    sep = Separation(3, Limits(v_max_mps=1.0, d_min_m=0.5, downwash_kappa=2.0), MPCSettings(), (ob,))
+    sep = Separation(3, bounds_of(v_max_mps=1.0, d_min_m=0.5, downwash_kappa=2.0), MPCSettings(), (ob,))
     targets = np.array([[0, 0, 0], [0.45, 0, 0], [3, 0, 0], [3, 0, 0.8], [6, 0, 0], [5, 5, 0.0]])
     np.testing.assert_array_equal(sep.blocked_targets(targets), [True, True, True, True, False, False])
-    sep = Separation(3, Limits(v_max_mps=1.0, d_min_m=0.5), MPCSettings(), ())
+    sep = Separation(3, bounds_of(v_max_mps=1.0, d_min_m=0.5), MPCSettings(), ())
     assert not sep.blocked_targets(
         targets + np.array([[0, 0, 0], [0.15, 0, 0], [0, 0, 0], [0, 0, 0], [0, 0, 0], [0, 0, 0]])
     )[:2].any()
@@ -301,14 +306,14 @@ def test_targets_within_two_tubes_of_the_tightened_distance_are_blocked() -> Non
     """A plant tube of 0.04 m (limits tightened to d_min 0.58): targets 0.6 m apart are blocked
     (0.6 < 0.58 + 2 x 0.04: the plant cannot hold both without the pair in conflict), 0.7 m apart
     are not; without a tube 0.6 m apart are not."""
-    from mpcform.world.limits import tightened
+    from mpcform.world.bounds import planning_bounds
 
     targets = np.array([[0.0, 0.0], [0.6, 0.0], [5.0, 0.0], [5.7, 0.0]])
-    planned, _ = tightened(Limits(v_max_mps=1.0, d_min_m=0.5), (), 0.04, None)
+    planned, _ = planning_bounds(Limits(v_max_mps=1.0, d_min_m=0.5), (), 0.04, None)
     assert planned.tube_m == 0.04 and planned.d_min_m == pytest.approx(0.58)
     sep = Separation(2, planned, MPCSettings(), ())
     np.testing.assert_array_equal(sep.blocked_targets(targets), [True, True, False, False])
-    plain = Separation(2, Limits(v_max_mps=1.0, d_min_m=0.58), MPCSettings(), ())
+    plain = Separation(2, bounds_of(v_max_mps=1.0, d_min_m=0.58), MPCSettings(), ())
     assert not plain.blocked_targets(targets).any()
 
 
@@ -321,7 +326,7 @@ def test_the_block_size_leaves_the_rows(kappa: float | None, monkeypatch: pytest
     p0 = rng.uniform(-1.0, 1.0, (n, 3))
     guess = p0 + np.cumsum(np.concatenate([np.zeros((1, n, 3)), rng.uniform(-0.1, 0.1, (h, n, 3))]), axis=0)
     x = np.cumsum(rng.uniform(-0.1, 0.1, (h, n, 3)), axis=0)
-    lim = Limits(v_max_mps=1.0, d_min_m=0.5, downwash_kappa=kappa)
+    lim = bounds_of(v_max_mps=1.0, d_min_m=0.5, downwash_kappa=kappa)
     ob = SphereObstacle(np.zeros(3), 0.2, clearance_m=0.25)
     sep = Separation(3, lim, MPCSettings(horizon=h, coupling="decoupled"), (ob,))
     items = cand([[i, k] for i in range(n) for k in range(i + 1, n)], [[i, 0] for i in range(n)])
@@ -350,7 +355,7 @@ def test_the_clear_test_answers_the_same_when_it_tries_the_least_clear_first(see
     guess = p0 + np.cumsum(np.concatenate([np.zeros((1, n, 2)), rng.uniform(-0.02, 0.02, (h, n, 2))]), axis=0)
     x = np.cumsum(rng.uniform(-0.02, 0.02, (h, n, 2)), axis=0)
     ob = SphereObstacle(np.zeros(2), 0.5, clearance_m=0.175)  # d_min / 2
-    sep = Separation(2, Limits(v_max_mps=1.0, d_min_m=0.35), MPCSettings(horizon=h), (ob,))
+    sep = Separation(2, bounds_of(v_max_mps=1.0, d_min_m=0.35), MPCSettings(horizon=h), (ob,))
     answers = []
     for first in (1, 10_000):
         monkey.setattr("mpcform.mpc.constraints.clear.FIRST_TESTED", first)
@@ -368,7 +373,7 @@ def test_the_clear_test_answers_the_same_with_its_neighbour_list_kept_between_st
     n, h = 100, 3
     grid = 0.6 * np.stack(np.meshgrid(np.arange(10), np.arange(10)), -1).reshape(-1, 2)
     p0 = grid + rng.uniform(-0.08, 0.08, (n, 2))
-    limits, st_h = Limits(v_max_mps=1.0, d_min_m=0.35), MPCSettings(horizon=h)
+    limits, st_h = bounds_of(v_max_mps=1.0, d_min_m=0.35), MPCSettings(horizon=h)
     kept = Separation(2, limits, st_h, ())
     for _ in range(8):
         steps = np.concatenate([np.zeros((1, n, 2)), rng.uniform(-0.02, 0.02, (h, n, 2))])
@@ -383,7 +388,7 @@ def test_without_the_tail_only_an_obstacles_braking_tail_conflicts() -> None:
     stop 0.4 m apart (d_min 0.5); every row of the horizon holds. With the tail all three are
     conflicted; without it (the tie-break's encounter test) only drone 0: it turns early for the
     sphere, while a pair's stop rows are left to the QP's braking."""
-    lim = Limits(v_max_mps=1.0, d_min_m=0.5, a_max_mps2=0.5)
+    lim = bounds_of(v_max_mps=1.0, d_min_m=0.5, a_max_mps2=0.5)
     ob = SphereObstacle(np.array([3.0, 0.0]), 1.0, clearance_m=0.5)
     sep = Separation(2, lim, MPCSettings(horizon=1), (ob,), Braking.of(0.1, lim))
     p0 = np.array([[0.0, 0.0], [0.0, 10.0], [3.0, 10.0]])
@@ -395,18 +400,18 @@ def test_without_the_tail_only_an_obstacles_braking_tail_conflicts() -> None:
 
 @pytest.mark.parametrize("coupling", ["joint", "decoupled"])
 def test_rows_grow_along_the_horizon_by_the_wind_growth(coupling: str) -> None:
-    """With ``tube_growth_m`` the rows at position step e ask for ``min(e - 1, E)`` growths more per
+    """With ``growth_m`` the rows at position step e ask for ``min(e - 1, E)`` growths more per
     growing drone (a pair for each of its drones, a decoupled side and an obstacle item for its
     own), the first rows none; the clear test grows with them: a plan that meets the plain rows but
     not the grown ones is not clear. A drone whose target is too close to another's to hold with
     the growth does not grow."""
     p0 = np.array([[0.0, 0.0], [0.9, 0.0], [3.0, 0.0]])
     ob = SphereObstacle(np.array([3.0, 0.6]), 0.2, clearance_m=0.25)
-    lim, settings_ = Limits(v_max_mps=1.0, d_min_m=0.5), MPCSettings(horizon=4, coupling=coupling)
+    lim, settings_ = bounds_of(v_max_mps=1.0, d_min_m=0.5), MPCSettings(horizon=4, coupling=coupling)
     c = cand([[0, 1]], [[2, 0]])
     plain_sep = Separation(2, lim, settings_, (ob,), dt_s=0.1)
     plain = plain_sep.rows(p0, still(p0, 4), c)
-    sep = Separation(2, replace(lim, tube_growth_m=0.01), settings_, (ob,), dt_s=0.1)
+    sep = Separation(2, replace(lim, growth_m=0.01), settings_, (ob,), dt_s=0.1)
     growing = sep.growing(p0 + np.array([0.0, 5.0]))  # targets far apart: every drone grows
     np.testing.assert_array_equal(growing, [1.0, 1.0, 1.0])
     grown = sep.rows(p0, still(p0, 4), c, growing=growing)
@@ -435,6 +440,6 @@ def test_rows_grow_along_the_horizon_by_the_wind_growth(coupling: str) -> None:
 
 
 def test_no_growth_without_dt_or_wind() -> None:
-    lim = Limits(v_max_mps=1.0, d_min_m=0.5, tube_growth_m=0.01)
+    lim = bounds_of(v_max_mps=1.0, d_min_m=0.5, growth_m=0.01)
     assert Separation(2, lim, MPCSettings(), ()).growing(np.zeros((2, 2))) is None  # no dt given
-    assert Separation(2, replace(lim, tube_growth_m=0.0), MPCSettings(), (), dt_s=0.1).growth is None
+    assert Separation(2, replace(lim, growth_m=0.0), MPCSettings(), (), dt_s=0.1).growth is None

@@ -3,20 +3,20 @@
 from __future__ import annotations
 
 import numpy as np
+from helpers import bounds_of
 
 from mpcform.mpc.constraints.candidates import Candidates
 from mpcform.mpc.constraints.separation import Separation
 from mpcform.mpc.plan import Plan
 from mpcform.mpc.safety.certify import Certifier
 from mpcform.mpc.settings import MPCSettings
-from mpcform.world.limits import Limits
 from mpcform.world.shapes import SphereObstacle
 
 DT = 0.1
 
 
 def certifier(obstacles: tuple[SphereObstacle, ...] = (), d_min: float = 0.5) -> Certifier:
-    lim = Limits(v_max_mps=1.0, d_min_m=d_min)
+    lim = bounds_of(v_max_mps=1.0, d_min_m=d_min)
     return Certifier(DT, lim.v_max_mps, Separation(2, lim, MPCSettings(), obstacles))
 
 
@@ -38,7 +38,7 @@ def test_a_command_outside_the_ball_is_scaled_onto_it() -> None:
 def test_with_a_vertical_bound_a_command_is_scaled_into_the_spheroid() -> None:
     """``v_max_z`` 0.5 of v_max 1: a climb of 0.8 m/s is scaled along its direction onto the
     spheroid (vertical 0.5), a slow climb is kept."""
-    lim = Limits(v_max_mps=1.0, d_min_m=0.5, v_max_z_mps=0.5)
+    lim = bounds_of(v_max_mps=1.0, d_min_m=0.5, v_max_z_mps=0.5)
     cert = Certifier(DT, 1.0, Separation(3, lim, MPCSettings(), ()), scale=lim.speed_scale(3))
     p0 = np.array([[0.0, 0.0, 0.0], [5.0, 0.0, 0.0]])
     u = np.array([[0.3, 0.0, 0.8], [0.0, 0.2, 0.3]])
@@ -138,7 +138,7 @@ def test_fallback_scales_the_solved_command_back_until_it_certifies() -> None:
     """0.7 m apart, the solved command closes 0.4 m in a step: half of it (0.2 m) certifies."""
     p0 = np.array([[0.0, 0.0], [0.7, 0.0]])
     solved = np.array([[2.0, 0.0], [-2.0, 0.0]])
-    cert = Certifier(DT, 3.0, Separation(2, Limits(v_max_mps=3.0, d_min_m=0.5), MPCSettings(), ()))
+    cert = Certifier(DT, 3.0, Separation(2, bounds_of(v_max_mps=3.0, d_min_m=0.5), MPCSettings(), ()))
     u, _, note = cert.fallback(None, p0, items([[0, 1]]), 3, solved)
     assert note == "solved command x 0.5"
     np.testing.assert_allclose(u[0], 0.5 * solved)
@@ -147,7 +147,7 @@ def test_fallback_scales_the_solved_command_back_until_it_certifies() -> None:
 def test_fallback_keeps_within_a_max() -> None:
     """With a_max 2 m/s^2 (0.2 m/s per step) every fallback command stays within 0.2 m/s of the last
     one, and the plan after it slows down by at most that much per step."""
-    lim = Limits(v_max_mps=1.0, d_min_m=0.5, a_max_mps2=2.0)
+    lim = bounds_of(v_max_mps=1.0, d_min_m=0.5, a_max_mps2=2.0)
     cert = Certifier(DT, 1.0, Separation(2, lim, MPCSettings(), ()), lim.a_max_mps2)
     p0 = np.array([[0.0, 0.0], [0.3, 0.0]])
     u_prev = np.array([[0.0, 0.5], [0.0, 0.5]])  # flying side by side
@@ -190,7 +190,7 @@ def test_the_kept_plan_is_the_shifted_plan_when_it_meets_the_rows_and_certifies(
     certifies; None when ``meets`` refuses it, when it would close a pair, or without braking."""
     from mpcform.mpc.constraints.braking import Braking
 
-    lim = Limits(v_max_mps=1.0, d_min_m=0.5, a_max_mps2=2.0)
+    lim = bounds_of(v_max_mps=1.0, d_min_m=0.5, a_max_mps2=2.0)
     braking = Braking.of(DT, lim)
     assert braking is not None
     cert = Certifier(DT, 1.0, Separation(2, lim, MPCSettings(), (), braking), 2.0, braking)

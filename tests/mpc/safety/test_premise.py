@@ -14,6 +14,7 @@ from mpcform.mpc.safety.premise import GrowthPremise
 from mpcform.mpc.settings import MPCSettings
 from mpcform.mpc.velocity_loop import VelocityLoop
 from mpcform.reference.base import ConstantReference
+from mpcform.world.bounds import planning_bounds
 from mpcform.world.limits import Limits
 
 LAG = (np.array([[-5.0]]), np.array([5.0]), np.array([1.0]), (0, 1))
@@ -42,7 +43,7 @@ def test_the_move_counts_the_window_and_the_growing_drones_only() -> None:
 def _planner(d_min_m: float = 0.5) -> MPCPlanner:
     tpl = Template(np.array([[-1.0, 0.0], [1.0, 0.0]]))
     ref = ConstantReference(tpl, FormationState.from_param([4.0, 0.0]))
-    limits = Limits(v_max_mps=1.0, d_min_m=d_min_m, a_max_mps2=2.0, tube_growth_m=0.01)
+    limits = planning_bounds(Limits(v_max_mps=1.0, d_min_m=d_min_m, a_max_mps2=2.0), (), 0.0, None, 0.01)[0]
     loop = VelocityLoop.from_groups([LAG], 2, 0.1, 6)
     return MPCPlanner(ref, 0.1, limits, MPCSettings(horizon=6, gain_per_s=2.0), loop=loop)
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import pytest
+from helpers import bounds_of
 
 from mpcform.mpc.constraints.limits import limit_rows
 from mpcform.mpc.constraints.separation import Separation
@@ -14,9 +15,8 @@ from mpcform.mpc.solve.split import SplitQP
 from mpcform.mpc.strategy import PerDroneSolve, SparseSolve, SplitPolicy
 from mpcform.solvers.base import SolverOptions
 from mpcform.solvers.registry import make_backend
-from mpcform.world.limits import Limits
 
-LIMITS = Limits(v_max_mps=1.0, d_min_m=0.5)
+LIMITS = bounds_of(v_max_mps=1.0, d_min_m=0.5)
 
 
 def build(settings: MPCSettings, backend=None):  # noqa: ANN001, ANN201 - a test helper

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from helpers import bounds_of
 
 from mpcform.mpc.constraints.candidates import Candidates
 from mpcform.mpc.constraints.limits import limit_rows
@@ -16,7 +17,6 @@ from mpcform.mpc.solve.sparse import SparseSolver
 from mpcform.solvers.base import SolverOptions
 from mpcform.solvers.daqp_dense import DaqpBackend
 from mpcform.solvers.registry import make_backend
-from mpcform.world.limits import Limits
 
 DT = 0.1
 
@@ -25,7 +25,7 @@ DT = 0.1
 def test_solvers_return_the_rollout_when_no_row_is_active(kind: str) -> None:
     options = SolverOptions(1e-9, 1e-9, 4000)
     st = MPCSettings(horizon=4, gain_per_s=2.0, coupling="decoupled")
-    lim = Limits(v_max_mps=10.0, d_min_m=0.5)
+    lim = bounds_of(v_max_mps=10.0, d_min_m=0.5)
     families, sep = limit_rows(2, DT, lim, st), Separation(2, lim, st, ())
     solver: StepSolver
     if kind == "sparse":

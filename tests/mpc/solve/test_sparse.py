@@ -7,7 +7,7 @@ from typing import Any
 import numpy as np
 import pytest
 import scipy.sparse as sp
-from helpers import crowd_and_swap
+from helpers import bounds_of, crowd_and_swap
 
 from mpcform.mpc.constraints.candidates import Candidates
 from mpcform.mpc.constraints.limits import limit_rows
@@ -22,7 +22,7 @@ from mpcform.world.limits import Limits
 from mpcform.world.shapes import SphereObstacle
 
 DT = 0.1
-LIMITS = Limits(v_max_mps=1.0, d_min_m=0.5)
+LIMITS = bounds_of(v_max_mps=1.0, d_min_m=0.5)
 OBSTACLE = SphereObstacle(np.array([0.0, 3.0]), 0.5, clearance_m=0.25)  # d_min / 2
 
 

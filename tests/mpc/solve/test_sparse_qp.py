@@ -4,17 +4,17 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from helpers import bounds_of
 
 from mpcform.mpc.constraints.limits import limit_rows
 from mpcform.mpc.constraints.rows import row_ends
 from mpcform.mpc.plan import rollout
 from mpcform.mpc.settings import MPCSettings
 from mpcform.mpc.solve.sparse_qp import MPCQP
-from mpcform.world.limits import Limits
 
 DT = 0.1
 FENCE = {"geofence_min_m": [-9.0, -9.0], "geofence_max_m": [9.0, 9.0]}
-LIMITS = Limits(v_max_mps=2.0, d_min_m=0.5, a_max_mps2=50.0, **FENCE)
+LIMITS = bounds_of(v_max_mps=2.0, d_min_m=0.5, a_max_mps2=50.0, **FENCE)
 
 
 def qp(n: int, settings: MPCSettings, pairs: np.ndarray, singles: np.ndarray) -> MPCQP:
@@ -124,7 +124,7 @@ def test_the_braking_tails_rows_sit_at_its_points_under_a_second_order_loop() ->
         for a, b, _, c, axes in second_order_plant(3, 2, 0.7, 6.0).velocity_loops()
     ]
     loop = VelocityLoop.from_groups(groups, 2, DT, h)
-    lim = Limits(v_max_mps=1.0, d_min_m=0.5, a_max_mps2=1.79, **FENCE)
+    lim = bounds_of(v_max_mps=1.0, d_min_m=0.5, a_max_mps2=1.79, **FENCE)
     st = MPCSettings(horizon=h)
     tail = braking_tail(Braking.of(DT, lim), h, 2, loop)
     assert tail.count > 2
