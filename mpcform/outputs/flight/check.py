@@ -32,7 +32,7 @@ from mpcform._validate import Array
 from mpcform.control.setpoints import FullState
 from mpcform.outputs.flight.limits import flat_state
 from mpcform.outputs.flight.polynomial import PiecewisePolynomial
-from mpcform.outputs.flight.safety import ClosestPair, closest_pair
+from mpcform.outputs.flight.safety import ClosestPair, ObstacleApproach, ObstacleCheck, closest_pair
 from mpcform.sim.crazyflow import CrazyflowPlant
 from mpcform.sim.plant_spec import QuadrotorPlantSpec
 from mpcform.sim.quadrotor import QuadrotorPlant
@@ -55,6 +55,7 @@ class FlightCheck:
     closest: ClosestPair | None = None
     d_min_m: float | None = None
     events: dict[str, Any] | None = None  # crazyflow's contacts, floor contacts and flips
+    obstacle: ObstacleApproach | None = None  # the deepest approach into an obstacle's clearance
 
     @property
     def min_separation_m(self) -> float:
@@ -70,13 +71,16 @@ class FlightCheck:
         """Tracked within the declared tolerance and no pair closer than d_min."""
         apart = self.d_min_m is None or self.min_separation_m >= self.d_min_m
         calm = not self.events or not any(self.events.get(k) for k in CONTACT_EVENTS)
-        return self.max_error_m <= self.declared_tolerance_m and apart and calm
+        clear = self.obstacle is None or self.obstacle.inside_m <= 0.0
+        return self.max_error_m <= self.declared_tolerance_m and apart and calm and clear
 
     def describe(self) -> str:
         """What broke the tolerance: contacts, a pair closer than d_min, or the tracking error."""
         said = [f"{k.replace('_', ' ')}: {v}" for k, v in (self.events or {}).items() if v]
         if self.d_min_m is not None and self.closest is not None and self.min_separation_m < self.d_min_m:
             said.append(f"{self.closest.describe()}, closer than d_min = {self.d_min_m:g} m")
+        if self.obstacle is not None and self.obstacle.inside_m > 0.0:
+            said.append(self.obstacle.describe())
         if self.max_error_m > self.declared_tolerance_m:
             said.append(
                 f"drone {self.error_drone} {self.max_error_m:.3g} m off at t = {self.error_t_s:.2f} s, "
@@ -85,19 +89,23 @@ class FlightCheck:
         return "; ".join(said) or "within tolerance"
 
     def record(self) -> dict[str, Any]:
-        return {
-            "max_tracking_error_m": self.max_error_m,
-            "drone": self.error_drone,
-            "t_s": self.error_t_s,
-            "min_separation_m": self.min_separation_m,
-            "closest_pair": None if self.closest is None else list(self.closest.pair),
-            "closest_t_s": None if self.closest is None else self.closest.t_s,
-            "d_min_m": self.d_min_m,
-            "plant_margin_m": self.plant_margin_m,
-            "fit_tolerance_m": self.fit_tolerance_m,
-            "declared_tolerance_m": self.declared_tolerance_m,
-            "within_tolerance": self.within_tolerance,
-        } | ({} if self.events is None else {"events": self.events})
+        return (
+            {
+                "max_tracking_error_m": self.max_error_m,
+                "drone": self.error_drone,
+                "t_s": self.error_t_s,
+                "min_separation_m": self.min_separation_m,
+                "closest_pair": None if self.closest is None else list(self.closest.pair),
+                "closest_t_s": None if self.closest is None else self.closest.t_s,
+                "d_min_m": self.d_min_m,
+                "plant_margin_m": self.plant_margin_m,
+                "fit_tolerance_m": self.fit_tolerance_m,
+                "declared_tolerance_m": self.declared_tolerance_m,
+                "within_tolerance": self.within_tolerance,
+            }
+            | ({} if self.events is None else {"events": self.events})
+            | ({} if self.obstacle is None else {"obstacle_inside_m": self.obstacle.inside_m})
+        )
 
 
 def drone_models_available() -> bool:
@@ -116,9 +124,11 @@ def fly_export(
     a_max_mps2: float,
     d_min_m: float | None = None,
     metric: Array | None = None,
+    obstacles: ObstacleCheck | None = None,
 ) -> FlightCheck | None:
     """Fly ``n`` drones' pieces (series drone * 4 + x, y, z, yaw) on the quadrotor plant; the
-    closest true pair (in the downwash ``metric`` when given) is checked against ``d_min_m``."""
+    closest true pair (in the downwash ``metric`` when given) is checked against ``d_min_m``, the
+    true path against the ``obstacles``."""
     if not drone_models_available():
         return None
     spec = QuadrotorPlantSpec()
@@ -138,7 +148,7 @@ def fly_export(
         true.append(samples.p_true_m[1:])
     t = np.concatenate(times)
     p_true = np.concatenate(true)
-    return _flight_check(poly, n, t, p_true, float(margin), fit_tolerance_m, d_min_m, metric)
+    return _flight_check(poly, n, t, p_true, float(margin), fit_tolerance_m, d_min_m, metric, None, obstacles)
 
 
 def fly_export_crazyflow(
@@ -147,6 +157,7 @@ def fly_export_crazyflow(
     fit_tolerance_m: float,
     d_min_m: float | None = None,
     metric: Array | None = None,
+    obstacles: ObstacleCheck | None = None,
 ) -> FlightCheck | None:
     """Fly ``n`` drones' pieces open loop in crazyflow (module docstring); None without it."""
     if importlib.util.find_spec("crazyflow") is None:
@@ -158,7 +169,7 @@ def fly_export_crazyflow(
     t_true, p_true = plant.fly_full_state(st["pos"][0], setpoints)
     events = {k: v for k, v in plant.events.items() if k in CONTACT_EVENTS}
     return _flight_check(
-        poly, n, t_true, p_true, PLATFORM_TRACKING_M, fit_tolerance_m, d_min_m, metric, events
+        poly, n, t_true, p_true, PLATFORM_TRACKING_M, fit_tolerance_m, d_min_m, metric, events, obstacles
     )
 
 
@@ -172,12 +183,14 @@ def _flight_check(
     d_min_m: float | None,
     metric: Array | None,
     events: dict[str, Any] | None = None,
+    obstacles: ObstacleCheck | None = None,
 ) -> FlightCheck:
     """The check of true positions ``p_true_m`` (K, n, 3) at ``t_s`` (K,) against the pieces: the
-    worst tracking error and the closest true pair."""
+    worst tracking error, the closest true pair and the deepest approach to an obstacle."""
     err = np.linalg.norm(p_true_m - poly.evaluate(t_s).reshape(-1, n, 4)[..., :3], axis=-1)
     j, i = np.unravel_index(int(np.argmax(err)), err.shape)
     closest = closest_pair(t_s, p_true_m, metric)
+    approach = None if obstacles is None else obstacles.approach(t_s, p_true_m)
     return FlightCheck(
-        float(err[j, i]), int(i), float(t_s[j]), margin_m, fit_tolerance_m, closest, d_min_m, events
+        float(err[j, i]), int(i), float(t_s[j]), margin_m, fit_tolerance_m, closest, d_min_m, events, approach
     )

@@ -62,7 +62,7 @@ from mpcform.outputs.flight.polynomial import (
     PolynomialFit,
 )
 from mpcform.outputs.flight.retime import Retiming
-from mpcform.outputs.flight.safety import closest_pair, separation_breaches
+from mpcform.outputs.flight.safety import ObstacleCheck, closest_pair, obstacle_breaches, separation_breaches
 from mpcform.outputs.flight.yaw import formation_yaw
 from mpcform.outputs.rundata import RunData
 from mpcform.world.limits import PLATFORM_TRACKING_M, Limits
@@ -209,12 +209,17 @@ def export_run(
     env = envelope(t_check, state["vel"], state["acc"], state["jerk"], state["omega"])
     worst = max(parts, key=lambda p: p.fit.max_error_m).fit
     warnings = _warnings(worst, env, opts)
+    obstacles = ObstacleCheck(run.obstacles, run.dim, np.asarray(opts.offset_m)) if run.obstacles else None
     check = (
-        fly_export(flown, n, opts.tolerance_m, dt, lim.max_acc_mps2, run.d_min_m, metric)
+        fly_export(flown, n, opts.tolerance_m, dt, lim.max_acc_mps2, run.d_min_m, metric, obstacles)
         if opts.fly
         else None
     )
-    cf = fly_export_crazyflow(flown, n, opts.tolerance_m, run.d_min_m, metric) if opts.crazyflow else None
+    cf = (
+        fly_export_crazyflow(flown, n, opts.tolerance_m, run.d_min_m, metric, obstacles)
+        if opts.crazyflow
+        else None
+    )
     if opts.crazyflow and cf is None:
         raise ValidationError(
             "crazyflow", 'flying an export in crazyflow needs it: pip install -e ".[crazyflow]"'
@@ -228,6 +233,9 @@ def export_run(
         retimed,
         None if check is None else check.closest,
     )
+    if obstacles is not None:  # the retimed pieces and the flight check's true path
+        retimed_ob = obstacles.approach(t_check, state["pos"])
+        breaches += obstacle_breaches(opts.tolerance_m, retimed_ob, None if check is None else check.obstacle)
     if cf is not None and not cf.within_tolerance:
         breaches += [f"flown open loop in crazyflow: {cf.describe()}"]
     if breaches and not opts.allow_unsafe:  # before any file is written
