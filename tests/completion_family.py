@@ -33,7 +33,7 @@ PLANT_EVENTS = ("drone_contacts", "floor_contacts", "flipped")  # crazyflow's (m
 A_MAX_MPS2 = 1.7851  # the planner's default, for the duration's ramps
 
 
-def _spread(rng: np.random.Generator, n: int, dim: int, gap_m: float) -> np.ndarray:
+def spread(rng: np.random.Generator, n: int, dim: int, gap_m: float) -> np.ndarray:
     """n centred random offsets at least ``gap_m`` apart (rejection sampling in a growing box)."""
     side = max(1.0, 1.1 * gap_m * n ** (1.0 / dim))
     while True:
@@ -43,7 +43,7 @@ def _spread(rng: np.random.Generator, n: int, dim: int, gap_m: float) -> np.ndar
         side *= 1.05
 
 
-def _plant(rng: np.random.Generator, kind: str, dim: int) -> dict[str, Any] | None:
+def draw_plant(rng: np.random.Generator, kind: str, dim: int) -> dict[str, Any] | None:
     if kind == "lag":
         return {"kind": "lag", "time_constant": float(rng.choice([0.1, 0.2, 0.3]))}
     if kind == "second_order":
@@ -68,7 +68,7 @@ def _zero(dim: int) -> float | list[float]:
 
 def _shape(rng: np.random.Generator, part: str, dim: int, n: int, gap: float, d_min: float) -> dict[str, Any]:
     """The part's template, start and reference (and obstacles), with targets ``gap`` apart."""
-    offsets = _spread(rng, n, dim, gap)
+    offsets = spread(rng, n, dim, gap)
     if part in ("swap_planar", "swap_spatial"):
         if part == "swap_planar" and rng.random() < 0.5:  # antipodal ring: every path crosses the centre
             radius = max(1.5, 0.55 * gap * n / np.pi + 0.1, 0.5 * gap / np.sin(np.pi / max(n, 2)))
@@ -126,7 +126,7 @@ def scenario(rng: np.random.Generator, index: int) -> dict[str, Any]:
         n = max(n, 3)
     d_min, dt = float(rng.uniform(0.3, 0.7)), float(rng.choice([0.05, 0.06, 0.08, 0.1]))
     v_max = float(rng.uniform(0.5, 2.0))
-    plant = _plant(rng, plant_kind, dim)
+    plant = draw_plant(rng, plant_kind, dim)
     sc: dict[str, Any] = {
         "version": 1,
         "name": f"completion_{index}_{part}_{plant_kind}",

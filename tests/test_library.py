@@ -29,6 +29,7 @@ MISSION = {
     "consensus ring": ["consensus_ring"],
     "null-space repulsion": ["spatial_nullspace_repulsion"],
     "obstacles": ["obstacles_planar", "mission_obstacle_gap"],
+    "poles and no-fly boxes": ["poles_box_planar", "poles_box_spatial"],
     "100-drone formation flight": ["formation_flight_100"],
 }
 

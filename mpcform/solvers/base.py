@@ -107,7 +107,8 @@ class QPBackend(ABC):
     Class attributes say what a caller may rely on: ``warm_starts`` (``solve`` uses ``x0``),
     ``persistent`` (``update`` is cheaper than ``setup``), ``needs_context`` (call
     :meth:`set_context` before each solve), ``stagewise`` (every row but the dynamics lies in
-    one stage: no acceleration rows).
+    one stage: no acceleration rows), ``point_obstacles_only`` (it writes each obstacle's exact
+    distance to its centre: only obstacles whose core is a point).
     """
 
     name: str
@@ -116,6 +117,7 @@ class QPBackend(ABC):
     persistent: bool = False
     needs_context: bool = False
     stagewise: bool = False
+    point_obstacles_only: bool = False
 
     def __init__(self, options: SolverOptions) -> None:
         self.options = options

@@ -29,6 +29,7 @@ class CasadiIpoptBackend(StoredQP):
     name = "casadi:ipopt"
     warm_starts = True
     needs_context = True
+    point_obstacles_only = True  # the exact distance to a sphere's (a disc's) centre
 
     def __init__(self, options: SolverOptions) -> None:
         super().__init__(options)

@@ -91,7 +91,8 @@ arrives at 9.7 s of its 10 s, later when the deadline cuts more split rounds).""
 
 def flown(name: str, altitude_m: float = 1.0) -> dict:
     """Fly a bundled scenario in crazyflow (:data:`EXTRA_S` longer): no contact, floor contact or
-    flip, d_min kept on the 500 Hz true path, every drone arrived; the step times printed."""
+    flip, d_min, the obstacles' clearances and the geofence kept on the 500 Hz true path, every
+    drone arrived; the step times printed."""
     sc = with_plant_kind(load_scenario(SCENARIOS / f"{name}.toml"), "crazyflow")
     sim = dataclasses.replace(sc.simulation, duration_s=sc.simulation.duration_s + EXTRA_S)
     plant = dataclasses.replace(sc.plant, altitude_m=altitude_m)
@@ -103,6 +104,8 @@ def flown(name: str, altitude_m: float = 1.0) -> dict:
     print(name, {k: m[k] for k in shown}, "step p50/p99/max [ms]", steps_ms, "setup", plant["setup_s"])
     assert plant["drone_contacts"] == [] and plant["floor_contacts"] == [] and plant["flipped"] == []
     assert m["separation_violations_true"] == 0 and m["min_separation_true"] >= sc.limits.d_min_m
+    assert m.get("obstacle_violations_true", 0) == 0, m.get("min_obstacle_clearance_true")
+    assert m["geofence_violations_true"] == 0
     assert m["completion"] == 1.0 and m["deadline_misses"] == 0
     return run.summary
 
@@ -157,6 +160,8 @@ def test_random_swaps_fly_in_crazyflow() -> None:
         ("mission_obstacle_gap", 1.0),
         ("mission_template_switch", 1.0),
         ("obstacles_planar", 1.0),
+        ("poles_box_planar", 1.0),
+        ("poles_box_spatial", 0.1),
     ],
 )
 def test_bundled_scenarios_fly_in_crazyflow(name: str, altitude_m: float) -> None:

@@ -5,6 +5,7 @@ the one factory (:func:`build_step_solvers`) and the object the planner asks eac
 from __future__ import annotations
 
 from mpcform._validate import Array
+from mpcform.errors import ValidationError
 from mpcform.mpc.constraints.family import LimitRows
 from mpcform.mpc.constraints.separation import Separation
 from mpcform.mpc.constraints.separation_rows import SeparationRows
@@ -64,6 +65,14 @@ def build_step_solvers(
     solve = settings.strategy
     if not isinstance(solve, PerDroneSolve):
         qp_backend = backend or make_backend(solve.backend, solve.options)
+        shapes = None if separation.obstacles is None else separation.obstacles.shapes
+        if qp_backend.point_obstacles_only and shapes is not None and not shapes.point_cores:
+            kinds = sorted({s.kind for s in shapes.shapes if not type(s).point_core(dim)})
+            raise ValidationError(
+                "controller.solver",
+                f"{qp_backend.name} writes the exact distance to an obstacle's centre, and a "
+                f"{' or '.join(kinds)} obstacle has none here: choose another solver",
+            )
         return StepSolvers(SparseSolver(qp_backend, dim, dt_s, limits, settings, families, separation, loop))
     per_drone_backend = make_per_drone_backend(solve.backend, solve.max_iter)
     per = PerDroneQP(dim, dt_s, limits, settings, families, per_drone_backend, loop)

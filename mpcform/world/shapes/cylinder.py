@@ -96,9 +96,10 @@ class Cylinder(Shape):
         center, radius, half = params[:, :3], params[:, 3], params[:, 4]
         radial = points[:, :2] - center[:, :2]
         r = np.linalg.norm(radial, axis=1)
-        scale = np.minimum(1.0, np.divide(radius, r, out=np.ones_like(r), where=r > radius))
+        beyond = r > radius
+        scale = np.divide(radius, r, out=np.ones_like(r), where=beyond)
         out = np.empty_like(points)
-        out[:, :2] = center[:, :2] + radial * scale[:, None]
+        out[:, :2] = np.where(beyond[:, None], center[:, :2] + radial * scale[:, None], points[:, :2])
         out[:, 2] = np.clip(points[:, 2], center[:, 2] - half, center[:, 2] + half)
         return out
 

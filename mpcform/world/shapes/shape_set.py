@@ -118,7 +118,8 @@ class ShapeSet:
             normal = path_closest(path_m - center, tail)  # divided in place, as the pairs' normals
             _normalise(normal)
             return normal, center
-        normal, anchor = np.empty((k, s1 - 1, d)), np.empty((k, s1 - 1, d))
+        segments = s1 - tail if tail > 1 else s1 - 1  # as path_closest: the tail's hull is one
+        normal, anchor = np.empty((k, segments, d)), np.empty((k, segments, d))
         for kind, sel, par in self.by_kind(items):
             path = path_m[sel]
             if kind.point_core(self.dim):
@@ -130,7 +131,7 @@ class ShapeSet:
             normal[sel], anchor[sel] = gap, core
             bad = vector_norms(gap) <= DEGENERATE_M
             if bad.any() and not kind.point_core(self.dim):  # the segment touches the core
-                rows = np.repeat(np.arange(sel.shape[0]), s1 - 1).reshape(-1, s1 - 1)[bad]
+                rows = np.repeat(np.arange(sel.shape[0]), segments).reshape(-1, segments)[bad]
                 escape = kind.escape(core[bad] + gap[bad], par[rows], self.dim)[1]
                 idx = sel[rows], np.nonzero(bad)[1]
                 normal[idx] = escape
@@ -142,7 +143,7 @@ class ShapeSet:
         """The closest pairs (gap, core point) per segment of paths (k, S + 1, d) of a core that is
         not a point: golden section on each segment, alternating projections on the tail's hull."""
         k, s1, d = path.shape
-        heads = s1 - 1 - (1 if tail > 1 else 0)
+        heads = s1 - 1 - (tail if tail > 1 else 0)
         rows = np.repeat(par, heads, axis=0)
         a = path[:, :heads].reshape(-1, d)
         b = path[:, 1 : heads + 1].reshape(-1, d)

@@ -58,3 +58,24 @@ def test_per_drone_and_its_split_policy(split: SplitPolicy, every: type, stalled
         assert while_stalled.per_drone is solver and while_stalled.iterations == split.stalled
     if isinstance(solver, SplitQP):
         assert solver.iterations == split.iterations and solver.name == "daqp (per drone, iterated split)"
+
+
+def test_an_exact_backend_refuses_obstacles_without_a_centre() -> None:
+    """casadi:ipopt replaces the obstacle rows by the distance to a centre: a box has none."""
+    import numpy as np
+
+    from mpcform.errors import ValidationError
+    from mpcform.world.shapes import Box, Cylinder
+
+    settings = MPCSettings(solve=SparseSolve("osqp"))
+    pytest.importorskip("casadi")
+    exact = make_backend("casadi:ipopt", SolverOptions())
+    families = limit_rows(2, 0.1, LIMITS, settings)
+    box = Box(np.zeros(2), np.ones(2), 0.1)
+    with pytest.raises(ValidationError, match=r"controller\.solver.*box"):
+        build_step_solvers(
+            settings, 2, 0.1, LIMITS, families, Separation(2, LIMITS, settings, (box,)), None, exact
+        )
+    disc = Cylinder(np.zeros(2), 0.5, clearance_m=0.1)  # a planar cylinder: a point core
+    sep = Separation(2, LIMITS, settings, (disc,))
+    assert build_step_solvers(settings, 2, 0.1, LIMITS, families, sep, None, exact).every.backend is exact
