@@ -16,7 +16,6 @@ and the drones that see the commanded scale; absent otherwise).
 
 from __future__ import annotations
 
-import json
 import zipfile
 import zlib
 from dataclasses import dataclass
@@ -28,6 +27,13 @@ import numpy as np
 from mpcform._validate import Array
 from mpcform.errors import ValidationError
 from mpcform.outputs.files import SCALE_ESTIMATES, SUMMARY_JSON, TRAJECTORY_NPZ, TRUE_ARRAYS
+from mpcform.outputs.saved_checks import (
+    RunDirError,
+    check_formation_arrays,
+    check_trajectory_arrays,
+    load_npz,
+    read_summary,
+)
 from mpcform.sim.trajectory import Trajectory, TrueTrajectory
 from mpcform.world.obstacles import SphereObstacle, resolve_clearances
 
@@ -35,10 +41,6 @@ if TYPE_CHECKING:
     from mpcform.scenario.spec import Scenario
 
 FORMATION_NPZ = "formation.npz"
-
-
-class RunDirError(ValidationError):
-    """A directory that does not hold the output files of a run (names the path)."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -196,6 +198,7 @@ def load_run(directory: str | Path) -> RunData:
     if not root.is_dir():
         raise RunDirError(str(root), "no such run directory (write one with `mpcform run --out DIR`)")
     arrays = _npz(root / TRAJECTORY_NPZ, ("t", "p", "u", "p_ref"), optional=(*TRUE_ARRAYS, SCALE_ESTIMATES))
+    check_trajectory_arrays(root / TRAJECTORY_NPZ, arrays)  # shapes, finite values: saved_checks
     try:
         true = None
         if "t_true" in arrays:
@@ -210,15 +213,7 @@ def load_run(directory: str | Path) -> RunData:
         )
     except ValidationError as exc:
         raise RunDirError(str(root / TRAJECTORY_NPZ), str(exc)) from None
-    summary_path = root / SUMMARY_JSON
-    try:
-        summary = json.loads(summary_path.read_text())
-    except FileNotFoundError:
-        raise RunDirError(str(summary_path), "missing (write it with `mpcform run --out DIR`)") from None
-    except (OSError, ValueError) as exc:
-        raise RunDirError(str(summary_path), f"cannot read it as JSON: {exc}") from None
-    if not isinstance(summary, dict):
-        raise RunDirError(str(summary_path), "expected a JSON object")
+    summary = read_summary(root / SUMMARY_JSON)
     return RunData(trajectory, _load_formation(root / FORMATION_NPZ, trajectory), summary, root)
 
 
@@ -228,9 +223,7 @@ def _load_formation(path: Path, trajectory: Trajectory) -> FormationData:
         ref0 = trajectory.reference_m[0]
         return FormationData(ref0 - ref0.mean(axis=0), None, np.empty((0, d + 2)))
     extra = _npz(path, ("offsets", "scale_ref", "obstacles"), optional=("graph_edges", "leaders", "geofence"))
-    if extra["offsets"].shape != (n, d) or extra["scale_ref"].shape != trajectory.t_s.shape:
-        shapes = f"offsets {extra['offsets'].shape} or scale_ref {extra['scale_ref'].shape}"
-        raise RunDirError(str(path), f"{shapes} do not match p {trajectory.positions_m.shape}")
+    check_formation_arrays(path, extra, n, d, trajectory.t_s.shape[0])
     graph = extra.get("graph_edges")
     return FormationData(
         extra["offsets"],
@@ -244,7 +237,7 @@ def _load_formation(path: Path, trajectory: Trajectory) -> FormationData:
 
 def _npz(path: Path, keys: tuple[str, ...], optional: tuple[str, ...] = ()) -> dict[str, Array]:
     try:
-        with np.load(path) as npz:
+        with load_npz(path) as npz:  # size and arrays' headers checked first
             missing = [k for k in keys if k not in npz.files]
             if missing:
                 raise RunDirError(str(path), f"missing arrays {missing} (has {sorted(npz.files)})")

@@ -462,3 +462,23 @@ def test_bad_figure_options_are_refused_before_running(
     assert main(["run", short_copy(tmp_path), "--out", str(tmp_path / "r"), *flags]) == 2
     assert fragment in capsys.readouterr().err
     assert not (tmp_path / "r").exists()
+
+
+@pytest.mark.parametrize(
+    "argv", [["plot"], ["export", "--allow-untracked"], ["view"], ["compare", "--no-figure"]]
+)
+def test_a_nan_in_a_saved_trajectory_is_one_error_naming_the_file_and_the_array(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], argv: list[str]
+) -> None:
+    """Issue 58, item 4: a NaN in ``p`` reached the figures and the export (a traceback, exit 1)."""
+    short_run("worked_example", tmp_path, steps=5)
+    with np.load(tmp_path / "trajectory.npz") as npz:
+        arrays = {k: npz[k] for k in npz.files}
+    arrays["p"][3, 0, 1] = np.nan
+    np.savez(tmp_path / "trajectory.npz", **arrays)
+    lines = error_lines(capsys, main([argv[0], str(tmp_path), *argv[1:]]))
+    assert lines == [
+        f"mpcform: error: {tmp_path / 'trajectory.npz'}: array 'p' holds nan at index (3, 0, 1); "
+        "expected finite numbers"
+    ]
+    assert not (tmp_path / "plots").exists() and not (tmp_path / "export").exists()
