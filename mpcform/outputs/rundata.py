@@ -16,6 +16,7 @@ and the drones that see the commanded scale; absent otherwise).
 
 from __future__ import annotations
 
+import os
 import zipfile
 import zlib
 from dataclasses import dataclass
@@ -219,7 +220,7 @@ def load_run(directory: str | Path) -> RunData:
 
 def _load_formation(path: Path, trajectory: Trajectory) -> FormationData:
     n, d = trajectory.n, trajectory.dim
-    if not path.exists():
+    if not os.path.lexists(path):  # a dangling or looping link is no missing file: refused below
         ref0 = trajectory.reference_m[0]
         return FormationData(ref0 - ref0.mean(axis=0), None, np.empty((0, d + 2)))
     extra = _npz(path, ("offsets", "scale_ref", "obstacles"), optional=("graph_edges", "leaders", "geofence"))

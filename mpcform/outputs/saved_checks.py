@@ -59,6 +59,10 @@ def load_npz(path: Path) -> Iterator[Any]:
         f = open_regular(path, MAX_NPZ_BYTES, "numpy .npz archive")
     except ValidationError as exc:
         raise RunDirError(exc.field, exc.message) from None
+    except FileNotFoundError:
+        raise
+    except OSError as exc:  # a symbolic link to itself, no permission: no raw errno
+        raise RunDirError(str(path), f"cannot open it: {exc.strerror or exc}") from None
     with f:
         total = sum(_array_bytes(path, name, header) for name, header in _headers(f))
         if total > MAX_NPZ_BYTES:
@@ -181,7 +185,7 @@ def check_obstacle_rows(path: Path, obstacles: Array, d: int) -> None:
 
 def read_summary(path: Path) -> dict[str, Any]:
     """``summary.json``: a regular file of at most :data:`MAX_SUMMARY_BYTES` holding a JSON object
-    whose ``limits`` are numbers or null and whose ``metrics``, ``plant`` and ``provenance`` are
+    whose ``limits`` are finite numbers >= 0 or null and whose ``metrics``, ``plant`` and ``provenance`` are
     objects (or absent)."""
     try:
         summary = json.loads(read_regular(path, MAX_SUMMARY_BYTES, "summary.json").decode("utf-8"))
@@ -189,7 +193,9 @@ def read_summary(path: Path) -> dict[str, Any]:
         raise RunDirError(str(path), "missing (write it with `mpcform run --out DIR`)") from None
     except ValidationError as exc:
         raise RunDirError(exc.field, exc.message) from None
-    except (OSError, ValueError) as exc:  # UnicodeDecodeError and JSONDecodeError are ValueErrors
+    except OSError as exc:  # a symbolic link to itself, no permission: no raw errno
+        raise RunDirError(str(path), f"cannot open it: {exc.strerror or exc}") from None
+    except ValueError as exc:  # UnicodeDecodeError and JSONDecodeError are ValueErrors
         raise RunDirError(str(path), f"cannot read it as JSON: {exc}") from None
     if not isinstance(summary, dict):
         raise RunDirError(str(path), f"expected a JSON object, got {shown(summary)}")
@@ -198,8 +204,10 @@ def read_summary(path: Path) -> dict[str, Any]:
             raise RunDirError(str(path), f"{key}: expected an object, got {shown(summary[key])}")
     for key in LIMITS:
         value = (summary.get("limits") or {}).get(key)
-        if value is not None and (isinstance(value, bool) or not isinstance(value, int | float)):
-            raise RunDirError(str(path), f"limits.{key}: expected a number or null, got {shown(value)}")
+        if value is not None and not (_numbers([value]) and value >= 0.0):  # json reads NaN, Infinity
+            raise RunDirError(
+                str(path), f"limits.{key}: expected a finite number >= 0 or null, got {shown(value)}"
+            )
     wind = (summary.get("plant") or {}).get("wind")
     if wind and not (
         isinstance(wind, dict)
@@ -208,12 +216,12 @@ def read_summary(path: Path) -> dict[str, Any]:
     ):
         raise RunDirError(
             str(path),
-            f"plant.wind: expected an object of numbers mean_mps and gust_std_mps, got {shown(wind)}",
+            f"plant.wind: expected an object of finite numbers mean_mps and gust_std_mps, got {shown(wind)}",
         )
     return summary
 
 
 def _numbers(value: Any) -> bool:
     return isinstance(value, list) and all(
-        isinstance(x, int | float) and not isinstance(x, bool) for x in value
+        isinstance(x, int | float) and not isinstance(x, bool) and math.isfinite(x) for x in value
     )

@@ -118,9 +118,18 @@ def test_the_summary_fields_the_figures_read(saved: Path, tmp_path: Path) -> Non
     run = _copy(saved, tmp_path)
     summary = json.loads((run / "summary.json").read_text())
     for change, match in [
-        ({"limits": {"d_min": "0.5"}}, r"summary.json: limits.d_min: expected a number or null, got '0.5'"),
+        (
+            {"limits": {"d_min": "0.5"}},
+            r"summary.json: limits.d_min: expected a finite number >= 0 or null, got '0.5'",
+        ),
+        (
+            {"limits": {"v_max": float("nan")}},
+            r"limits.v_max: expected a finite number >= 0 or null, got nan",
+        ),
+        ({"limits": {"tracking": -1.0}}, r"limits.tracking: expected a finite number >= 0 or null, got -1.0"),
+        ({"plant": {"wind": {"mean_mps": [float("inf"), 0.0]}}}, "plant.wind: expected an object of finite"),
         ({"metrics": [1]}, r"summary.json: metrics: expected an object, got \[1\]"),
-        ({"plant": {"wind": {"mean_mps": "x"}}}, "plant.wind: expected an object of numbers"),
+        ({"plant": {"wind": {"mean_mps": "x"}}}, "plant.wind: expected an object of finite numbers"),
     ]:
         (run / "summary.json").write_text(json.dumps(summary | change))
         with pytest.raises(RunDirError, match=match):
