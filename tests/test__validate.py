@@ -3,12 +3,14 @@ and that every refusal is a ValidationError naming the field and what was expect
 
 from __future__ import annotations
 
+import os
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pytest
 
-from mpcform._validate import dimension, finite_array, positive
+from mpcform._validate import byte_size, dimension, finite_array, open_regular, positive, read_regular
 from mpcform.errors import MPCFormError, ValidationError
 
 # ---- finite_array ---------------------------------------------------------------------------
@@ -60,6 +62,79 @@ def test_finite_array_refuses_and_names_the_field(
     assert info.value.field == "start.positions"
     assert str(info.value).startswith("start.positions: ")
     assert expected in str(info.value)
+
+
+@pytest.mark.parametrize(
+    ("value", "expected"),
+    [
+        (np.array([1.0 + 2.0j, 0.0]), "expected real numbers of shape (2), got array([1.+2.j, 0.+0.j])"),
+        ([1j, 0.0], "expected real numbers of shape (2), got [1j, 0.0]"),
+        (["1", "2"], "expected numbers of shape (2), got ['1', '2']"),
+        ([1.0, "2"], "expected numbers of shape (2), got [1.0, '2']"),
+    ],
+)
+def test_finite_array_takes_real_numbers_only(value: Any, expected: str) -> None:
+    """A complex value would lose its imaginary part and a string be parsed: both refused."""
+    with pytest.raises(ValidationError) as info:
+        finite_array("positions", value, (2,))
+    assert str(info.value) == f"positions: {expected}"
+
+
+def test_finite_array_cuts_a_long_value_short() -> None:
+    value = np.full(10_000, np.nan)
+    message = str(pytest.raises(ValidationError, finite_array, "p", value, (None,)).value)
+    assert len(message) < 200 and message.startswith("p: expected finite numbers, got [nan, nan")
+
+
+# ---- open_regular, read_regular -------------------------------------------------------------
+
+
+def test_read_regular_reads_a_small_file(tmp_path: Path) -> None:
+    (tmp_path / "s.toml").write_bytes(b"dim = 2\n")
+    assert read_regular(tmp_path / "s.toml", 100, "scenario file") == b"dim = 2\n"
+    with open_regular(tmp_path / "s.toml", 100, "scenario file") as f:
+        assert f.read() == b"dim = 2\n"
+
+
+@pytest.mark.parametrize(
+    ("path", "kind"),
+    [("/dev/zero", "a character device"), ("/dev/urandom", "a character device"), ("/", "a directory")],
+)
+def test_read_regular_refuses_what_is_no_regular_file_at_once(path: str, kind: str) -> None:
+    with pytest.raises(ValidationError) as info:
+        read_regular(path, 2**20, "scenario file")
+    assert str(info.value) == (
+        f"{path}: is {kind}, not a regular file; expected a scenario file (a regular file of at most 1 MiB)"
+    )
+
+
+def test_read_regular_refuses_a_fifo_without_waiting_for_a_writer(tmp_path: Path) -> None:
+    os.mkfifo(tmp_path / "pipe")
+    with pytest.raises(ValidationError, match=r"pipe: is a FIFO \(named pipe\), not a regular file"):
+        read_regular(tmp_path / "pipe", 2**20, "ground file")
+
+
+def test_read_regular_refuses_a_large_file_before_reading_it(tmp_path: Path) -> None:
+    """A sparse file of 1 GiB (no byte on disk) is refused from its size alone."""
+    big = tmp_path / "big.toml"
+    with big.open("wb") as f:
+        f.truncate(2**30)
+    with pytest.raises(ValidationError) as info:
+        read_regular(big, 16 * 2**20, "scenario file")
+    assert str(info.value) == (
+        f"{big}: is 1 GiB (1,073,741,824 bytes); expected a scenario file (a regular file of at most 16 MiB)"
+    )
+    with pytest.raises(FileNotFoundError):
+        read_regular(tmp_path / "missing", 10, "scenario file")
+
+
+def test_byte_size() -> None:
+    assert [byte_size(n) for n in (812, 2048, 16 * 2**20, 3 * 2**29)] == [
+        "812 bytes",
+        "2 KiB",
+        "16 MiB",
+        "1.5 GiB",
+    ]
 
 
 # ---- positive -------------------------------------------------------------------------------

@@ -24,13 +24,11 @@ from mpcform.cli.progress import ProgressBar
 from mpcform.errors import MPCFormError, ValidationError
 from mpcform.outputs.files import DPI_RANGE, FIGURE_DPI, FIGURE_FORMATS, plant_events
 from mpcform.outputs.flight.export import check_tracked, export_run
+from mpcform.outputs.outdir import EXPORT_DIR, PLOTS_DIR, VIEWER_FILE, DirClaim, claim_dir
 from mpcform.outputs.rundata import RunData, formation_data, load_run, write_formation_npz
 from mpcform.run.runner import RunResult
 from mpcform.scenario.spec import Scenario
 
-PLOTS_DIR = "plots"
-EXPORT_DIR = "export"
-VIEWER_FILE = "viewer.html"
 PLOT_HINT = "plotting needs matplotlib: pip install 'mpcform[plot]'"
 """The library's names of the export options: their errors name the flag (``--max-speed``)."""
 
@@ -97,15 +95,35 @@ def _plot(args: argparse.Namespace) -> int:
     args.plot = True
     check_figure_options(args)
     data = load_run(args.dir)
-    out = Path(args.dir) / PLOTS_DIR if args.out is None else Path(args.out)
-    _figures(data, out, args)
+    with claim_into(args.dir, PLOTS_DIR, args.out, "plots") as claim:
+        claim.clear()
+        _figures(data, claim.root / PLOTS_DIR if claim.names else claim.root, args)
     return 0
 
 
 def _view(args: argparse.Namespace) -> int:
     data = load_run(args.dir)
-    print(f"wrote {write_view(data, Path(args.dir) / VIEWER_FILE if args.out is None else Path(args.out))}")
+    default = Path(args.dir) / VIEWER_FILE
+    if args.out_file is not None and not _same(Path(args.out_file), default):
+        print(f"wrote {write_view(data, Path(args.out_file))}")  # a file the user named: replaced
+        return 0
+    with claim_dir(args.dir, "run", (VIEWER_FILE,), own=False) as claim:
+        claim.clear()
+        print(f"wrote {write_view(data, default)}")
     return 0
+
+
+def claim_into(directory: str, name: str, out: str | None, kind: str) -> DirClaim:
+    """The claim of a command writing ``name`` into the run ``directory`` (``plots/``,
+    ``export/``), or, with ``--out``, all of a directory of its own (``kind``)."""
+    default = Path(directory) / name
+    if out is None or _same(Path(out), default):
+        return claim_dir(directory, "run", (name,), own=False)
+    return claim_dir(out, kind, field="--out")
+
+
+def _same(a: Path, b: Path) -> bool:
+    return a.resolve() == b.resolve()
 
 
 def write_view(data: RunData, path: Path) -> Path:
@@ -163,9 +181,9 @@ def default_compare_figure(dirs: list[str]) -> Path:
 
 def _export(args: argparse.Namespace) -> int:
     data = load_run(args.dir)
-    out = Path(args.dir) / EXPORT_DIR if args.out is None else Path(args.out)
-    with option_errors(*EXPORT_FIELDS):
-        report_export(export_run(data, out, export_options(args)))
+    with claim_into(args.dir, EXPORT_DIR, args.out, "export") as claim, option_errors(*EXPORT_FIELDS):
+        out = claim.root / EXPORT_DIR if claim.names else claim.root
+        report_export(export_run(data, out, export_options(args), before_writing=claim.clear))
     return 0
 
 
@@ -189,7 +207,9 @@ def add_commands(sub: Any) -> None:
     )
     view.set_defaults(func=_view)
     view.add_argument("dir", metavar="DIR", help="output directory of `mpcform run`")
-    view.add_argument("--out", metavar="HTML", help="file to write (default: DIR/viewer.html)")
+    view.add_argument(
+        "--out", dest="out_file", metavar="HTML", help="file to write (default: DIR/viewer.html)"
+    )
 
     compare = sub.add_parser(
         "compare",

@@ -16,6 +16,7 @@ import json
 import os
 import sys
 from collections.abc import Callable
+from dataclasses import replace
 from importlib import metadata
 from pathlib import Path
 from typing import NoReturn
@@ -23,12 +24,18 @@ from typing import NoReturn
 from mpcform.cli import bench_commands, sweep_commands
 from mpcform.cli import handlers as cli_runner
 from mpcform.cli.options import add_max_memory, add_max_work, solver_help
-from mpcform.cli.paths import check_output_dir, check_output_paths, clear_outputs
+from mpcform.cli.paths import check_output_dir, check_output_paths
 from mpcform.errors import MPCFormError, ScenarioError, ValidationError
-from mpcform.outputs.files import OUTPUT_FILES, format_summary, incomplete_warning, plant_events
-from mpcform.outputs.rundata import FORMATION_NPZ
+from mpcform.outputs.files import (
+    OUTPUT_FILES,
+    format_summary,
+    incomplete_warning,
+    plant_events,
+    write_outputs,
+)
+from mpcform.outputs.outdir import RUN_LAYOUT, claim_dir
 from mpcform.run.heap import keep_heap
-from mpcform.run.runner import describe, run_scenario
+from mpcform.run.runner import RunResult, describe, run_scenario
 from mpcform.scenario.build import check_solver_key
 from mpcform.scenario.check import check_scenario_file, located_problem
 from mpcform.scenario.keys import key_reference_markdown
@@ -36,6 +43,7 @@ from mpcform.scenario.load import load_scenario
 from mpcform.scenario.plant import with_plant_kind
 from mpcform.scenario.schema import CONTROLLER_KINDS, did_you_mean, listing
 from mpcform.scenario.size import check_memory, check_work
+from mpcform.scenario.spec import Scenario
 from mpcform.sim.plants import KINDS as PLANT_KINDS
 from mpcform.solvers.registry import solver_info, solver_infos
 from mpcform.world.limits import PLATFORM_TRACKING_M
@@ -49,14 +57,8 @@ class _UsageError(Exception):
     pass
 
 
-RUN_OUTPUTS = (
-    *OUTPUT_FILES,
-    FORMATION_NPZ,
-    cli_runner.VIEWER_FILE,
-    cli_runner.PLOTS_DIR,
-    cli_runner.EXPORT_DIR,
-)
-"""What ``run`` writes into its ``--out`` directory (an earlier run's are removed first)."""
+RUN_OUTPUTS = tuple(RUN_LAYOUT)
+"""What ``run`` writes into its ``--out`` directory (an earlier run's, by its manifest, removed first)."""
 
 
 class _Parser(argparse.ArgumentParser):
@@ -77,19 +79,25 @@ def _run(args: argparse.Namespace) -> int:
         cli_runner.check_run_options(args, scenario)  # e.g. --plot without matplotlib: fail before running
         out_dir = Path("results") / scenario.name if args.out is None else Path(args.out)
         check_output_dir("--out", out_dir)
-        for warning in scenario.warnings(args.controller):
-            print(f"mpcform: warning: {warning}", file=sys.stderr)
-        if removed := clear_outputs(out_dir, RUN_OUTPUTS):
-            print(f"mpcform: {out_dir}: removed the earlier run's {', '.join(removed)}", file=sys.stderr)
-        run = run_scenario(
-            scenario,
-            out_dir,
-            controller=args.controller,
-            solver=args.solver,
-            progress=cli_runner.progress_bar(scenario),
-        )
+        with claim_dir(out_dir, "run", RUN_OUTPUTS, field="--out") as claim:  # refused before the run
+            for warning in scenario.warnings(args.controller):
+                print(f"mpcform: warning: {warning}", file=sys.stderr)
+            run = run_scenario(
+                scenario,
+                controller=args.controller,
+                solver=args.solver,
+                progress=cli_runner.progress_bar(scenario),
+            )
+            if removed := claim.clear():  # the earlier run's outputs stay until this one is done
+                print(f"mpcform: {out_dir}: replaced the earlier run's {', '.join(removed)}", file=sys.stderr)
+            run = replace(run, out_dir=write_outputs(out_dir, run.simulation, run.summary))
+            _report_run(args, scenario, run)
     except ScenarioError as exc:
         raise MPCFormError(located_problem(exc, args.scenario).text(args.scenario)) from None
+    return 0
+
+
+def _report_run(args: argparse.Namespace, scenario: Scenario, run: RunResult) -> None:
     print(format_summary(run.summary))
     if (incomplete := incomplete_warning(run.summary)) is not None:
         print(f"mpcform: warning: {incomplete}", file=sys.stderr)
@@ -97,7 +105,6 @@ def _run(args: argparse.Namespace) -> int:
         print(f"mpcform: warning: the plant reports {events}", file=sys.stderr)
     print(f"wrote {', '.join(OUTPUT_FILES)} to {run.out_dir}")
     cli_runner.finish_run(args, scenario, run)  # --plot, --animate, --export
-    return 0
 
 
 def _check_overrides(args: argparse.Namespace) -> None:

@@ -2,9 +2,10 @@
 because ``--out`` names a file or ``--json`` a missing directory.
 
 Every command's output options are checked by their argparse destination: ``out`` (a directory,
-created with its parents when missing) and ``json``, ``report``, ``figure`` (files, written into
-an existing directory). A run into a directory that holds an earlier run's outputs removes those
-first (:func:`clear_outputs`): its data and a stale viewer or export are never mixed.
+created with its parents when missing; never the filesystem root, the home directory or a project
+root) and ``json``, ``report``, ``figure``, ``out_file`` (files, written into an existing
+directory). What a command may replace in a directory it writes is decided by the directory's
+manifest, when the command claims it (:mod:`mpcform.outputs.outdir`).
 """
 
 from __future__ import annotations
@@ -15,9 +16,12 @@ import shutil
 from pathlib import Path
 
 from mpcform.errors import ValidationError, shown
+from mpcform.outputs.outdir import check_root
 
 DIRECTORY_OPTIONS = ("out",)
-FILE_OPTIONS = ("json", "report", "figure")
+FILE_OPTIONS = ("json", "report", "figure", "out_file")
+FLAGS = {"out_file": "--out"}
+"""Destinations whose flag is not ``--`` + the destination (``view --out HTML`` is a file)."""
 
 
 def check_output_paths(args: argparse.Namespace) -> None:
@@ -37,30 +41,12 @@ def check_output_paths(args: argparse.Namespace) -> None:
             check_output_file(_flag(dest), value)
 
 
-def clear_outputs(out_dir: Path, names: tuple[str, ...]) -> list[str]:
-    """Remove the files and folders ``names`` (an earlier run's outputs) from ``out_dir``; the
-    names removed. Nothing else in ``out_dir`` is touched."""
-    removed = []
-    for name in names:
-        path = out_dir / name
-        if path.is_dir() and not path.is_symlink():
-            shutil.rmtree(path)
-        elif path.exists() or path.is_symlink():
-            path.unlink()
-        else:
-            continue
-        removed.append(name)
-    return removed
-
-
 def check_output_dir(flag: str, path: str | Path) -> None:
-    """``path`` is a directory, or can be created: not a file, its nearest existing ancestor a
-    writable directory."""
+    """``path`` is a directory, or can be created: not a file nor a dangling symbolic link, not
+    ``/``, the home directory or a project root, its nearest existing ancestor a writable
+    directory."""
     path = Path(path)
-    if path.exists() and not path.is_dir():
-        raise ValidationError(
-            flag, f"{str(path)!r} is an existing file; expected a directory (created when missing)"
-        )
+    check_root(flag, path)  # a file, a dangling symbolic link, /, the home directory, a project root
     _writable_ancestor(flag, path)
     if not path.exists():
         _try_create(flag, path)
@@ -105,4 +91,4 @@ def _try_create(flag: str, path: Path) -> None:
 
 
 def _flag(dest: str) -> str:
-    return "--" + dest.replace("_", "-")
+    return FLAGS.get(dest, "--" + dest.replace("_", "-"))

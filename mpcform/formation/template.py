@@ -6,12 +6,15 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike
+from scipy.spatial import cKDTree
 
 from mpcform._validate import Array, dimension, finite_array, positive
 from mpcform.errors import ValidationError, shown
 from mpcform.formation.geometry import min_pair_distance
 
 CENTRED_RTOL = 1e-9
+COINCIDENT_RTOL = 1e-9
+"""Points closer than this times max(1 m, their extent) coincide (:func:`check_distinct`)."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -58,10 +61,13 @@ class Template:
     # ---- constructors -------------------------------------------------------------------
     @classmethod
     def centred(cls, points: ArrayLike, name: str = "explicit") -> tuple[Template, Array]:
-        """Centre ``points`` (n, d): returns the template and the shift that was subtracted."""
+        """Centre ``points`` (n, d), real, finite and distinct (as a scenario's offsets:
+        :func:`check_distinct`): returns the template and the shift that was subtracted."""
         p = finite_array("template.offsets", points, (None, None))
         shift = p.mean(axis=0)
-        return cls(p - shift, name=name), shift
+        template = cls(p - shift, name=name)
+        check_distinct(template.offsets, "template.offsets")
+        return template, shift
 
     @classmethod
     def polygon(cls, n: int, radius: float = 1.0, dim: int = 2, phase: float = 0.0) -> Template:
@@ -109,6 +115,34 @@ class Template:
         rho = np.sqrt(1.0 - z * z)
         pts = radius * np.column_stack([rho * np.cos(phi), rho * np.sin(phi), z])
         return cls(_clean(pts - pts.mean(axis=0)), name="sphere")
+
+
+def check_distinct(points_m: Array, field: str, what: str = "offsets") -> None:
+    """Raise :class:`ValidationError` naming ``field`` when two rows of ``points_m`` (n, d) are at
+    one point, closer than :data:`COINCIDENT_RTOL` times max(1 m, their extent), or all are zero
+    (n >= 2): no separation d_min > 0 can hold between them."""
+    n = points_m.shape[0]
+    if n < 2:
+        return
+    tol = COINCIDENT_RTOL * max(1.0, float(np.abs(points_m).max()))
+    if float(np.abs(points_m).max()) <= tol:
+        raise ValidationError(
+            field,
+            f"all {n} {what} are zero: the drones would share one point, and no "
+            "separation d_min > 0 can hold between them",
+        )
+    dist, idx = cKDTree(points_m).query(points_m, k=2)
+    i = int(np.argmin(dist[:, 1]))
+    if dist[i, 1] > tol:
+        return
+    j = int(idx[i, 1] if idx[i, 1] != i else idx[i, 0])
+    i, j = min(i, j), max(i, j)
+    at = "[" + ", ".join(f"{x:.4g}" for x in points_m[i]) + "]"
+    raise ValidationError(
+        field,
+        f"{what} {i} and {j} coincide at {at} (distance {dist[i, 1]:.3g} m): no separation "
+        "d_min > 0 can hold between them; expected distinct points",
+    )
 
 
 def _count(field: str, value: object, minimum: int) -> int:

@@ -14,7 +14,8 @@ from typing import Any
 
 import numpy as np
 
-from mpcform.errors import ValidationError
+from mpcform._validate import positive
+from mpcform.errors import ValidationError, shown
 from mpcform.online.loop import OnlineLoop, OnlineStep
 
 
@@ -26,8 +27,9 @@ def fly_online(
     server's order, ``allcfs.crazyflies``). Returns every step (its command, setpoints and times);
     stops early when Crazyswarm2 shuts down."""
     allcfs, clock = swarm.allcfs, swarm.timeHelper
-    cfs = allcfs.crazyflies if names is None else [allcfs.crazyfliesByName[name] for name in names]
     n, dim = loop.n, loop.dim
+    positive("duration_s", duration_s)
+    cfs = allcfs.crazyflies if names is None else _by_name(allcfs.crazyfliesByName, names, n)
     if len(cfs) != n:
         raise ValidationError("names", f"expected {n} Crazyflies (one per drone of the plan), got {len(cfs)}")
     steps: list[OnlineStep] = []
@@ -51,3 +53,22 @@ def fly_online(
     for cf in cfs:
         cf.notifySetpointsStop()
     return steps
+
+
+def _by_name(by_name: dict[str, Any], names: list[str], n: int) -> list[Any]:
+    """The Crazyflies ``names``, checked before any is commanded: n distinct names of the swarm."""
+    names = list(names)
+    if len(names) != n:
+        raise ValidationError(
+            "names", f"expected {n} Crazyflie names (one per drone of the plan), got {len(names)}"
+        )
+    unknown = [name for name in names if not isinstance(name, str) or name not in by_name]
+    if unknown:
+        known = ", ".join(sorted(map(str, by_name))[:8]) + (", ..." if len(by_name) > 8 else "")
+        raise ValidationError(
+            "names", f"no Crazyflie named {shown(unknown[0])} in the swarm (it has {known or 'none'})"
+        )
+    if len(set(names)) != n:
+        twice = next(name for name in names if names.count(name) > 1)
+        raise ValidationError("names", f"expected distinct names, got {twice!r} more than once")
+    return [by_name[name] for name in names]

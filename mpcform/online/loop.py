@@ -31,10 +31,13 @@ from numpy.typing import ArrayLike
 from mpcform._validate import Array, finite_array, positive
 from mpcform.control.base import Controller, StepInfo
 from mpcform.control.setpoints import FullState, interval_setpoints, ticks_per_interval
-from mpcform.errors import ValidationError
+from mpcform.errors import ValidationError, shown
 from mpcform.mpc.planner import MPCPlanner
 from mpcform.scenario.build import build_controller
 from mpcform.scenario.spec import Scenario
+
+GRID_TOLERANCE = 1e-6
+"""How far from the loop's grid ``t0 + k dt`` a step's time may be, as a fraction of dt."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -69,6 +72,8 @@ class OnlineLoop:
         ticks_per_interval(self.dt_s, self.setpoint_rate_hz)
         self.altitude_m = positive("altitude", altitude_m)
         self._started = False
+        self._t0_s = 0.0  # the flight's first time: the steps fall on t0 + k dt
+        self._last_s: float | None = None  # the last step's time (None: none since start)
 
     @classmethod
     def from_scenario(
@@ -92,35 +97,91 @@ class OnlineLoop:
     def start(self, t_s: float, positions_m: ArrayLike) -> None:
         """Begin a flight at ``t_s`` [s] from ``positions_m`` (n, d): the planner of every drone,
         its plan forgotten."""
+        t = _time(t_s)
         p = finite_array("positions", positions_m, (self.n, self.dim))
         self.planner = self._full
-        self.planner.reset(float(t_s), p)
-        self._started = True
+        self.planner.reset(t, p)
+        self._started, self._t0_s, self._last_s = True, t, None
 
     def step(self, t_s: float, positions_m: ArrayLike) -> OnlineStep:
         """Plan from the measured ``positions_m`` (n, d) [m] at ``t_s`` [s]: the command to hold
-        until ``t_s + dt`` and its full-state setpoints (module docstring)."""
+        until ``t_s + dt`` and its full-state setpoints (module docstring). ``t_s`` is a real,
+        finite time after the previous step's, on the flight's grid ``t0 + k dt`` (``t0`` the first
+        step's, or :meth:`start`'s; within :data:`GRID_TOLERANCE` of dt); ``positions_m`` real and
+        finite. A :class:`ValidationError` otherwise, before the planner is touched."""
+        t = _time(t_s)
         p = finite_array("positions", positions_m, (self.n, self.dim))
-        if not self._started:
-            self.start(t_s, p)
+        if self._started:
+            self._check_on_grid(t)
+        else:
+            self.start(t, p)
         wall, cpu = time.perf_counter(), time.process_time()
-        out = self.planner.step(float(t_s), p.copy())
+        out = self.planner.step(t, p.copy())
         wall, cpu = time.perf_counter() - wall, time.process_time() - cpu
+        self._last_s = t
         u = out.command_mps
-        setpoints = interval_setpoints(p, u, float(t_s), self.dt_s, self.setpoint_rate_hz, self.altitude_m)
+        setpoints = interval_setpoints(p, u, t, self.dt_s, self.setpoint_rate_hz, self.altitude_m)
         missed = bool(getattr(out.info, "deadline_missed", False))
-        return OnlineStep(float(t_s), u, setpoints, out.info, wall, cpu, missed)
+        return OnlineStep(t, u, setpoints, out.info, wall, cpu, missed)
+
+    def _check_on_grid(self, t_s: float) -> None:
+        last, dt = self._last_s, self.dt_s
+        if last is not None and t_s <= last:
+            raise ValidationError(
+                "t_s",
+                f"expected a time after the previous step's {last:g} s (start() begins a new "
+                f"flight), got {t_s:g} s",
+            )
+        k = (t_s - self._t0_s) / dt
+        if abs(k - round(k)) > GRID_TOLERANCE:
+            raise ValidationError(
+                "t_s",
+                f"expected a time on the loop's grid {self._t0_s:g} s + k dt (dt = {dt:g} s), got "
+                f"{t_s:g} s, {abs(k - round(k)):.3g} dt off",
+            )
 
     def lose(self, drones: ArrayLike, positions_m: ArrayLike) -> None:
         """Stop planning for ``drones`` (lost: flipped, on the floor), the swarm at
-        ``positions_m`` (n, d) [m] now (module docstring)."""
+        ``positions_m`` (n, d) [m] now (module docstring). ``drones``: integer indices in
+        ``0..n-1``, or a boolean mask of length n (True: lost); anything else is refused."""
+        lost = lost_indices(drones, self.n)
         p = finite_array("positions", positions_m, (self.n, self.dim))
-        self.planner = self.planner.lose(np.asarray(drones, dtype=int), p)
+        self.planner = self.planner.lose(lost, p)
 
     @property
     def lost_drones(self) -> Array:
         """The drones the loop no longer plans for (sorted)."""
         return self.planner.lost_drones
+
+
+def lost_indices(drones: ArrayLike, n: int) -> Array:
+    """The drones of ``drones`` as sorted indices: integer indices in ``0..n-1`` (a number: one),
+    or a boolean mask of length ``n``; a :class:`ValidationError` naming ``drones`` otherwise (a
+    mask is never read as indices, a float such as 1.5 never rounded)."""
+    d = np.asarray(drones)
+    expected = f"expected integer drone indices in 0..{n - 1} or a boolean mask of length {n}"
+    if d.dtype.kind == "b":
+        if d.shape != (n,):
+            raise ValidationError("drones", f"{expected}: got a boolean mask of shape {d.shape}")
+        return np.flatnonzero(d)
+    if d.size == 0 and d.ndim == 1:
+        return np.empty(0, dtype=int)
+    if d.dtype.kind not in "iu" or d.ndim > 1:
+        raise ValidationError("drones", f"{expected}, got {shown(drones)}")
+    idx = np.unique(np.atleast_1d(d).astype(int))
+    if idx[0] < 0 or idx[-1] >= n:
+        bad = int(idx[0] if idx[0] < 0 else idx[-1])
+        raise ValidationError("drones", f"{expected}: index {bad} is out of range")
+    return idx
+
+
+def _time(t_s: object) -> float:
+    """``t_s`` as a float: a real, finite number (not a bool, a string or a complex number)."""
+    if isinstance(t_s, bool) or not isinstance(t_s, int | float | np.integer | np.floating):
+        raise ValidationError("t_s", f"expected a real number of seconds, got {shown(t_s)}")
+    if not np.isfinite(t_s):
+        raise ValidationError("t_s", f"expected a finite time [s], got {t_s}")
+    return float(t_s)
 
 
 def step_time_stats(steps: list[OnlineStep]) -> dict[str, float]:

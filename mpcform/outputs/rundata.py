@@ -19,6 +19,7 @@ and the drones that see the commanded scale; absent otherwise).
 from __future__ import annotations
 
 import json
+import os
 import zipfile
 import zlib
 from dataclasses import dataclass
@@ -30,6 +31,13 @@ import numpy as np
 from mpcform._validate import Array
 from mpcform.errors import ValidationError
 from mpcform.outputs.files import SCALE_ESTIMATES, SUMMARY_JSON, TRAJECTORY_NPZ, TRUE_ARRAYS
+from mpcform.outputs.saved_checks import (
+    RunDirError,
+    check_formation_arrays,
+    check_trajectory_arrays,
+    load_npz,
+    read_summary,
+)
 from mpcform.sim.trajectory import Trajectory, TrueTrajectory
 from mpcform.world.obstacles import Obstacle, resolve_clearances
 from mpcform.world.shapes import Sphere, shape_from_keys
@@ -38,10 +46,6 @@ if TYPE_CHECKING:
     from mpcform.scenario.spec import Scenario
 
 FORMATION_NPZ = "formation.npz"
-
-
-class RunDirError(ValidationError):
-    """A directory that does not hold the output files of a run (names the path)."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -188,6 +192,7 @@ def load_run(directory: str | Path) -> RunData:
     if not root.is_dir():
         raise RunDirError(str(root), "no such run directory (write one with `mpcform run --out DIR`)")
     arrays = _npz(root / TRAJECTORY_NPZ, ("t", "p", "u", "p_ref"), optional=(*TRUE_ARRAYS, SCALE_ESTIMATES))
+    check_trajectory_arrays(root / TRAJECTORY_NPZ, arrays)  # shapes, finite values: saved_checks
     try:
         true = None
         if "t_true" in arrays:
@@ -202,27 +207,17 @@ def load_run(directory: str | Path) -> RunData:
         )
     except ValidationError as exc:
         raise RunDirError(str(root / TRAJECTORY_NPZ), str(exc)) from None
-    summary_path = root / SUMMARY_JSON
-    try:
-        summary = json.loads(summary_path.read_text())
-    except FileNotFoundError:
-        raise RunDirError(str(summary_path), "missing (write it with `mpcform run --out DIR`)") from None
-    except (OSError, ValueError) as exc:
-        raise RunDirError(str(summary_path), f"cannot read it as JSON: {exc}") from None
-    if not isinstance(summary, dict):
-        raise RunDirError(str(summary_path), "expected a JSON object")
+    summary = read_summary(root / SUMMARY_JSON)
     return RunData(trajectory, _load_formation(root / FORMATION_NPZ, trajectory), summary, root)
 
 
 def _load_formation(path: Path, trajectory: Trajectory) -> FormationData:
     n, d = trajectory.n, trajectory.dim
-    if not path.exists():
+    if not os.path.lexists(path):  # a dangling or looping link is no missing file: refused below
         ref0 = trajectory.reference_m[0]
         return FormationData(ref0 - ref0.mean(axis=0), None, ())
     extra = _npz(path, ("offsets", "scale_ref"), optional=("obstacles", "graph_edges", "leaders", "geofence"))
-    if extra["offsets"].shape != (n, d) or extra["scale_ref"].shape != trajectory.t_s.shape:
-        shapes = f"offsets {extra['offsets'].shape} or scale_ref {extra['scale_ref'].shape}"
-        raise RunDirError(str(path), f"{shapes} do not match p {trajectory.positions_m.shape}")
+    check_formation_arrays(path, extra, n, d, trajectory.t_s.shape[0])
     graph = extra.get("graph_edges")
     return FormationData(
         extra["offsets"],
@@ -237,7 +232,7 @@ def _load_formation(path: Path, trajectory: Trajectory) -> FormationData:
 def _load_obstacles(path: Path, legacy: Array | None, d: int) -> tuple[Obstacle, ...]:
     """The obstacles of ``formation.npz``: its ``obstacle_records``, or an older run's sphere rows."""
     try:
-        with np.load(path) as npz:
+        with load_npz(path) as npz:
             text = str(npz["obstacle_records"]) if "obstacle_records" in npz.files else None
         if text is None:
             rows = np.empty((0, d + 2)) if legacy is None else legacy.reshape(-1, d + 2)
@@ -254,7 +249,7 @@ def _load_obstacles(path: Path, legacy: Array | None, d: int) -> tuple[Obstacle,
 
 def _npz(path: Path, keys: tuple[str, ...], optional: tuple[str, ...] = ()) -> dict[str, Array]:
     try:
-        with np.load(path) as npz:
+        with load_npz(path) as npz:  # size and arrays' headers checked first
             missing = [k for k in keys if k not in npz.files]
             if missing:
                 raise RunDirError(str(path), f"missing arrays {missing} (has {sorted(npz.files)})")

@@ -15,7 +15,7 @@ from numpy.typing import ArrayLike
 from scipy.spatial.transform import Rotation
 
 from mpcform._validate import Array, positive
-from mpcform.errors import ValidationError
+from mpcform.errors import ValidationError, shown
 from mpcform.formation.kinematics import velocity_size
 from mpcform.formation.rotation import S_PLANAR, geodesic
 from mpcform.formation.state import FormationState
@@ -46,8 +46,9 @@ class Reference(ABC):
         """Formation states and velocities at ``times_s`` (T,)."""
 
     def targets(self, times_s: ArrayLike) -> tuple[Array, Array]:
-        """Drone targets ``p*`` [m] and ``p_dot*`` [m/s], each (T, n, d), at ``times_s`` (T,)."""
-        pr = self.profile(np.atleast_1d(np.asarray(times_s, dtype=float)))
+        """Drone targets ``p*`` [m] and ``p_dot*`` [m/s], each (T, n, d), at ``times_s`` (T,)
+        (real and finite: :func:`sample_times`)."""
+        pr = self.profile(sample_times(times_s))
         q = self.template.offsets @ pr.rotation_body_to_world.transpose(0, 2, 1)  # R_t r_i (T, n, d)
         s = pr.scale[:, None, None]
         if q.shape[-1] == 2:
@@ -82,6 +83,20 @@ class Reference(ABC):
         """The desired formation velocity ``xi_dot_d`` (4 or 7) at ``t_s``."""
         pr = self.profile(np.array([t_s], dtype=float))
         return np.concatenate([pr.centroid_velocity_mps[0], pr.omega_world_radps[0], pr.scale_rate_per_s[:1]])
+
+
+def sample_times(times_s: ArrayLike) -> Array:
+    """``times_s`` [s] as a 1-D float array (a number: one time); a :class:`ValidationError`
+    naming ``times_s`` unless they are real, finite numbers (a NaN time has no targets)."""
+    t = np.asarray(times_s)
+    if t.dtype.kind not in "biuf" or t.ndim > 1:
+        raise ValidationError(
+            "times_s", f"expected real times [s] (a number or a 1-D array), got {shown(times_s)}"
+        )
+    t = np.atleast_1d(t.astype(float, copy=False))
+    if not np.isfinite(t).all():
+        raise ValidationError("times_s", f"expected finite times [s], got {shown(t.tolist())}")
+    return t
 
 
 def add_per_time(a: Array, b: Array) -> None:
@@ -126,7 +141,7 @@ class ConstantReference(Reference):
             return super().targets(times_s)
         if self._held_m is None:
             self._held_m = super().targets(0.0)[0][0]
-        t = np.atleast_1d(np.asarray(times_s, dtype=float)).shape[0]
+        t = sample_times(times_s).shape[0]
         pos = np.repeat(self._held_m[None], t, axis=0)
         return pos, np.zeros_like(pos)
 

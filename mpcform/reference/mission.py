@@ -28,7 +28,7 @@ from mpcform.errors import ValidationError
 from mpcform.formation.rotation import omega_size
 from mpcform.formation.state import FormationState
 from mpcform.formation.template import Template
-from mpcform.reference.base import Profile, Reference, add_per_time, spin_world
+from mpcform.reference.base import Profile, Reference, add_per_time, sample_times, spin_world
 from mpcform.reference.keyframes import (
     Keyframe,
     MissionLimits,
@@ -301,7 +301,7 @@ class MissionReference(Reference):
         ``rho_i = (1 - alpha) r_i + alpha r'_pi(i)``; the velocity includes the blend's term
         ``s R alpha_dot (r'_pi(i) - r_i)`` besides ``J xi_dot_d``.
         """
-        pr = self.profile(np.atleast_1d(np.asarray(times_s, dtype=float)))
+        pr = self.profile(sample_times(times_s))
         rot_t = pr.rotation_body_to_world.transpose(0, 2, 1)  # R_t rho_i as one stacked matmul
         q, q_rate = pr.offsets_m @ rot_t, pr.offsets_rate_mps @ rot_t
         s = pr.scale[:, None, None]

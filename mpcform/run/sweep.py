@@ -38,7 +38,7 @@ from mpcform.outputs import tables
 from mpcform.run.parallel import process_pool, single_threaded_env
 from mpcform.run.runner import run_scenario
 from mpcform.scenario.load import load_scenario, scenario_from_dict, scenario_text
-from mpcform.scenario.size import check_memory, check_work
+from mpcform.scenario.size import check_memory, check_work, read_scenario_bytes
 from mpcform.scenario.spec import Scenario
 from mpcform.sim.metrics import REL_TOL
 from mpcform.solvers.registry import check_solver_name
@@ -103,7 +103,7 @@ def load_job(job: SweepJob, max_memory_gib: float | None = None) -> Scenario:
     base = load_scenario(
         job.path, max_memory_gib=max_memory_gib
     )  # readable, valid TOML (errors name the file)
-    data = tomllib.loads(scenario_text(Path(job.path).read_bytes()))
+    data = tomllib.loads(scenario_text(read_scenario_bytes(job.path)))
     data = apply_overrides(data, job.overrides + ((("seed", job.seed),) if job.seed is not None else ()))
     return scenario_from_dict(
         data,

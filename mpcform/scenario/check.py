@@ -27,7 +27,13 @@ from mpcform.scenario.build import build_controller
 from mpcform.scenario.load import load_scenario, scenario_from_dict, scenario_text
 from mpcform.scenario.parse import parse_keys, parse_top_level
 from mpcform.scenario.schema import SCHEMA, TABLES, Table
-from mpcform.scenario.size import DEFAULT_MAX_MEMORY_GIB, DEFAULT_MAX_WORK, check_memory, check_work
+from mpcform.scenario.size import (
+    DEFAULT_MAX_MEMORY_GIB,
+    DEFAULT_MAX_WORK,
+    check_memory,
+    check_work,
+    read_scenario_bytes,
+)
 from mpcform.scenario.spec import Scenario
 
 MAX_ROUNDS = 100
@@ -89,7 +95,7 @@ def check_scenario_file(
         if exc.field == str(path):  # unreadable file or TOML syntax: nothing more to find
             return CheckResult(None, (_problem(exc, None),))
         first = exc
-    text = scenario_text(path.read_bytes())
+    text = scenario_text(read_scenario_bytes(path))
     problems = check_document(tomllib.loads(text), path.stem, controller, max_memory_gib, max_work)
     if not problems:  # the document is valid: the memory estimate failed
         problems = [_problem(first, None)]
@@ -104,8 +110,8 @@ def located_problem(exc: ScenarioError, path: str | Path) -> Problem:
     line = None
     if exc.field != str(path):
         try:
-            line = locate(scenario_text(path.read_bytes()), exc.field)
-        except OSError:
+            line = locate(scenario_text(read_scenario_bytes(path)), exc.field)
+        except ScenarioError:
             pass
     return _problem(exc, line)
 

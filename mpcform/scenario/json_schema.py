@@ -15,10 +15,10 @@ from __future__ import annotations
 from typing import Any
 
 from mpcform.reference.keyframes import GROUPS
+from mpcform.scenario.parse import MAX_NAME_CHARS, NAME_PATTERN
 from mpcform.scenario.schema import FORMAT_VERSION, SCHEMA, TABLES, Key, Table, listing
 
 DRAFT = "https://json-schema.org/draft/2020-12/schema"
-NAME_PATTERN = "^[A-Za-z0-9_][A-Za-z0-9_.-]*$"  # as mpcform.scenario.parse checks ``name``
 NUMBER: dict[str, Any] = {"type": "number"}
 VECTOR: dict[str, Any] = {"type": "array", "items": NUMBER, "minItems": 2, "maxItems": 3}
 INDEX: dict[str, Any] = {"type": "integer", "minimum": 0}
@@ -51,7 +51,7 @@ def scenario_json_schema() -> dict[str, Any]:
         )
         if table.required:
             top["required"].append(table.name)
-    top["properties"]["name"]["pattern"] = NAME_PATTERN
+    top["properties"]["name"] |= {"pattern": f"^{NAME_PATTERN}$", "maxLength": MAX_NAME_CHARS}
     defs = {t.name.replace(".", "_"): _object(t) for t in SCHEMA if t.name}
     return {
         "$schema": DRAFT,

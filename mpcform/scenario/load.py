@@ -36,7 +36,7 @@ from mpcform.scenario.parse import as_scenario_error, parse_keys, parse_table, p
 from mpcform.scenario.placement import check_distinct, check_extent, check_goal, check_start
 from mpcform.scenario.plant import parse_plant, planned_for_its_plant
 from mpcform.scenario.schema import CONSENSUS_FIELDS, NULLSPACE_FIELDS, TABLES
-from mpcform.scenario.size import MAX_STEPS, REFERENCE_SAMPLES, check_drone_count
+from mpcform.scenario.size import MAX_STEPS, REFERENCE_SAMPLES, check_drone_count, read_scenario_bytes
 from mpcform.scenario.solve import solve_strategy
 from mpcform.scenario.spec import ControllerSpec, Scenario, SimulationSpec
 from mpcform.world.limits import Limits, crazyswarm_downwash
@@ -48,12 +48,7 @@ def load_scenario(path: str | Path, *, max_memory_gib: float | None = None) -> S
     """Read and validate a scenario TOML file; raises :class:`ScenarioError` on any problem
     (``max_memory_gib``: see :func:`scenario_from_dict`)."""
     path = Path(path)
-    try:
-        raw = path.read_bytes()
-    except FileNotFoundError:
-        raise ScenarioError(str(path), "no such scenario file") from None
-    except OSError as exc:
-        raise ScenarioError(str(path), f"cannot read the file: {exc.strerror}") from None
+    raw = read_scenario_bytes(path)  # a regular file of at most 16 MiB
     text = scenario_text(raw)
     try:
         data = tomllib.loads(text)
@@ -95,7 +90,8 @@ def scenario_from_dict(
     tpl = _template(template, dim)
     init = parse_table(data, "initial", dim, tpl.n)
     start, positions = _initial(tpl, init)
-    limits = _limits(parse_table(data, "limits", dim), dim)
+    lim = parse_table(data, "limits", dim)
+    limits = _limits(lim, dim)
     obstacles = resolve_clearances(_obstacles(data.get("obstacles"), dim), limits.d_min_m)  # unset: d_min / 2
     explicit = init["positions"] is not None
     check_extent(positions, "initial.positions" if explicit else "initial", "the start puts")
@@ -145,6 +141,7 @@ def scenario_from_dict(
         plant=plant,
         source=source,
         source_sha256=source_sha256,
+        unbounded=lim["unbounded"],
     )
     scenario = planned_for_its_plant(scenario)
     if controller.kind != "mpc":
@@ -171,8 +168,7 @@ def _template(t: dict[str, Any], dim: int) -> Template:
                 f"off by {float(np.linalg.norm(shift)):.6g} m; subtract it from every row "
                 f"(centred: {np.round(centred.offsets, 12).tolist()})",
             )
-        check_distinct(centred.offsets, "template.offsets")
-        return centred
+        return centred  # distinct: Template.centred checks it as check_distinct does
 
 
 def _shape(t: dict[str, Any], dim: int) -> Template:
@@ -277,6 +273,10 @@ def _mission(tpl: Template, start: FormationState, ref: dict[str, Any], limits: 
 
 
 def _limits(lim: dict[str, Any], dim: int) -> Limits:
+    if lim["unbounded"] and lim["d_min"] is not None:
+        raise ScenarioError(
+            "limits.unbounded", f"true says the run keeps no d_min, but d_min = {lim['d_min']:g}"
+        )
     for key in ("downwash", "v_max_z"):
         if lim[key] is not None and dim != 3:
             raise ScenarioError(f"limits.{key}", f"applies only when dim = 3, got dim = {dim}")

@@ -23,6 +23,10 @@ from mpcform.scenario.schema import SCHEMA, TABLES, Key, Table, did_you_mean, li
 MAX_MAGNITUDE = 1e6
 """The largest magnitude of a vector or point component (1000 km, 1000 km/s): beyond it a
 distance squared loses all precision, then overflows."""
+MAX_NAME_CHARS = 100
+"""The longest scenario ``name`` (a directory name: at most 255 bytes on most file systems)."""
+NAME_PATTERN = r"[A-Za-z0-9_][A-Za-z0-9_.-]*"
+"""What a scenario ``name`` may be: no path separator, no leading '.' or '-' (``.``, ``..``, ``-x``)."""
 
 
 def parse_top_level(data: Mapping[str, Any]) -> dict[str, Any]:
@@ -43,9 +47,17 @@ def parse_top_level(data: Mapping[str, Any]) -> dict[str, Any]:
             raise ScenarioError(name, f"expected a table [{name}], got {data[name]!r}")
     values = parse_keys(top, scalars, "", dim=2, n=None)
     name = values["name"]
-    if name is not None and (not re.fullmatch(r"[A-Za-z0-9_][A-Za-z0-9_.-]*", name)):
+    if name is not None and len(name) > MAX_NAME_CHARS:
         raise ScenarioError(
-            "name", f"expected letters, digits, '_', '-' or '.' (it names the output directory), got {name!r}"
+            "name",
+            f"expected at most {MAX_NAME_CHARS} characters (it names the output directory), "
+            f"got {len(name):,}: {shown(name)}",
+        )
+    if name is not None and (not re.fullmatch(NAME_PATTERN, name)):
+        raise ScenarioError(
+            "name",
+            "expected letters, digits, '_', '-' or '.', starting with a letter, a digit or '_' "
+            f"(it names the output directory), got {shown(name)}",
         )
     return values
 

@@ -19,42 +19,25 @@ A moving reference (exponential, mission) may pass through obstacles: the MPC go
 from __future__ import annotations
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from mpcform._validate import Array
 from mpcform.errors import ScenarioError, ValidationError
+from mpcform.formation.template import check_distinct as distinct_points
 from mpcform.world.limits import Limits
 from mpcform.world.obstacles import Obstacle
 
 Obstacles = tuple[Obstacle, ...]
 MAX_EXTENT_M = 1e6  # the farthest a drone may be from the origin (as a vector key's magnitude)
-COINCIDENT_RTOL = 1e-9  # points closer than this times max(1 m, their extent) coincide
 
 
 def check_distinct(points_m: Array, field: str, what: str = "offsets") -> None:
-    """Raise when two rows of ``points_m`` (n, d) are at one point (or all are zero, n >= 2)."""
-    n = points_m.shape[0]
-    if n < 2:
-        return
-    tol = COINCIDENT_RTOL * max(1.0, float(np.abs(points_m).max()))
-    if float(np.abs(points_m).max()) <= tol:
-        raise ScenarioError(
-            field,
-            f"all {n} {what} are zero: the drones would share one point, and no "
-            "separation d_min > 0 can hold between them",
-        )
-    dist, idx = cKDTree(points_m).query(points_m, k=2)
-    i = int(np.argmin(dist[:, 1]))
-    if dist[i, 1] > tol:
-        return
-    j = int(idx[i, 1] if idx[i, 1] != i else idx[i, 0])
-    i, j = min(i, j), max(i, j)
-    raise ScenarioError(
-        field,
-        f"{what} {i} and {j} coincide at {_point(points_m[i])} (distance "
-        f"{dist[i, 1]:.3g} m): no separation d_min > 0 can hold between them; "
-        "expected distinct points",
-    )
+    """Raise when two rows of ``points_m`` (n, d) are at one point (or all are zero, n >= 2): the
+    rule of :meth:`~mpcform.formation.template.Template.centred`
+    (:func:`mpcform.formation.template.check_distinct`), as a :class:`ScenarioError`."""
+    try:
+        distinct_points(points_m, field, what)
+    except ValidationError as exc:
+        raise ScenarioError(exc.field, exc.message) from None
 
 
 def check_extent(points_m: Array, field: str, what: str) -> None:

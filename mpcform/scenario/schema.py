@@ -164,6 +164,9 @@ SCHEMA: tuple[Table, ...] = (
             "the plan is flown (mpc; `mpcform run --flyable`: a Crazyflie's 0.05): pairs keep "
             "d_min + 2 tracking apart, obstacles and the geofence tracking more. `export` refuses a run "
             "planned without it.", "m", default=0.0, bound=">= 0"),
+        Key("unbounded", "bool", "The run keeps no separation on purpose: an mpc run of two or more "
+            "drones without d_min warns that it keeps none, unless this is true (then d_min must "
+            "not be set).", default=False),
     ), required=False),
     Table("controller", "Controller and its parameters; `mpcform run --controller` overrides "
           "`kind`, then keys of other kinds take their defaults.", (
@@ -228,7 +231,7 @@ SCHEMA: tuple[Table, ...] = (
           "estimated to need more than 4 GiB of memory (duration / dt x n x d values of time "
           "series, the MPC's rows over its horizon and drone pairs) is refused; `--max-memory` "
           "raises the limit.", (
-        Key("dt", "float", "Control period.", "s", required=True, bound="> 0"),
+        Key("dt", "float", "Control period (at least a microsecond).", "s", required=True, bound=">= 1e-6"),
         Key("duration", "float", "Simulated time.", "s", required=True, bound="> 0"),
         Key("lag", "float", "Removed: a velocity lag is now `[plant]` `kind = \"lag\"` with "
             "`time_constant` (an error names it).", "s", shown_default="-"),

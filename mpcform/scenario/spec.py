@@ -81,6 +81,7 @@ class Scenario:
     network: Network = dataclasses.field(default_factory=Network)
     allow_disconnected: bool = False
     plant: PlantSpec = dataclasses.field(default_factory=IdealPlantSpec)
+    unbounded: bool = False  # limits.unbounded: no d_min on purpose (no separation_warning)
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "obstacles", resolve_clearances(tuple(self.obstacles), self.limits.d_min_m))
@@ -141,8 +142,20 @@ class Scenario:
         if (controller or self.controller.kind) != "mpc":
             return old
         spacing = self.spacing_warning(controller) or self.growth_warning()
-        lines = (spacing, self.speed_warning(), self.unreachable_warning())
+        lines = (self.separation_warning(), spacing, self.speed_warning(), self.unreachable_warning())
         return old + [w for w in lines if w is not None]
+
+    def separation_warning(self) -> str | None:
+        """A line when an mpc run of two or more drones keeps no separation (no ``limits.d_min``),
+        unless the file says it means it (``limits.unbounded = true``)."""
+        lim = self.limits
+        if self.unbounded or self.n < 2 or lim.d_min_m is not None:
+            return None
+        speed = " and no speed bound (no v_max)" if lim.v_max_mps is None else ""
+        return (
+            f"limits: no d_min: the mpc run keeps no separation between the drones{speed}; set "
+            "limits.d_min (and v_max), or limits.unbounded = true to run without them"
+        )
 
     def goal_after_end(self) -> Array | None:
         """The reference's final targets (n, d) when it ends after the run (a mission longer than

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import json
 import re
+import shutil
+import time
 from importlib.util import find_spec
 from pathlib import Path
 
@@ -15,6 +17,7 @@ from saved_runs import SCENARIOS, short_run
 from mpcform.cli import handlers as cli_runner
 from mpcform.cli.main import main
 from mpcform.outputs import rundata
+from mpcform.outputs.outdir import EXPORT_DIR, PLOTS_DIR, RUN_LAYOUT, VIEWER_FILE
 from mpcform.outputs.rundata import load_run
 from mpcform.world.limits import PLATFORM_TRACKING_M
 
@@ -22,6 +25,7 @@ ROOT = Path(__file__).resolve().parents[2]
 WORKED = ROOT / "scenarios" / "worked_example.toml"
 HAS_PLOT = find_spec("matplotlib") is not None and find_spec("PIL") is not None
 needs_plot = pytest.mark.skipif(not HAS_PLOT, reason="matplotlib is not installed")
+OWN = (".mpcform-manifest.json", ".mpcform.lock")  # mpcform's bookkeeping in its output directory
 
 
 def short_copy(
@@ -110,8 +114,10 @@ def test_run_draws_and_exports_from_memory(
     assert main(["plot", str(out), "--out", str(tmp_path / "plots")]) == 0
     assert main(["export", str(out), "--out", str(tmp_path / "export")]) == 0
     for name in ("plots", "export"):
-        memory = sorted((out / name).iterdir())
-        assert [p.name for p in memory] == sorted(p.name for p in (tmp_path / name).iterdir())
+        memory = sorted((out / name).iterdir())  # listed in out's manifest; the --out ones in their own
+        assert [p.name for p in memory] == sorted(
+            p.name for p in (tmp_path / name).iterdir() if p.name not in OWN
+        )
         for file in memory:
             assert file.read_bytes() == (tmp_path / name / file.name).read_bytes(), file.name
 
@@ -139,7 +145,7 @@ def test_run_export_without_a_tracking_allowance_is_refused_before_the_run(
 def test_plain_run_writes_only_the_contract_files(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     out = tmp_path / "out"
     assert main(["run", short_copy(tmp_path), "--out", str(out)]) == 0
-    assert {p.name for p in out.iterdir()} == {"trajectory.npz", "trajectory.csv", "summary.json"}
+    assert {p.name for p in out.iterdir()} == {"trajectory.npz", "trajectory.csv", "summary.json", *OWN}
 
 
 def test_plot_without_matplotlib_fails_before_running(
@@ -441,7 +447,7 @@ def test_figures_as_pdf_svg_or_png_at_a_dpi_and_a_gif_on_request(
     magic = {"pdf": b"%PDF", "svg": b"<?xml"}
     for fmt, head in magic.items():
         assert main(["plot", str(out), "--format", fmt, "--out", str(tmp_path / fmt)]) == 0
-        files = sorted((tmp_path / fmt).iterdir())
+        files = sorted(p for p in (tmp_path / fmt).iterdir() if p.name not in OWN)
         assert files and all(f.suffix == f".{fmt}" and f.read_bytes().startswith(head) for f in files)
     assert main(["plot", str(out), "--animate", "gif", "--out", str(tmp_path / "video")]) == 0
     assert (tmp_path / "video" / "flight.gif").read_bytes().startswith(b"GIF8")
@@ -462,3 +468,151 @@ def test_bad_figure_options_are_refused_before_running(
     assert main(["run", short_copy(tmp_path), "--out", str(tmp_path / "r"), *flags]) == 2
     assert fragment in capsys.readouterr().err
     assert not (tmp_path / "r").exists()
+
+
+@pytest.mark.parametrize(
+    "argv", [["plot"], ["export", "--allow-untracked"], ["view"], ["compare", "--no-figure"]]
+)
+def test_a_nan_in_a_saved_trajectory_is_one_error_naming_the_file_and_the_array(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], argv: list[str]
+) -> None:
+    """Issue 58, item 4: a NaN in ``p`` reached the figures and the export (a traceback, exit 1)."""
+    short_run("worked_example", tmp_path, steps=5)
+    with np.load(tmp_path / "trajectory.npz") as npz:
+        arrays = {k: npz[k] for k in npz.files}
+    arrays["p"][3, 0, 1] = np.nan
+    np.savez(tmp_path / "trajectory.npz", **arrays)
+    lines = error_lines(capsys, main([argv[0], str(tmp_path), *argv[1:]]))
+    assert lines == [
+        f"mpcform: error: {tmp_path / 'trajectory.npz'}: array 'p' holds nan at index (3, 0, 1); "
+        "expected finite numbers"
+    ]
+    assert not (tmp_path / "plots").exists() and not (tmp_path / "export").exists()
+
+
+# ---- output directories that cannot destroy data (issue 58) ------------------------------------
+WRITES = {
+    "run": tuple(RUN_LAYOUT),
+    "plot": (PLOTS_DIR,),
+    "export": (EXPORT_DIR,),
+    "view": (VIEWER_FILE,),
+}
+USER_NAMES = (*RUN_LAYOUT, "plots/top_view.png", "plots/mine.png", "export/fly.py", "export/mine.csv")
+
+
+@pytest.fixture(scope="module")
+def full_run(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A run with everything mpcform writes into its directory: data, figures, viewer, export."""
+    root = tmp_path_factory.mktemp("full")
+    argv = ["run", short_copy(root), "--out", str(root / "run"), "--plot", "--html", "--export"]
+    assert main([*argv, "--allow-untracked", "--no-flight-check"]) == 0
+    return root / "run"
+
+
+def _tree(root: Path) -> dict[str, bytes | None]:
+    return {
+        str(p.relative_to(root)): p.read_bytes() if p.is_file() else None
+        for p in sorted(root.rglob("*"))
+        if p.name not in (".mpcform.lock", ".mpcform-manifest.json")
+    }
+
+
+@pytest.mark.parametrize("form", ["file", "dir"])
+@pytest.mark.parametrize(
+    ("command", "name"),
+    [(c, n) for c, names in WRITES.items() for n in USER_NAMES if n.split("/")[0] in names],
+)
+def test_a_users_file_or_directory_at_any_output_name_survives(
+    full_run: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str], command: str, name: str, form: str
+) -> None:
+    """A user's file or directory where mpcform writes (in place of its own, or beside it in
+    plots/ and export/): the command refuses, naming it, and it is left as it was."""
+    shutil.copytree(full_run, tmp_path / "run", symlinks=True)
+    root, mine = tmp_path / "run", tmp_path / "run" / name
+    if mine.is_dir():
+        shutil.rmtree(mine)
+    else:
+        mine.unlink(missing_ok=True)
+    if form == "dir":
+        mine.mkdir()
+        (mine / "mine.txt").write_text("the user's")
+    else:
+        mine.write_text("the user's own file")
+    before = _tree(root)
+    argv = [command, short_copy(tmp_path), "--out", str(root)] if command == "run" else [command, str(root)]
+    lines = error_lines(capsys, main([*argv, *(["--allow-untracked"] if command == "export" else [])]))
+    assert len(lines) == 1 and (f"{mine}: " in lines[0] or f"{mine}/mine.txt: " in lines[0]), lines
+    assert _tree(root) == before
+
+
+def test_export_into_a_file_named_export_is_refused_at_once(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Issue 58, item 5: after 6 s of work, "[Errno 17] File exists: 'g/export'"."""
+    short_run("worked_example", tmp_path, steps=5)
+    (tmp_path / "export").write_text("x\n")
+    start = time.perf_counter()
+    lines = error_lines(capsys, main(["export", str(tmp_path), "--allow-untracked"]))
+    assert time.perf_counter() - start < 3.0 and "Errno" not in lines[0]
+    assert lines == [
+        f"mpcform: error: {tmp_path / 'export'}: a file that mpcform did not write (not in a manifest: "
+        f"{tmp_path} has none); expected only mpcform's own outputs where it writes: move it away, or "
+        "write elsewhere (--out)"
+    ]
+    assert (tmp_path / "export").read_text() == "x\n"
+
+
+def test_view_refuses_a_directory_named_viewer_html(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Issue 58, item 15: a raw "[Errno 21] Is a directory"."""
+    short_run("worked_example", tmp_path, steps=5)
+    (tmp_path / "viewer.html").mkdir()
+    lines = error_lines(capsys, main(["view", str(tmp_path)]), f"{tmp_path / 'viewer.html'}: a directory")
+    assert len(lines) == 1 and "Errno" not in lines[0]
+    (tmp_path / "v.html").write_text("an older page the user names")
+    assert main(["view", str(tmp_path), "--out", str(tmp_path / "v.html")]) == 0  # a file named: replaced
+    assert "viewer-ready" in (tmp_path / "v.html").read_text()
+
+
+@pytest.mark.parametrize("command", ["plot", "export"])
+def test_plot_and_export_out_take_a_directory_of_their_own(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], command: str
+) -> None:
+    short_run("worked_example", tmp_path / "run", steps=5)
+    extra = ["--allow-untracked", "--no-flight-check"] if command == "export" else []
+    out = tmp_path / "mine"
+    out.mkdir()
+    (out / "notes.txt").write_text("mine")
+    error_lines(
+        capsys, main([command, str(tmp_path / "run"), "--out", str(out), *extra]), "--out: ", "is not empty"
+    )
+    assert sorted(p.name for p in out.iterdir()) == ["notes.txt"]
+    out = tmp_path / "new"
+    for _ in range(2):  # the second time, its own files are replaced
+        assert main([command, str(tmp_path / "run"), "--out", str(out), *extra]) == 0
+    listed = json.loads((out / ".mpcform-manifest.json").read_text())
+    assert listed["kind"] == ("plots" if command == "plot" else "export")
+    assert sorted(listed["entries"]) == sorted(p.name for p in out.iterdir() if not p.name.startswith("."))
+    error_lines(
+        capsys, main([command, str(tmp_path / "run"), "--out", str(tmp_path / "run"), *extra]), "--out: "
+    )
+
+
+def test_export_replaces_its_own_earlier_export_split_or_not(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A split export's parts never sit beside a later export's files; a refused export keeps the
+    earlier one whole (it is replaced only once every check passed)."""
+    short_run("obstacles_planar", tmp_path, steps=80, flyable=True)
+    argv = ["export", str(tmp_path), "--no-flight-check"]
+    assert main([*argv, "--tolerance", "0.0002"]) == 0
+    parts = sorted((tmp_path / "export").glob("drone000_poly7_part*.csv"))
+    assert len(parts) >= 2
+    capsys.readouterr()
+    error_lines(capsys, main([*argv, "--max-speed", "1e-6"]), "--max-speed")
+    assert sorted((tmp_path / "export").glob("drone000_poly7_part*.csv")) == parts
+    assert main([*argv, "--tolerance", "0.05"]) == 0
+    assert not list((tmp_path / "export").glob("drone*_part*.csv"))
+    listed = json.loads((tmp_path / ".mpcform-manifest.json").read_text())["entries"]
+    assert sorted(listed) == ["export", *sorted(f"export/{p.name}" for p in (tmp_path / "export").iterdir())]

@@ -17,6 +17,7 @@ from mpcform.scenario.keys import key_reference_markdown
 
 ROOT = Path(__file__).resolve().parents[2]
 WORKED = str(ROOT / "scenarios" / "worked_example.toml")
+OWN = (".mpcform-manifest.json", ".mpcform.lock")  # mpcform's bookkeeping in its output directory
 
 
 def short_copy(tmp_path: Path, replace: tuple[str, str] = ("duration = 10.0", "duration = 0.2")) -> str:
@@ -44,7 +45,7 @@ def test_run_writes_the_outputs(tmp_path: Path, capsys: pytest.CaptureFixture[st
     assert main(["run", WORKED, "--out", str(out)]) == 0
     stdout = capsys.readouterr().out
     assert "final tracking error" in stdout and str(out) in stdout
-    assert {p.name for p in out.iterdir()} == {"trajectory.npz", "trajectory.csv", "summary.json"}
+    assert {p.name for p in out.iterdir()} == {"trajectory.npz", "trajectory.csv", "summary.json", *OWN}
     summary = json.loads((out / "summary.json").read_text())
     assert summary["steps"] == 500 and summary["metrics"]["final_tracking_error"] < 1e-3
 
@@ -52,25 +53,100 @@ def test_run_writes_the_outputs(tmp_path: Path, capsys: pytest.CaptureFixture[st
 def test_a_run_into_an_earlier_runs_directory_replaces_its_outputs(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    """A stale viewer or export never sits beside the new run's data; other files stay."""
-    out = tmp_path / "r"
-    assert main(["run", WORKED, "--out", str(out)]) == 0
-    (out / "viewer.html").write_text("old")
-    (out / "export").mkdir()
+    """A stale viewer never sits beside the new run's data (the manifest lists it); other files stay."""
+    out, path = tmp_path / "r", short_copy(tmp_path)
+    assert main(["run", path, "--out", str(out), "--html"]) == 0
     (out / "notes.txt").write_text("mine")
     capsys.readouterr()
-    assert main(["run", WORKED, "--out", str(out)]) == 0
+    assert main(["run", path, "--out", str(out)]) == 0
     err = capsys.readouterr().err
     assert (
-        f"{out}: removed the earlier run's trajectory.npz, trajectory.csv, summary.json, viewer.html, export"
-        in err
+        f"{out}: replaced the earlier run's trajectory.npz, trajectory.csv, summary.json, "
+        "formation.npz, viewer.html" in err
     )
     assert sorted(p.name for p in out.iterdir()) == [
+        ".mpcform-manifest.json",
+        ".mpcform.lock",
         "notes.txt",
         "summary.json",
         "trajectory.csv",
         "trajectory.npz",
     ]
+    assert (out / "notes.txt").read_text() == "mine"
+
+
+def _never(*args: object, **kwargs: object) -> None:
+    raise AssertionError("the simulation ran")
+
+
+@pytest.mark.parametrize("where", ["root", "home", "project", "project-git"])
+def test_out_at_the_root_the_home_or_a_project_root_is_refused(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch, where: str
+) -> None:
+    """Issue 58, item 1: ``--out /`` wrote (and would have removed) files in the filesystem root."""
+    monkeypatch.setattr(main_module, "run_scenario", _never)
+    monkeypatch.setenv("HOME", str(tmp_path / "home"))
+    (tmp_path / "home").mkdir()
+    (tmp_path / "project" / ".git").mkdir(parents=True)
+    (tmp_path / "project-git").mkdir()
+    (tmp_path / "project-git" / "pyproject.toml").write_text("[project]\n")
+    out = {"root": "/", "home": str(tmp_path / "home")}.get(where, str(tmp_path / where))
+    what = {"root": "the filesystem root", "home": "your home directory"}.get(where, "a project root")
+    assert_one_line_error(capsys, main(["run", WORKED, "--out", out]), f"--out: {out!r} is {what}")
+    assert sorted(p.name for p in (tmp_path / "home").iterdir()) == []
+
+
+@pytest.mark.parametrize(
+    ("make", "survivor"),
+    [
+        (lambda o: (o / "trajectory.npz" / "x").mkdir(parents=True), "trajectory.npz/x"),
+        (lambda o: ((o / "plots").mkdir(), (o / "plots" / "mine.png").write_text("mine")), "plots/mine.png"),
+        (lambda o: ((o / "export").mkdir(), (o / "export" / "fly.py").write_text("mine")), "export/fly.py"),
+        (lambda o: (o / "summary.json").write_text("my notes, not JSON"), "summary.json"),
+        (lambda o: (o / "plots").write_text("a file named plots"), "plots"),
+    ],
+)
+def test_a_users_files_in_out_are_never_removed(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch, make, survivor: str
+) -> None:
+    """Issue 58, item 2: these were removed as "the earlier run's" outputs; now the run is refused."""
+    monkeypatch.setattr(main_module, "run_scenario", _never)
+    out = tmp_path / "o"
+    out.mkdir()
+    make(out)
+    before = {str(p): p.read_bytes() if p.is_file() else None for p in out.rglob("*")}
+    line = assert_one_line_error(
+        capsys, main(["run", WORKED, "--out", str(out)]), f"--out: {str(out)!r} is not empty"
+    )
+    assert "has no .mpcform-manifest.json" in line and (out / survivor).exists()
+    assert {
+        str(p): p.read_bytes() if p.is_file() else None for p in out.rglob("*") if p.name != ".mpcform.lock"
+    } == before
+
+
+def test_out_at_a_dangling_symbolic_link_says_so(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Issue 58, item 12: it read "cannot create 'o': File exists"."""
+    monkeypatch.setattr(main_module, "run_scenario", _never)
+    (tmp_path / "o").symlink_to(tmp_path / "gone")
+    status = main(["run", WORKED, "--out", str(tmp_path / "o")])
+    assert_one_line_error(capsys, status, "is a symbolic link to", "which does not exist")
+    assert not (tmp_path / "gone").exists()
+
+
+def test_a_second_run_into_the_same_directory_is_refused(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Issue 58, item 16: two runs into one --out both went ahead; the lock refuses the second."""
+    from mpcform.outputs.outdir import RUN_LAYOUT, claim_dir
+
+    monkeypatch.setattr(main_module, "run_scenario", _never)
+    with claim_dir(tmp_path / "o", "run", tuple(RUN_LAYOUT)):  # a run in progress (held as one would)
+        status = main(["run", WORKED, "--out", str(tmp_path / "o")])
+    assert_one_line_error(
+        capsys, status, f"--out: {str(tmp_path / 'o')!r} is being written by another mpcform command (pid"
+    )
 
 
 @pytest.mark.parametrize(

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from mpcform.cli.paths import check_output_dir, check_output_file, check_output_paths, clear_outputs
+from mpcform.cli.paths import check_output_dir, check_output_file, check_output_paths
 from mpcform.errors import ValidationError
 
 
@@ -17,15 +17,21 @@ def test_a_directory_may_exist_or_be_created(tmp_path: Path) -> None:
     check_output_dir("--out", tmp_path / "new" / "deeper")
 
 
-def test_clear_outputs_removes_only_the_names_given(tmp_path: Path) -> None:
-    (tmp_path / "plots").mkdir()
-    (tmp_path / "plots" / "old.png").write_text("x")
-    (tmp_path / "summary.json").write_text("{}")
-    (tmp_path / "notes.txt").write_text("mine")
-    names = ("summary.json", "trajectory.npz", "plots")
-    assert clear_outputs(tmp_path, names) == ["summary.json", "plots"]
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["notes.txt"]
-    assert clear_outputs(tmp_path, names) == []
+def test_a_directory_option_is_never_the_root_the_home_or_a_dangling_link(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """What a command may replace in it is its manifest's business (mpcform.outputs.outdir)."""
+    with pytest.raises(ValidationError, match=r"^--out: '/' is the filesystem root"):
+        check_output_dir("--out", "/")
+    monkeypatch.setenv("HOME", str(tmp_path))
+    with pytest.raises(ValidationError, match=r"^--out: '.*' is your home directory"):
+        check_output_dir("--out", tmp_path)
+    (tmp_path / "o").symlink_to(tmp_path / "gone")
+    with pytest.raises(
+        ValidationError, match=r"^--out: '.*o' is a symbolic link to '.*gone', which does not"
+    ):
+        check_output_dir("--out", tmp_path / "o")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["o"]
 
 
 def test_a_directory_option_naming_a_file(tmp_path: Path) -> None:
@@ -56,6 +62,9 @@ def test_every_output_option_of_a_namespace_is_checked(tmp_path: Path) -> None:
         with pytest.raises(ValidationError, match=f"^{flag}: "):
             check_output_paths(argparse.Namespace(**{dest: str(bad)}))
     check_output_paths(argparse.Namespace(figure=str(tmp_path), no_figure=True))  # no figure drawn
+    with pytest.raises(ValidationError, match="^--out: .* is a directory; expected a file path"):
+        check_output_paths(argparse.Namespace(out_file=str(tmp_path)))  # view --out HTML: a file
+    check_output_paths(argparse.Namespace(out_file=str(tmp_path / "f")))
 
 
 def test_a_directory_the_system_refuses_is_named_and_nothing_is_left(tmp_path: Path) -> None:

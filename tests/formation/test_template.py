@@ -26,6 +26,43 @@ def test_centred_returns_the_shift():
     assert_centred(tpl)
 
 
+@pytest.mark.parametrize(
+    ("points", "expected"),
+    [
+        (
+            np.array([[1.0 + 1.0j, 0.0], [-1.0, 0.0]]),
+            "template.offsets: expected real numbers of shape (n, n)",
+        ),
+        ([[1.0, 0.0], [1.0, 0.0], [-2.0, 0.0]], "template.offsets: offsets 0 and 1 coincide at [1, 0]"),
+        (
+            [[5e-10, 0.0], [-5e-10, 0.0], [1.0, 0.0], [-1.0, 0.0]],
+            "template.offsets: offsets 0 and 1 coincide",
+        ),
+        ([[0.0, 0.0], [0.0, 0.0]], "template.offsets: all 2 offsets are zero"),
+        ([[0.0, np.nan], [1.0, 0.0]], "template.offsets: expected finite numbers"),
+        ([["0", "1"], ["1", "0"]], "template.offsets: expected numbers of shape (n, n)"),
+    ],
+)
+def test_centred_takes_real_finite_distinct_points(points, expected):
+    """The same rules as a scenario's offsets (mpcform.scenario.placement.check_distinct)."""
+    with pytest.raises(ValidationError) as info:
+        Template.centred(points)
+    assert str(info.value).startswith(expected), str(info.value)
+
+
+def test_centred_and_the_scenario_loader_refuse_coincident_points_alike():
+    from mpcform.errors import ScenarioError
+    from mpcform.scenario.placement import check_distinct
+
+    points = np.array([[5e-10, 0.0], [-5e-10, 0.0], [1.0, 0.0], [-1.0, 0.0]])  # 1e-9 m apart
+    with pytest.raises(ValidationError) as api:
+        Template.centred(points)
+    with pytest.raises(ScenarioError) as toml:
+        check_distinct(points, "template.offsets")
+    assert str(api.value) == str(toml.value) and "coincide" in str(api.value)
+    Template.centred([[2e-9, 0.0], [-2e-9, 0.0], [1.0, 0.0], [-1.0, 0.0]])  # 4e-9 m apart: distinct
+
+
 def test_offsets_are_read_only():
     tpl = Template.polygon(4)
     with pytest.raises(ValueError):

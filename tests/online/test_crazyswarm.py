@@ -38,3 +38,24 @@ def test_the_swarm_must_match_the_plan() -> None:
     loop = OnlineLoop.from_scenario(load_scenario(SCENARIOS / "swap_planar_8.toml"))
     with pytest.raises(ValidationError, match="expected 8 Crazyflies"):
         fly_online(loop, fake_crazyflie_py([], 3).Crazyswarm(), 1.0)
+
+
+@pytest.mark.parametrize(
+    ("names", "message"),
+    [
+        (
+            ["cfX"] * 8,
+            "names: no Crazyflie named 'cfX' in the swarm (it has cf1, cf2, cf3, cf4, cf5, cf6, cf7, cf8)",
+        ),
+        (["cf1"] * 6, "names: expected 8 Crazyflie names (one per drone of the plan), got 6"),
+        (["cf1"] * 8, "names: expected distinct names, got 'cf1' more than once"),
+    ],
+)
+def test_the_names_are_checked_before_the_first_command(names: list[str], message: str) -> None:
+    """A bare KeyError before; a wrong count was found only after the lookups."""
+    loop = OnlineLoop.from_scenario(load_scenario(SCENARIOS / "swap_planar_8.toml"))
+    calls: list[tuple] = []
+    swarm = fake_crazyflie_py(calls, 8).Crazyswarm()
+    with pytest.raises(ValidationError) as info:
+        fly_online(loop, swarm, 1.0, names)
+    assert str(info.value) == message and calls == []

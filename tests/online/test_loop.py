@@ -88,3 +88,100 @@ def test_a_lost_drone_is_commanded_zero_and_a_new_flight_plans_for_every_drone()
         loop.lose([8], p)
     loop.start(0.0, sc.initial_positions_m)
     assert loop.lost_drones.size == 0 and np.linalg.norm(loop.step(0.0, p).command_mps[3]) > 0.0
+
+
+@pytest.mark.parametrize(
+    ("drones", "fragment"),
+    [
+        ([1.5], "got [1.5]"),
+        ([1.0], "got [1.0]"),
+        ([True, False, False, False, False, False], "a boolean mask of shape (6,)"),
+        ([8], "index 8 is out of range"),
+        ([-1], "index -1 is out of range"),
+        ([[1, 2]], "got [[1, 2]]"),
+        (["1"], "got ['1']"),
+    ],
+)
+def test_lose_takes_indices_or_a_mask_of_length_n(drones: object, fragment: str) -> None:
+    """A mask is never read as indices (it lost drones 0 and 1), a float never rounded."""
+    sc = load_scenario(SCENARIOS / "swap_planar_8.toml")
+    loop = OnlineLoop.from_scenario(sc)
+    p = sc.initial_positions_m.copy()
+    loop.step(0.0, p)
+    with pytest.raises(ValidationError) as info:
+        loop.lose(drones, p)  # type: ignore[arg-type]
+    message = str(info.value)
+    assert message.startswith("drones: expected integer drone indices in 0..7 or a boolean mask of length 8")
+    assert fragment in message and loop.lost_drones.size == 0
+
+
+def test_lose_by_mask_is_lose_by_indices() -> None:
+    sc = load_scenario(SCENARIOS / "swap_planar_8.toml")
+    p = sc.initial_positions_m.copy()
+    by_mask, by_index = OnlineLoop.from_scenario(sc), OnlineLoop.from_scenario(sc)
+    for loop in (by_mask, by_index):
+        loop.step(0.0, p)
+    by_mask.lose(np.arange(8) == 5, p)
+    by_index.lose(np.int64(5), p)
+    assert by_mask.lost_drones.tolist() == by_index.lost_drones.tolist() == [5]
+    by_mask.lose([], p)
+    assert by_mask.lost_drones.tolist() == [5]
+
+
+@pytest.mark.parametrize(
+    ("times", "fragment"),
+    [
+        ((0.0, float("nan")), "t_s: expected a finite time [s], got nan"),
+        ((0.0, float("inf")), "t_s: expected a finite time [s], got inf"),
+        (
+            (0.0, -5.0),
+            "t_s: expected a time after the previous step's 0 s (start() begins a new flight), got -5 s",
+        ),
+        (
+            (0.0, 0.1, 0.1),
+            "t_s: expected a time after the previous step's 0.1 s (start() begins a new flight), got 0.1 s",
+        ),
+        (
+            (0.0, 0.15),
+            "t_s: expected a time on the loop's grid 0 s + k dt (dt = 0.1 s), got 0.15 s, 0.5 dt off",
+        ),
+        (("0",), "t_s: expected a real number of seconds, got '0'"),
+        ((True,), "t_s: expected a real number of seconds, got True"),
+        ((1j,), "t_s: expected a real number of seconds, got 1j"),
+    ],
+)
+def test_step_takes_finite_increasing_times_on_the_loops_grid(times: tuple, fragment: str) -> None:
+    sc = load_scenario(SCENARIOS / "swap_planar_8.toml")
+    loop = OnlineLoop.from_scenario(sc)
+    assert loop.dt_s == 0.1
+    p = sc.initial_positions_m.copy()
+    *good, bad = times
+    for t in good:
+        loop.step(t, p)
+    with pytest.raises(ValidationError) as info:
+        loop.step(bad, p)
+    assert str(info.value) == fragment
+
+
+def test_step_allows_a_skipped_period_and_a_grid_from_the_first_step() -> None:
+    sc = load_scenario(SCENARIOS / "swap_planar_8.toml")
+    loop = OnlineLoop.from_scenario(sc)
+    p = sc.initial_positions_m.copy()
+    for t in (7.05, 7.15, 7.45, 7.55 + 1e-9):  # a missed period is no error; rounding is within the grid
+        assert loop.step(t, p).t_s == t
+    loop.start(0.0, p)
+    loop.step(0.0, p)
+
+
+def test_step_refuses_complex_or_non_finite_positions() -> None:
+    sc = load_scenario(SCENARIOS / "swap_planar_8.toml")
+    loop = OnlineLoop.from_scenario(sc)
+    p = sc.initial_positions_m.copy()
+    with pytest.raises(ValidationError, match=r"^positions: expected real numbers of shape \(8, 2\)"):
+        loop.step(0.0, p + 1e-3j)
+    bad = p.copy()
+    bad[3, 1] = np.nan
+    with pytest.raises(ValidationError, match=r"^positions: expected finite numbers"):
+        loop.step(0.0, bad)
+    with pytest.raises(ValidationError, match=r"^positions: expected shape \(8, 2\), got shape \(8, 3\)"):
+        loop.step(0.0, np.zeros((8, 3)))

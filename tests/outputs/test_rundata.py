@@ -127,7 +127,9 @@ def test_errors_name_the_file(tmp_path: Path) -> None:
         load_run(tmp_path)
     np.savez(tmp_path / FORMATION_NPZ, offsets=np.zeros((2, 2)), scale_ref=np.ones(6), obstacles=np.zeros(0))
     (tmp_path / "summary.json").write_text("{}")
-    with pytest.raises(RunDirError, match=r"formation.npz: offsets \(2, 2\) or scale_ref \(6,\) do not"):
+    with pytest.raises(
+        RunDirError, match=r"formation.npz: array 'offsets' has shape \(2, 2\); expected \(n, d\)"
+    ):
         load_run(tmp_path)
     np.savez(
         tmp_path / "trajectory.npz",
@@ -136,7 +138,9 @@ def test_errors_name_the_file(tmp_path: Path) -> None:
         u=np.zeros((3, 2, 2)),
         p_ref=np.zeros((3, 2, 2)),
     )
-    with pytest.raises(RunDirError, match=r"trajectory.npz: trajectory: expected commands_mps \(T-1, n, d\)"):
+    with pytest.raises(
+        RunDirError, match=r"trajectory.npz: array 'u' has shape \(3, 2, 2\); expected \(T-1, n, d\)"
+    ):
         load_run(tmp_path)
     np.savez(
         tmp_path / "trajectory.npz",
@@ -146,7 +150,9 @@ def test_errors_name_the_file(tmp_path: Path) -> None:
         p_ref=np.zeros((3, 2, 2)),
         scale_estimates=np.ones((2, 2)),
     )
-    with pytest.raises(RunDirError, match=r"trajectory.npz: trajectory: expected scale_estimates \(T, n\)"):
+    with pytest.raises(
+        RunDirError, match=r"trajectory.npz: array 'scale_estimates' has shape \(2, 2\); expected \(T, n\)"
+    ):
         load_run(tmp_path)
     np.savez(tmp_path / "trajectory.npz", t=np.arange(3.0))
     with pytest.raises(RunDirError, match=r"trajectory.npz: missing arrays \['p', 'u', 'p_ref'\]"):

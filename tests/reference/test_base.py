@@ -77,6 +77,17 @@ def test_negative_times_are_clamped(dim):
         np.testing.assert_array_equal(got, expected)
 
 
+@pytest.mark.parametrize("times", [np.nan, [0.0, np.inf], [1.0 + 2.0j], "0", [[0.0, 1.0]]])
+def test_targets_refuse_times_that_are_no_real_finite_numbers(times):
+    """A NaN time gave NaN positions; a complex one lost its imaginary part."""
+    rng = np.random.default_rng(3)
+    tpl = random_template(rng, 4, 2)
+    references = [random_reference(7, 2), ConstantReference(tpl, random_state(rng, 2))]
+    for ref in references:
+        with pytest.raises(ValidationError, match=r"^times_s: expected (real|finite) times \[s\]"):
+            ref.targets(times)
+
+
 def test_scale_follows_eq_16():
     tpl = Template.polygon(3)
     start = FormationState.from_param([5.0, 5.0], 0.0, 1.0)

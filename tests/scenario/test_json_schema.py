@@ -70,6 +70,9 @@ def _set(data: dict[str, Any], dotted: str, value: Any) -> dict[str, Any]:
         ("template.spacing", 1.0, "False schema does not allow"),  # a key of another shape
         ("version", 2, "is not one of [1]"),
         ("name", "my run", "does not match"),
+        ("name", "..", "does not match"),
+        ("name", "a" * 101, "is too long"),
+        ("simulation.dt", 1e-300, "less than the minimum of 1e-06"),
     ],
 )
 def test_malformed_scenarios_fail(validator: Any, dotted: str, value: Any, fragment: str) -> None:

@@ -217,6 +217,16 @@ BAD_INPUTS: list[tuple[str, dict[str, Any], str, str]] = [
     ),
     ("shorter than a step", {"simulation.duration": 0.01}, "simulation.duration", "one step"),
     ("path in name", {"name": "../x"}, "name", "directory"),
+    ("dot name", {"name": "."}, "name", "starting with a letter, a digit or '_'"),
+    ("dot dot name", {"name": ".."}, "name", "starting with a letter, a digit or '_'"),
+    ("long name", {"name": "a" * 10_000}, "name", "expected at most 100 characters"),
+    (
+        "tiny dt",
+        {"simulation.dt": 1e-300},
+        "simulation.dt",
+        "expected a finite number >= 1e-6 [s], got 1e-300",
+    ),
+    ("unbounded with d_min", {"limits.unbounded": True}, "limits.unbounded", "but d_min = 0.5"),
 ]
 
 
@@ -230,6 +240,27 @@ def test_bad_input_names_the_field(changes: dict[str, Any], field: str, fragment
     assert str(err.value).startswith(f"{field}: ")
     assert fragment in str(err.value)
     assert "\n" not in str(err.value)
+
+
+def test_a_name_of_100_characters_is_a_name() -> None:
+    assert scenario_from_dict(mutated({"name": "a" * 100})).name == "a" * 100
+
+
+@pytest.mark.parametrize("device", ["/dev/zero", "/dev/urandom"])
+def test_a_device_is_refused_before_it_is_read(device: str) -> None:
+    start = time.perf_counter()
+    with pytest.raises(ScenarioError, match="is a character device, not a regular file") as err:
+        load_scenario(device)
+    assert err.value.field == device and "at most 16 MiB" in str(err.value)
+    assert time.perf_counter() - start < 1.0
+
+
+def test_a_file_above_16_mib_is_refused_from_its_size(tmp_path: Path) -> None:
+    big = tmp_path / "big.toml"
+    with big.open("wb") as f:
+        f.truncate(2**30)  # sparse: 1 GiB of size, no block on disk
+    with pytest.raises(ScenarioError, match=r"is 1 GiB \(1,073,741,824 bytes\); expected a scenario file"):
+        load_scenario(big)
 
 
 def test_missing_file(tmp_path: Path) -> None:

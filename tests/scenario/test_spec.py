@@ -200,3 +200,28 @@ def test_growth_warning_names_the_drones_whose_rows_do_not_grow_in_wind() -> Non
     gentle = scenario_from_dict(data)
     assert gentle.growth_warning() is None
     np.testing.assert_array_equal(build_controller(gentle).steps.separation.growing(final), np.ones(100))
+
+
+def test_an_mpc_run_without_d_min_says_it_keeps_no_separation() -> None:
+    """An empty [limits] table (no v_max, no d_min) warns once, unless limits.unbounded says so."""
+    import tomllib
+
+    from mpcform.scenario.load import scenario_from_dict
+
+    data = tomllib.loads(WORKED.read_text())
+    data["controller"] = {"kind": "mpc"}
+    data["limits"] = {}
+    (line,) = [w for w in scenario_from_dict(data).warnings() if w.startswith("limits:")]
+    assert line == (
+        "limits: no d_min: the mpc run keeps no separation between the drones and no speed bound "
+        "(no v_max); set limits.d_min (and v_max), or limits.unbounded = true to run without them"
+    )
+    data["limits"] = {"v_max": 2.0}
+    (line,) = [w for w in scenario_from_dict(data).warnings() if w.startswith("limits:")]
+    assert "keeps no separation between the drones;" in line and "speed" not in line
+    data["limits"] = {"unbounded": True}
+    assert scenario_from_dict(data).separation_warning() is None
+    data["limits"] = {}
+    assert scenario_from_dict(data).warnings("tracking") == []  # only the mpc keeps d_min
+    data["template"] = {"shape": "polygon", "n": 1, "radius": 1.0}
+    assert scenario_from_dict(data).separation_warning() is None  # one drone: nothing to separate

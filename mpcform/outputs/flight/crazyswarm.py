@@ -23,13 +23,15 @@ from pathlib import Path
 
 import numpy as np
 
-from mpcform._validate import Array
+from mpcform._validate import Array, read_regular
 from mpcform.errors import ValidationError
 from mpcform.outputs.flight.phases import Flight
 from mpcform.outputs.flight.pieces import CRAZYFLIE_MAX_PIECES
 
 CRAZYFLIES_YAML = "crazyflies.yaml"
 FLY_PY = "fly.py"
+MAX_GROUND_BYTES = 2**20
+"""The largest ``crazyflies.yaml`` read by ``--ground``, 1 MiB (a robot takes about 200 bytes)."""
 ROBOT_TYPE = "cf21"
 
 FLY_TEMPLATE = '''#!/usr/bin/env python
@@ -183,10 +185,14 @@ def read_pads(path: str | Path) -> tuple[tuple[tuple[float, float], ...], tuple[
         raise ValidationError(
             "ground", 'reading crazyflies.yaml needs PyYAML: pip install -e ".[flight]"'
         ) from None
-    try:
-        doc = yaml.safe_load(Path(path).read_text())
-    except (OSError, yaml.YAMLError) as exc:
-        raise ValidationError("ground", f"cannot read {path}: {exc}") from None
+    try:  # size and kind first: a device or a sparse giant is refused before it is read
+        doc = yaml.safe_load(read_regular(path, MAX_GROUND_BYTES, CRAZYFLIES_YAML).decode("utf-8"))
+    except ValidationError as exc:
+        raise ValidationError("ground", str(exc)) from None
+    except OSError as exc:
+        raise ValidationError("ground", f"cannot read {path}: {exc.strerror or exc}") from None
+    except (UnicodeDecodeError, yaml.YAMLError) as exc:
+        raise ValidationError("ground", f"cannot read {path} as YAML: {' '.join(str(exc).split())}") from None
     robots = doc.get("robots") if isinstance(doc, dict) else None
     if not isinstance(robots, dict) or not robots:
         raise ValidationError("ground", f"{path}: expected a 'robots' table of Crazyswarm2 robots")
@@ -195,7 +201,11 @@ def read_pads(path: str | Path) -> tuple[tuple[tuple[float, float], ...], tuple[
         if not isinstance(robot, dict) or not robot.get("enabled", True):
             continue
         p, uri = robot.get("initial_position"), robot.get("uri")
-        if not (isinstance(p, list) and len(p) in (2, 3) and all(isinstance(x, int | float) for x in p)):
+        if not (
+            isinstance(p, list)
+            and len(p) in (2, 3)
+            and all(isinstance(x, int | float) and not isinstance(x, bool) and np.isfinite(x) for x in p)
+        ):
             raise ValidationError(
                 "ground", f"{path}: robot {name}: expected initial_position [x, y, z], got {p!r}"
             )

@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import json
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -166,9 +167,17 @@ def positions_3d(run: RunData, options: ExportOptions) -> Array:
 
 
 def export_run(
-    run: RunData, out_dir: str | Path, options: ExportOptions | None = None, **fields: Any
+    run: RunData,
+    out_dir: str | Path,
+    options: ExportOptions | None = None,
+    *,
+    before_writing: Callable[[], object] | None = None,
+    **fields: Any,
 ) -> ExportResult:
-    """Retime, fit, check and write every drone's files (``fields`` override ``options``)."""
+    """Retime, fit, check and write every drone's files (``fields`` override ``options``).
+    ``before_writing`` is called once every check passed, just before the first file is written
+    (``mpcform export`` removes its earlier export then); ``out_dir`` must then hold no drone's
+    files (an earlier export is never mixed in, nor removed here)."""
     opts = replace(options or ExportOptions(), **fields)
     lim = opts.limits
     if not opts.allow_untracked:
@@ -250,9 +259,15 @@ def export_run(
             + f" per drone exceed the Crazyflie's {CRAZYFLIE_MAX_PIECES}: split into files per "
             "drone (fly.py refuses them), or raise --tolerance"
         )
+    if before_writing is not None:
+        before_writing()
     out.mkdir(parents=True, exist_ok=True)
-    for stale in [*out.glob("drone*_setpoints.csv"), *out.glob("drone*_poly7*.csv")]:
-        stale.unlink()  # an earlier export (perhaps split into more parts) of this directory
+    if stale := min([*out.glob("drone*_setpoints.csv"), *out.glob("drone*_poly7*.csv")], default=None):
+        raise ValidationError(
+            str(stale),
+            "a file of an earlier export (perhaps split into other parts); expected a directory "
+            "without drones' files: remove them, or export elsewhere (`mpcform export` replaces its own)",
+        )
     width = max(3, len(str(n - 1)))
     stems = [f"drone{i:0{width}d}" for i in range(n)]
     files: list[Path] = []

@@ -184,3 +184,31 @@ def test_pads_are_read_from_a_crazyflies_yaml(tmp_path: Path) -> None:
             read_pads(path)
     with pytest.raises(ValidationError, match=r"^ground: cannot read"):
         read_pads(tmp_path / "missing.yaml")
+
+
+@pytest.mark.parametrize(
+    ("kind", "says"),
+    [
+        ("device", "is a character device, not a regular file; expected a crazyflies.yaml"),
+        ("sparse", r"is 1 GiB \(1,073,741,824 bytes\); expected a crazyflies.yaml .*at most 1 MiB"),
+        ("directory", "is a directory, not a regular file"),
+        ("nan", r"robot cf1: expected initial_position \[x, y, z\], got \[nan, 0, 0\]"),
+        ("binary", "as YAML"),
+    ],
+)
+def test_a_ground_file_is_size_checked_before_it_is_read(tmp_path: Path, kind: str, says: str) -> None:
+    """Issue 58: ``--ground /dev/zero`` read without end; a NaN pad was taken."""
+    path = tmp_path / "crazyflies.yaml"
+    if kind == "device":
+        path.symlink_to("/dev/zero")
+    elif kind == "sparse":
+        with open(path, "wb") as f:
+            f.truncate(2**30)
+    elif kind == "directory":
+        path.mkdir()
+    else:
+        path.write_bytes(
+            b"\xff\xfe\x00" if kind == "binary" else b"robots:\n  cf1:\n    initial_position: [.nan, 0, 0]\n"
+        )
+    with pytest.raises(ValidationError, match=r"^ground: .*" + says):
+        read_pads(path)

@@ -173,10 +173,14 @@ def test_long_fits_are_split_for_the_crazyflie(tmp_path: Path) -> None:
     assert len(parts) == result.files_per_drone
     rows = [sum(1 for _ in csv.reader(p.open())) - 1 for p in parts]
     assert all(0 < r <= CRAZYFLIE_MAX_PIECES for r in rows) and sum(rows) == result.fit.polynomial.pieces
-    # a later export with fewer pieces (a shorter run: at most 8 samples per piece) replaces the parts
+    # a later export never mixes with nor removes these (``mpcform export`` replaces its own, by the
+    # manifest): into the same directory it is refused, naming a file of the earlier export
     short_run("obstacles_planar", tmp_path / "short", steps=60, flyable=True)
-    export_run(load_run(tmp_path / "short"), tmp_path / "export", tolerance_m=0.05, fly=False)
-    assert not list((tmp_path / "export").glob("drone000_poly7_part*.csv"))
+    with pytest.raises(ValidationError, match=r"drone000_.*\.csv: a file of an earlier export"):
+        export_run(load_run(tmp_path / "short"), tmp_path / "export", tolerance_m=0.05, fly=False)
+    assert sorted((tmp_path / "export").glob("drone000_poly7_part*.csv")) == parts
+    export_run(load_run(tmp_path / "short"), tmp_path / "export2", tolerance_m=0.05, fly=False)
+    assert not list((tmp_path / "export2").glob("drone000_poly7_part*.csv"))
 
 
 def test_provenance_goes_with_the_export(tmp_path: Path) -> None:
@@ -203,7 +207,7 @@ def test_a_swarm_planned_without_a_tracking_allowance_is_refused_unless_allowed(
     result = export_run(data, tmp_path / "export", fly=False, allow_untracked=True)
     assert result.record["tracking_m"] == 0.0
     short_run("swap_planar_8", tmp_path / "flyable", steps=20, flyable=True)
-    result = export_run(load_run(tmp_path / "flyable"), tmp_path / "export", fly=False)
+    result = export_run(load_run(tmp_path / "flyable"), tmp_path / "export-flyable", fly=False)
     assert result.record["tracking_m"] == PLATFORM_TRACKING_M
 
 
