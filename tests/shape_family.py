@@ -4,9 +4,11 @@ across an arena of cylinders, boxes and spheres, on the ideal, lag and quadrotor
 Each run draws n 2-9 drones, d_min 0.3-0.6 m, v_max 0.5-2 m/s, dt 0.05-0.1 s, a horizon of 6-12,
 both couplings, and 1-4 obstacles (vertical cylinders finite or floor to ceiling, axis-aligned
 boxes, spheres) with clearances 0.1-0.3 m or unset (d_min / 2), inside a geofence 1.5 m beyond every
-start and goal. A swap's poles stand among its targets, so a draw may put a goal inside one: the
-loader must refuse it naming ``obstacles``. :func:`true_clearances` measures the drones' distance to
-each shape with its own closed forms, not the library's.
+start and goal. Starts and goals keep d_min + 4 delta + 0.1 m (delta: the plant's margin) beyond a
+shape's clearance, as in ``completion_family``; a swap's poles stand among its targets, so a draw may
+put a goal inside a clearance: the loader must refuse it naming ``obstacles``.
+:func:`true_clearances` measures the drones' distance to each shape with its own closed forms, not
+the library's.
 """
 
 from __future__ import annotations
@@ -79,8 +81,7 @@ def scenario(rng: np.random.Generator, index: int) -> dict[str, Any]:
     sc["initial"] = {"positions": start.tolist()}
     sc["reference"] |= {"centroid": goal_c.tolist(), "rotation": 0.0 if dim == 2 else [0.0] * 3, "scale": 1.0}
     sc["obstacles"] = [obstacle(rng, c, dim) for c in centers]
-    clear = [ob for ob in sc["obstacles"] if away(ob, start, d_min)]  # a start inside: a drawing error
-    sc["obstacles"] = clear or sc["obstacles"][:0]
+    sc["obstacles"] = [ob for ob in sc["obstacles"] if fair(ob, start, goal, d_min, gap)]
     if not sc["obstacles"]:
         del sc["obstacles"]
     ends = np.concatenate([start, goal])
@@ -126,9 +127,15 @@ def surface_distances(ob: dict[str, Any], points: np.ndarray) -> np.ndarray:
     return np.linalg.norm(np.maximum(q, 0.0), axis=-1) + np.minimum(q.max(axis=-1), 0.0)
 
 
-def away(ob: dict[str, Any], points: np.ndarray, d_min: float) -> bool:
-    """Whether every point keeps the obstacle's clearance (unset: d_min / 2) with 5 cm to spare."""
-    return bool(surface_distances(ob, points).min() >= ob.get("clearance", 0.5 * d_min) + 0.05)
+def fair(ob: dict[str, Any], start: np.ndarray, goal: np.ndarray, d_min: float, gap: float) -> bool:
+    """Whether the obstacle is kept: every start and goal ``gap`` (d_min + 4 delta + 0.1 m or more)
+    beyond its clearance (unset: d_min / 2), as the completion family keeps its spheres, or a goal
+    inside the clearance (the loader's refusal to see)."""
+    need = ob.get("clearance", 0.5 * d_min)
+    to_goal = surface_distances(ob, goal).min()
+    return bool(
+        surface_distances(ob, start).min() >= need + gap and (to_goal >= need + gap or to_goal < need)
+    )
 
 
 def true_clearances(sc: dict[str, Any], path: np.ndarray, straight: bool) -> tuple[float, int]:
