@@ -12,6 +12,7 @@ from __future__ import annotations
 from collections.abc import Iterable
 
 from mpcform.errors import ValidationError, shown
+from mpcform.world.shapes import SHAPES
 from mpcform.world.shapes.base import Shape
 
 Obstacle = Shape
@@ -21,11 +22,10 @@ Obstacle = Shape
 def obstacles_of(obstacles: Iterable[object], field: str = "obstacles") -> tuple[Shape, ...]:
     """``obstacles`` as a tuple of shapes; anything else is a :class:`ValidationError` naming it."""
     out = tuple(obstacles)
+    kinds = ", ".join(kind.__name__ for kind in SHAPES.values())
     for k, ob in enumerate(out):
         if not isinstance(ob, Shape):
-            raise ValidationError(
-                f"{field}[{k}]", f"expected an obstacle shape (Sphere, Cylinder, Box), got {shown(ob)}"
-            )
+            raise ValidationError(f"{field}[{k}]", f"expected an obstacle shape ({kinds}), got {shown(ob)}")
     return out  # type: ignore[return-value]
 
 
