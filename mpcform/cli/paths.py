@@ -16,7 +16,7 @@ import shutil
 from pathlib import Path
 
 from mpcform.errors import ValidationError, shown
-from mpcform.outputs.outdir import check_root
+from mpcform.outputs.outdir import check_root, create_dirs
 
 DIRECTORY_OPTIONS = ("out",)
 FILE_OPTIONS = ("json", "report", "figure", "out_file")
@@ -80,14 +80,9 @@ def _writable_ancestor(flag: str, path: Path) -> None:
 def _try_create(flag: str, path: Path) -> None:
     """Create the missing ``path`` and remove what was created: a writable-looking ancestor may still
     refuse it (``/proc``, a read-only mount), and nothing is left on disk before the work starts."""
-    first = path
-    while not first.parent.exists():
-        first = first.parent
-    try:
-        path.mkdir(parents=True)
-    except OSError as exc:
-        raise ValidationError(flag, f"cannot create {str(path)!r}: {exc.strerror or exc}") from None
-    shutil.rmtree(first)
+    first = create_dirs(flag, path)
+    if first is not None:
+        shutil.rmtree(first)
 
 
 def _flag(dest: str) -> str:

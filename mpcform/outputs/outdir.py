@@ -109,7 +109,7 @@ def claim_dir(
     name ``field`` (default: the path), errors about what is in it the path of that."""
     root, field = Path(root), field or str(root)
     check_root(field, root)
-    created = _create(field, root)
+    created = create_dirs(field, root)
     try:
         fresh_lock = not os.path.lexists(root / LOCK)
         fd = _lock(field, root)
@@ -303,7 +303,7 @@ def _same_file(fd: int, path: Path) -> bool:
     return (a.st_dev, a.st_ino) == (b.st_dev, b.st_ino)
 
 
-def _create(field: str, root: Path) -> Path | None:
+def create_dirs(field: str, root: Path) -> Path | None:
     """Create the missing ``root`` with its parents; the first directory created (None: none)."""
     if root.exists():
         return None
