@@ -244,6 +244,13 @@ def require_plotting(gif: bool = False) -> None:
     """Raise :class:`PlotUnavailable` when matplotlib (or pillow, for a GIF) is missing."""
     if find_spec("matplotlib") is None:
         raise PlotUnavailable(PLOT_HINT)
+    try:
+        import matplotlib  # noqa: F401 - it reads MPLBACKEND as it loads
+    except ValueError:
+        backend = os.environ.get("MPLBACKEND", "")
+        raise ValidationError(
+            "MPLBACKEND", f"{backend!r} is not a matplotlib backend; expected one it knows (Agg), or unset it"
+        ) from None
     if gif and find_spec("PIL") is None:
         raise PlotUnavailable("the GIF writer needs pillow: pip install 'mpcform[plot]'")
 

@@ -25,6 +25,7 @@ from mpcform.cli import bench_commands, sweep_commands
 from mpcform.cli import handlers as cli_runner
 from mpcform.cli.options import add_max_memory, add_max_work, solver_help
 from mpcform.cli.paths import check_output_dir, check_output_paths
+from mpcform.cli.signals import Terminated, terminating
 from mpcform.errors import MPCFormError, ScenarioError, ValidationError
 from mpcform.outputs.files import (
     OUTPUT_FILES,
@@ -233,14 +234,18 @@ def main(argv: list[str] | None = None) -> int:
     keep_heap()  # large runs: freed arrays stay in the heap (see mpcform.run.heap)
     parser = build_parser()
     try:
-        args = parser.parse_args(argv)
-        check_output_paths(args)  # --out, --json, --report, --figure: before any work
-        status: int = args.func(args)
-        sys.stdout.flush()  # a reader that closed the pipe shows here, not at exit
-        return status
+        with terminating():  # SIGTERM, SIGHUP: as Ctrl-C
+            args = parser.parse_args(argv)
+            check_output_paths(args)  # --out, --json, --report, --figure: before any work
+            status: int = args.func(args)
+            sys.stdout.flush()  # a reader that closed the pipe shows here, not at exit
+            return status
     except BrokenPipeError:
         _discard_stdout()
         return EXIT_BROKEN_PIPE
+    except Terminated as exc:  # one line, the shell's status for the signal
+        print(f"mpcform: interrupted ({exc.name})", file=sys.stderr)
+        return 128 + exc.signum
     except KeyboardInterrupt:  # Ctrl-C: one line, the shell's status for SIGINT
         print("mpcform: interrupted", file=sys.stderr)
         return EXIT_INTERRUPTED

@@ -616,3 +616,24 @@ def test_export_replaces_its_own_earlier_export_split_or_not(
     assert not list((tmp_path / "export").glob("drone*_part*.csv"))
     listed = json.loads((tmp_path / ".mpcform-manifest.json").read_text())["entries"]
     assert sorted(listed) == ["export", *sorted(f"export/{p.name}" for p in (tmp_path / "export").iterdir())]
+
+
+def test_a_bad_mplbackend_is_one_line(tmp_path: Path) -> None:
+    """matplotlib refuses an unknown MPLBACKEND as it loads: named before any work, exit 2."""
+    import os
+    import subprocess
+    import sys
+
+    code = "import sys; from mpcform.cli.main import main; sys.exit(main(sys.argv[1:]))"
+    scenario = str(ROOT / "scenarios" / "worked_example.toml")
+    env = os.environ | {"MPLBACKEND": "bogus"}
+    proc = subprocess.run(
+        [sys.executable, "-c", code, "run", scenario, "--out", str(tmp_path / "o"), "--plot"],
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=120,
+    )
+    said = "MPLBACKEND: 'bogus' is not a matplotlib backend; expected one it knows (Agg), or unset it"
+    assert proc.returncode == 2 and proc.stderr.strip().splitlines() == [f"mpcform: error: {said}"]
+    assert not (tmp_path / "o" / "trajectory.npz").exists()
