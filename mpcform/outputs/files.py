@@ -255,7 +255,7 @@ def format_summary(summary: dict[str, Any]) -> str:
             f"(d_min {_m(lim['d_min'], 'm')})",
         ),
         ("max speed", f"{_m(m['max_speed'], 'm/s')} (v_max {_m(lim['v_max'], 'm/s')})"),
-        ("violations", f"{m['separation_violations']} separation, {m['speed_violations']} speed"),
+        ("violations", _violations(m, "")),
         (
             "qp solves",
             f"{m['qp_solves']} ({m['fast_path_steps']} fast-path steps, "
@@ -289,8 +289,8 @@ def format_summary(summary: dict[str, Any]) -> str:
             (
                 "true motion",
                 f"{plant['kind']} plant (margin {_m(plant['margin'], 'm')}{model}): min "
-                f"separation {_m(m['min_separation_true'], 'm')}, {m['separation_violations_true']} "
-                f"violations, max speed {_m(m['max_speed_true'], 'm/s')}",
+                f"separation {_m(m['min_separation_true'], 'm')}, violations {_violations(m, '_true')}, "
+                f"max speed {_m(m['max_speed_true'], 'm/s')}",
             )
         )
     if plant is not None and (events := plant_events(plant)) is not None:
@@ -304,6 +304,20 @@ def format_summary(summary: dict[str, Any]) -> str:
         )
     width = max(len(label) for label, _ in rows)
     return "\n".join(f"{label:<{width}}  {value}" for label, value in rows)
+
+
+def _violations(m: dict[str, Any], suffix: str) -> str:
+    """The violations of the path (``suffix`` ``_true``: of the dense true motion) by kind."""
+    kinds = [
+        ("separation", "separation"),
+        ("speed", "speed"),
+        ("obstacle", "obstacle"),
+        ("geofence", "geofence"),
+    ]
+    said = [
+        f"{m[f'{key}_violations{suffix}']} {name}" for key, name in kinds if f"{key}_violations{suffix}" in m
+    ]
+    return ", ".join(said)
 
 
 def _m(value: float | None, unit: str) -> str:
