@@ -163,8 +163,9 @@ class FlightScene:
         span = np.maximum(both.max(axis=0) - both.min(axis=0), 1.0)
         ratio = max(span[b] / span[a] for a, b in self.planes)
         panel_in = (6.4 if ratio >= 0.6 else 9.0) if run.dim == 2 else 5.0  # a wide flight: a wide frame
-        height = float(np.clip(panel_in * ratio + 1.6, 3.2, 7.5))
-        self.fig = Figure(figsize=(panel_in * len(self.planes), height), dpi=dpi, layout="constrained")
+        height = float(np.clip(panel_in * ratio + 1.6, 3.6, 7.5))
+        self.fig = Figure(figsize=frame_size_in(panel_in * len(self.planes), height, dpi), dpi=dpi)
+        self.fig.set_layout_engine("constrained")
         _FrameCanvas(self.fig)
         axes = self.fig.subplots(1, len(self.planes), squeeze=False)[0]
         few = run.n <= PER_DRONE_MAX
@@ -243,8 +244,17 @@ class FlightScene:
             handles, labels, loc="outside lower center", ncol=5, fontsize="x-small", frameon=False
         )
         self.clock = self.fig.suptitle(f"{run.label}   t = 000.00 s", fontsize="medium", family="monospace")
-        self.fig.canvas.draw()  # lay the figure out once, then keep it: no layout pass per frame
+        for _ in range(3):  # lay the figure out, then keep it: no layout pass per frame
+            self.fig.canvas.draw()  # a first pass can leave the panels' titles under the clock
+            if not self.titles_overlap():
+                break
         self.fig.set_layout_engine("none")
+
+    def titles_overlap(self) -> bool:
+        """Whether the clock (the figure's title) overlaps a panel's title (as last drawn)."""
+        renderer: Any = self.fig.canvas.get_renderer()  # type: ignore[attr-defined]
+        clock = self.clock.get_window_extent(renderer)
+        return any(ax.title.get_window_extent(renderer).overlaps(clock) for ax in self.fig.axes)
 
     def update(self, t_s: float) -> list[Any]:
         """Move every artist to flight time ``t_s`` (positions interpolated between samples)."""
@@ -299,6 +309,12 @@ class FlightScene:
         for artist in moving:
             self.fig.draw_artist(artist)
         return np.asarray(canvas.buffer_rgba())[..., :3].copy()
+
+
+def frame_size_in(width_in: float, height_in: float, dpi: int) -> tuple[float, float]:
+    """A figure size near ``width_in`` x ``height_in`` that is an even number of pixels each way at
+    ``dpi``: the GIF's frames and the MP4's (H.264 wants even sizes) are then the same."""
+    return 2 * round(width_in * dpi / 2) / dpi, 2 * round(height_in * dpi / 2) / dpi
 
 
 def _at(t_s: Array, values: Array, t: float) -> Array:

@@ -33,7 +33,7 @@ PER_DRONE_MAX = len(DRONE_COLOURS)  # up to this many drones: one line per drone
 TIME_CMAP = ListedColormap(colormaps["plasma"](np.linspace(0.0, 0.82, 256)), name="time")
 """Snapshots coloured by time: dark blue (start) to orange (end); no pale yellow on white."""
 PATH_GREY = "0.55"  # paths of a swarm above PATH_COLOURS_MAX drones
-PATH_COLOURS_MAX = 20  # up to this many drones a plan's paths get a colour each (tab20): no grey tangle
+PATH_COLOURS_MAX = 20  # up to this many drones a plan's paths get a colour each: no grey tangle
 REFERENCE_STYLE: dict[str, Any] = {
     "color": "k",
     "lw": 0.9,
@@ -105,14 +105,19 @@ def drone_colours(n: int) -> list[Any]:
     return [colormaps["viridis"](0.1 + 0.8 * i / max(1, n - 1)) for i in range(n)]
 
 
+def distinct_colours(n: int) -> list[Any]:
+    """``n`` qualitative colours, the first six :data:`DRONE_COLOURS`: tab10, then tab20's light
+    shades up to 20 (light blue after blue, not beside it), beyond an evenly sampled colour map."""
+    if n <= 20:
+        tab20 = colormaps["tab20"]
+        return [tab20(2 * i if i < 10 else 2 * (i - 10) + 1) for i in range(n)]
+    return [colormaps["turbo"](0.05 + 0.9 * i / (n - 1)) for i in range(n)]
+
+
 def path_colours(n: int) -> list[Any]:
-    """A plan view's path colours: :func:`drone_colours` up to :data:`PER_DRONE_MAX` drones, tab20's
-    up to :data:`PATH_COLOURS_MAX` (twenty grey paths of a 3-D swap tangle), else one grey."""
-    if n <= PER_DRONE_MAX:
-        return drone_colours(n)
-    if n <= PATH_COLOURS_MAX:
-        return [colormaps["tab20"](i) for i in range(n)]
-    return [PATH_GREY] * n
+    """A plan view's path colours: :func:`distinct_colours` up to :data:`PATH_COLOURS_MAX` drones
+    (the first six those of the time series), else one grey."""
+    return distinct_colours(n) if n <= PATH_COLOURS_MAX else [PATH_GREY] * n
 
 
 def marker_scale(n: int) -> float:

@@ -12,19 +12,21 @@ and for consensus runs the communication graph and the leaders.
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 from matplotlib.axes import Axes
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.cm import ScalarMappable
 from matplotlib.figure import Figure
+from matplotlib.text import Annotation
 
 from mpcform.outputs.drawing import (
     FLOWN_GID,
     PATH_COLOURS_MAX,
     PER_DRONE_MAX,
     REFERENCE_STYLE,
+    SNAPSHOT_LABEL,
     closest_pair,
     display_rows,
     draw_graph,
@@ -73,6 +75,8 @@ def top_view(run: RunData) -> Figure:
     ax.set_title(f"Top view: {run.label}", fontsize="medium")
     _colour_bar(fig, run, [ax])
     legend_below(fig, ax)
+    fit_height(fig, ax)
+    place_time_labels(ax)
     return fig
 
 
@@ -112,8 +116,8 @@ def draw_plan(
             p[:, i, a],
             p[:, i, b],
             color=colours[i],
-            lw=2.4 if few else 0.9 if coloured else 0.7,
-            alpha=0.7 if few else 0.8 if coloured else 0.6,
+            lw=2.4 if few else 1.3 if coloured else 0.7,
+            alpha=0.7 if few else 0.9 if coloured else 0.6,
             zorder=2,
             label=label,
         )
@@ -169,6 +173,66 @@ def legend_below(fig: Figure, ax: Any, ncol: int = 4) -> None:
     handles, labels = ax.get_legend_handles_labels()
     if handles:
         fig.legend(handles, labels, loc="outside lower center", ncol=ncol, fontsize="small", frameon=False)
+
+
+def fit_height(fig: Figure, ax: Axes, rounds: int = 3) -> None:
+    """Shorten ``fig`` by the height its equal-aspect ``ax`` leaves empty in its layout box: no
+    blank band between the plot and the legend under it."""
+    for _ in range(rounds):
+        fig.canvas.draw()
+        box, used = ax.get_position(original=True), ax.get_position()
+        width, height = fig.get_size_inches()
+        empty = (box.height - used.height) * height
+        if empty < 0.02:
+            return
+        fig.set_size_inches(width, height - empty)
+
+
+LABEL_GAP_PT = 9.0  # from a snapshot's drone to the nearest edge of its time label
+LABEL_SIDES = (0, 1, -1, 2, -2, 3, -3, 4)  # eighths of a turn from the first choice
+
+
+def place_time_labels(ax: Axes) -> None:
+    """Put each ``t = ... s`` label on the side of its drone (eight tried, the first away from the
+    snapshot's centre as drawn) that covers the fewest drone markers, then earlier labels and the
+    axes' edge: none if it can. Call it on a figure laid out at its final size."""
+    fig = cast(Figure, ax.figure)
+    renderer = fig.canvas.get_renderer()  # type: ignore[attr-defined]
+    points = [c.get_offset_transform().transform(c.get_offsets()) for c in ax.collections]
+    markers = np.concatenate([np.empty((0, 2)), *[q for q in points if q.size]])
+    margin = 3.0 * fig.dpi / 72  # a marker's half size and some air [px]
+    frame = ax.get_window_extent(renderer)
+    taken: list[Any] = []
+    for label in [t for t in ax.texts if t.get_gid() == SNAPSHOT_LABEL]:
+        assert isinstance(label, Annotation)
+        first = float(np.arctan2(label.xyann[1], label.xyann[0]))
+        tried = []
+        for turn in LABEL_SIDES:
+            _set_side(label, first + turn * np.pi / 4)
+            box = label.get_window_extent(renderer).padded(2.0)
+            cost = float(_covered(box, markers, margin).sum() + sum(box.overlaps(o) for o in taken))
+            cost += 0.5 * float(
+                box.x0 < frame.x0 or box.x1 > frame.x1 or box.y0 < frame.y0 or box.y1 > frame.y1
+            )
+            tried.append((cost, turn))
+            if cost == 0:
+                break
+        _set_side(label, first + min(tried)[1] * np.pi / 4)
+        taken.append(label.get_window_extent(renderer).padded(2.0))
+
+
+def _set_side(label: Annotation, angle: float) -> None:
+    """``label`` :data:`LABEL_GAP_PT` from its point towards ``angle``, aligned on that side."""
+    u = np.cos(angle), np.sin(angle)
+    label.xyann = (LABEL_GAP_PT * u[0], LABEL_GAP_PT * u[1])
+    label.set_horizontalalignment("left" if u[0] > 0.3 else "right" if u[0] < -0.3 else "center")
+    label.set_verticalalignment("bottom" if u[1] > 0.3 else "top" if u[1] < -0.3 else "center")
+
+
+def _covered(box: Any, points: np.ndarray, margin: float) -> np.ndarray:
+    """Which ``points`` (m, 2) [px] lie within ``margin`` of ``box``."""
+    lo, hi = np.array([box.x0, box.y0]) - margin, np.array([box.x1, box.y1]) + margin
+    return np.asarray(((points >= lo) & (points <= hi)).all(axis=1))
 
 
 def key_moments(run: RunData) -> np.ndarray:

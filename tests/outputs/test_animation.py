@@ -196,3 +196,40 @@ def test_a_plant_run_animates_its_flown_path(tmp_path: Path) -> None:
     t = float(run.flown.t_s[7])  # a dense sample between two control samples
     scene.update(t)
     np.testing.assert_allclose(scene.artists[0]["drones"].get_offsets(), run.flown.positions_m[7])
+
+
+def mp4_size(ffprobe: str, path: Path) -> tuple[int, int]:
+    out = subprocess.run(
+        [ffprobe, "-v", "error", "-select_streams", "v:0", "-show_entries", "stream=width,height"]
+        + ["-of", "csv=p=0", str(path)],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        check=True,
+    )
+    width, height = out.stdout.strip().split(",")
+    return int(width), int(height)
+
+
+@pytest.mark.parametrize(("name", "steps"), [("mission_obstacle_gap", 60), ("swap_spatial_12", 8)])
+def test_the_gif_has_the_mp4s_frame_size(tmp_path: Path, ffprobe: str, name: str, steps: int) -> None:
+    short_run(name, tmp_path, steps=steps)  # a flat, wide flight (a short frame) and a spatial one
+    run = load_run(tmp_path)
+    gif = animate_run(run, tmp_path / ANIMATION_FILE, max_frames=4)
+    with PIL.open(gif) as im:
+        size = im.size
+    assert size == mp4_size(ffprobe, animate_run(run, tmp_path / MP4_FILE, max_frames=4))
+    assert size[0] % 2 == size[1] % 2 == 0 and size[1] >= 288  # no 256-pixel strip
+
+
+@pytest.mark.parametrize(("name", "steps"), [("mission_obstacle_gap", 60), ("swap_spatial_12", 8)])
+def test_the_clock_clears_the_panels_titles(tmp_path: Path, name: str, steps: int) -> None:
+    short_run(name, tmp_path, steps=steps)
+    scene = FlightScene(load_run(tmp_path), 1.0, 80)
+    scene.update(0.5)
+    scene.render()
+    renderer = scene.fig.canvas.get_renderer()
+    clock = scene.clock.get_window_extent(renderer)
+    for ax in scene.fig.axes:  # the clock above every panel's title, apart
+        assert ax.title.get_text() and ax.title.get_window_extent(renderer).y1 < clock.y0
+    assert not scene.titles_overlap()

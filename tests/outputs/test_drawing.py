@@ -10,16 +10,19 @@ from saved_runs import short_run
 
 pytest.importorskip("matplotlib")
 
+from matplotlib.colors import to_rgb  # noqa: E402
 from matplotlib.figure import Figure  # noqa: E402
 
 from mpcform.formation.geometry import formation_edges
 from mpcform.formation.template import Template  # noqa: E402
 from mpcform.outputs.drawing import (  # noqa: E402
+    DRONE_COLOURS,
     EVENTS_GID,
     PER_DRONE_MAX,
     SNAPSHOT_LABEL,
     WIND_GID,
     closest_pair,
+    distinct_colours,
     draw_snapshot,
     draw_wind,
     drone_colours,
@@ -145,3 +148,23 @@ def test_what_the_plant_reported_is_noted_in_red(tmp_path: Path) -> None:
         note.get_text() == "on the floor: 3; planning stopped for drone 3 at 0.7 s"
         and note.get_color() == "tab:red"
     )
+
+
+def lab(colours: list) -> np.ndarray:
+    """CIE L*a*b* (D65) of matplotlib colours."""
+    rgb = np.array([to_rgb(c) for c in colours])
+    linear = np.where(rgb <= 0.04045, rgb / 12.92, ((rgb + 0.055) / 1.055) ** 2.4)
+    m = np.array([[0.4124, 0.3576, 0.1805], [0.2126, 0.7152, 0.0722], [0.0193, 0.1192, 0.9505]])
+    xyz = linear @ m.T / np.array([0.95047, 1.0, 1.08883])
+    f = np.where(xyz > (6 / 29) ** 3, np.cbrt(xyz), xyz / (3 * (6 / 29) ** 2) + 4 / 29)
+    return np.stack([116 * f[:, 1] - 16, 500 * (f[:, 0] - f[:, 1]), 200 * (f[:, 1] - f[:, 2])], axis=1)
+
+
+@pytest.mark.parametrize(("n", "delta_e"), [(6, 25.0), (12, 25.0), (20, 15.0), (40, 1.0)])
+def test_drone_colours_stay_apart_in_lab(n: int, delta_e: float) -> None:
+    colours = distinct_colours(n)
+    d = np.linalg.norm(lab(colours)[:, None] - lab(colours)[None], axis=-1)
+    assert d[np.triu_indices(n, 1)].min() > delta_e
+    if n <= 20:  # the time series' six first, as the plans' path colours (top view and projections)
+        assert [to_rgb(c) for c in colours[:PER_DRONE_MAX]] == [to_rgb(c) for c in DRONE_COLOURS]
+        assert [to_rgb(c) for c in path_colours(n)] == [to_rgb(c) for c in colours]

@@ -100,3 +100,34 @@ def test_projected_circles_of_the_closest_pair_overlap_only_for_a_breach(tmp_pat
         np.testing.assert_allclose(centres, run.trajectory.positions_m[k][[i, j]][:, list(plane)])
         assert circles[0].radius == pytest.approx(run.d_min_m / 2 * seen / dist)
         assert 2 * circles[0].radius <= seen + 1e-12  # they touch at most: not read as a violation
+
+
+def test_the_legend_sits_under_the_top_view_without_an_empty_band(tmp_path: Path) -> None:
+    short_run("swap_spatial_12", tmp_path, steps=40)  # the colour bar narrows the equal-aspect plot
+    fig = top_view(load_run(tmp_path))
+    fig.canvas.draw()
+    renderer = fig.canvas.get_renderer()
+    ax, legend = fig.axes[0], fig.legends[0].get_window_extent(renderer)
+    plot = ax.get_tightbbox(renderer)  # the axes with their tick labels and x label
+    assert 0 <= plot.y0 - legend.y1 <= 0.25 * fig.dpi  # at most a quarter inch between them
+    assert ax.get_position().height == pytest.approx(ax.get_position(original=True).height, rel=0.01)
+
+
+@pytest.mark.parametrize("name", ["worked_example", "swap_planar_8"])
+def test_time_labels_cover_no_drone_marker(tmp_path: Path, name: str) -> None:
+    short_run(name, tmp_path, steps=60)
+    fig = top_view(load_run(tmp_path))
+    fig.canvas.draw()
+    renderer = fig.canvas.get_renderer()
+    ax = fig.axes[0]
+    markers = np.concatenate(
+        [c.get_offset_transform().transform(c.get_offsets()) for c in ax.collections if len(c.get_offsets())]
+    )
+    labels = [t for t in ax.texts if t.get_gid() == SNAPSHOT_LABEL]
+    assert labels[0].get_text() == "t = 0 s"
+    for label in labels:
+        box = label.get_window_extent(renderer)
+        inside = (markers >= [box.x0, box.y0]) & (markers <= [box.x1, box.y1])
+        assert not inside.all(axis=1).any(), label.get_text()
+        anchor = ax.transData.transform(label.xy)
+        assert np.hypot(*(anchor - np.clip(anchor, [box.x0, box.y0], [box.x1, box.y1]))) >= 4.0  # beside it

@@ -332,3 +332,41 @@ def test_the_wind_is_in_the_payload() -> None:
     assert viewer.viewer_payload(**run)["wind"] is None
     with pytest.raises(ValidationError, match="wind"):
         viewer.viewer_payload(**run, wind=(np.array([1.0, 0.0, 0.0]), 0.3))
+
+
+def spatial_synthetic() -> dict:
+    """:func:`synthetic` lifted into space: the drones climb 1 m (no obstacle, no geofence)."""
+    run = synthetic()
+    t, p = run["t_s"], run["positions_m"]
+    p = np.concatenate([p, np.broadcast_to(t[:, None, None] / 4, (*p.shape[:2], 1))], axis=-1)
+    ref = p + 0.05 * np.exp(-2.0 * t)[:, None, None]
+    curves = viewer.viewer_curves(t, p, reference_m=ref)
+    return {
+        **run,
+        "positions_m": p,
+        "reference_m": ref,
+        "curves": curves,
+        "obstacles": None,
+        "geofence": None,
+    }
+
+
+TRIAD_RGB = {"x": (0xD6, 0x27, 0x28), "y": (0x2C, 0xA0, 0x2C), "z": (0x1F, 0x77, 0xB4)}
+
+
+def test_the_3d_view_draws_an_axis_triad(browser: str, tmp_path: Path) -> None:
+    """x red, y green, z blue, labelled, in the lower left corner of the 3-D scene (none in 2-D)."""
+    page = viewer.write_viewer_html(tmp_path / "spatial.html", **spatial_synthetic())
+    html = page.read_text(encoding="utf-8")
+    assert "drawTriad" in html and all(f'["{a}", "#{bytes(c).hex()}"]' in html for a, c in TRIAD_RGB.items())
+    dom = check_page(browser, page, tmp_path, 41, "#t=1")
+    found = re.search(r'data-triad="([-\d.,;]+)"', dom)
+    assert found is not None, re.findall(r"<body[^>]*>", dom)
+    tips = np.array([[float(v) for v in q.split(",")] for q in found.group(1).split(";")])
+    assert tips.shape == (3, 2) and (tips > 10).all() and (tips < 100).all()  # from the lower left [px]
+    image = plt_image(tmp_path / "spatial.png")[WINDOW[1] // 2 :, :160]  # the scene's lower left
+    for rgb in TRIAD_RGB.values():  # each axis drawn in its colour (a red line only there)
+        assert (np.abs(image - np.array(rgb) / 255).max(axis=-1) < 0.1).sum() >= 30
+    planar = viewer.write_viewer_html(tmp_path / "planar.html", **synthetic())
+    dom, _ = chromium(browser, planar, "--dump-dom", tmp_path / "profile-planar", "#t=1")
+    assert "data-triad" not in dom

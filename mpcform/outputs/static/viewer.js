@@ -382,10 +382,28 @@
     g.fillRect(x0, y0, w, rows.length * lh + 8); g.strokeRect(x0, y0, w, rows.length * lh + 8);
     rows.forEach(([label, mark], j) => { const y = y0 + 4 + lh * j + lh / 2; mark(x0 + 6, y); text(g, label, x0 + 30, y, "left", "middle", font(12), COL.ink); });
   }
+  const TRIAD = [["x", "#d62728"], ["y", "#2ca02c"], ["z", "#1f77b4"]];
+  let triad = null; // the 3-D triad's tips, from the scene's lower left [px], published for tests
+  function drawTriad(g, h) { // the world axes' directions in the lower left, rotated with the view
+    const ca = Math.cos(view.az), sa = Math.sin(view.az), ce = Math.cos(view.el), se = Math.sin(view.el);
+    const o = [54, h - 58], L = 34; // the rotation of projector(), without perspective, pan or zoom
+    const axes = [[-sa, -se * ca, ce * ca], [ca, -se * sa, ce * sa], [0, ce, se]].map((u, a) => ({ u, a }));
+    g.fillStyle = "rgba(255,255,255,0.85)"; circle(g, o[0], o[1], L + 14); g.fill();
+    triad = [];
+    for (const { u, a } of axes.sort((p, q) => p.u[2] - q.u[2])) { // the farthest first
+      const tip = [o[0] + L * u[0], o[1] - L * u[1]], len = Math.hypot(u[0], u[1]) || 1;
+      g.strokeStyle = TRIAD[a][1]; g.lineWidth = 2.4; g.lineCap = "round"; seg(g, o, tip); g.lineCap = "butt";
+      const lx = tip[0] + (9 * u[0]) / len, ly = tip[1] - (9 * u[1]) / len;
+      text(g, TRIAD[a][0], lx, ly, "center", "middle", font(12, "600"), TRIAD[a][1]);
+      triad[a] = [tip[0], h - tip[1]];
+    }
+    circle(g, o[0], o[1], 2); g.fillStyle = COL.ink; g.fill();
+  }
   function renderScene() {
     const { g, w, h } = fit(canvas);
     const info = drawScene(g, w, h, state.time);
     drawLegend(g);
+    if (dim === 3) drawTriad(g, h);
     const [tx, ty] = dim === 2 ? [w - 26, 40] : [w - 14, 26]; // 2-D: inside the plot's frame
     text(g, "t = " + state.time.toFixed(TIME_DEC) + " s", tx, ty, "right", "alphabetic", font(16, "600"), COL.ink);
     const hint = dim === 3 ? "drag: orbit · shift-drag: pan · wheel: zoom · double-click: reset" : "drag: pan · wheel: zoom · double-click: reset";
@@ -468,6 +486,7 @@
     body.dataset.sample = String(kn); body.dataset.below = String(info.below); body.dataset.flown = String(info.flown);
     if (D.wind) body.dataset.wind = windDir ? windDir.map((v) => v.toFixed(2)).join(",") : "across";
     if (extent) body.dataset.extent = extent.map((v) => v.toFixed(3)).join(",");
+    if (triad) body.dataset.triad = triad.map((q) => q.map((v) => v.toFixed(1)).join(",")).join(";");
     return info;
   }
   function closestText() {
