@@ -21,7 +21,7 @@ from importlib import metadata
 from pathlib import Path
 from typing import NoReturn
 
-from mpcform.cli import bench_commands, sweep_commands
+from mpcform.cli import bench_commands, report_commands, sweep_commands
 from mpcform.cli import handlers as cli_runner
 from mpcform.cli.options import add_max_memory, add_max_work, solver_help
 from mpcform.cli.paths import check_output_dir, check_output_paths
@@ -225,6 +225,7 @@ def build_parser() -> argparse.ArgumentParser:
     bench_commands.add_bench(sub)
     bench_commands.add_problems(sub)
     sweep_commands.add_sweep(sub)
+    report_commands.add_report(sub)
     cli_runner.add_commands(sub)  # plot, compare, export
     return parser
 
