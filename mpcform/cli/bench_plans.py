@@ -8,6 +8,7 @@ then give the pace measured as the cases run.
 from __future__ import annotations
 
 import argparse
+import importlib.util
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -52,6 +53,8 @@ def mpc_plan(args: argparse.Namespace, scenarios: Sequence[str | Path]) -> str:
     """``bench mpc``'s plan."""
     cases = len(args.n) + len(args.spatial_n) + len(scenarios)
     cvxpy = f"cvxpy within {args.cvxpy_budget:g} s per case" if args.cvxpy_budget > 0 else "no cvxpy"
+    if args.cvxpy_budget > 0 and importlib.util.find_spec("cvxpy") is None:  # found, not imported
+        cvxpy = "no cvxpy (not installed)"
     return (
         f"{count(cases, 'case')} (planar swaps n = {_ns(args.n) or 'none'}; spatial swaps n = "
         f"{_ns(args.spatial_n) or 'none'}; scenarios: {_names(scenarios)}), one run each, {args.steps} "

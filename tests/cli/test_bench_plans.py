@@ -3,6 +3,8 @@ sentence names the defaults' run time."""
 
 from __future__ import annotations
 
+import importlib.util
+
 import pytest
 
 from mpcform.cli import bench_plans as plans
@@ -27,7 +29,9 @@ def test_plans_of_the_defaults() -> None:
     assert mpc.startswith(
         "6 cases (planar swaps n = 8, 16, 32, 64; spatial swaps n = 20; scenarios: swap_planar_8)"
     )
-    assert "solver piqp" in mpc and "cvxpy within 60 s per case" in mpc and "time: " in mpc
+    cvxpy = "no cvxpy (not installed)" if importlib.util.find_spec("cvxpy") is None else "cvxpy within 60 s"
+    assert "solver piqp" in mpc and cvxpy in mpc and "time: " in mpc
+    assert "no cvxpy;" in plans.mpc_plan(_args("mpc", "--cvxpy-budget", "0"), ())
     scale = plans.scale_plan(_args("scale"))
     assert scale.startswith("20 cases (scenarios formation, crossing x n = 10, 30, 100, 300, 1000 x modes")
     assert plans.online_plan(_args("online")).startswith("3 crossings (n = 20, 100, 1000), one run each")
