@@ -13,16 +13,16 @@ from collections.abc import Sequence
 from pathlib import Path
 
 RUN_TIMES = {
-    "mpc": "roughly 3-10 min, an estimate (76 s measured for --n 8 --cvxpy-budget 5, 5 cases; the "
-    "defaults add three larger swaps and up to 60 s of cvxpy per case)",
-    "solvers": "roughly 10-25 min with the 13 solvers usable here, an estimate (156 s measured for "
-    "--solvers piqp osqp, references included)",
+    "mpc": "roughly 3-12 min, an estimate (115 s measured for --n 8 without cvxpy, 5 cases, on a shared "
+    "machine; the defaults add three larger planar swaps and up to --cvxpy-budget of cvxpy per case)",
+    "solvers": "roughly 15-25 min with the 13 solvers usable here, an estimate (156-356 s measured for "
+    "--solvers piqp osqp by the machine's load: 1-4 min for the two references, about a minute per solver)",
     "closed-loop": "roughly 3-10 min with every usable solver, an estimate (13 s measured for --solvers "
     "piqp; a stalled run can hold up to --timeout)",
     "scale": "roughly 5-15 min, an estimate (20 cases up to 1000 drones; each monolithic case runs up "
     "to its 60 s budget)",
     "split": "about 3-9 min (513 s measured on a shared machine, wall time 2-3x the CPU time)",
-    "plant": "about 6 s (measured: 3 runs of about 1.7 s)",
+    "plant": "about 4-6 s (measured: 3 runs of 1.1-1.7 s)",
     "online": "about 25 s (24 s measured)",
 }
 """The run time of each benchmark's defaults on a 2-core machine (rough)."""
@@ -58,29 +58,29 @@ def mpc_plan(args: argparse.Namespace, scenarios: Sequence[str | Path]) -> str:
     return (
         f"{count(cases, 'case')} (planar swaps n = {_ns(args.n) or 'none'}; spatial swaps n = "
         f"{_ns(args.spatial_n) or 'none'}; scenarios: {_names(scenarios)}), one run each, {args.steps} "
-        f"steps per swap, {args.coupling}, solver {args.solver}, {cvxpy}; time: about 10-30 s per case "
-        "of 60 steps up to 64 drones on a 2-core machine, plus its cvxpy time"
+        f"steps per swap, {args.coupling}, solver {args.solver}, {cvxpy}; time: about 1-50 s per case "
+        "on a 2-core machine (joint spatial swaps of 20 drones the longest), plus its cvxpy time"
     )
 
 
 def solvers_plan(args: argparse.Namespace, problems: int, where: str) -> str:
     """``bench solvers``' plan (before the installed solvers are looked up)."""
-    names = ", ".join(args.solvers) if args.solvers else "every installed solver (named next)"
+    names = f"solvers {', '.join(args.solvers)}" if args.solvers else "every installed solver (named next)"
     exact = "" if args.no_exact else ", then the exact casadi:ipopt reference"
     return (
-        f"{count(problems, 'problem')} of {where}: the clarabel reference, then solvers {names} side "
+        f"{count(problems, 'problem')} of {where}: the clarabel reference, then {names} side "
         f"by side in modes {', '.join(args.modes)} x settings {', '.join(args.settings)}{exact}; time limit "
-        f"{args.time_limit:g} s per solve; time: about a minute per solver and the references on a "
-        "2-core machine (156 s for piqp and osqp)"
+        f"{args.time_limit:g} s per solve; time: about 1-2 min for each reference, then 5-10 s per "
+        "solver per mode and setting on a 2-core machine"
     )
 
 
 def closed_loop_plan(args: argparse.Namespace, scenarios: Sequence[str | Path]) -> str:
     """``bench closed-loop``'s plan (before the installed solvers are looked up)."""
-    names = ", ".join(args.solvers) if args.solvers else "every usable solver (named next)"
+    names = f"solvers {', '.join(args.solvers)}" if args.solvers else "every usable solver (named next)"
     duration = f"{args.duration:g} s each" if args.duration else "their own durations"
     return (
-        f"scenarios {_names(scenarios)} ({duration}) x solvers {names}: one run per pair, each in its "
+        f"scenarios {_names(scenarios)} ({duration}) x {names}: one run per pair, each in its "
         f"own process, time limit {args.timeout:g} s per run; time: about 5 s per run for piqp on the "
         "swaps (2-core machine), more for a solver set up at every call"
     )
