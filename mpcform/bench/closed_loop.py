@@ -95,24 +95,27 @@ def run_closed_loop(
     solvers: Sequence[str] | None = None,
     timeout_s: float = 600.0,
     duration_s: float | None = None,
-    progress: Callable[[str], None] | None = None,
+    progress: Callable[[str, int, int], None] | None = None,
 ) -> list[dict[str, Any]]:
-    """Each solver drives each scenario (controller ``mpc``) in its own process; one record per run."""
+    """Each solver drives each scenario (controller ``mpc``) in its own process; one record per run.
+    ``progress(label, i, n)`` is called as run ``i`` of ``n`` starts (one not run too)."""
     infos = [solver_info(n) for n in (default_solvers() if solvers is None else solvers)]  # unknown: raises
     usable = next((info.name for info in infos if info.usable), None)
     for scenario in scenarios:  # an invalid scenario is an error here, not a failed row per solver
         load_bench_scenario(scenario, duration_s, usable)
     ctx = mp.get_context("spawn")
-    rows = []
+    rows: list[dict[str, Any]] = []
     os.environ.update(BENCH_ENV)
     for scenario in scenarios:
         for info in infos:
             name = info.name
+            if progress is not None:
+                why = "" if info.usable else f": not run, {shorten(info.note, 60)}"
+                label = f"{Path(scenario).stem} ({name}{why})"
+                progress(label, len(rows) + 1, len(scenarios) * len(infos))
             if not info.usable:  # missing or unsupported: reported, not run
                 rows.append(_closed_loop_row(Path(scenario).stem, name, {"ok": False, "status": info.note}))
                 continue
-            if progress is not None:
-                progress(f"{Path(scenario).stem}: {name}")
             receiver, sender = ctx.Pipe(duplex=False)
             proc = ctx.Process(
                 target=_closed_loop_worker, args=(sender, str(scenario), name, duration_s), daemon=True

@@ -298,6 +298,25 @@ def markdown_table(rows: list[dict[str, Any]]) -> str:
     return "\n".join([table, "", "Times and ratios: wall / CPU (process time).", *notes])
 
 
+def check_cases(
+    planar_n: Sequence[int],
+    spatial_n: Sequence[int],
+    steps: int,
+    scenarios: Sequence[str | Path],
+    coupling: str,
+) -> list[MPCCase]:
+    """Swaps of >= 2 drones, >= 1 step and at least one case, else a :class:`ValidationError`;
+    the scenario files' cases (a file that is no case fails here)."""
+    if steps < 1 or any(n < 2 for n in (*planar_n, *spatial_n)):
+        got = f"--n {list(planar_n)}, --spatial-n {list(spatial_n)}, --steps {steps}"
+        raise ValidationError(
+            "--n/--spatial-n/--steps", f"expected swaps of >= 2 drones and >= 1 step, got {got}"
+        )
+    if not (planar_n or spatial_n or scenarios):
+        raise ValidationError("--n", "no case to run: give --n, --spatial-n or --scenarios")
+    return [scenario_case(path, coupling) for path in scenarios]
+
+
 def run(
     planar_n: Sequence[int],
     spatial_n: Sequence[int],
@@ -306,28 +325,25 @@ def run(
     coupling: str,
     cvxpy_budget_s: float = DEFAULT_CVXPY_BUDGET_S,
     scenarios: Sequence[str | Path] = DEFAULT_SCENARIOS,
-    progress: Callable[[str], None] | None = None,
+    progress: Callable[[str, int, int], None] | None = None,
 ) -> list[dict[str, Any]]:
     """The generated swaps, then the scenario files; cvxpy in every case that fits
-    ``cvxpy_budget_s`` (0: none). Bad sizes, steps or no case at all fail before any case runs."""
-    if steps < 1 or any(n < 2 for n in (*planar_n, *spatial_n)):
-        got = f"--n {list(planar_n)}, --spatial-n {list(spatial_n)}, --steps {steps}"
-        raise ValidationError(
-            "--n/--spatial-n/--steps", f"expected swaps of >= 2 drones and >= 1 step, got {got}"
-        )
-    if not (planar_n or spatial_n or scenarios):
-        raise ValidationError("--n", "no case to run: give --n, --spatial-n or --scenarios")
+    ``cvxpy_budget_s`` (0: none). Bad sizes, steps or no case at all fail before any case runs.
+    ``progress(label, i, n)`` is called as case ``i`` of ``n`` starts."""
+    from_files = check_cases(planar_n, spatial_n, steps, scenarios, coupling)
     cases = [
         generated_case(n, dim, steps, coupling)
         for dim, sizes in ((2, planar_n), (3, spatial_n))
         for n in sizes
     ]
-    cases += [scenario_case(path, coupling) for path in scenarios]
+    cases += from_files
     cvxpy_solver = solver if cvxpy_budget_s > 0 and _have_cvxpy() else None
     rows = []
-    for case in cases:
+    for i, case in enumerate(cases, 1):
         if progress is not None:
-            progress(f"bench mpc: {case.name} (n = {case.start_m.shape[0]})")
+            cvxpy = f", cvxpy within {cvxpy_budget_s:g} s" if cvxpy_solver else ""
+            label = f"{case.name} n={case.start_m.shape[0]} ({solver}, {coupling}{cvxpy})"
+            progress(label, i, len(cases))
         rows.append(bench_case(case, solver, cvxpy_solver, cvxpy_budget_s))
     return rows
 

@@ -11,6 +11,7 @@ share of drones within 0.1 m of their targets at the end (completion).
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -66,10 +67,20 @@ def bench_online(n: int, steps: int, budget_s: float, coupling: str = "decoupled
 
 
 def run(
-    ns: tuple[int, ...], steps: int, budget_s: float, coupling: str = "decoupled"
+    ns: tuple[int, ...],
+    steps: int,
+    budget_s: float,
+    coupling: str = "decoupled",
+    progress: Callable[[str, int, int], None] | None = None,
 ) -> list[dict[str, Any]]:
-    """:func:`bench_online` for every n of ``ns``."""
-    return [bench_online(n, steps, budget_s, coupling) for n in ns]
+    """:func:`bench_online` for every n of ``ns``; ``progress(label, i, n)`` as case ``i`` starts."""
+    rows = []
+    for i, n in enumerate(ns, 1):
+        if progress is not None:
+            solver = "DAQP per drone" if coupling == "decoupled" else "piqp"
+            progress(f"crossing n={n} ({coupling}, {solver}, {steps} steps)", i, len(ns))
+        rows.append(bench_online(n, steps, budget_s, coupling))
+    return rows
 
 
 def markdown_table(rows: list[dict[str, Any]]) -> str:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 
 import numpy as np
 
@@ -62,10 +63,21 @@ COLUMNS = (
 
 
 def run(
-    n: int, duration_s: float, rate_hz: float, repeats: int, *, wind: bool = True
+    n: int,
+    duration_s: float,
+    rate_hz: float,
+    repeats: int,
+    *,
+    wind: bool = True,
+    progress: Callable[[str, int, int], None] | None = None,
 ) -> list[dict[str, object]]:
-    """``repeats`` runs of :func:`bench_plant`; one row with wall and CPU medians and maxima."""
-    runs = [bench_plant(n, duration_s, rate_hz, wind=wind) for _ in range(max(1, repeats))]
+    """``repeats`` runs of :func:`bench_plant`; one row with wall and CPU medians and maxima;
+    ``progress(label, i, n)`` is called as run ``i`` of ``n`` starts."""
+    runs = []
+    for i in range(1, max(1, repeats) + 1):
+        if progress is not None:
+            progress(f"run, {n} drones x {duration_s:g} s at {rate_hz:g} Hz", i, max(1, repeats))
+        runs.append(bench_plant(n, duration_s, rate_hz, wind=wind))
     wall, cpu = (np.array([r[k] for r in runs]) for k in ("wall_s", "cpu_s"))
     row: dict[str, object] = {"n": n, "duration_s": duration_s, "rate_hz": rate_hz}
     row |= {"inner_steps": runs[0]["inner_steps"], "wind": "gusts" if wind else "none"}

@@ -179,27 +179,16 @@ def skipped_row(scenario: str, n: int, mode: str, steps: int, note: str) -> dict
     }
 
 
-def run(
-    sizes: Sequence[int] = DEFAULT_N,
-    scenarios: Sequence[str] = SCENARIOS,
-    coupling: str = "decoupled",
-    steps: int = 30,
-    solver: str = DEFAULT_SOLVER,
-    horizon: int = 10,
-    budget_s: float = 60.0,
-    monolithic_budget_s: float = 60.0,
-    isolate: bool = True,
-    trace_memory: bool = False,
-    progress: Callable[[str], None] | None = None,
-) -> list[dict[str, Any]]:
-    """Every case, one at a time (never two timed cases at once).
-
-    ``coupling`` is the planner's mode (``decoupled`` or ``joint``, with grouping); each of its
-    cases stops after ``budget_s`` of planning time. The monolithic joint QP runs side by side when
-    ``monolithic_budget_s > 0``; once one of its cases runs over, its larger sizes are skipped.
-    ``isolate`` runs every case in a fresh spawned process (clean peak-memory readings);
-    ``progress`` is called with a line per finished case.
-    """
+def check_options(
+    sizes: Sequence[int],
+    scenarios: Sequence[str],
+    coupling: str,
+    steps: int,
+    solver: str,
+    horizon: int,
+    monolithic_budget_s: float,
+) -> list[str]:
+    """The modes :func:`run` times; bad sizes, steps or a ``--solver`` a mode ignores fail here."""
     modes = [coupling] + (["monolithic"] if monolithic_budget_s > 0 else [])
     for mode in modes:  # bad input fails here, before any case process starts
         settings = mode_settings(mode, horizon)
@@ -214,26 +203,55 @@ def run(
         raise ValidationError(
             "--n/--steps", f"expected n >= {smallest} and steps >= 1, got n = {list(sizes)}, steps = {steps}"
         )
+    return modes
+
+
+def run(
+    sizes: Sequence[int] = DEFAULT_N,
+    scenarios: Sequence[str] = SCENARIOS,
+    coupling: str = "decoupled",
+    steps: int = 30,
+    solver: str = DEFAULT_SOLVER,
+    horizon: int = 10,
+    budget_s: float = 60.0,
+    monolithic_budget_s: float = 60.0,
+    isolate: bool = True,
+    trace_memory: bool = False,
+    progress: Callable[[str, int, int], None] | None = None,
+) -> list[dict[str, Any]]:
+    """Every case, one at a time (never two timed cases at once).
+
+    ``coupling`` is the planner's mode (``decoupled`` or ``joint``, with grouping); each of its
+    cases stops after ``budget_s`` of planning time. The monolithic joint QP runs side by side when
+    ``monolithic_budget_s > 0``; once one of its cases runs over, its larger sizes are skipped.
+    ``isolate`` runs every case in a fresh spawned process (clean peak-memory readings);
+    ``progress(label, i, n)`` is called as case ``i`` of ``n`` starts (a skipped one too).
+    """
+    modes = check_options(sizes, scenarios, coupling, steps, solver, horizon, monolithic_budget_s)
     rows: list[dict[str, Any]] = []
     over_budget: dict[tuple[str, str], int] = {}
+    total = len(scenarios) * len(sizes) * len(modes)
     with ExitStack() as stack:
         pool = stack.enter_context(process_pool(1, max_tasks_per_child=1)) if isolate else None
         for scenario in scenarios:
             for n in sorted(sizes):
                 for mode in modes:
                     budget = monolithic_budget_s if mode == "monolithic" else budget_s
-                    if (scenario, mode) in over_budget:
+                    skipped = (scenario, mode) in over_budget
+                    if progress is not None:
+                        what = (
+                            "skipped"
+                            if skipped
+                            else f"{_solver(mode_settings(mode, horizon), solver) or 'DAQP'}"
+                        )
+                        progress(f"{scenario} n={n} {mode} ({what})", len(rows) + 1, total)
+                    if skipped:
                         note = f"skipped: n = {over_budget[scenario, mode]} exceeded the {budget:g} s budget"
                         rows.append(skipped_row(scenario, n, mode, steps, note))
                         continue
                     args = (scenario, n, mode, steps, solver, horizon, budget, trace_memory)
                     row = pool.submit(bench_case, *args).result() if pool is not None else bench_case(*args)
                     rows.append(row)
-                    if progress is not None:
-                        progress(
-                            f"bench scale: {scenario} n={n} {mode}: median step "
-                            f"{row['step_ms_median']:.1f} ms over {row['steps_run']} steps"
-                        )
                     if mode == "monolithic" and row["steps_run"] < steps:
                         over_budget[scenario, mode] = n
     return rows

@@ -71,25 +71,17 @@ def run_solver_benchmark(
     modes: Sequence[str] = MODES,
     time_limit_s: float = DEFAULT_TIME_LIMIT_S,
     exact: bool = True,
-    progress: Callable[[str], None] | None = None,
+    progress: Callable[[str, int, int], None] | None = None,
 ) -> SolverBenchmark:
-    """Run the problem benchmark (see the module docstring) on the problems in ``problems_dir``."""
+    """Run the problem benchmark (see the module docstring) on the problems in ``problems_dir``.
+    ``progress(label, i, n)`` is called as stage ``i`` of ``n`` starts: the reference, each (mode,
+    setting) of the solvers side by side, the exact reference."""
     start, load = time.perf_counter(), os.getloadavg()[0]
     paths = [str(p) for p in problem_files(problems_dir)]
     problems = [load_problem(p) for p in paths]
     names = list(default_solvers() if solvers is None else solvers)
     for name in names:
         check_solver_name(name)  # an unknown name is a usage error before anything runs
-
-    def say(text: str) -> None:
-        if progress is not None:
-            progress(text)
-
-    say(f"reference: {REFERENCE_SOLVER} at {REFERENCE_EPS:g}")
-    ref_tasks = [
-        Task(i, p, REFERENCE_SOLVER, "high", "cold", True, REFERENCE_EPS, 60.0) for i, p in enumerate(paths)
-    ]
-    references = [r["objective"] if r["found"] else None for r in run_isolated(ref_tasks)]
     tasks: list[Task] = []
     not_run: list[dict[str, Any]] = []
     for name in names:
@@ -107,11 +99,36 @@ def run_solver_benchmark(
             continue
         solver_modes = [m for m in modes if m == "cold" or info.warm_start or info.persistent]
         tasks += benchmark_tasks(paths, name, settings, solver_modes, time_limit_s)
-    say(f"{len(tasks)} solves by {len(names) - len(not_run)} solvers, side by side")
-    results = run_isolated(tasks)
+    exact = exact and solver_info(EXACT_SOLVER).usable
+    groups: dict[tuple[str, str], list[str]] = {}
+    for task in tasks:
+        names_in = groups.setdefault((task.mode, task.setting), [])
+        if task.solver not in names_in:
+            names_in.append(task.solver)
+    stages = 1 + len(groups) + int(exact)
+    on = f"on {len(paths)} problems"
+
+    def say(label: str, i: int) -> None:
+        if progress is not None:
+            progress(label, i, stages)
+
+    begun: list[tuple[str, str]] = []  # the (mode, setting) groups started, in the order they run
+
+    def starting(task: Task) -> None:
+        key = (task.mode, task.setting)
+        if key not in begun:
+            begun.append(key)
+            say(f"{task.mode} {task.setting}: {', '.join(groups[key])} side by side {on}", 1 + len(begun))
+
+    say(f"reference {REFERENCE_SOLVER} at {REFERENCE_EPS:g} {on}", 1)
+    ref_tasks = [
+        Task(i, p, REFERENCE_SOLVER, "high", "cold", True, REFERENCE_EPS, 60.0) for i, p in enumerate(paths)
+    ]
+    references = [r["objective"] if r["found"] else None for r in run_isolated(ref_tasks)]
+    results = run_isolated(tasks, starting=starting)
     exact_results: list[dict[str, Any]] = []
-    if exact and solver_info(EXACT_SOLVER).usable:
-        say(f"exact reference: {EXACT_SOLVER}")
+    if exact:
+        say(f"exact reference {EXACT_SOLVER} {on}", stages)
         tasks = [
             Task(i, p, EXACT_SOLVER, "mid", "warm", True, 1e-6, EXACT_TIME_LIMIT_S)
             for i, p in enumerate(paths)

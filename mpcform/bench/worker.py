@@ -181,6 +181,7 @@ def run_isolated(
     progress: Callable[[dict[str, Any]], None] | None = None,
     grace_s: float = 5.0,
     worker: Callable[[Connection], None] = _worker,
+    starting: Callable[[Task], None] | None = None,
 ) -> list[dict[str, Any]]:
     """Run ``tasks`` in one child process per solver, side by side, with a hard time limit per solve.
 
@@ -191,7 +192,8 @@ def run_isolated(
     for the task it happened in and the solver gets a fresh process for its next task; after
     :data:`MAX_CONSECUTIVE_TIMEOUTS` solves in a row over the time limit (killed, or answering
     late), the rest of that solver's group (mode, setting) is recorded as skipped. Returns one
-    result per task, in order; ``worker`` is the processes' entry point.
+    result per task, in order; ``worker`` is the processes' entry point; ``starting(task)`` is
+    called before each task runs (or is skipped), ``progress(result)`` after.
     """
     ctx = mp.get_context("spawn")
     slots: dict[tuple[int, int, int], list[int]] = {}
@@ -208,6 +210,8 @@ def run_isolated(
             ids = slots[key]
             for i in ids[n % len(ids) :] + ids[: n % len(ids)]:
                 task = tasks[i]
+                if starting is not None:
+                    starting(task)
                 if task.group in abandoned:
                     why = f"skipped after {MAX_CONSECUTIVE_TIMEOUTS} solves over the time limit"
                     results[i] = _failure(task, why, 0.0)

@@ -1,6 +1,8 @@
 """The ``bench`` and ``problems`` subcommands of ``mpcform`` (wired in by :mod:`mpcform.cli.main`).
 
-The benchmark modules are imported only when a benchmark runs (or its options are listed).
+The benchmark modules are imported only when a benchmark runs (or its options are listed). A
+benchmark checks its options, says its plan on stderr (:mod:`mpcform.cli.bench_plans`), then a
+line per case (:class:`~mpcform.cli.progress.CaseLines`); stdout keeps the tables.
 """
 
 from __future__ import annotations
@@ -8,10 +10,14 @@ from __future__ import annotations
 import argparse
 import math
 import sys
+from collections.abc import Callable
 from pathlib import Path
 
-from mpcform.cli.options import DefaultsFormatter, print_bench, progress, seconds, solver_help
+from mpcform.cli import bench_plans as plans
+from mpcform.cli.options import DefaultsFormatter, print_bench, seconds, solver_help
+from mpcform.cli.progress import CaseLines
 from mpcform.errors import ValidationError
+from mpcform.scenario.load import load_scenario
 from mpcform.scenario.size import DEFAULT_MAX_WORK
 from mpcform.solvers.registry import DEFAULT_SOLVER, PERSISTENT_SOLVERS
 
@@ -26,6 +32,8 @@ def _bench_mpc(args: argparse.Namespace) -> int:
     from mpcform.bench import mpc as bench_mpc  # benchmarks are imported only when asked for
 
     scenarios = bench_mpc.DEFAULT_SCENARIOS if args.scenarios is None else args.scenarios
+    bench_mpc.check_cases(args.n, args.spatial_n, args.steps, scenarios, args.coupling)
+    lines = _started("mpc", plans.mpc_plan(args, scenarios))
     rows = bench_mpc.run(
         args.n,
         args.spatial_n,
@@ -34,8 +42,9 @@ def _bench_mpc(args: argparse.Namespace) -> int:
         args.coupling,
         args.cvxpy_budget,
         scenarios,
-        progress=progress,
+        progress=lines.case,
     )
+    lines.done()
     print_bench(bench_mpc.markdown_table(rows), rows, args.json)
     return 0
 
@@ -115,9 +124,17 @@ def add_bench(sub: argparse._SubParsersAction) -> None:
     online.add_argument("--budget", type=float, default=0.1, help="the step deadline [s]")
     online.add_argument("--coupling", choices=("decoupled", "joint"), default="decoupled", help="the rows")
     online.add_argument("--json", metavar="PATH", help="also write the rows as a JSON list of records")
-    for choice in kinds._choices_actions:  # each benchmark's --help: what it measures, and the defaults
+    for choice in kinds._choices_actions:  # each benchmark's --help: what it measures, the defaults' time
         parser = kinds.choices[choice.dest]
-        parser.description, parser.formatter_class = choice.help, DefaultsFormatter
+        parser.description = f"{choice.help}. {plans.run_time_help(choice.dest)}"
+        parser.formatter_class = DefaultsFormatter
+
+
+def _started(name: str, plan: str) -> CaseLines:
+    """The progress lines of ``bench NAME``, its plan said first."""
+    lines = CaseLines(f"bench {name}")
+    lines.say(plan)
+    return lines
 
 
 def _bench_split(args: argparse.Namespace) -> int:
@@ -127,7 +144,11 @@ def _bench_split(args: argparse.Namespace) -> int:
         print("mpcform: error: --rounds must be >= 0 and --steps >= 1", file=sys.stderr)
         return 2
     scenarios = bench_split.DEFAULT_SCENARIOS if args.scenarios is None else tuple(args.scenarios)
-    rows = bench_split.run(scenarios, tuple(args.rounds), args.steps, args.figure)
+    for path in scenarios:  # an unreadable or invalid file is one error line, before the plan
+        load_scenario(path)
+    lines = _started("split", plans.split_plan(args, scenarios))
+    rows = bench_split.run(scenarios, tuple(args.rounds), args.steps, args.figure, progress=lines.case)
+    lines.done()
     print_bench(bench_split.markdown_table(rows), rows, args.json)
     return 0
 
@@ -136,7 +157,11 @@ def _bench_plant(args: argparse.Namespace) -> int:
     from mpcform.bench import plant as bench_plant
 
     check_plant_options(args)
-    rows = bench_plant.run(args.n, args.duration, args.rate, args.repeats, wind=not args.no_wind)
+    lines = _started("plant", plans.plant_plan(args))
+    rows = bench_plant.run(
+        args.n, args.duration, args.rate, args.repeats, wind=not args.no_wind, progress=lines.case
+    )
+    lines.done()
     print_bench(bench_plant.markdown_table(rows), rows, args.json)
     return 0
 
@@ -149,7 +174,9 @@ def _bench_online(args: argparse.Namespace) -> int:
         raise ValidationError(flag, f"expected --n in 2..{MAX_ONLINE_N} and --steps >= 1, got {value}")
     if not 0.0 < args.budget < math.inf:
         raise ValidationError("--budget", f"expected a finite deadline > 0 [s], got {args.budget:g}")
-    rows = bench_online.run(tuple(args.n), args.steps, args.budget, args.coupling)
+    lines = _started("online", plans.online_plan(args))
+    rows = bench_online.run(tuple(args.n), args.steps, args.budget, args.coupling, progress=lines.case)
+    lines.done()
     print_bench(bench_online.markdown_table(rows), rows, args.json)
     return 0
 
@@ -178,17 +205,22 @@ def check_plant_options(args: argparse.Namespace) -> None:
 def _bench_solvers(args: argparse.Namespace) -> int:
     from mpcform.bench import report as bench_report
     from mpcform.bench import solvers as bs
+    from mpcform.bench.accuracy import default_solvers
+    from mpcform.bench.problems import problem_files
 
     problems = args.problems or bs.DEFAULT_PROBLEMS_DIR
+    lines = _started("solvers", plans.solvers_plan(args, len(problem_files(problems)), str(problems)))
+    names = _solver_names(lines, args.solvers, default_solvers)
     bench = bs.run_solver_benchmark(
         problems,
-        args.solvers,
+        names,
         args.settings,
         args.modes,
         args.time_limit,
         exact=not args.no_exact,
-        progress=progress,
+        progress=lines.case,
     )
+    lines.done()
     report = bench_report.markdown_report(bench)
     print_bench(report, bench_report.records(bench), args.json)
     if args.report:
@@ -198,16 +230,30 @@ def _bench_solvers(args: argparse.Namespace) -> int:
 
 def _bench_closed_loop(args: argparse.Namespace) -> int:
     from mpcform.bench import closed_loop
+    from mpcform.bench.accuracy import default_solvers
     from mpcform.bench.problems import DEFAULT_SCENARIOS
 
-    rows = closed_loop.run_closed_loop(
-        args.scenarios or DEFAULT_SCENARIOS[:2], args.solvers, args.timeout, args.duration, progress=progress
-    )
+    scenarios = args.scenarios or DEFAULT_SCENARIOS[:2]
+    for scenario in scenarios:  # an invalid one is one error line, before the plan
+        closed_loop.load_bench_scenario(scenario, args.duration, DEFAULT_SOLVER)
+    lines = _started("closed-loop", plans.closed_loop_plan(args, scenarios))
+    names = _solver_names(lines, args.solvers, default_solvers)
+    rows = closed_loop.run_closed_loop(scenarios, names, args.timeout, args.duration, progress=lines.case)
+    lines.done()
     report = closed_loop.closed_loop_markdown(rows)
     print_bench(report, rows, args.json)
     if args.report:
         Path(args.report).write_text(report)
     return 0
+
+
+def _solver_names(lines: CaseLines, names: list[str] | None, known: Callable[[], list[str]]) -> list[str]:
+    """The solvers asked for, or every known one (looked up after the plan: it imports them)."""
+    if names:
+        return names
+    names = known()
+    lines.say(f"solvers: {', '.join(names)} (a missing or unsupported one is reported, not run)")
+    return names
 
 
 def _add_bench_solvers(kinds: argparse._SubParsersAction) -> None:
@@ -243,6 +289,10 @@ def _add_bench_solvers(kinds: argparse._SubParsersAction) -> None:
 def _bench_scale(args: argparse.Namespace) -> int:
     from mpcform.bench import scale as bench_scale
 
+    bench_scale.check_options(
+        args.n, args.scenario, args.coupling, args.steps, args.solver, args.horizon, args.monolithic_budget
+    )
+    lines = _started("scale", plans.scale_plan(args))
     rows = bench_scale.run(
         args.n,
         args.scenario,
@@ -254,8 +304,9 @@ def _bench_scale(args: argparse.Namespace) -> int:
         args.monolithic_budget,
         isolate=not args.in_process,
         trace_memory=args.tracemalloc,
-        progress=progress,
+        progress=lines.case,
     )
+    lines.done()
     text, growth = bench_scale.report(rows, args.coupling)
     print_bench(text, rows + growth, args.json)
     return 0

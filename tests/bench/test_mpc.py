@@ -13,6 +13,7 @@ import pytest
 from mpcform.bench.mpc import (
     RecordingBackend,
     bench_case,
+    check_cases,
     cpu_key,
     generated_case,
     markdown_table,
@@ -130,3 +131,11 @@ def test_cli_bench_mpc_refuses_a_negative_budget(capsys: pytest.CaptureFixture[s
 def test_bad_sizes_fail_before_any_case(planar, spatial, steps, scenarios, match) -> None:  # noqa: ANN001
     with pytest.raises(ValidationError, match=match):
         run(planar, spatial, steps, "piqp", "joint", 0.0, scenarios)
+
+
+def test_check_cases_builds_the_scenario_cases_before_any_runs() -> None:
+    swap = Path(__file__).resolve().parents[2] / "scenarios" / "swap_planar_8.toml"
+    (case,) = check_cases([4], [], 3, [swap], "decoupled")
+    assert case.name == "swap_planar_8" and case.settings.coupling == "decoupled"
+    with pytest.raises(ValidationError, match="no case to run"):
+        check_cases([], [], 3, [], "joint")

@@ -51,7 +51,19 @@ def test_crossing_has_qp_steps_and_formation_flight_takes_the_fast_path() -> Non
 
 
 def test_run_in_process_skips_monolithic_sizes_after_the_budget() -> None:
-    rows = run([6, 8], ["crossing"], "decoupled", steps=3, horizon=3, monolithic_budget_s=1e-9, isolate=False)
+    said: list[tuple[str, int, int]] = []
+    rows = run(
+        [6, 8],
+        ["crossing"],
+        "decoupled",
+        steps=3,
+        horizon=3,
+        monolithic_budget_s=1e-9,
+        isolate=False,
+        progress=lambda *line: said.append(line),
+    )
+    assert [(i, n) for _, i, n in said] == [(1, 4), (2, 4), (3, 4), (4, 4)]  # a line per case, skipped too
+    assert said[0][0] == "crossing n=6 decoupled (DAQP)" and said[3][0] == "crossing n=8 monolithic (skipped)"
     assert [(r["n"], r["mode"]) for r in rows] == [
         (6, "decoupled"),
         (6, "monolithic"),

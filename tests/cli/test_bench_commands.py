@@ -1,14 +1,25 @@
-"""The bench and problems subcommands' wiring: the benchmark families, their options and the checks
-made before a benchmark runs."""
+"""The bench and problems subcommands' wiring: the benchmark families, their options, the checks
+made before a benchmark runs, and what each says as it runs (its plan within 2 s, a line per case)."""
 
 from __future__ import annotations
 
 import argparse
+import os
+import re
+import shutil
+import subprocess
+import sys
+import time
 from pathlib import Path
 
 import pytest
 
+from mpcform.bench.problems import problem_files
+from mpcform.cli import bench_plans as plans
 from mpcform.cli.main import build_parser, main
+
+ROOT = Path(__file__).resolve().parents[2]
+SWAP = str(ROOT / "scenarios" / "swap_planar_8.toml")
 
 
 def _choices(parser: argparse.ArgumentParser) -> dict[str, argparse.ArgumentParser]:
@@ -111,3 +122,87 @@ def test_bench_online_refuses_bad_sizes(capsys) -> None:
     for argv, flag in ((["--n", "1"], "--n"), (["--steps", "0"], "--steps"), (["--budget", "0"], "--budget")):
         assert main(["bench", "online", *argv]) == 2
         assert f"mpcform: error: {flag}" in capsys.readouterr().err
+
+
+SMALLEST = {  # each benchmark's smallest real run, and its number of cases
+    "mpc": (["--n", "4", "6", "--spatial-n", "--scenarios", "--steps", "3", "--cvxpy-budget", "0"], 2),
+    "solvers": (["--solvers", "piqp", "--settings", "default", "--modes", "cold", "--no-exact"], 2),
+    "closed-loop": ([SWAP, "--solvers", "piqp", "--duration", "0.2"], 1),
+    "scale": (
+        [
+            "--n",
+            "4",
+            "8",
+            "--steps",
+            "2",
+            "--scenario",
+            "formation",
+            "--monolithic-budget",
+            "0",
+            "--in-process",
+        ],
+        2,
+    ),
+    "split": (["--scenarios", SWAP, "--rounds", "0", "1", "--steps", "3"], 1),
+    "plant": (["--n", "2", "--duration", "0.2", "--repeats", "2"], 2),
+    "online": (["--n", "4", "6", "--steps", "3"], 2),
+}
+
+
+@pytest.fixture(scope="module")
+def two_problems(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    out = tmp_path_factory.mktemp("problems")
+    for f in problem_files(ROOT / "problems")[:2]:
+        (out / f.parent.name).mkdir(exist_ok=True)
+        shutil.copy(f, out / f.parent.name / f.name)
+    return out
+
+
+def _import_floor_s(env: dict[str, str]) -> float:
+    """How long this machine, now, takes to start the interpreter and import the command."""
+    start = time.monotonic()
+    subprocess.run([sys.executable, "-c", "import mpcform.cli.main"], env=env, check=True)
+    return time.monotonic() - start
+
+
+@pytest.mark.parametrize("name", list(SMALLEST))
+def test_every_bench_says_its_plan_within_2_s_then_a_line_per_case(
+    name: str, two_problems: Path, tmp_path: Path
+) -> None:
+    """The plan within 2 s of the process's start (on a machine so loaded that importing the
+    command alone takes over 1.5 s, within 0.5 s of that import), then one line per case."""
+    argv, cases = SMALLEST[name]
+    if name == "solvers":
+        argv = [*argv, "--problems", str(two_problems)]
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    limit = max(2.0, _import_floor_s(env) + 0.5)
+    start = time.monotonic()
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "mpcform.cli.main", "bench", name, *argv, "--json", str(tmp_path / "r.json")],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env=env,
+        cwd=tmp_path,
+    )
+    assert proc.stderr is not None and proc.stdout is not None
+    first = proc.stderr.readline()
+    took = time.monotonic() - start
+    rest, out = proc.stderr.read(), proc.stdout.read()  # the tables are far below a pipe's buffer
+    proc.wait(timeout=60)
+    assert proc.returncode == 0, first + rest
+    assert took < limit, f"first line after {took:.2f} s (limit {limit:.2f} s): {first!r}"
+    assert first.startswith(f"bench {name}: ") and "time: " in first, first
+    lines = [first, *rest.splitlines()]
+    assert all(line.startswith(f"bench {name}: ") for line in lines), lines
+    seen = [m.groups() for line in lines if (m := re.match(rf"bench {name}: (\d+)/(\d+) \S", line))]
+    assert seen == [(str(i), str(cases)) for i in range(1, cases + 1)], lines
+    assert "elapsed" in lines[-2] and lines[-1].startswith(f"bench {name}: done: ")
+    assert "|" in out and f"bench {name}:" not in out  # stdout: the table alone
+    assert (tmp_path / "r.json").read_text().startswith("[")
+
+
+def test_every_bench_help_names_the_run_time_of_its_defaults() -> None:
+    for name, cmd in _choices(_choices(build_parser())["bench"]).items():
+        text = " ".join(cmd.format_help().split())
+        assert f"Run time of the defaults on a 2-core machine: {plans.RUN_TIMES[name]}." in text, name

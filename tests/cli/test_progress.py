@@ -1,10 +1,11 @@
-"""The progress bar: silent off a terminal and for short runs, erased when the run ends."""
+"""The progress bar: silent off a terminal and for short runs, erased when the run ends; a
+benchmark's plain lines: on any stream, flushed, one per case."""
 
 from __future__ import annotations
 
 import io
 
-from mpcform.cli.progress import BAR_WIDTH, ProgressBar, format_line
+from mpcform.cli.progress import BAR_WIDTH, CaseLines, ProgressBar, format_line
 
 
 class FakeTerminal(io.StringIO):
@@ -47,3 +48,25 @@ def test_format_line() -> None:
     assert "3.0 s" in line and "about 9.0 s left" in line
     assert "about" not in format_line("swap", 0, 100, 0.1)
     assert "2 min 05 s" in format_line("swap", 50, 100, 125.0)
+
+
+class FlushCounter(io.StringIO):
+    flushes = 0
+
+    def flush(self) -> None:
+        self.flushes += 1
+
+
+def test_case_lines_print_on_a_pipe_one_flushed_line_each() -> None:
+    stream = FlushCounter()  # not a terminal
+    lines = CaseLines("bench x", stream)
+    lines.say("2 cases")
+    lines.case("a (piqp)", 1, 2)
+    lines.case("b (piqp)", 2, 2)
+    lines.done()
+    out = stream.getvalue().splitlines()
+    assert stream.flushes == 4 and len(out) == 4 and all(line.startswith("bench x: ") for line in out)
+    assert out[0] == "bench x: 2 cases"
+    assert out[1].startswith("bench x: 1/2 a (piqp), ") and out[1].endswith(" s elapsed")
+    assert out[2].startswith("bench x: 2/2 b (piqp), ") and "left at this pace" in out[2]
+    assert out[3].startswith("bench x: done: 2 cases in ")
