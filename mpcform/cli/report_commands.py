@@ -161,17 +161,21 @@ def bench_table(
     from mpcform.bench import solvers as bs
 
     say(f"report: solver benchmark: {', '.join(opts.solvers)} on {root / 'problems'}")
+
+    def progress(label: str, i: int, n: int) -> None:
+        say(f"report: {i}/{n} {label}")
+
     bench = bs.run_solver_benchmark(
         root / "problems",
         opts.solvers,
         opts.settings,
         time_limit_s=opts.time_limit_s,
         exact=False,
-        progress=say,
+        progress=progress,
     )
     steps = opts.mpc_steps
     say(f"report: planner vs bare solver: planar swap of {MPC_CASE_N}, {steps} steps")
-    rows = bench_mpc.run([MPC_CASE_N], [], steps, MPC_SOLVER, "joint", 0.0, [], progress=say)
+    rows = bench_mpc.run([MPC_CASE_N], [], steps, MPC_SOLVER, "joint", 0.0, [], progress=progress)
     intro = (
         f"Solvers {', '.join(f'`{s}`' for s in opts.solvers)}, settings "
         f"{', '.join(f'`{s}`' for s in opts.settings)}, both modes, without the exact casadi:ipopt "
