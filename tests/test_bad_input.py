@@ -146,6 +146,7 @@ def make_full_run(root: Path) -> Path:
     """A short run with everything mpcform writes into its directory (data, figures, viewer, export)."""
     from mpcform.cli.main import main
 
+    root.mkdir(parents=True, exist_ok=True)
     scenario = root / "scenario.toml"
     scenario.write_text(WORKED.read_text().replace("duration = 10.0", "duration = 0.4"))
     argv = ["run", str(scenario), "--out", str(root / "run"), "--plot", "--html", "--export"]
