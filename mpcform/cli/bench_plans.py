@@ -13,17 +13,13 @@ from collections.abc import Sequence
 from pathlib import Path
 
 RUN_TIMES = {
-    "mpc": "roughly 3-12 min, an estimate (115 s measured for --n 8 without cvxpy, 5 cases, on a shared "
-    "machine; the defaults add three larger planar swaps and up to --cvxpy-budget of cvxpy per case)",
-    "solvers": "roughly 15-25 min with the 13 solvers usable here, an estimate (156-356 s measured for "
-    "--solvers piqp osqp by the machine's load: 1-4 min for the two references, about a minute per solver)",
-    "closed-loop": "roughly 3-10 min with every usable solver, an estimate (13 s measured for --solvers "
-    "piqp; a stalled run can hold up to --timeout)",
-    "scale": "roughly 5-15 min, an estimate (20 cases up to 1000 drones; each monolithic case runs up "
-    "to its 60 s budget)",
-    "split": "about 3-9 min (513 s measured on a shared machine, wall time 2-3x the CPU time)",
-    "plant": "about 4-6 s (measured: 3 runs of 1.1-1.7 s)",
-    "online": "about 25 s (24 s measured)",
+    "mpc": "roughly 3-12 min (up to --cvxpy-budget more per case with cvxpy)",
+    "solvers": "roughly 15-25 min with a dozen solvers installed, about a minute per solver",
+    "closed-loop": "roughly 3-10 min with every usable solver (a stalled run holds up to --timeout)",
+    "scale": "roughly 5-15 min (each monolithic case up to its --monolithic-budget)",
+    "split": "about 3-9 min",
+    "plant": "about 5 s",
+    "online": "about 25 s",
 }
 """The run time of each benchmark's defaults on a 2-core machine (rough)."""
 
