@@ -18,6 +18,7 @@ from mpcform.world.bounds import planning_bounds
 from mpcform.world.free_space import FreeSpace
 from mpcform.world.limits import Limits
 from mpcform.world.obstacles import Obstacle
+from mpcform.world.shapes.shape_set import ShapeSet
 
 TIMES = 200  # reference samples searched for the time a target becomes unreachable
 
@@ -37,6 +38,9 @@ def unreachable_warning(
     if not obstacles:
         return None
     planned, inflated = planning_bounds(limits, obstacles, tube_m, a_max_mps2)
+    held = _held_inside(inflated, times_s, targets_m)
+    if held is not None:
+        return held + _tightening(limits, tube_m)
     points = np.concatenate([start_m, targets_m.reshape(-1, start_m.shape[1])])
     space = FreeSpace(inflated, planned.geofence_min_m, planned.geofence_max_m, points)
     home = space.region(start_m)
@@ -61,9 +65,35 @@ def unreachable_warning(
     more = f" (and drones {', '.join(map(str, drones[1:].tolist()))})" if drones.size > 1 else ""
     return (
         f"reference: drone {i}{more} cannot reach its goal {_point(targets_m[-1, i])}: from t = "
-        f"{since:.3g} s its target lies {where}, with the planner's tightening (clearance + "
-        f"{2.0 * tube_m + limits.tracking_m:.3g} m); the run will end incomplete (move the goal, the "
-        "obstacles or the fence)"
+        f"{since:.3g} s its target lies {where}" + _tightening(limits, tube_m)
+    )
+
+
+def _held_inside(inflated: tuple[Obstacle, ...], times_s: Array, targets_m: Array) -> str | None:
+    """The start of the line for drones whose final target lies inside a shape grown by the
+    planner's tightening, measured exactly (the grid of :class:`FreeSpace` calls a cell closed only
+    when it is): a goal a few millimetres inside its keep-out can never be reached either."""
+    shapes = ShapeSet(inflated, targets_m.shape[-1])
+    depth = shapes.required_m - shapes.core_distances(targets_m)  # (T, n, m) > 0: inside
+    inside = depth.max(axis=-1) > 0.0
+    drones = np.flatnonzero(inside[-1])
+    if not drones.size:
+        return None
+    i = int(drones[0])
+    free = np.flatnonzero(~inside[:, i])
+    since = times_s[0] if not free.size else times_s[free[-1] + 1]
+    k = int(np.argmax(depth[-1, i]))
+    more = f" (and drones {', '.join(map(str, drones[1:].tolist()))})" if drones.size > 1 else ""
+    return (
+        f"reference: drone {i}{more} cannot reach its goal {_point(targets_m[-1, i])}: from t = "
+        f"{since:.3g} s its target lies {depth[-1, i, k]:.3g} m inside obstacles[{k}]'s keep-out"
+    )
+
+
+def _tightening(limits: Limits, tube_m: float) -> str:
+    return (
+        f", with the planner's tightening (clearance + {2.0 * tube_m + limits.tracking_m:.3g} m); the run "
+        "will end incomplete (move the goal, the obstacles or the fence)"
     )
 
 

@@ -70,3 +70,15 @@ def test_the_bundled_scenarios_with_obstacles_are_not_reported(name: str) -> Non
     from mpcform.scenario.load import load_scenario
 
     assert load_scenario(SCENARIOS / f"{name}.toml").unreachable_warning() is None
+
+
+def test_a_goal_just_inside_its_grown_keep_out_is_said() -> None:
+    """A box whose clearance the goal keeps by 0.02 m, inside the flyable plan's 0.05 m allowance:
+    the grid calls the cell free, the exact distance does not."""
+    goal_x = 4.0 + 0.6  # drone 0 of the polygon (circumradius 0.6, first vertex along x)
+    box = [{"shape": "box", "center": [goal_x + 0.5 + 0.2 + 0.02, 0.0], "size": [1.0, 1.0], "clearance": 0.2}]
+    plain = scenario_from_dict(changed(obstacles=box))
+    assert plain.unreachable_warning() is None  # outside the clearance: the ideal plan arrives
+    line = plain.flyable().unreachable_warning()
+    assert line is not None and line.startswith("reference: drone 0 cannot reach its goal [4.6, 0]")
+    assert "0.03 m inside obstacles[0]'s keep-out" in line and "(clearance + 0.05 m)" in line
