@@ -89,7 +89,7 @@ def open_regular(path: str | Path, max_bytes: int, what: str) -> BinaryIO:
         info = os.fstat(fd)
         expected = f"expected a {what} (a regular file of at most {byte_size(max_bytes)})"
         if not stat.S_ISREG(info.st_mode):
-            raise ValidationError(str(path), f"is {_file_kind(info.st_mode)}, not a regular file; {expected}")
+            raise ValidationError(str(path), f"is {file_kind(info.st_mode)}, not a regular file; {expected}")
         if info.st_size > max_bytes:
             raise ValidationError(
                 str(path), f"is {byte_size(info.st_size)} ({info.st_size:,} bytes); {expected}"
@@ -113,9 +113,12 @@ def read_regular(path: str | Path, max_bytes: int, what: str) -> bytes:
     return data
 
 
-def _file_kind(mode: int) -> str:
+def file_kind(mode: int) -> str:
+    """What a file of ``st_mode`` ``mode`` is, in words (``a directory``, ``a FIFO (named pipe)``)."""
     kinds = (
+        (stat.S_ISREG, "a file"),
         (stat.S_ISDIR, "a directory"),
+        (stat.S_ISLNK, "a symbolic link"),
         (stat.S_ISCHR, "a character device"),
         (stat.S_ISBLK, "a block device"),
         (stat.S_ISFIFO, "a FIFO (named pipe)"),

@@ -24,7 +24,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from mpcform._validate import read_regular
+from mpcform._validate import file_kind, read_regular
 from mpcform.errors import ValidationError, shown
 from mpcform.outputs.files import SUMMARY_JSON, TRAJECTORY_CSV, TRAJECTORY_NPZ
 from mpcform.outputs.rundata import FORMATION_NPZ
@@ -98,7 +98,7 @@ def read_manifest(root: Path, kind: str, field: str | None = None) -> dict[str, 
     bad = f"expected the manifest mpcform writes (a JSON object, format {FORMAT}): remove the directory's "
     bad += "outputs yourself, or choose another --out"
     if not stat.S_ISREG(info.st_mode):
-        raise ValidationError(str(path), f"is {what(info.st_mode)}; {bad}")
+        raise ValidationError(str(path), f"is {file_kind(info.st_mode)}; {bad}")
     try:
         doc = json.loads(read_regular(path, MAX_MANIFEST_BYTES, "manifest of mpcform").decode("utf-8"))
     except ValidationError:
@@ -143,14 +143,3 @@ def write_manifest(root: Path, kind: str, entries: dict[str, Entry]) -> None:
 
 def file_type(mode: int) -> str:
     return "file" if stat.S_ISREG(mode) else "dir" if stat.S_ISDIR(mode) else "other"
-
-
-def what(mode: int) -> str:
-    kinds = (
-        (stat.S_ISREG, "a file"),
-        (stat.S_ISDIR, "a directory"),
-        (stat.S_ISLNK, "a symbolic link"),
-        (stat.S_ISFIFO, "a FIFO (named pipe)"),
-        (stat.S_ISSOCK, "a socket"),
-    )
-    return next((name for test, name in kinds if test(mode)), "a device")

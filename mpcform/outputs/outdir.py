@@ -33,6 +33,7 @@ from contextlib import contextmanager
 from pathlib import Path
 from types import TracebackType
 
+from mpcform._validate import file_kind
 from mpcform.errors import ValidationError
 from mpcform.outputs.manifest import (
     EXPORT_DIR,
@@ -47,7 +48,6 @@ from mpcform.outputs.manifest import (
     allowed,
     file_type,
     read_manifest,
-    what,
     write_manifest,
 )
 
@@ -164,7 +164,7 @@ class DirClaim:
     def verify(self) -> None:
         """Everything under the claimed names is in the manifest, with its type and size."""
         for rel, info in self._present():
-            entry, path, found = self.entries.get(rel), self.root / rel, what(info.st_mode)
+            entry, path, found = self.entries.get(rel), self.root / rel, file_kind(info.st_mode)
             if entry is None:
                 where = str(self.root / MANIFEST) if self._listed else f"a manifest: {self.root} has none"
                 raise ValidationError(

@@ -203,8 +203,7 @@ def place_time_labels(ax: Axes) -> None:
     margin = 3.0 * fig.dpi / 72  # a marker's half size and some air [px]
     frame = ax.get_window_extent(renderer)
     taken: list[Any] = []
-    for label in [t for t in ax.texts if t.get_gid() == SNAPSHOT_LABEL]:
-        assert isinstance(label, Annotation)
+    for label in [t for t in ax.texts if t.get_gid() == SNAPSHOT_LABEL and isinstance(t, Annotation)]:
         first = float(np.arctan2(label.xyann[1], label.xyann[0]))
         tried = []
         for turn in LABEL_SIDES:

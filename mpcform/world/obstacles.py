@@ -22,9 +22,9 @@ Obstacle = Shape
 def obstacles_of(obstacles: Iterable[object], field: str = "obstacles") -> tuple[Shape, ...]:
     """``obstacles`` as a tuple of shapes; anything else is a :class:`ValidationError` naming it."""
     out = tuple(obstacles)
-    kinds = ", ".join(kind.__name__ for kind in SHAPES.values())
     for k, ob in enumerate(out):
         if not isinstance(ob, Shape):
+            kinds = ", ".join(kind.__name__ for kind in SHAPES.values())
             raise ValidationError(f"{field}[{k}]", f"expected an obstacle shape ({kinds}), got {shown(ob)}")
     return out  # type: ignore[return-value]
 
