@@ -12,8 +12,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from mpcform import _jit
 from mpcform._validate import Array
 from mpcform.formation.geometry import NearPairs
+from mpcform.mpc.constraints import kernels
 from mpcform.mpc.constraints.family import SeparationFamily
 from mpcform.mpc.constraints.half_spaces import (
     BLOCK,
@@ -80,14 +82,41 @@ class PairSeparation(SeparationFamily):
     ) -> RowPart:
         """The decoupled rows: two per-drone rows about the guess's midpoint ``m_e`` at each row's
         position step, ``+-c^T (p0_side - m_e) >= (d_min + margin) / 2``, side i (+c) of every
-        pair, then side k (-c); built :data:`BLOCK` pairs at a time (the temporaries stay small).
+        pair, then side k (-c).
         With ``stops`` (n, d), the last row (the braking stop point) of a pair whose ``stops`` meet
         it jointly is split about their midpoint instead (any common split point is safe: the two
         sides add up to the joint row). Each side's rows grow by its drone's share ``grows`` (n,)
-        (None: no growth)."""
+        (None: no growth). Built by :func:`mpcform.mpc.constraints.kernels.side_rows` when numba
+        is installed (a tail of at most one point), else by numpy."""
         p, r, d = pairs.shape[0], self.segs.shape[0], path.shape[2]
         coeffs, lower, hard = np.empty((2 * p, r, d)), np.empty((2 * p, r)), np.empty(p, dtype=bool)
         half = 0.5 * (self.d_min_m + self.margin_m)
+        if _jit.ENABLED and self.tail <= 1:  # the same rows by the compiled loop
+            no_grows, no_stops = np.empty(0), np.empty((0, d))
+            grows_, stops_ = no_grows if grows is None else grows, no_stops if stops is None else stops
+            args = (self.metric, self.segs, self.ends, self.d_min_m, half, grows_, self.grow, stops_)
+            kernels.side_rows(p0, path, pairs, *args, coeffs, lower, hard)
+        else:
+            self._numpy_sides(p0, path, pairs, stops, grows, half, coeffs, lower, hard)
+        hard2 = np.concatenate([hard, hard])
+        lower[hard2, 0] = 0.0
+        return np.concatenate([pairs, pairs[:, ::-1]]), coeffs, lower, np.concatenate([on, on]), hard2
+
+    def _numpy_sides(
+        self,
+        p0: Array,
+        path: Array,
+        pairs: Array,
+        stops: Array | None,
+        grows: Array | None,
+        half: float,
+        coeffs: Array,
+        lower: Array,
+        hard: Array,
+    ) -> None:
+        """:meth:`_sides`'s rows into ``coeffs``, ``lower`` and ``hard`` by numpy, :data:`BLOCK`
+        pairs at a time (the temporaries stay small); ``lower``'s hard rows are set after."""
+        p, r = pairs.shape[0], self.segs.shape[0]
         plain = np.full((1, r), half)  # every side's bound without growth (1, R)
         for a in range(0, p, BLOCK):
             b = min(a + BLOCK, p)
@@ -113,9 +142,6 @@ class PairSeparation(SeparationFamily):
             for (side, out, fix), bound in zip(sides, bounds, strict=True):
                 gap = p0[side][:, None] - mid  # -(-c)^T gap = +c^T gap on side k
                 fix(bound, np.einsum("prd,prd->pr", coeffs[a:b], gap), out=out)
-        hard2 = np.concatenate([hard, hard])
-        lower[hard2, 0] = 0.0
-        return np.concatenate([pairs, pairs[:, ::-1]]), coeffs, lower, np.concatenate([on, on]), hard2
 
     def _stop_split(
         self,

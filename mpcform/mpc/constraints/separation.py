@@ -29,8 +29,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from mpcform import _jit
 from mpcform._validate import Array
 from mpcform.formation.geometry import pairs_within
+from mpcform.mpc.constraints import kernels
 from mpcform.mpc.constraints.braking import Braking
 from mpcform.mpc.constraints.candidates import Candidates
 from mpcform.mpc.constraints.clear import ClearTest
@@ -143,6 +145,9 @@ class Separation:
         """``c^T x_e - b`` (S, R) of the one-drone rows at positions ``x`` (H, n, d): negative where
         a row is missed (inf for the items out of reach)."""
         xe = np.ascontiguousarray(x[self.ends - 1].transpose(1, 0, 2))  # (n, R, d)
+        if _jit.ENABLED:
+            on = rows.single_on
+            return kernels.single_values(xe, rows.singles, rows.single_coeffs, rows.single_lower, on)
         value = np.empty_like(rows.single_lower, dtype=float)
         for a in range(0, rows.singles.shape[0], 2 * BLOCK):  # in blocks: the gathered positions stay small
             b = slice(a, a + 2 * BLOCK)

@@ -19,7 +19,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from mpcform import _jit
 from mpcform._validate import Array
+from mpcform.mpc.constraints import kernels
 from mpcform.world.closest import vector_norms
 
 WORKING_MARGIN = 0.1  # rows this close to a bound [m/s or m] go to DAQP first
@@ -48,8 +50,15 @@ def reachable_rows(
     A row ``a^T x_e + s_e >= b`` that every reachable ``x_e`` meets (``b <= -|a| e step_m``, the
     longest step ``step_m`` = v_max dt, since the velocity set lies in the ball; None: no limit) is
     left out, the optimum unchanged. The rows over ``v`` are built later, drone by drone into
-    DAQP's buffer (:meth:`PerDroneQP._rows_v`).
+    DAQP's buffer (:meth:`PerDroneQP._rows_v`). Compiled with numba when it is installed
+    (:func:`mpcform.mpc.constraints.kernels.reachable_rows`).
     """
+    if _jit.ENABLED:
+        no = np.empty(0, dtype=bool)
+        limit = -1.0 if step_m is None else step_m
+        reach = ends.astype(float) if reach_steps is None else reach_steps
+        hard_, on_ = no if hard is None else hard, no if on is None else on
+        return kernels.reachable_rows(n, singles, coeffs, lower, hard_, on_, ends, limit, reach)
     keep = np.ones(lower.shape, dtype=bool)
     if on is not None:
         keep &= on[:, None]
