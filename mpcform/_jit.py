@@ -1,30 +1,32 @@
 """The optional compiled kernels' switch: numba (the ``fast`` extra) when it is installed.
 
-:func:`njit` compiles a loop-style kernel with numba (cached on disk, compiled at its first call)
-when numba is importable and ``MPCFORM_NUMBA`` is not ``0``; otherwise it returns the function
-unchanged and :data:`ENABLED` is False, so callers keep their numpy path. The two paths give the
-same plans within 1e-9 m (tests/test_jit.py flies both).
+:data:`AVAILABLE`: numba is installed and ``MPCFORM_NUMBA`` is not ``0``. Loading the kernels
+costs about a second (numba's import and its on-disk cache; minutes the very first time), so a
+planner loads them when it is built for a swarm large enough to gain
+(:func:`mpcform.mpc.constraints.kernels.warm_up`), never in the middle of a flight; from then on
+:data:`USE` is True and the hot loops run compiled. Either way the plans are the same, bit for bit
+(tests/test_jit.py flies both).
 """
 
 from __future__ import annotations
 
 import os
 from collections.abc import Callable
+from importlib.util import find_spec
 from typing import Any, TypeVar
 
 F = TypeVar("F", bound=Callable[..., Any])
 
-try:  # pragma: no cover - depends on the installed extras
-    import numba
-
-    ENABLED = os.environ.get("MPCFORM_NUMBA", "1") != "0"
-except ImportError:  # pragma: no cover
-    numba = None  # type: ignore[assignment]
-    ENABLED = False
+AVAILABLE = find_spec("numba") is not None and os.environ.get("MPCFORM_NUMBA", "1") != "0"
+USE = False  # the kernels are loaded: the hot loops run compiled
+MIN_DRONES = 100
+"""Planners for this many drones or more load the kernels (below it numpy's step is short)."""
 
 
 def njit(fn: F) -> F:
-    """``fn`` compiled by numba (no Python objects, cached), or ``fn`` itself without numba."""
-    if numba is None:
+    """``fn`` compiled by numba (no Python objects, cached on disk), or ``fn`` itself without it."""
+    if not AVAILABLE:
         return fn
+    import numba
+
     return numba.njit(cache=True, nogil=True)(fn)  # type: ignore[return-value]

@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 
 from mpcform import _jit
+from mpcform.mpc.constraints import kernels
 from mpcform.run.runner import run_scenario
 from mpcform.scenario.load import scenario_from_dict
 
@@ -40,9 +41,10 @@ def _run(name: str, changes: dict[str, dict[str, object]], seconds: float):
 def test_kernels_fly_the_numpy_plans(
     monkeypatch: pytest.MonkeyPatch, name: str, changes: dict[str, dict[str, object]], seconds: float
 ) -> None:
-    monkeypatch.setattr(_jit, "ENABLED", False)
+    kernels.warm_up()
+    monkeypatch.setattr(_jit, "USE", False)
     plain = _run(name, changes, seconds)
-    monkeypatch.setattr(_jit, "ENABLED", True)
+    monkeypatch.setattr(_jit, "USE", True)
     fast = _run(name, changes, seconds)
     a, b = plain.simulation, fast.simulation
     np.testing.assert_allclose(b.commands_mps, a.commands_mps, rtol=0.0, atol=1e-9)
@@ -54,9 +56,23 @@ def test_kernels_fly_the_numpy_plans(
 
 
 def test_without_numba_the_decorator_returns_the_function(monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.setattr(_jit, "numba", None)
+    monkeypatch.setattr(_jit, "AVAILABLE", False)
 
     def f(x: float) -> float:
         return 2.0 * x
 
     assert _jit.njit(f) is f
+
+
+def test_a_large_swarms_planner_loads_the_kernels(monkeypatch: pytest.MonkeyPatch) -> None:
+    from mpcform.bench.scale_cases import DT_S, LIMITS, make_case
+    from mpcform.mpc.planner import MPCPlanner
+    from mpcform.mpc.settings import MPCSettings
+
+    monkeypatch.setattr(_jit, "USE", False)
+    ref, _ = make_case("formation", _jit.MIN_DRONES - 1)
+    MPCPlanner(ref, DT_S, LIMITS, MPCSettings(coupling="decoupled"))
+    assert not _jit.USE  # a small swarm's planner never imports numba
+    ref, _ = make_case("formation", _jit.MIN_DRONES)
+    MPCPlanner(ref, DT_S, LIMITS, MPCSettings(coupling="decoupled"))
+    assert _jit.USE

@@ -33,7 +33,7 @@ from mpcform.mpc.safety.premise import GrowthPremise
 from mpcform.mpc.safety.slack import SLACK_REPORT_M, slack_report
 from mpcform.mpc.settings import MPCSettings
 from mpcform.mpc.solve.factory import build_step_solvers
-from mpcform.mpc.solve.problem import StepQP, StepSolver
+from mpcform.mpc.solve.problem import BUDGET_CUT, StepQP, StepSolver
 from mpcform.mpc.step_info import FAST_PATH, MPCStepInfo, solve_info
 from mpcform.mpc.velocity_loop import VelocityLoop
 from mpcform.reference.base import Reference
@@ -132,12 +132,12 @@ class StepPipeline:
         drones = qp_drones(bad, self.solvers.linked(conflict.rows, solver)) if grouped else np.arange(self.n)
         qp, relaxed, brake = self._step_qp(p0, nom, c, conflict, drones, deadline)
         sol, active = solver.solve(qp)
-        late = deadline is not None and time.perf_counter() > deadline
-        if late:  # the command had to be sent: the solution came too late
-            sol = replace(sol, success=False, status=f"{sol.status}; past the step's deadline")
-        elif not sol.success and brake is not None:  # wind: no plan in the fence
+        if not sol.success and brake is not None:  # wind: no plan in the fence
             sol, active = solve_in_wider_fence(self, solver, qp, p0, brake, sol, active)
-        return self._outcome(p0, nom, conflict, drones, sol, active, relaxed, late)
+        u0, info = self._outcome(p0, nom, conflict, drones, sol, active, relaxed)
+        late = deadline is not None and time.perf_counter() > deadline  # sent late, still certified
+        cut = bool(sol.extras.get(BUDGET_CUT, False))
+        return u0, replace(info, deadline_missed=late, budget_cut=cut) if late or cut else info
 
     def _nominal(self, t_s: float, p0: Array) -> Nominal:
         """The step's eq. 14 rollout from ``p0``, where it takes the drones, the guess the rows are
@@ -256,7 +256,6 @@ class StepPipeline:
         sol: QPSolution,
         active: int,
         relaxed: bool,
-        late: bool,
     ) -> tuple[Array, MPCStepInfo]:
         """The command and the record of a step that called the solver: the solve's certified
         command, the previous plan where it avoids the slack the solve left, else the fallback."""
@@ -294,7 +293,7 @@ class StepPipeline:
         info = solve_info(
             "fallback", sol, f"{status}; {note}", 0, 0, inside_m, inside, self.tie_break, relaxed
         )
-        return u[0].copy(), replace(info, deadline_missed=late)
+        return u[0].copy(), info
 
     def _fast_path(self, nominal: Plan) -> tuple[Array, MPCStepInfo]:
         """Accept the rollout's plan: its first input is the command."""

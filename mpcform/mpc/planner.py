@@ -39,6 +39,7 @@ from dataclasses import replace
 
 import numpy as np
 
+from mpcform import _jit
 from mpcform._validate import Array, positive
 from mpcform.control.base import Controller, ControlStep
 from mpcform.control.laws import check_gain_dt
@@ -57,10 +58,6 @@ from mpcform.world.bounds import PlanningBounds, planning_bounds
 from mpcform.world.limits import Limits
 from mpcform.world.obstacles import Obstacle, require_resolved, resolve_clearances
 from mpcform.world.shapes.shape_set import ShapeSet
-
-DEADLINE_RESERVE = 0.25
-"""Share of ``step_budget_s`` no optional solver work is planned into: it is kept for what follows
-the solve and for the machine's jitter (the scheduler, the garbage collector, a plant's process)."""
 
 
 class MPCPlanner(Controller):
@@ -105,6 +102,10 @@ class MPCPlanner(Controller):
         instance = solver if isinstance(solver, QPBackend) else None
         shapes = ShapeSet(self.obstacles, self.dim)  # every consumer asks these
         self._steps = StepPipeline(reference, self.dt_s, limits, settings, shapes, self.loop, instance)
+        if self.n >= _jit.MIN_DRONES and _jit.AVAILABLE:  # now, not within a flight's first step
+            from mpcform.mpc.constraints.kernels import warm_up
+
+            warm_up()
         self.braking, self.solver_name = self._steps.braking, self._steps.solvers.name
         self.reset(0.0, np.zeros((self.n, self.dim)))
 

@@ -52,10 +52,11 @@ class MPCSettings:
     - ``braking``: with a finite ``a_max``, end every plan where the drones can still stop
       (:mod:`mpcform.mpc.constraints.braking`).
     - ``step_budget_s``: the deadline of one step [s] (online planning, :mod:`mpcform.online`):
-      no split round is planned into its last quarter (``planner.DEADLINE_RESERVE``, kept for the
-      machine's jitter), and a step whose solve ends past it returns the certified braking
-      fallback instead (reported as a deadline miss). None: no deadline, so
-      offline runs stay deterministic.
+      no split round starts less than two rounds before its last quarter
+      (``pipeline.DEADLINE_RESERVE``, kept for the machine's jitter); a step so cut reports
+      ``budget_cut``, the only case in which the machine's load changes a plan. A step that ends past
+      the deadline still sends its certified command (reported as a deadline miss), so a tight
+      budget slows a swarm but never holds it. None: no deadline.
     """
 
     horizon: int = 10

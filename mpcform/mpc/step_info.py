@@ -27,8 +27,10 @@ class MPCStepInfo(StepInfo):
     ``wind_shift_m`` [m]: in wind, how far the wind moved the previous plan within the growth's
     window, and ``growth_exceeded``: farther than the growth per step, its premise
     (:mod:`mpcform.mpc.safety.premise`).
-    ``deadline_missed``: the solve ended past the step's deadline (``MPCSettings.step_budget_s``),
-    so the command is the braking fallback."""
+    ``deadline_missed``: the step ended past its deadline (``MPCSettings.step_budget_s``): its
+    command, certified as any, was sent late. ``budget_cut``: the wall clock stopped the step's
+    optional work (split rounds) before its count, so the plan may depend on the machine's load
+    (:data:`mpcform.mpc.solve.problem.BUDGET_CUT`)."""
 
     iterations: int = 0
     solve_time_s: float = 0.0
@@ -45,6 +47,7 @@ class MPCStepInfo(StepInfo):
     wind_shift_m: float = 0.0
     growth_exceeded: bool = False
     deadline_missed: bool = False
+    budget_cut: bool = False
 
 
 FAST_PATH = MPCStepInfo("fast_path")

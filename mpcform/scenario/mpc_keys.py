@@ -84,8 +84,9 @@ MPC_KEYS: tuple[Key, ...] = (
              "`limits.a_max` or its default (the plans' terminal condition: a horizon shorter "
              "than the braking keeps d_min; off with `limits.a_max = inf`)."),
     _mpc_key("step_budget", "float", "Deadline of one step (online planning): no split round "
-             "starts after it, and a solve that ends later is replaced by the certified braking "
-             "fallback (counted in `deadline_misses`). Unset: none (deterministic runs).", "s",
+             "starts too close to it (counted in `budget_cuts`, the only steps the machine's load "
+             "can change), and a step that ends later still sends its certified command (counted "
+             "in `deadline_misses`). Unset: none.", "s",
              bound="> 0"),
     Key("solve", "table", "`[controller.solve]`: how the QP is solved (below).", when=_MPC),
     _old_key("solver", "string"),

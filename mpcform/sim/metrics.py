@@ -18,8 +18,9 @@ window, and the steps it moved farther than the growth per step: the growth's pr
 :mod:`mpcform.mpc.safety.premise`),
 ``stall_events``, ``resolutions`` and ``circling_resets`` (drones that started to stall,
 escalated tie-breaks that ended, and circling drones whose escalation was reset,
-:mod:`mpcform.mpc.liveness`), ``deadline_misses`` (steps whose solve ended past
-``controller.step_budget``, which sent the braking fallback), and
+:mod:`mpcform.mpc.liveness`), ``deadline_misses`` (steps that ended past
+``controller.step_budget``: their certified command was sent late), ``budget_cuts`` (steps whose
+split rounds the wall clock stopped: the only steps whose plan the machine's load can change), and
 ``step_time_ms`` (median, p90 and max of the controller's wall-clock time per step mode). The
 figures draw the same series (:func:`tracking_errors_m`, :func:`min_separations_m`,
 :func:`command_speeds_mps`).
@@ -134,6 +135,7 @@ def run_metrics(
         "resolutions": int(sum(getattr(i, "resolved", 0) for i in result.infos)),
         "circling_resets": int(sum(getattr(i, "unwound", 0) for i in result.infos)),
         "deadline_misses": int(sum(getattr(i, "deadline_missed", False) for i in result.infos)),
+        "budget_cuts": int(sum(getattr(i, "budget_cut", False) for i in result.infos)),
         "step_time_ms": {
             mode: _stats(1e3 * result.step_times_s[modes == mode]) for mode in sorted(set(modes.tolist()))
         },

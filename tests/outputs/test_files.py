@@ -55,6 +55,7 @@ METRIC_KEYS = {
     "resolutions",
     "circling_resets",  # the planner's liveness events
     "deadline_misses",  # online planning (controller.step_budget)
+    "budget_cuts",
     "slack_steps",
     "lowered_first_rows",  # the separation guarantee's conditions (braking terminal condition)
     "max_growth_slack",

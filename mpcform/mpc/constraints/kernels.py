@@ -14,6 +14,7 @@ import math
 
 import numpy as np
 
+from mpcform import _jit
 from mpcform._jit import njit
 from mpcform._validate import Array
 
@@ -204,3 +205,18 @@ def reachable_rows(
                 sep_end[j], sep_lo[j], at[j] = ends[r], lower[s, r], s * r_n + r
                 soft[j] = r > 0 or (hard.shape[0] > 0 and not hard[s])
     return sep_c, sep_end, sep_lo, soft, counts, at
+
+
+def warm_up() -> None:
+    """Compile (or load from numba's cache) every kernel for the argument types the planner passes,
+    then turn them on (:data:`mpcform._jit.USE`)."""
+    if not _jit.AVAILABLE or _jit.USE:
+        return
+    f, i, b = np.zeros, np.zeros(2, dtype=np.intp), np.ones(1, dtype=bool)
+    pairs, segs = np.array([[0, 1]], dtype=np.intp), np.zeros(2, dtype=np.intp)
+    rows = np.empty((2, 2, 3)), np.empty((2, 2)), np.empty(1, dtype=bool)
+    for grows, stops in ((f(0), f((0, 3))), (f(2), f((2, 3)))):
+        side_rows(f((2, 3)), f((2, 3, 3)), pairs, f(3), segs, i, 0.5, 0.25, grows, f(2), stops, *rows)
+    single_values(f((2, 2, 3)), i[:1], f((1, 2, 3)), f((1, 2)), b)
+    reachable_rows(2, i[:1], f((1, 2, 3)), f((1, 2)), b, b, i, 0.1, f(2))
+    _jit.USE = True

@@ -15,7 +15,6 @@ import numpy as np
 from mpcform import _jit
 from mpcform._validate import Array
 from mpcform.formation.geometry import NearPairs
-from mpcform.mpc.constraints import kernels
 from mpcform.mpc.constraints.family import SeparationFamily
 from mpcform.mpc.constraints.half_spaces import (
     BLOCK,
@@ -91,7 +90,9 @@ class PairSeparation(SeparationFamily):
         p, r, d = pairs.shape[0], self.segs.shape[0], path.shape[2]
         coeffs, lower, hard = np.empty((2 * p, r, d)), np.empty((2 * p, r)), np.empty(p, dtype=bool)
         half = 0.5 * (self.d_min_m + self.margin_m)
-        if _jit.ENABLED and self.tail <= 1:  # the same rows by the compiled loop
+        if _jit.USE and self.tail <= 1:  # the same rows by the compiled loop
+            from mpcform.mpc.constraints import kernels
+
             no_grows, no_stops = np.empty(0), np.empty((0, d))
             grows_, stops_ = no_grows if grows is None else grows, no_stops if stops is None else stops
             args = (self.metric, self.segs, self.ends, self.d_min_m, half, grows_, self.grow, stops_)

@@ -32,7 +32,6 @@ import numpy as np
 from mpcform import _jit
 from mpcform._validate import Array
 from mpcform.formation.geometry import pairs_within
-from mpcform.mpc.constraints import kernels
 from mpcform.mpc.constraints.braking import Braking
 from mpcform.mpc.constraints.candidates import Candidates
 from mpcform.mpc.constraints.clear import ClearTest
@@ -145,7 +144,9 @@ class Separation:
         """``c^T x_e - b`` (S, R) of the one-drone rows at positions ``x`` (H, n, d): negative where
         a row is missed (inf for the items out of reach)."""
         xe = np.ascontiguousarray(x[self.ends - 1].transpose(1, 0, 2))  # (n, R, d)
-        if _jit.ENABLED:
+        if _jit.USE:
+            from mpcform.mpc.constraints import kernels
+
             on = rows.single_on
             return kernels.single_values(xe, rows.singles, rows.single_coeffs, rows.single_lower, on)
         value = np.empty_like(rows.single_lower, dtype=float)

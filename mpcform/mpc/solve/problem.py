@@ -18,6 +18,12 @@ from mpcform.solvers.base import QPSolution
 ACTIVE_TOL = 1e-6  # a row whose multiplier exceeds this is reported active
 
 
+BUDGET_CUT = "budget_cut"
+"""The key of :attr:`QPSolution.extras` a step solver sets True when the wall clock (the step's
+deadline, a split budget) stopped its optional work before its counted rounds: the one place the
+machine's load can change a plan (reported per step and per run)."""
+
+
 @dataclass(frozen=True)
 class StepQP:
     """The QP of one step over ``drones`` (m,) of the ``n`` (global indices).

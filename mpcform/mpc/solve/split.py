@@ -38,7 +38,7 @@ from mpcform.errors import ValidationError
 from mpcform.mpc.constraints.separation_rows import pair_sides
 from mpcform.mpc.solve.drone_solves import DroneSolves
 from mpcform.mpc.solve.per_drone import PerDroneQP
-from mpcform.mpc.solve.problem import StepQP, StepSolver
+from mpcform.mpc.solve.problem import BUDGET_CUT, StepQP, StepSolver
 from mpcform.mpc.solve.sensitivity import Sensitivity
 from mpcform.solvers.base import QPSolution
 
@@ -118,13 +118,14 @@ class SplitQP(StepSolver):
         best = step_qp.solve(np.arange(m), step_qp.midpoint(), warm, None)
         history = [(best.value, time.perf_counter() - t0, time.process_time() - c0)]
         seen = [step_qp.positions(best)] if record else []
-        bend, direction, rounds = 1.0, None, 0
+        bend, direction, rounds, cut = 1.0, None, 0, False
         frozen = np.zeros(best.shift.shape, dtype=bool)  # rows kept where they are until a step succeeds
         budget_end = np.inf if self.budget_s is None else t0 + self.budget_s
         round_s, deadline = 2.0 * history[0][1], qp.deadline_s or np.inf  # a solve and a direction
         while rounds < self.iterations and np.isfinite(best.value):  # (a failed midpoint: no rounds)
             if (now := time.perf_counter()) >= budget_end or now + 2.0 * round_s > deadline:
-                break  # the split budget spent, or no time for a round and what follows the solve
+                cut = True  # the split budget spent, or no time for a round and what follows the solve
+                break
             if (direction := step_qp.direction(best) if rounds == 0 else direction) is None:
                 break  # converged
             newton, slope, longest = direction
@@ -152,6 +153,8 @@ class SplitQP(StepSolver):
         sol, active = step_qp.solution(best)
         if sol.success and self.iterations:
             sol = replace(sol, status=f"{sol.status}; split {rounds} rounds")
+        if cut:
+            sol = replace(sol, extras={**sol.extras, BUDGET_CUT: True})
         hist = np.array(history)
         hist[:, 0] += step_qp.c_sq
         return SplitRun(sol, active, rounds, hist, seen)

@@ -21,7 +21,6 @@ import numpy as np
 
 from mpcform import _jit
 from mpcform._validate import Array
-from mpcform.mpc.constraints import kernels
 from mpcform.world.closest import vector_norms
 
 WORKING_MARGIN = 0.1  # rows this close to a bound [m/s or m] go to DAQP first
@@ -53,7 +52,9 @@ def reachable_rows(
     DAQP's buffer (:meth:`PerDroneQP._rows_v`). Compiled with numba when it is installed
     (:func:`mpcform.mpc.constraints.kernels.reachable_rows`).
     """
-    if _jit.ENABLED:
+    if _jit.USE:
+        from mpcform.mpc.constraints import kernels
+
         no = np.empty(0, dtype=bool)
         limit = -1.0 if step_m is None else step_m
         reach = ends.astype(float) if reach_steps is None else reach_steps

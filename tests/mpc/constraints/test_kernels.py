@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from mpcform import _jit
+from mpcform.mpc.constraints import kernels
 from mpcform.mpc.constraints.pairs import PairSeparation
 from mpcform.mpc.settings import MPCSettings
 from mpcform.mpc.solve import working_set
@@ -17,12 +18,14 @@ pytest.importorskip("numba")
 
 @pytest.fixture
 def numpy_path(monkeypatch: pytest.MonkeyPatch):
-    """Call ``fn`` with the kernels off, then on: both results."""
+    """``both(fn)``: ``fn()`` with the kernels off, then on."""
+
+    kernels.warm_up()
 
     def both(fn):
-        monkeypatch.setattr(_jit, "ENABLED", False)
+        monkeypatch.setattr(_jit, "USE", False)
         plain = fn()
-        monkeypatch.setattr(_jit, "ENABLED", True)
+        monkeypatch.setattr(_jit, "USE", True)
         return plain, fn()
 
     return both
@@ -70,8 +73,6 @@ def test_values_and_reachable_rows_match_numpy(numpy_path, seed: int) -> None:
     hard = rng.random(s) < 0.3
     ends = np.arange(1, r + 1, dtype=np.intp)
     x_rows = rng.normal(size=(n, r, d))
-    from mpcform.mpc.constraints import kernels
-
     plain = np.einsum("srd,srd->sr", coeffs, x_rows[singles]) - lower
     plain[~on] = np.inf
     np.testing.assert_array_equal(kernels.single_values(x_rows, singles, coeffs, lower, on), plain)
