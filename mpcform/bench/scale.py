@@ -35,7 +35,6 @@ from typing import Any, cast
 import numpy as np
 
 from mpcform._validate import Array
-from mpcform.bench.growth import growth_exponent, growth_rows
 from mpcform.bench.scale_cases import DT_S, LIMITS, SCENARIOS, make_case
 from mpcform.bench.stats import median_p90
 from mpcform.errors import ValidationError
@@ -43,7 +42,6 @@ from mpcform.formation.geometry import min_segment_distance
 from mpcform.mpc.planner import MPCPlanner
 from mpcform.mpc.settings import MPCSettings, mode_settings
 from mpcform.mpc.step_info import MPCStepInfo
-from mpcform.outputs import tables
 from mpcform.run.parallel import blas_threads, process_pool
 from mpcform.solvers.registry import DEFAULT_SOLVER
 
@@ -255,115 +253,3 @@ def run(
                     if mode == "monolithic" and row["steps_run"] < steps:
                         over_budget[scenario, mode] = n
     return rows
-
-
-COLUMNS = [
-    ("scenario", "scenario", "{}"),
-    ("n", "n", "{}"),
-    ("mode", "mode", "{}"),
-    ("steps_run", "steps", "{}"),
-    ("qp_steps", "QP", "{}"),
-    ("fast_path_steps", "fast", "{}"),
-    ("fallback_steps", "fallback", "{}"),
-    ("qp_drones_mean", "QP drones", "{:.0f}"),
-    ("step_ms_median", "step med [ms]", "{:.2f}"),
-    ("step_ms_p90", "step p90", "{:.2f}"),
-    ("qp_ms_median", "QP med [ms]", "{:.2f}"),
-    ("qp_ms_p90", "QP p90", "{:.2f}"),
-    ("qp_cpu_ms_median", "QP CPU med", "{:.2f}"),
-    ("qp_cpu_ms_p90", "QP CPU p90", "{:.2f}"),
-    ("fast_ms_median", "fast med [ms]", "{:.2f}"),
-    ("fast_ms_p90", "fast p90", "{:.2f}"),
-    ("fast_cpu_ms_median", "fast CPU med", "{:.2f}"),
-    ("rss_peak_mib", "peak RSS [MiB]", "{:.0f}"),
-    ("rss_delta_mib", "RSS growth", "{:.0f}"),
-    ("tracemalloc_peak_mib", "traced peak", "{:.0f}"),
-    ("min_separation_segments", "min sep [m]", "{:.3f}"),
-    ("note", "note", "{}"),
-]
-
-GROWTH_COLUMNS = [
-    ("scenario", "scenario", "{}"),
-    ("mode", "mode", "{}"),
-    ("step_exponent_fit", "step: fit n>=100", "{:.2f}"),
-    ("step_exponent_100_1000", "step: 100->1000", "{:.2f}"),
-    ("qp_exponent_fit", "QP step: fit n>=100", "{:.2f}"),
-    ("qp_exponent_100_1000", "QP step: 100->1000", "{:.2f}"),
-    ("qp_cpu_exponent_fit", "QP CPU: fit n>=100", "{:.2f}"),
-    ("partial", "stopped early (n)", "{}"),
-]
-
-
-def markdown_table(rows: list[dict[str, Any]], columns: list[tuple[str, str, str]] | None = None) -> str:
-    """The rows as a markdown table (missing or NaN entries shown as ``-``)."""
-    return tables.markdown_table(rows, COLUMNS if columns is None else columns)
-
-
-def target_lines(rows: list[dict[str, Any]], growth: list[dict[str, Any]], coupling: str) -> list[str]:
-    """The acceptance targets of the scaling issue for the planner mode ``coupling``, each with what
-    was measured (``-`` where not measured; cases stopped by their budget say so)."""
-
-    def case(scenario: str, n: int) -> dict[str, Any]:
-        match = [r for r in rows if (r["scenario"], r["n"], r["mode"]) == (scenario, n, coupling)]
-        return match[0] if match and match[0].get("steps_run") else {}
-
-    def num(value: float, fmt: str) -> str:
-        return fmt.format(value) if np.isfinite(value) else "-"
-
-    def verdict(value: float, limit: float, row: dict[str, Any] | None = None) -> str:
-        if not np.isfinite(value):
-            return "not measured"
-        partial = row is not None and row["steps_run"] < row["steps"]
-        return ("met" if value <= limit else "MISSED") + (f" ({row['note']})" if partial and row else "")
-
-    form = case("formation", 1000)
-    med, p90 = form.get("step_ms_median", math.nan), form.get("step_ms_p90", math.nan)
-    lines = [
-        f"formation n=1000 median step {num(med, '{:.1f}')} ms (p90 {num(p90, '{:.1f}')}) <= 100 ms: "
-        f"{verdict(med, 100.0, form)}"
-    ]
-    cross = case("crossing", 100)
-    qp = cross.get("qp_ms_median", math.nan)
-    lines.append(f"crossing n=100 median QP step {num(qp, '{:.1f}')} ms <= 50 ms: {verdict(qp, 50.0, cross)}")
-    for g in growth:
-        if g["mode"] == coupling:
-            e = g["step_exponent_100_1000"]
-            partial = f" (from cases stopped early: n = {g['partial']})" if g["partial"] else ""
-            text = f"{g['scenario']} growth exponent 100->1000 (median step) {num(e, '{:.2f}')} <= 1.2"
-            lines.append(f"{text}: {verdict(e, 1.2)}{partial}")
-    big = case("crossing", 1000)  # the performance targets (decoupled step at the solver floor)
-    qp, qp_cpu = big.get("qp_ms_median", math.nan), big.get("qp_cpu_ms_median", math.nan)
-    lines.append(
-        f"crossing n=1000 median QP step {num(qp, '{:.1f}')} ms (CPU {num(qp_cpu, '{:.1f}')} ms) "
-        f"<= 40 ms: {verdict(qp, 40.0, big)}"
-    )
-    for g in growth:
-        if g["mode"] == coupling and g["scenario"] == "crossing":
-            e = g.get("qp_cpu_exponent_fit", math.nan)
-            lines.append(
-                f"crossing growth exponent (median CPU per QP step, fit n>=100) {num(e, '{:.2f}')} "
-                f"<= 1.1: {verdict(e, 1.1)}"
-            )
-    lines.append(f"formation n=1000 median step {num(med, '{:.2f}')} ms <= 2 ms: {verdict(med, 2.0, form)}")
-    peaks = [case(s, 1000).get("rss_peak_mib", math.nan) for s in SCENARIOS]
-    peak = max((x for x in peaks if np.isfinite(x)), default=math.nan)
-    lines.append(f"peak RSS of the n=1000 runs {num(peak, '{:.0f}')} MiB <= 1 GiB: {verdict(peak, 1024.0)}")
-    return lines
-
-
-def report(rows: list[dict[str, Any]], coupling: str) -> tuple[str, list[dict[str, Any]]]:
-    """Markdown (cases, growth exponents, targets) and the growth records."""
-    ran = [r for r in rows if r.get("steps_run")]
-    growth = growth_rows(ran)
-    for g in growth:  # the growth of the median CPU time per QP step too
-        case = [r for r in ran if (r["scenario"], r["mode"]) == (g["scenario"], g["mode"])]
-        cpu_ms = [r.get("qp_cpu_ms_median", math.nan) for r in case]
-        g["qp_cpu_exponent_fit"] = growth_exponent([r["n"] for r in case], cpu_ms)
-    text = "\n\n".join(
-        [
-            markdown_table(rows),
-            markdown_table(growth, GROWTH_COLUMNS),
-            "\n".join(f"- {line}" for line in target_lines(rows, growth, coupling)),
-        ]
-    )
-    return text, growth

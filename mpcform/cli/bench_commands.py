@@ -288,6 +288,7 @@ def _add_bench_solvers(kinds: argparse._SubParsersAction) -> None:
 
 def _bench_scale(args: argparse.Namespace) -> int:
     from mpcform.bench import scale as bench_scale
+    from mpcform.bench.scale_report import report
 
     bench_scale.check_options(
         args.n, args.scenario, args.coupling, args.steps, args.solver, args.horizon, args.monolithic_budget
@@ -307,7 +308,7 @@ def _bench_scale(args: argparse.Namespace) -> int:
         progress=lines.case,
     )
     lines.done()
-    text, growth = bench_scale.report(rows, args.coupling)
+    text, growth = report(rows, args.coupling)
     print_bench(text, rows + growth, args.json)
     return 0
 

@@ -8,7 +8,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from mpcform.bench.scale import bench_case, markdown_table, report, run
+from mpcform.bench.scale import bench_case, run
+from mpcform.bench.scale_report import markdown_table, report
 from mpcform.bench.scale_cases import LIMITS
 from mpcform.cli.main import main
 
