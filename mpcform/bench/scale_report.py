@@ -1,5 +1,6 @@
-"""The report of ``mpcform bench scale`` (:mod:`mpcform.bench.scale`): the cases' table, the growth
-exponents and the acceptance targets of the scaling issue, each with what was measured."""
+"""The report of ``mpcform bench scale`` (:mod:`mpcform.bench.scale`): the cases' table, their CPU
+times per step with the deadline misses and the bare solver floor, the growth exponents and the
+acceptance targets of the scaling issue, each with what was measured."""
 
 from __future__ import annotations
 
@@ -37,6 +38,27 @@ COLUMNS = [
     ("note", "note", "{}"),
 ]
 
+TIMING_COLUMNS = [
+    ("scenario", "scenario", "{}"),
+    ("n", "n", "{}"),
+    ("mode", "mode", "{}"),
+    ("steps_run", "steps", "{}"),
+    ("cpu_ms_p50", "CPU p50 [ms]", "{:.2f}"),
+    ("cpu_ms_p99", "CPU p99", "{:.2f}"),
+    ("cpu_ms_max", "CPU max", "{:.2f}"),
+    ("qp_cpu_ms_median", "QP CPU p50", "{:.2f}"),
+    ("qp_cpu_ms_p99", "QP CPU p99", "{:.2f}"),
+    ("qp_cpu_ms_max", "QP CPU max", "{:.2f}"),
+    ("deadline_misses", "over dt", "{}"),
+    ("solver_steps", "solver steps", "{}"),
+    ("solved_ms_median", "their med [ms]", "{:.2f}"),
+    ("solver_ms_median", "solver med [ms]", "{:.2f}"),
+    ("solver_ratio", "step / solver", "{:.2f}"),
+]
+"""Every step's CPU time, then the QP steps'; steps whose wall time exceeded dt; the steps that
+called the solver, their median wall time against the median wall time inside their solver calls
+(the bare solver floor) and the ratio."""
+
 GROWTH_COLUMNS = [
     ("scenario", "scenario", "{}"),
     ("mode", "mode", "{}"),
@@ -45,6 +67,7 @@ GROWTH_COLUMNS = [
     ("qp_exponent_fit", "QP step: fit n>=100", "{:.2f}"),
     ("qp_exponent_100_1000", "QP step: 100->1000", "{:.2f}"),
     ("qp_cpu_exponent_fit", "QP CPU: fit n>=100", "{:.2f}"),
+    ("cpu_exponent_fit", "CPU p50: fit n>=100", "{:.2f}"),
     ("partial", "stopped early (n)", "{}"),
 ]
 
@@ -92,6 +115,16 @@ def target_lines(rows: list[dict[str, Any]], growth: list[dict[str, Any]], coupl
         f"crossing n=1000 median QP step {num(qp, '{:.1f}')} ms (CPU {num(qp_cpu, '{:.1f}')} ms) "
         f"<= 40 ms: {verdict(qp, 40.0, big)}"
     )
+    p99 = big.get("qp_cpu_ms_p99", math.nan)
+    lines.append(
+        f"crossing n=1000 p99 QP step CPU {num(p99, '{:.1f}')} ms <= 100 ms: {verdict(p99, 100.0, big)}"
+    )
+    ratio, floor = big.get("solver_ratio", math.nan), big.get("solver_ms_median", math.nan)
+    lines.append(
+        f"crossing n=1000 ratio to the bare solver at the median {num(ratio, '{:.2f}')} (step "
+        f"{num(big.get('solved_ms_median', math.nan), '{:.1f}')} ms, solver {num(floor, '{:.1f}')} ms) "
+        f"<= 3: {verdict(ratio, 3.0, big)}"
+    )
     for g in growth:
         if g["mode"] == coupling and g["scenario"] == "crossing":
             e = g.get("qp_cpu_exponent_fit", math.nan)
@@ -107,16 +140,19 @@ def target_lines(rows: list[dict[str, Any]], growth: list[dict[str, Any]], coupl
 
 
 def report(rows: list[dict[str, Any]], coupling: str) -> tuple[str, list[dict[str, Any]]]:
-    """Markdown (cases, growth exponents, targets) and the growth records."""
+    """Markdown (cases, their CPU times and solver floor, growth exponents, targets) and the growth
+    records."""
     ran = [r for r in rows if r.get("steps_run")]
     growth = growth_rows(ran)
-    for g in growth:  # the growth of the median CPU time per QP step too
+    for g in growth:  # the growth of the median CPU time per QP step and per step too
         case = [r for r in ran if (r["scenario"], r["mode"]) == (g["scenario"], g["mode"])]
-        cpu_ms = [r.get("qp_cpu_ms_median", math.nan) for r in case]
-        g["qp_cpu_exponent_fit"] = growth_exponent([r["n"] for r in case], cpu_ms)
+        for key, name in (("qp_cpu_ms_median", "qp_cpu"), ("cpu_ms_p50", "cpu")):
+            cpu_ms = [r.get(key, math.nan) for r in case]
+            g[f"{name}_exponent_fit"] = growth_exponent([r["n"] for r in case], cpu_ms)
     text = "\n\n".join(
         [
             markdown_table(rows),
+            markdown_table(rows, TIMING_COLUMNS),
             markdown_table(growth, GROWTH_COLUMNS),
             "\n".join(f"- {line}" for line in target_lines(rows, growth, coupling)),
         ]
