@@ -14,7 +14,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 from mpcform.cli import bench_plans as plans
-from mpcform.cli.options import DefaultsFormatter, print_bench, seconds, solver_help
+from mpcform.cli.options import DefaultsFormatter, add_profile, print_bench, seconds, solver_help
 from mpcform.cli.progress import CaseLines
 from mpcform.errors import ValidationError
 from mpcform.scenario.load import load_scenario
@@ -124,6 +124,7 @@ def add_bench(sub: argparse._SubParsersAction) -> None:
     online.add_argument("--budget", type=float, default=0.1, help="the step deadline [s]")
     online.add_argument("--coupling", choices=("decoupled", "joint"), default="decoupled", help="the rows")
     online.add_argument("--json", metavar="PATH", help="also write the rows as a JSON list of records")
+    add_profile(online)
     for choice in kinds._choices_actions:  # each benchmark's --help: what it measures, the defaults' time
         parser = kinds.choices[choice.dest]
         parser.description = f"{choice.help}. {plans.run_time_help(choice.dest)}"
@@ -175,9 +176,11 @@ def _bench_online(args: argparse.Namespace) -> int:
     if not 0.0 < args.budget < math.inf:
         raise ValidationError("--budget", f"expected a finite deadline > 0 [s], got {args.budget:g}")
     lines = _started("online", plans.online_plan(args))
-    rows = bench_online.run(tuple(args.n), args.steps, args.budget, args.coupling, progress=lines.case)
+    rows = bench_online.run(
+        tuple(args.n), args.steps, args.budget, args.coupling, progress=lines.case, profile_path=args.profile
+    )
     lines.done()
-    print_bench(bench_online.markdown_table(rows), rows, args.json)
+    print_bench(bench_online.markdown_table(rows), [*rows, bench_online.growth(rows)], args.json)
     return 0
 
 
@@ -306,6 +309,7 @@ def _bench_scale(args: argparse.Namespace) -> int:
         isolate=not args.in_process,
         trace_memory=args.tracemalloc,
         progress=lines.case,
+        profile_path=args.profile,
     )
     lines.done()
     text, growth = report(rows, args.coupling)
@@ -348,6 +352,7 @@ def _add_bench_scale(kinds: argparse._SubParsersAction) -> None:
     scale.add_argument("--tracemalloc", action="store_true", help="also trace Python/numpy allocations")
     scale.add_argument("--in-process", action="store_true", help="run the cases here, not in fresh processes")
     scale.add_argument("--json", metavar="PATH", help="also write the rows as a JSON list of records")
+    add_profile(scale)
 
 
 # ---- problems -------------------------------------------------------------------------------
