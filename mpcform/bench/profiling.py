@@ -2,9 +2,10 @@
 their time.
 
 Each case is run a second time, after its timed run and never timed itself (the profiler slows
-every Python call), with :mod:`cProfile` enabled around the planner steps only (not the case's
-set-up). The file holds one section per case: a header line starting ``#`` that names the case and
-the steps profiled, then :mod:`pstats`' text of the top :data:`TOP` functions by internal time
+every Python call, so under a deadline the profiled run may fall back where the timed one did
+not), with :mod:`cProfile` enabled around the planner steps only (not the case's set-up). The
+file holds one section per case: a header line starting ``#`` that names the case and the steps
+profiled, then :mod:`pstats`' text of the top :data:`TOP` functions by internal time
 (``tottime``; file names without their directories).
 """
 
