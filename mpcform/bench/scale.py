@@ -3,7 +3,11 @@
 The scenarios (``formation`` and ``crossing``, at constant density) are those of
 :mod:`mpcform.bench.scale_cases`, horizon 10 by default. Each case runs a fixed number of
 closed-loop steps with exact execution; only :meth:`MPCPlanner.step` is timed (wall clock, and
-the process's CPU time: on a loaded machine the CPU time is the steadier figure). Modes
+the process's CPU time: on a loaded machine the CPU time is the steadier figure), and within it
+the solver's calls (each step's ``solve_time_s``, wall): the bare solver floor, against which the
+median step of those that called the solver is set (``solver_ratio``). A step longer than
+dt = 0.1 s (wall) is a deadline miss. With ``profile_path`` every case is run again under
+:mod:`cProfile` (:mod:`mpcform.bench.profiling`). Modes
 (:func:`mpcform.mpc.settings.mode_settings`): ``decoupled`` (``coupling="decoupled"``, grouping,
 each conflicted drone's QP solved by DAQP), ``decoupled-sparse`` (the same as one sparse QP with
 the ``--solver``), ``joint`` (joint rows, conflict grouping) and ``monolithic`` (``grouping=False``,
@@ -23,6 +27,7 @@ get them anyway (see :mod:`mpcform.run.parallel`).
 
 from __future__ import annotations
 
+import cProfile
 import math
 import resource
 import sys
@@ -30,20 +35,20 @@ import time
 import tracemalloc
 from collections.abc import Callable, Sequence
 from contextlib import ExitStack
+from pathlib import Path
 from typing import Any, cast
 
 import numpy as np
 
 from mpcform._validate import Array
-from mpcform.bench.growth import growth_exponent, growth_rows
+from mpcform.bench.profiling import top_functions, write_profiles
 from mpcform.bench.scale_cases import DT_S, LIMITS, SCENARIOS, make_case
-from mpcform.bench.stats import median_p90
+from mpcform.bench.stats import median_p90, p50_p99_max, solver_floor
 from mpcform.errors import ValidationError
 from mpcform.formation.geometry import min_segment_distance
 from mpcform.mpc.planner import MPCPlanner
 from mpcform.mpc.settings import MPCSettings, mode_settings
 from mpcform.mpc.step_info import MPCStepInfo
-from mpcform.outputs import tables
 from mpcform.run.parallel import blas_threads, process_pool
 from mpcform.solvers.registry import DEFAULT_SOLVER
 
@@ -61,23 +66,34 @@ def _maxrss_mib() -> float:
     return peak / 2**20 if sys.platform == "darwin" else peak / 2**10
 
 
-def _closed_loop(planner: MPCPlanner, p: Array, steps: int, budget_s: float) -> dict[str, Any]:
+def _closed_loop(
+    planner: MPCPlanner, p: Array, steps: int, budget_s: float, profiler: cProfile.Profile | None = None
+) -> dict[str, Any]:
     """Run ``steps`` steps (or until ``budget_s`` of planning time); time every planner call (wall
-    clock, and the process's CPU time)."""
+    clock, and the process's CPU time) and the solver's calls within it (``floor``: each step's
+    wall time and ``solve_time_s`` [ms]). ``profiler`` is enabled around the planner calls (a
+    profiled run's times are not meant to be reported)."""
     planner.reset(0.0, p)
     times: dict[str, list[float]] = {"qp": [], "fast_path": [], "fallback": []}
     cpu: dict[str, list[float]] = {"qp": [], "fast_path": [], "fallback": []}
+    floor: tuple[list[float], list[float]] = ([], [])
     qp_drones: list[int] = []
     min_seg, max_slack, spent = float("inf"), 0.0, 0.0
     done = 0
     for j in range(steps):
+        if profiler is not None:
+            profiler.enable()
         start, start_cpu = time.perf_counter(), time.process_time()
         out = planner.step(DT_S * j, p)
         elapsed, elapsed_cpu = time.perf_counter() - start, time.process_time() - start_cpu
+        if profiler is not None:
+            profiler.disable()
         spent += elapsed
         times[out.info.mode].append(1e3 * elapsed)
         cpu[out.info.mode].append(1e3 * elapsed_cpu)
         info = cast(MPCStepInfo, out.info)
+        floor[0].append(1e3 * elapsed)
+        floor[1].append(1e3 * info.solve_time_s)
         if info.mode != "fast_path":
             qp_drones.append(info.qp_drones)
         max_slack = max(max_slack, info.max_slack_m)
@@ -90,6 +106,7 @@ def _closed_loop(planner: MPCPlanner, p: Array, steps: int, budget_s: float) -> 
     return {
         "times": times,
         "cpu": cpu,
+        "floor": floor,
         "qp_drones": qp_drones,
         "min_seg": min_seg,
         "max_slack": max_slack,
@@ -136,11 +153,18 @@ def bench_case(
     }
     row["step_ms_median"], row["step_ms_p90"] = median_p90(all_ms)
     row["step_ms_max"] = max(all_ms, default=float("nan"))
+    row["deadline_misses"] = sum(t > 1e3 * DT_S for t in all_ms)  # steps longer than a period
     row["qp_ms_median"], row["qp_ms_p90"] = median_p90(qp_ms)
     row["fast_ms_median"], row["fast_ms_p90"] = median_p90(times["fast_path"])
     cpu = run["cpu"]
-    row["qp_cpu_ms_median"], row["qp_cpu_ms_p90"] = median_p90(cpu["qp"] + cpu["fallback"])
+    qp_cpu_ms = cpu["qp"] + cpu["fallback"]
+    row["cpu_ms_p50"], row["cpu_ms_p99"], row["cpu_ms_max"] = p50_p99_max(qp_cpu_ms + cpu["fast_path"])
+    row["qp_cpu_ms_median"], row["qp_cpu_ms_p90"] = median_p90(qp_cpu_ms)
+    _, row["qp_cpu_ms_p99"], row["qp_cpu_ms_max"] = p50_p99_max(qp_cpu_ms)
     row["fast_cpu_ms_median"], row["fast_cpu_ms_p90"] = median_p90(cpu["fast_path"])
+    floor = solver_floor(*run["floor"])  # wall against wall, the steps that called the solver
+    row["solver_steps"], row["solved_ms_median"] = floor.steps, floor.step_ms_median
+    row["solver_ms_median"], row["solver_ratio"] = floor.solver_ms_median, floor.ratio
     row["planning_s"] = run["spent"]
     row["rss_peak_mib"], row["rss_delta_mib"] = rss_after, rss_after - rss_before
     row["tracemalloc_peak_mib"] = float("nan")
@@ -164,6 +188,22 @@ def bench_case(
     if run["steps_run"] < steps:
         row["note"] = f"stopped after {run['steps_run']} of {steps} steps (budget {budget_s:g} s)"
     return row
+
+
+def profile_case(
+    scenario: str, n: int, mode: str, steps: int, solver: str = DEFAULT_SOLVER, horizon: int = 10
+) -> str:
+    """A second run of the case, ``steps`` planner steps under :mod:`cProfile`: its section of the
+    ``--profile`` file (:func:`mpcform.bench.profiling.top_functions`)."""
+    ref, p0 = make_case(scenario, n)
+    settings = mode_settings(mode, horizon)
+    planner = MPCPlanner(ref, DT_S, LIMITS, settings, solver=_solver(settings, solver))
+    profiler = cProfile.Profile()
+    _closed_loop(planner, p0, steps, math.inf, profiler)
+    what = f"{scenario} n={n} {mode} ({planner.solver_name})"
+    return top_functions(
+        profiler, f"bench scale: {what}: {steps} planner steps profiled (a second run, not timed)"
+    )
 
 
 def skipped_row(scenario: str, n: int, mode: str, steps: int, note: str) -> dict[str, Any]:
@@ -218,6 +258,7 @@ def run(
     isolate: bool = True,
     trace_memory: bool = False,
     progress: Callable[[str, int, int], None] | None = None,
+    profile_path: str | Path | None = None,
 ) -> list[dict[str, Any]]:
     """Every case, one at a time (never two timed cases at once).
 
@@ -226,9 +267,12 @@ def run(
     ``monolithic_budget_s > 0``; once one of its cases runs over, its larger sizes are skipped.
     ``isolate`` runs every case in a fresh spawned process (clean peak-memory readings);
     ``progress(label, i, n)`` is called as case ``i`` of ``n`` starts (a skipped one too).
+    With ``profile_path``, each case run is run again, as many steps, under :mod:`cProfile` (in a
+    fresh process of its own when ``isolate``), and the sections are written there at the end.
     """
     modes = check_options(sizes, scenarios, coupling, steps, solver, horizon, monolithic_budget_s)
     rows: list[dict[str, Any]] = []
+    profiles: list[str] = []
     over_budget: dict[tuple[str, str], int] = {}
     total = len(scenarios) * len(sizes) * len(modes)
     with ExitStack() as stack:
@@ -252,118 +296,15 @@ def run(
                     args = (scenario, n, mode, steps, solver, horizon, budget, trace_memory)
                     row = pool.submit(bench_case, *args).result() if pool is not None else bench_case(*args)
                     rows.append(row)
+                    if profile_path is not None:
+                        again = (scenario, n, mode, row["steps_run"], solver, horizon)
+                        profiles.append(
+                            pool.submit(profile_case, *again).result()
+                            if pool is not None
+                            else profile_case(*again)
+                        )
                     if mode == "monolithic" and row["steps_run"] < steps:
                         over_budget[scenario, mode] = n
+    if profile_path is not None:
+        write_profiles(profile_path, profiles)
     return rows
-
-
-COLUMNS = [
-    ("scenario", "scenario", "{}"),
-    ("n", "n", "{}"),
-    ("mode", "mode", "{}"),
-    ("steps_run", "steps", "{}"),
-    ("qp_steps", "QP", "{}"),
-    ("fast_path_steps", "fast", "{}"),
-    ("fallback_steps", "fallback", "{}"),
-    ("qp_drones_mean", "QP drones", "{:.0f}"),
-    ("step_ms_median", "step med [ms]", "{:.2f}"),
-    ("step_ms_p90", "step p90", "{:.2f}"),
-    ("qp_ms_median", "QP med [ms]", "{:.2f}"),
-    ("qp_ms_p90", "QP p90", "{:.2f}"),
-    ("qp_cpu_ms_median", "QP CPU med", "{:.2f}"),
-    ("qp_cpu_ms_p90", "QP CPU p90", "{:.2f}"),
-    ("fast_ms_median", "fast med [ms]", "{:.2f}"),
-    ("fast_ms_p90", "fast p90", "{:.2f}"),
-    ("fast_cpu_ms_median", "fast CPU med", "{:.2f}"),
-    ("rss_peak_mib", "peak RSS [MiB]", "{:.0f}"),
-    ("rss_delta_mib", "RSS growth", "{:.0f}"),
-    ("tracemalloc_peak_mib", "traced peak", "{:.0f}"),
-    ("min_separation_segments", "min sep [m]", "{:.3f}"),
-    ("note", "note", "{}"),
-]
-
-GROWTH_COLUMNS = [
-    ("scenario", "scenario", "{}"),
-    ("mode", "mode", "{}"),
-    ("step_exponent_fit", "step: fit n>=100", "{:.2f}"),
-    ("step_exponent_100_1000", "step: 100->1000", "{:.2f}"),
-    ("qp_exponent_fit", "QP step: fit n>=100", "{:.2f}"),
-    ("qp_exponent_100_1000", "QP step: 100->1000", "{:.2f}"),
-    ("qp_cpu_exponent_fit", "QP CPU: fit n>=100", "{:.2f}"),
-    ("partial", "stopped early (n)", "{}"),
-]
-
-
-def markdown_table(rows: list[dict[str, Any]], columns: list[tuple[str, str, str]] | None = None) -> str:
-    """The rows as a markdown table (missing or NaN entries shown as ``-``)."""
-    return tables.markdown_table(rows, COLUMNS if columns is None else columns)
-
-
-def target_lines(rows: list[dict[str, Any]], growth: list[dict[str, Any]], coupling: str) -> list[str]:
-    """The acceptance targets of the scaling issue for the planner mode ``coupling``, each with what
-    was measured (``-`` where not measured; cases stopped by their budget say so)."""
-
-    def case(scenario: str, n: int) -> dict[str, Any]:
-        match = [r for r in rows if (r["scenario"], r["n"], r["mode"]) == (scenario, n, coupling)]
-        return match[0] if match and match[0].get("steps_run") else {}
-
-    def num(value: float, fmt: str) -> str:
-        return fmt.format(value) if np.isfinite(value) else "-"
-
-    def verdict(value: float, limit: float, row: dict[str, Any] | None = None) -> str:
-        if not np.isfinite(value):
-            return "not measured"
-        partial = row is not None and row["steps_run"] < row["steps"]
-        return ("met" if value <= limit else "MISSED") + (f" ({row['note']})" if partial and row else "")
-
-    form = case("formation", 1000)
-    med, p90 = form.get("step_ms_median", math.nan), form.get("step_ms_p90", math.nan)
-    lines = [
-        f"formation n=1000 median step {num(med, '{:.1f}')} ms (p90 {num(p90, '{:.1f}')}) <= 100 ms: "
-        f"{verdict(med, 100.0, form)}"
-    ]
-    cross = case("crossing", 100)
-    qp = cross.get("qp_ms_median", math.nan)
-    lines.append(f"crossing n=100 median QP step {num(qp, '{:.1f}')} ms <= 50 ms: {verdict(qp, 50.0, cross)}")
-    for g in growth:
-        if g["mode"] == coupling:
-            e = g["step_exponent_100_1000"]
-            partial = f" (from cases stopped early: n = {g['partial']})" if g["partial"] else ""
-            text = f"{g['scenario']} growth exponent 100->1000 (median step) {num(e, '{:.2f}')} <= 1.2"
-            lines.append(f"{text}: {verdict(e, 1.2)}{partial}")
-    big = case("crossing", 1000)  # the performance targets (decoupled step at the solver floor)
-    qp, qp_cpu = big.get("qp_ms_median", math.nan), big.get("qp_cpu_ms_median", math.nan)
-    lines.append(
-        f"crossing n=1000 median QP step {num(qp, '{:.1f}')} ms (CPU {num(qp_cpu, '{:.1f}')} ms) "
-        f"<= 40 ms: {verdict(qp, 40.0, big)}"
-    )
-    for g in growth:
-        if g["mode"] == coupling and g["scenario"] == "crossing":
-            e = g.get("qp_cpu_exponent_fit", math.nan)
-            lines.append(
-                f"crossing growth exponent (median CPU per QP step, fit n>=100) {num(e, '{:.2f}')} "
-                f"<= 1.1: {verdict(e, 1.1)}"
-            )
-    lines.append(f"formation n=1000 median step {num(med, '{:.2f}')} ms <= 2 ms: {verdict(med, 2.0, form)}")
-    peaks = [case(s, 1000).get("rss_peak_mib", math.nan) for s in SCENARIOS]
-    peak = max((x for x in peaks if np.isfinite(x)), default=math.nan)
-    lines.append(f"peak RSS of the n=1000 runs {num(peak, '{:.0f}')} MiB <= 1 GiB: {verdict(peak, 1024.0)}")
-    return lines
-
-
-def report(rows: list[dict[str, Any]], coupling: str) -> tuple[str, list[dict[str, Any]]]:
-    """Markdown (cases, growth exponents, targets) and the growth records."""
-    ran = [r for r in rows if r.get("steps_run")]
-    growth = growth_rows(ran)
-    for g in growth:  # the growth of the median CPU time per QP step too
-        case = [r for r in ran if (r["scenario"], r["mode"]) == (g["scenario"], g["mode"])]
-        cpu_ms = [r.get("qp_cpu_ms_median", math.nan) for r in case]
-        g["qp_cpu_exponent_fit"] = growth_exponent([r["n"] for r in case], cpu_ms)
-    text = "\n\n".join(
-        [
-            markdown_table(rows),
-            markdown_table(growth, GROWTH_COLUMNS),
-            "\n".join(f"- {line}" for line in target_lines(rows, growth, coupling)),
-        ]
-    )
-    return text, growth

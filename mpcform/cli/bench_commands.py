@@ -14,7 +14,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 from mpcform.cli import bench_plans as plans
-from mpcform.cli.options import DefaultsFormatter, print_bench, seconds, solver_help
+from mpcform.cli.options import DefaultsFormatter, add_profile, print_bench, seconds, solver_help
 from mpcform.cli.progress import CaseLines
 from mpcform.errors import ValidationError
 from mpcform.scenario.load import load_scenario
@@ -124,6 +124,7 @@ def add_bench(sub: argparse._SubParsersAction) -> None:
     online.add_argument("--budget", type=float, default=0.1, help="the step deadline [s]")
     online.add_argument("--coupling", choices=("decoupled", "joint"), default="decoupled", help="the rows")
     online.add_argument("--json", metavar="PATH", help="also write the rows as a JSON list of records")
+    add_profile(online)
     for choice in kinds._choices_actions:  # each benchmark's --help: what it measures, the defaults' time
         parser = kinds.choices[choice.dest]
         parser.description = f"{choice.help}. {plans.run_time_help(choice.dest)}"
@@ -175,9 +176,11 @@ def _bench_online(args: argparse.Namespace) -> int:
     if not 0.0 < args.budget < math.inf:
         raise ValidationError("--budget", f"expected a finite deadline > 0 [s], got {args.budget:g}")
     lines = _started("online", plans.online_plan(args))
-    rows = bench_online.run(tuple(args.n), args.steps, args.budget, args.coupling, progress=lines.case)
+    rows = bench_online.run(
+        tuple(args.n), args.steps, args.budget, args.coupling, progress=lines.case, profile_path=args.profile
+    )
     lines.done()
-    print_bench(bench_online.markdown_table(rows), rows, args.json)
+    print_bench(bench_online.markdown_table(rows), [*rows, bench_online.growth(rows)], args.json)
     return 0
 
 
@@ -288,6 +291,7 @@ def _add_bench_solvers(kinds: argparse._SubParsersAction) -> None:
 
 def _bench_scale(args: argparse.Namespace) -> int:
     from mpcform.bench import scale as bench_scale
+    from mpcform.bench.scale_report import report
 
     bench_scale.check_options(
         args.n, args.scenario, args.coupling, args.steps, args.solver, args.horizon, args.monolithic_budget
@@ -305,9 +309,10 @@ def _bench_scale(args: argparse.Namespace) -> int:
         isolate=not args.in_process,
         trace_memory=args.tracemalloc,
         progress=lines.case,
+        profile_path=args.profile,
     )
     lines.done()
-    text, growth = bench_scale.report(rows, args.coupling)
+    text, growth = report(rows, args.coupling)
     print_bench(text, rows + growth, args.json)
     return 0
 
@@ -347,6 +352,7 @@ def _add_bench_scale(kinds: argparse._SubParsersAction) -> None:
     scale.add_argument("--tracemalloc", action="store_true", help="also trace Python/numpy allocations")
     scale.add_argument("--in-process", action="store_true", help="run the cases here, not in fresh processes")
     scale.add_argument("--json", metavar="PATH", help="also write the rows as a JSON list of records")
+    add_profile(scale)
 
 
 # ---- problems -------------------------------------------------------------------------------

@@ -90,7 +90,7 @@ def scale_plan(args: argparse.Namespace) -> str:
     where = "in process" if args.in_process else "each in a fresh process"
     return (
         f"{count(cases, 'case')} (scenarios {', '.join(args.scenario)} x n = {_ns(sorted(args.n))} x modes "
-        f"{', '.join(modes)}), one run each, {args.steps} steps, horizon {args.horizon}, solver "
+        f"{', '.join(modes)}), {_runs(args.profile)}, {args.steps} steps, horizon {args.horizon}, solver "
         f"{args.solver} (DAQP per drone when decoupled), {where}; budget {args.budget:g} s per case"
         f"{mono}; time: a few s per case up to 300 drones, up to a minute at 1000 (2-core machine)"
     )
@@ -118,10 +118,17 @@ def plant_plan(args: argparse.Namespace) -> str:
     )
 
 
+def _runs(profile: str | None) -> str:
+    """How often each case runs: once, or with ``--profile`` once more under cProfile (twice the time)."""
+    if profile is None:
+        return "one run each"
+    return f"one run each, then a second under cProfile into {profile} (about twice the time)"
+
+
 def online_plan(args: argparse.Namespace) -> str:
     """``bench online``'s plan."""
     return (
-        f"{count(len(args.n), 'crossing')} (n = {_ns(args.n)}), one run each, {args.steps} periods of 0.1 s, "
-        f"deadline {args.budget:g} s, {args.coupling}; time: about 2 s per 100 drones per 60 "
+        f"{count(len(args.n), 'crossing')} (n = {_ns(args.n)}), {_runs(args.profile)}, {args.steps} periods "
+        f"of 0.1 s, deadline {args.budget:g} s, {args.coupling}; time: about 2 s per 100 drones per 60 "
         "periods on a 2-core machine"
     )

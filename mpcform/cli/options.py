@@ -1,6 +1,6 @@
 """What the subcommands' wiring shares: option types (``--max-memory``, ``--max-work``, a time
-budget), the solvers' help text, and how the table commands print (markdown on stdout, ``--json``
-records, progress lines on a terminal's stderr)."""
+budget, a benchmark's ``--profile``), the solvers' help text, and how the table commands print
+(markdown on stdout, ``--json`` records, progress lines on a terminal's stderr)."""
 
 from __future__ import annotations
 
@@ -92,6 +92,17 @@ def add_max_work(cmd: argparse.ArgumentParser, per: str = "run") -> None:
         help=f"refuse a {per} whose plant takes more inner steps x drones than this (the "
         f"quadrotor's rate x duration x n; default {DEFAULT_MAX_WORK:g}), or whose MPC's sparse QP "
         "nonzeros x steps exceed twice it",
+    )
+
+
+def add_profile(cmd: argparse.ArgumentParser) -> None:
+    """``--profile PATH`` of a benchmark (checked before any case, with the other output files:
+    :mod:`mpcform.cli.paths`)."""
+    cmd.add_argument(
+        "--profile",
+        metavar="PATH",
+        help="also run each case a second time, untimed, under cProfile, and write the top 30 functions "
+        "by tottime of its planner steps to PATH (a header line per case)",
     )
 
 

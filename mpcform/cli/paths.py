@@ -3,7 +3,7 @@ because ``--out`` names a file or ``--json`` a missing directory.
 
 Every command's output options are checked by their argparse destination: ``out`` (a directory,
 created with its parents when missing; never the filesystem root, the home directory or a project
-root) and ``json``, ``report``, ``figure``, ``out_file`` (files, written into an existing
+root) and ``json``, ``report``, ``figure``, ``out_file``, ``profile`` (files, written into an existing
 directory). What a command may replace in a directory it writes is decided by the directory's
 manifest, when the command claims it (:mod:`mpcform.outputs.outdir`).
 """
@@ -19,7 +19,7 @@ from mpcform.errors import ValidationError, shown
 from mpcform.outputs.outdir import check_root, create_dirs
 
 DIRECTORY_OPTIONS = ("out",)
-FILE_OPTIONS = ("json", "report", "figure", "out_file")
+FILE_OPTIONS = ("json", "report", "figure", "out_file", "profile")
 FLAGS = {"out_file": "--out"}
 """Destinations whose flag is not ``--`` + the destination (``view --out HTML`` is a file)."""
 

@@ -331,4 +331,5 @@ def solve_in_wider_fence(
     wider = admitted(steps.families, p0, free, path)
     if np.array_equal(wider, free):
         return sol, active
-    return solver.solve(replace(qp, free_m=wider[:, qp.drones]))
+    again, active = solver.solve(replace(qp, free_m=wider[:, qp.drones]))
+    return replace(again, solve_time_s=sol.solve_time_s + again.solve_time_s), active  # both solves

@@ -13,7 +13,8 @@ from mpcform.solvers.base import QPSolution
 @dataclass(frozen=True)
 class MPCStepInfo(StepInfo):
     """A planner step: the generic record (``mode`` ``fast_path`` | ``qp`` | ``fallback``, solver
-    ``status``) and the solve's figures: ``iterations``, ``solve_time_s`` [s], ``active_rows``,
+    ``status``) and the solve's figures: ``iterations``, ``solve_time_s`` [s] (wall time inside
+    the backend's calls of the step: every setup, update and solve, per drone or sparse), ``active_rows``,
     ``max_slack_m`` [m] with ``slack_pairs``, the drone pairs (or ``(drone, -1 - obstacle)``)
     whose separation rows needed slack, and ``qp_drones``, how many drones the QP was solved for
     (the others' groups took the fast path). Liveness (:mod:`mpcform.mpc.liveness`): ``stalled``

@@ -124,6 +124,18 @@ def test_bench_online_refuses_bad_sizes(capsys) -> None:
         assert f"mpcform: error: {flag}" in capsys.readouterr().err
 
 
+@pytest.mark.parametrize("bench", ["scale", "online"])
+def test_a_bad_profile_path_is_one_line_naming_the_option_before_any_case(
+    bench: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    for path, why in ((tmp_path, "is a directory"), (tmp_path / "missing" / "p.txt", "does not exist")):
+        assert main(["bench", bench, "--n", "4", "--steps", "1", "--profile", str(path)]) == 2
+        err = capsys.readouterr().err
+        assert err.startswith("mpcform: error: --profile: ") and why in err and err.count("\n") == 1
+        assert f"bench {bench}: " not in err  # no plan, no case
+    assert not (tmp_path / "missing").exists()
+
+
 SMALLEST = {  # each benchmark's smallest real run, and its number of cases
     "mpc": (["--n", "4", "6", "--spatial-n", "--scenarios", "--steps", "3", "--cvxpy-budget", "0"], 2),
     "solvers": (["--solvers", "piqp", "--settings", "default", "--modes", "cold", "--no-exact"], 2),

@@ -47,3 +47,10 @@ def test_the_plant_plan_scales_its_time_with_the_work() -> None:
     assert "about 3.5 s per run" in plans.plant_plan(_args("plant", "--n", "40"))
     assert "under 0.1 s per run" in plans.plant_plan(_args("plant", "--n", "1", "--duration", "0.1"))
     assert plans.count(1, "run") == "1 run" and plans.count(3, "run") == "3 runs"
+
+
+def test_plans_say_the_profiled_runs() -> None:
+    online = plans.online_plan(_args("online", "--profile", "p.txt"))
+    assert "(n = 20, 100, 1000), one run each, then a second under cProfile into p.txt" in online
+    scale = plans.scale_plan(_args("scale", "--profile", "p.txt"))
+    assert "modes decoupled, monolithic), one run each, then a second under cProfile into p.txt" in scale

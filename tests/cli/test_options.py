@@ -12,6 +12,7 @@ import pytest
 from mpcform.cli.options import (
     add_max_memory,
     add_max_work,
+    add_profile,
     max_memory_gib,
     max_work,
     print_bench,
@@ -91,3 +92,10 @@ def test_add_max_work_defaults_and_parses() -> None:
     assert parser.parse_args([]).max_work == DEFAULT_MAX_WORK
     assert parser.parse_args(["--max-work", "2e8"]).max_work == 2e8
     assert "refuse a sweep run whose plant takes more inner steps x drones" in parser.format_help()
+
+
+def test_add_profile_takes_a_path() -> None:
+    cmd = argparse.ArgumentParser()
+    add_profile(cmd)
+    assert cmd.parse_args([]).profile is None and cmd.parse_args(["--profile", "p.txt"]).profile == "p.txt"
+    assert "top 30 functions" in cmd.format_help()

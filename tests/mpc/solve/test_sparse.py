@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import time
 from typing import Any
 
 import numpy as np
@@ -114,6 +115,54 @@ def test_context_numbers_the_drones_locally() -> None:
     np.testing.assert_allclose(ctx.obstacle_centers_m, [OBSTACLE.center_m] * 2)
     np.testing.assert_allclose(ctx.obstacle_distance_m, 0.5 + 0.25 + 2e-3)
     assert ctx.pair_distance_m == 0.5 + 2e-3
+
+
+class Clocked(QPBackend):
+    """PIQP, with the time spent in its setup and update calls (timed around them) and its solves
+    (the time they report) summed."""
+
+    name = "piqp+clock"
+
+    def __init__(self) -> None:
+        from mpcform.solvers.registry import make_backend
+
+        super().__init__(SolverOptions())
+        self.inner = make_backend("piqp", SolverOptions())
+        self.spent_s, self.calls = 0.0, []  # type: float, list[str]
+        self.warm_starts = self.inner.warm_starts
+
+    def setup(self, P: Any, q: Any, A: Any, lo: Any, hi: Any) -> None:
+        start = time.perf_counter()
+        self.inner.setup(P, q, A, lo, hi)
+        self.spent_s += time.perf_counter() - start
+        self.calls.append("setup")
+
+    def update(self, q: Any, lo: Any, hi: Any, A_data: Any) -> None:
+        start = time.perf_counter()
+        self.inner.update(q, lo, hi, A_data)
+        self.spent_s += time.perf_counter() - start
+        self.calls.append("update")
+
+    def solve(self, x0: Any = None) -> QPSolution:
+        sol = self.inner.solve(x0)
+        self.spent_s += sol.solve_time_s
+        self.calls.append("solve")
+        return sol
+
+
+def test_solve_time_covers_every_backend_call_of_the_step() -> None:
+    """The solution's ``solve_time_s`` (the step record's) is the setup or update and the solve,
+    each timed around the backend's call: at least what the backend measured inside them."""
+    st = MPCSettings(horizon=3, coupling="joint", solve=SparseSolve())
+    sep = Separation(2, LIMITS, st, (OBSTACLE,))
+    backend = Clocked()
+    sparse = SparseSolver(backend, 2, DT, LIMITS, st, limit_rows(2, DT, LIMITS, st), sep)
+    p0 = np.array([[0.0, 0.0], [0.6, 0.0]])
+    for expected in (["setup", "solve"], ["update", "solve"]):
+        backend.spent_s, backend.calls = 0.0, []
+        sol, _ = sparse.solve(step_qp(p0, sep, np.arange(2)))
+        assert sol.success and backend.calls == expected
+        assert backend.spent_s <= sol.solve_time_s < np.inf
 
 
 class HardCheck(QPBackend):
