@@ -17,12 +17,18 @@ A drone that can no longer follow its setpoints (flipped, on the floor: the Craz
 supervisor reports it tumbled) is given up with :meth:`OnlineLoop.lose`: the planner stops
 planning for it, the others keep ``d_min`` from where it lies (:mod:`mpcform.mpc.safety.survivors`),
 and its command is zero from then on (its setpoints hold it where it is: stop or land it).
+
+A planner with neither a velocity-loop model nor a robust tube (no plant margin, no tracking
+allowance) plans for the ideal single integrator, not for a drone: :class:`OnlineLoop` warns once
+(:class:`IdealPlanWarning`) when built on one.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import sys
 import time
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
@@ -38,6 +44,20 @@ from mpcform.scenario.spec import Scenario
 
 GRID_TOLERANCE = 1e-6
 """How far from the loop's grid ``t0 + k dt`` a step's time may be, as a fraction of dt."""
+
+
+class IdealPlanWarning(UserWarning):
+    """An online loop's planner plans for the ideal single integrator (module docstring)."""
+
+
+IDEAL_PLAN = (
+    "online: the planner plans for an ideal drone: it models no velocity loop (a [plant] other "
+    "than ideal, with controller.plant_model = true) and keeps no tracking allowance "
+    "(limits.tracking = 0), so a flown drone's lag may bring it closer than d_min; plan with a "
+    'Crazyflie\'s defaults: mpcform.scenario.plant.with_plant_kind(scenario, "crazyflow") (its loop '
+    "model and the 0.05 m tracking allowance), or at least scenario.flyable()"
+)
+"""The warning's text (:class:`IdealPlanWarning`)."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -57,13 +77,17 @@ class OnlineStep:
 
 class OnlineLoop:
     """An :class:`~mpcform.mpc.planner.MPCPlanner` stepped on measurements (module docstring);
-    setpoints at ``setpoint_rate_hz`` (a multiple of ``1 / dt``), planar plans at ``altitude_m``."""
+    setpoints at ``setpoint_rate_hz`` (a multiple of ``1 / dt``), planar plans at ``altitude_m``.
+    A planner for the ideal drone (no loop model, no margin, no tracking allowance) is warned of
+    once, here (:class:`IdealPlanWarning`)."""
 
     def __init__(
         self, planner: Controller, *, setpoint_rate_hz: float = 100.0, altitude_m: float = 1.0
     ) -> None:
         if not isinstance(planner, MPCPlanner):
             raise ValidationError("planner", f"expected an MPCPlanner, got {type(planner).__name__}")
+        if planner.loop is None and planner.limits.tube_m == 0.0:
+            warnings.warn(IDEAL_PLAN, IdealPlanWarning, stacklevel=_outside_level())
         self._full = planner
         self.planner: Controller = planner  # after lose: the planner of the drones still flying
         self.n, self.dim = planner.n, planner.dim
@@ -173,6 +197,15 @@ def lost_indices(drones: ArrayLike, n: int) -> Array:
         bad = int(idx[0] if idx[0] < 0 else idx[-1])
         raise ValidationError("drones", f"{expected}: index {bad} is out of range")
     return idx
+
+
+def _outside_level() -> int:
+    """The ``stacklevel`` of its caller's first caller outside this module (the user's line,
+    whether it built the loop or called :meth:`OnlineLoop.from_scenario`)."""
+    frame, level = sys._getframe(1), 1
+    while frame.f_back is not None and frame.f_code.co_filename == __file__:
+        frame, level = frame.f_back, level + 1
+    return level
 
 
 def _time(t_s: object) -> float:
