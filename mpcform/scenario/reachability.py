@@ -7,9 +7,17 @@ that never calls a passable gap closed). A target that lies in another region is
 the drones, the spheres (and the fence) that close it off, and the time from which the reference
 keeps it there. A reference that passes through a sphere on its way is not reported: the MPC goes
 around it, and only where it ends matters.
+
+A reference faster than the limits (:func:`pace_warning`) is said too: its targets sampled at every
+control step of the run, a target speed above ``v_max`` (the velocity set's spheroid with
+``v_max_z``) or a component of the target velocities' finite differences above the planner's
+``a_max`` (its rows bound each component's change by ``a_max dt``) leaves the drones behind it,
+whatever the reference's kind.
 """
 
 from __future__ import annotations
+
+from collections.abc import Callable
 
 import numpy as np
 
@@ -21,6 +29,11 @@ from mpcform.world.obstacles import Obstacle
 from mpcform.world.shapes.shape_set import ShapeSet
 
 TIMES = 200  # reference samples searched for the time a target becomes unreachable
+PACE_RTOL = 1e-6
+"""A reference's speed or acceleration exceeds a limit when above it by this fraction (rounding)."""
+PACE_CHUNK = 1024
+"""Steps of the reference sampled at once (its targets are (T, n, d): bounded memory at load)."""
+AXES = "xyz"
 
 
 def unreachable_warning(
@@ -66,6 +79,58 @@ def unreachable_warning(
     return (
         f"reference: drone {i}{more} cannot reach its goal {_point(targets_m[-1, i])}: from t = "
         f"{since:.3g} s its target lies {where}" + _tightening(limits, tube_m)
+    )
+
+
+def pace_warning(
+    limits: Limits,
+    a_max_mps2: float | None,
+    dt_s: float,
+    steps: int,
+    velocities: Callable[[Array], Array],
+    a_max_field: str,
+) -> str | None:
+    """One line when the reference is faster than the limits, or None: ``velocities(times_s)``
+    (T, n, d) its target velocities, read at ``t = k dt_s`` for k = 0..steps (the run's steps) in
+    chunks of :data:`PACE_CHUNK`; ``a_max_mps2`` the planner's bound (None: none), named
+    ``a_max_field`` in the line (module docstring)."""
+    speed = (0.0, 0, 0.0)  # the fastest (value, drone, time)
+    acc = (0.0, 0, 0, 0.0)  # the largest component change per second (value, drone, axis, time)
+    scale = None
+    for first in range(0, steps + 1, PACE_CHUNK):
+        k = np.arange(max(first - 1, 0), min(first + PACE_CHUNK, steps + 1))  # one sample of overlap
+        t_s = dt_s * k
+        v = velocities(t_s)
+        if scale is None:
+            scale = limits.speed_scale(v.shape[-1])
+        norm = np.linalg.norm(v * scale, axis=-1)  # (T, n): v_max on the spheroid's ball
+        j, i = np.unravel_index(int(np.argmax(norm)), norm.shape)
+        if norm[j, i] > speed[0]:
+            speed = (float(norm[j, i]), int(i), float(t_s[j]))
+        if v.shape[0] > 1:
+            change = np.abs(np.diff(v, axis=0)) / dt_s  # (T - 1, n, d)
+            j, i, axis = np.unravel_index(int(np.argmax(change)), change.shape)
+            if change[j, i, axis] > acc[0]:
+                acc = (float(change[j, i, axis]), int(i), int(axis), float(t_s[j]))
+    parts = []
+    v_max = limits.v_max_mps
+    if v_max is not None and speed[0] > v_max * (1.0 + PACE_RTOL):
+        squeezed = " (v_max_z on the vertical)" if scale is not None and np.any(scale != 1.0) else ""
+        parts.append(
+            f"its speed reaches {speed[0]:.3g} m/s (drone {speed[1]} at t = {speed[2]:.3g} s), above "
+            f"limits.v_max = {v_max:g} m/s{squeezed}"
+        )
+    if a_max_mps2 is not None and acc[0] > a_max_mps2 * (1.0 + PACE_RTOL):
+        parts.append(
+            f"its acceleration reaches {acc[0]:.3g} m/s^2 (drone {acc[1]} along {AXES[acc[2]]} at "
+            f"t = {acc[3]:.3g} s), above {a_max_field}"
+        )
+    if not parts:
+        return None
+    return (
+        f"reference: {' and '.join(parts)}: the drones cannot keep up with it and the run may not "
+        f"complete within its duration ({steps * dt_s:.3g} s; slow the reference, e.g. a mission's "
+        "speed_fraction or drone_acceleration, raise the limits or lengthen simulation.duration)"
     )
 
 
