@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import cProfile
 import math
+import warnings
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -31,7 +32,7 @@ from mpcform.bench.stats import solver_floor
 from mpcform.formation.geometry import min_segment_distance
 from mpcform.mpc.planner import MPCPlanner
 from mpcform.mpc.settings import MPCSettings
-from mpcform.online.loop import OnlineLoop, OnlineStep, step_time_stats
+from mpcform.online.loop import IdealPlanWarning, OnlineLoop, OnlineStep, step_time_stats
 from mpcform.outputs import tables
 
 DEFAULT_N = (20, 100, 1000)
@@ -66,7 +67,9 @@ def _fly(
     segments and the final targets."""
     reference, p = crossing_case(n)
     settings = MPCSettings(coupling=coupling, step_budget_s=budget_s)
-    loop = OnlineLoop(MPCPlanner(reference, DT_S, LIMITS, settings))
+    with warnings.catch_warnings():  # flown on the ideal plant: planned for it on purpose
+        warnings.simplefilter("ignore", IdealPlanWarning)
+        loop = OnlineLoop(MPCPlanner(reference, DT_S, LIMITS, settings))
     done, closest = [], np.inf
     for k in range(steps):
         if profiler is not None:

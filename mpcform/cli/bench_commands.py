@@ -169,12 +169,18 @@ def _bench_plant(args: argparse.Namespace) -> int:
 
 def _bench_online(args: argparse.Namespace) -> int:
     from mpcform.bench import online as bench_online
+    from mpcform.online.loop import JOINT_ONLINE_MAX_DRONES
 
     if min(args.n) < 2 or max(args.n) > MAX_ONLINE_N or args.steps < 1:
         flag, value = ("--steps", args.steps) if args.steps < 1 else ("--n", args.n)
         raise ValidationError(flag, f"expected --n in 2..{MAX_ONLINE_N} and --steps >= 1, got {value}")
     if not 0.0 < args.budget < math.inf:
         raise ValidationError("--budget", f"expected a finite deadline > 0 [s], got {args.budget:g}")
+    if args.coupling == "joint" and max(args.n) > JOINT_ONLINE_MAX_DRONES:
+        raise ValidationError(
+            "--coupling",
+            f"joint is planned online for at most {JOINT_ONLINE_MAX_DRONES} drones, got --n {args.n}",
+        )
     lines = _started("online", plans.online_plan(args))
     rows = bench_online.run(
         tuple(args.n), args.steps, args.budget, args.coupling, progress=lines.case, profile_path=args.profile

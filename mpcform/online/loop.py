@@ -7,22 +7,29 @@ within ``a_max dt``) and the interval's full-state setpoints at the setpoint rat
 positions), which a Crazyflie's ``cmdFullState`` takes as they are.
 
 The deadline is the planner's ``step_budget_s`` (:class:`mpcform.mpc.settings.MPCSettings`): no
-optional split round starts after it, and a step whose solve ends after it sends the certified
-braking fallback instead (the previous plan's tail, :mod:`mpcform.mpc.constraints.braking`), reported as
-``deadline_missed``. The check is cooperative: a solver call is bounded by its iteration cap
-(``controller.solve.max_iter``), not interrupted, so a step can end later than its budget by one
-solver call; :attr:`OnlineStep.wall_s` records it.
+optional split round starts too close to it (the step reports ``budget_cut``), and a step that ends
+after it still sends its certified command, reported as ``deadline_missed`` (a late command is as
+safe as a late fallback, and a swarm under a tight budget keeps moving). The check is cooperative:
+a solver call is bounded by its iteration cap (``controller.solve.max_iter``), not interrupted, so a
+step can end later than its budget by one solver call; :attr:`OnlineStep.wall_s` records it. Joint
+coupling is planned online for at most :data:`JOINT_ONLINE_MAX_DRONES` drones.
 
 A drone that can no longer follow its setpoints (flipped, on the floor: the Crazyflie's
 supervisor reports it tumbled) is given up with :meth:`OnlineLoop.lose`: the planner stops
 planning for it, the others keep ``d_min`` from where it lies (:mod:`mpcform.mpc.safety.survivors`),
 and its command is zero from then on (its setpoints hold it where it is: stop or land it).
+
+A planner with neither a velocity-loop model nor a robust tube (no plant margin, no tracking
+allowance) plans for the ideal single integrator, not for a drone: :class:`OnlineLoop` warns once
+(:class:`IdealPlanWarning`) when built on one.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import sys
 import time
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
@@ -40,11 +47,31 @@ GRID_TOLERANCE = 1e-6
 """How far from the loop's grid ``t0 + k dt`` a step's time may be, as a fraction of dt."""
 
 
+class IdealPlanWarning(UserWarning):
+    """An online loop's planner plans for the ideal single integrator (module docstring)."""
+
+
+IDEAL_PLAN = (
+    "online: the planner plans for an ideal drone: it models no velocity loop (a [plant] other "
+    "than ideal, with controller.plant_model = true) and keeps no tracking allowance "
+    "(limits.tracking = 0), so a flown drone's lag may bring it closer than d_min; plan with a "
+    'Crazyflie\'s defaults: mpcform.scenario.plant.with_plant_kind(scenario, "crazyflow") (its loop '
+    "model and the 0.05 m tracking allowance), or at least scenario.flyable()"
+)
+"""The warning's text (:class:`IdealPlanWarning`)."""
+
+
+JOINT_ONLINE_MAX_DRONES = 8
+"""The largest swarm planned jointly online: measured per step on a 2-core machine, joint
+``swap_planar_8`` p99 23 ms; ``swap_spatial_12`` over 0.1 s on 38 of 100 steps, ``swap_spatial_20``
+p99 0.56 s (one sparse QP of ~1400 variables and ~10,000 rows). Decoupled plans scale."""
+
+
 @dataclass(frozen=True, eq=False)
 class OnlineStep:
     """One online step: the command (n, d) [m/s] held until the next step, its ``setpoints``, the
     planner's step record, its wall and CPU time [s] and whether it missed its deadline (the
-    command is then the braking fallback)."""
+    command, certified as any, then came late)."""
 
     t_s: float
     command_mps: Array
@@ -57,13 +84,25 @@ class OnlineStep:
 
 class OnlineLoop:
     """An :class:`~mpcform.mpc.planner.MPCPlanner` stepped on measurements (module docstring);
-    setpoints at ``setpoint_rate_hz`` (a multiple of ``1 / dt``), planar plans at ``altitude_m``."""
+    setpoints at ``setpoint_rate_hz`` (a multiple of ``1 / dt``), planar plans at ``altitude_m``.
+    A planner for the ideal drone (no loop model, no margin, no tracking allowance) is warned of
+    once, here (:class:`IdealPlanWarning`); joint coupling of more than
+    :data:`JOINT_ONLINE_MAX_DRONES` drones is refused."""
 
     def __init__(
         self, planner: Controller, *, setpoint_rate_hz: float = 100.0, altitude_m: float = 1.0
     ) -> None:
         if not isinstance(planner, MPCPlanner):
             raise ValidationError("planner", f"expected an MPCPlanner, got {type(planner).__name__}")
+        if planner.settings.coupling == "joint" and planner.n > JOINT_ONLINE_MAX_DRONES:
+            raise ValidationError(
+                "controller.coupling",
+                f"joint coupling of {planner.n} drones is not planned online (its QP took 0.1-0.6 s "
+                f"per step from 12 drones, past a 0.1 s period; up to {JOINT_ONLINE_MAX_DRONES} it "
+                'flies): set coupling = "decoupled"',
+            )
+        if planner.loop is None and planner.limits.tube_m == 0.0:
+            warnings.warn(IDEAL_PLAN, IdealPlanWarning, stacklevel=_outside_level())
         self._full = planner
         self.planner: Controller = planner  # after lose: the planner of the drones still flying
         self.n, self.dim = planner.n, planner.dim
@@ -173,6 +212,15 @@ def lost_indices(drones: ArrayLike, n: int) -> Array:
         bad = int(idx[0] if idx[0] < 0 else idx[-1])
         raise ValidationError("drones", f"{expected}: index {bad} is out of range")
     return idx
+
+
+def _outside_level() -> int:
+    """The ``stacklevel`` of its caller's first caller outside this module (the user's line,
+    whether it built the loop or called :meth:`OnlineLoop.from_scenario`)."""
+    frame, level = sys._getframe(1), 1
+    while frame.f_back is not None and frame.f_code.co_filename == __file__:
+        frame, level = frame.f_back, level + 1
+    return level
 
 
 def _time(t_s: object) -> float:

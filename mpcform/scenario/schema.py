@@ -286,7 +286,8 @@ SCHEMA: tuple[Table, ...] = (
         Key("wind", "table", "`[plant.wind]`: `mean` (d numbers) [m/s], `gust_std` [m/s] (0), "
             "`gust_time` [s] (1), `gust_bound` [m/s] per axis (3 gust_std; `inf`: unclipped), "
             "`gust_field` (`per_drone` or `shared`); seeded Ornstein-Uhlenbeck gusts acting "
-            "through drag.", when=("lag", "second_order", "quadrotor")),
+            "through drag (on `crazyflow`, the quadrotor's drag force on the wind, applied as "
+            "crazyflow's external force).", when=("lag", "second_order", "quadrotor", "crazyflow")),
     ), required=False, selector="kind"),
     Table("obstacles", "Static obstacles; repeat the table for more, `shape` choosing each one's "
           "kind. No drone may start within an obstacle's clearance of "

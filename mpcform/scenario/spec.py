@@ -19,7 +19,7 @@ from mpcform.formation.template import Template
 from mpcform.mpc.constraints.rows import step_growth
 from mpcform.mpc.settings import MPCSettings
 from mpcform.reference.base import Reference
-from mpcform.scenario.reachability import TIMES, unreachable_warning
+from mpcform.scenario.reachability import TIMES, pace_warning, unreachable_warning
 from mpcform.sim.plant_spec import IdealPlantSpec, PlantSpec, Robustness
 from mpcform.world.bounds import PlanningBounds, planning_bounds
 from mpcform.world.limits import PLATFORM_TRACKING_M, Limits
@@ -123,8 +123,8 @@ class Scenario:
     def warnings(self, controller: str | None = None) -> list[str]:
         """The warnings for a run with ``controller`` (None: the file's): the deprecated keys of the
         file, a duration that is no whole number of steps, a mission cut short, then the plant's
-        spacing and speed warnings and the goals closed off by obstacles
-        (:mod:`mpcform.scenario.reachability`)."""
+        spacing and speed warnings, the goals closed off by obstacles and a reference faster than
+        the limits (:mod:`mpcform.scenario.reachability`)."""
         old = list(self.controller.deprecations)
         sim = self.simulation
         flown = self.steps * sim.dt_s
@@ -142,7 +142,13 @@ class Scenario:
         if (controller or self.controller.kind) != "mpc":
             return old
         spacing = self.spacing_warning(controller) or self.growth_warning()
-        lines = (self.separation_warning(), spacing, self.speed_warning(), self.unreachable_warning())
+        lines = (
+            self.separation_warning(),
+            spacing,
+            self.speed_warning(),
+            self.unreachable_warning(),
+            self.pace_warning(),
+        )
         return old + [w for w in lines if w is not None]
 
     def separation_warning(self) -> str | None:
@@ -176,6 +182,16 @@ class Scenario:
         targets = reference.targets(times)[0]
         args = (rob.margin_m, rob.a_max_mps2, self.initial_positions_m, times, targets)
         return unreachable_warning(self.limits, self.obstacles, *args)
+
+    def pace_warning(self) -> str | None:
+        """A line when the reference's targets, sampled at every step of the run, move faster than
+        ``limits.v_max`` for a drone to catch up, or change velocity faster than ``limits.a_max``
+        allows (:func:`mpcform.scenario.reachability.pace_warning`)."""
+        lim, dt = self.limits, self.simulation.dt_s
+        field = "" if lim.a_max_mps2 is None else f"limits.a_max = {lim.a_max_mps2:g} m/s^2"
+        return pace_warning(
+            lim, lim.a_max_mps2, dt, self.steps, lambda t: self.reference.targets(t)[1], field
+        )
 
     def speed_warning(self) -> str | None:
         """A line when ``limits.v_max`` exceeds the speed below which the quadrotor's margin holds

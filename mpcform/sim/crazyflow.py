@@ -22,6 +22,14 @@ and is lost (:attr:`CrazyflowPlant.lost_drones`): the simulation stops planning 
 setpoints then hold it where it is, zero velocity, as a ground station would until the operator
 cuts its motors).
 
+Wind (``[plant.wind]``, :mod:`mpcform.sim.wind`: the plant's seeded field, sampled at
+``physics_hz``, per drone) acts as the quadrotor plant's does, through drag: before every physics
+step each drone's ``states.force`` (crazyflow's external force on the centre of mass, held over
+the step) is ``-R D R^T w``, the wind's share of the drag ``R D R^T (v - w)`` with the quadrotor
+plant's drag matrix ``D`` of the platform (so_rpy_rotor_drag) and the attitude ``R`` at the step's
+start (:func:`mpcform.sim.crazyflow_worker.wind_force_N`); crazyflow's own drag acts on the
+velocity. The same wind and seed give the same gusts as on the quadrotor plant at the same rate.
+
 The planner models a crazyflow drone by the quadrotor plant's hover linearisation of the same
 platform (:class:`mpcform.sim.plant_spec.CrazyflowPlantSpec`), and plans for it with a Crazyflie's
 tracking allowance and, in space, climb rate (:func:`mpcform.scenario.plant.planned_for_its_plant`).
@@ -46,6 +54,7 @@ import numpy as np
 from mpcform._validate import Array
 from mpcform.control.setpoints import FullState, interval_setpoints, ticks_per_interval
 from mpcform.errors import MPCFormError, ValidationError
+from mpcform.sim import so_rpy
 from mpcform.sim.plants import Plant
 from mpcform.sim.so_rpy import package_file
 
@@ -61,10 +70,8 @@ def body_radius_m(drone: str) -> float:
     return math.sqrt(2.0) * float(params["L"]) + float(params["prop_radius"])
 
 
-def check_settings(drone: str, physics_hz: int, control_hz: int, altitude_m: float, windy: bool) -> None:
+def check_settings(drone: str, physics_hz: int, control_hz: int, altitude_m: float) -> None:
     """The crazyflow plant's settings (errors name the scenario's ``[plant]`` keys)."""
-    if windy:
-        raise ValidationError("plant.wind", "the crazyflow plant flies in calm air: remove [plant.wind]")
     if drone not in DRONES:
         raise ValidationError("plant.drone", f"expected one of {', '.join(DRONES)}, got {drone!r}")
     for key, rate in (("physics_rate", physics_hz), ("control_rate", control_hz)):
@@ -96,10 +103,11 @@ class CrazyflowPlant(Plant):
         **kwargs: Any,
     ) -> None:
         super().__init__(n, dim, **kwargs)
-        check_settings(drone, physics_hz, control_hz, altitude_m, self.wind is not None)
+        check_settings(drone, physics_hz, control_hz, altitude_m)
         self.drone, self.altitude_m = drone, altitude_m
         self.physics_hz, self.control_hz = physics_hz, control_hz
         self.radius_m = body_radius_m(drone)
+        self._drag = so_rpy.load_params(drone).drag_matrix  # the quadrotor plant's (module docstring)
         self._worker: _Worker | None = None
         self._p = np.zeros((n, 3))
         self.setup_s = 0.0
@@ -149,12 +157,23 @@ class CrazyflowPlant(Plant):
     def _advance(self, u: Array, dt: float, planned: Array | None) -> tuple[Array, Array, Array, dict]:
         ticks_per_interval(dt, self.control_hz, "plant.control_rate")
         sp = interval_setpoints(self._p[:, : self.dim], u, self.t_s, dt, self.control_hz, self.altitude_m)
-        pos, vel, quat = self._ask("fly", sp.state_control())
+        rows = sp.state_control()
+        steps = rows.shape[0] * (self.physics_hz // self.control_hz)
+        wind = self._wind(1.0 / self.physics_hz, steps)  # (steps, n, d): held over each physics step
+        pushed = None
+        if wind is not None:
+            w3 = np.zeros((steps, self.n, 3))
+            w3[..., : self.dim] = wind
+            pushed = (w3, self._drag)
+        pos, vel, quat = self._ask("fly", rows, pushed)
         self._p = pos[-1].copy()
         self._watch(pos, quat)
         t = self.t_s + np.arange(pos.shape[0]) / self.physics_hz
         pos[:, :, 2] -= self.altitude_m  # back in the scenario's frame
-        return t, pos[:, :, : self.dim], vel[:, :, : self.dim], {"quat_xyzw": quat}
+        extra: dict[str, Any] = {"quat_xyzw": quat}
+        if wind is not None:  # the wind in force from each sample on (the last: the last step's)
+            extra["wind_mps"] = np.concatenate([wind, wind[-1:]])
+        return t, pos[:, :, : self.dim], vel[:, :, : self.dim], extra
 
     def _watch(self, pos: Array, quat: Array) -> None:
         """Record contacts, floor contacts and flips of the dense samples (module docstring)."""
@@ -179,7 +198,7 @@ class CrazyflowPlant(Plant):
         if self.dim != 3:
             raise ValidationError("plant", "full-state setpoints fly a spatial (dim = 3) crazyflow plant")
         self.reset(start_m - np.array([0.0, 0.0, self.altitude_m]))
-        pos, _, quat = self._ask("fly", setpoints.state_control())
+        pos, _, quat = self._ask("fly", setpoints.state_control(), None)
         self._watch(pos, quat)
         return np.arange(pos.shape[0]) / self.physics_hz, pos
 

@@ -9,10 +9,13 @@ requests on its pipe:
   n drones of the first-principles model of ``drone``) and compile its step (the JIT), unless the
   last reset built the same; place the drones at those positions, level, at rest, rotors at hover
   speed; answers the time it took [s];
-- ``("fly", setpoints (k, n, 16))``: send setpoint row j at control tick j (``Sim.state_control``,
-  the firmware's Mellinger controller) and step the physics ``physics_hz / control_hz`` times per
-  tick, recording every physics step; answers positions, velocities (k m + 1, n, 3) and
-  attitudes ``quat_xyzw`` (k m + 1, n, 4), the first sample the state before the interval;
+- ``("fly", setpoints (k, n, 16), wind)``: send setpoint row j at control tick j
+  (``Sim.state_control``, the firmware's Mellinger controller) and step the physics
+  ``physics_hz / control_hz`` times per tick, recording every physics step; answers positions,
+  velocities (k m + 1, n, 3) and attitudes ``quat_xyzw`` (k m + 1, n, 4), the first sample the
+  state before the interval. ``wind`` is None (calm) or ``(wind_mps (k m, n, 3), drag (3, 3))``:
+  before physics step s every drone's ``states.force`` is set to :func:`wind_force_N` of its
+  attitude then and ``wind_mps[s]``, held over the step;
 - ``("stop",)``: end the process (as does the end of the requests).
 
 Run as ``python -m mpcform.sim.crazyflow_worker`` with ``SCIPY_ARRAY_API=1``: requests come on
@@ -29,6 +32,19 @@ from multiprocessing.connection import Connection
 from typing import Any
 
 import numpy as np
+
+
+def wind_force_N(drag: np.ndarray, quat_xyzw: np.ndarray, wind_mps: np.ndarray) -> np.ndarray:
+    """The wind's share of the body-frame linear drag ``R D (R^T (v - w))`` in the world frame,
+    ``-R D R^T w`` (n, 3) [N], for the drag matrix ``drag`` (3, 3) [kg/s, <= 0], attitudes
+    ``quat_xyzw`` (n, 4) and winds ``wind_mps`` (n, 3): the force the quadrotor plant's drag on
+    the airspeed adds to its drag on the velocity (:mod:`mpcform.sim.quadrotor`)."""
+    x, y, z, w = (quat_xyzw[:, i] for i in range(4))
+    rot = np.empty((quat_xyzw.shape[0], 3, 3))  # body to world
+    rot[:, 0] = np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)], axis=1)
+    rot[:, 1] = np.stack([2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)], axis=1)
+    rot[:, 2] = np.stack([2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)], axis=1)
+    return -np.einsum("nij,jk,nlk,nl->ni", rot, drag, rot, wind_mps)
 
 
 class _Flight:
@@ -69,6 +85,7 @@ class _Flight:
                 quat=jnp.zeros_like(states.quat).at[..., 3].set(1.0),
                 ang_vel=jnp.zeros_like(states.ang_vel),
                 rotor_vel=jnp.full(states.rotor_vel.shape, self.hover_rpm),
+                force=jnp.zeros_like(states.force),  # calm until a windy interval sets it
             )
         )
         self.sim.reset()
@@ -77,7 +94,9 @@ class _Flight:
         hold[0, :, 12] = 1.0  # quaternion (x, y, z, w): yaw 0
         self.sim.state_control(hold)
 
-    def fly(self, setpoints: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def fly(
+        self, setpoints: np.ndarray, wind: tuple[np.ndarray, np.ndarray] | None = None
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         k, n = setpoints.shape[:2]
         m = self.per_tick
         pos, vel, quat = np.empty((k * m + 1, n, 3)), np.empty((k * m + 1, n, 3)), np.empty((k * m + 1, n, 4))
@@ -85,9 +104,20 @@ class _Flight:
         for j in range(k):
             self.sim.state_control(setpoints[j][None])
             for s in range(m):
+                i = j * m + s
+                if wind is not None:
+                    self._push(wind_force_N(wind[1], quat[i], wind[0][i]))
                 self.sim.step(1)
-                pos[j * m + s + 1], vel[j * m + s + 1], quat[j * m + s + 1] = self._state()
+                pos[i + 1], vel[i + 1], quat[i + 1] = self._state()
         return pos, vel, quat
+
+    def _push(self, force_N: np.ndarray) -> None:
+        """Every drone's external force (n, 3) [N, world frame] until the next push."""
+        import jax.numpy as jnp
+
+        states = self.sim.data.states
+        force = jnp.asarray(force_N[None], dtype=states.force.dtype)
+        self.sim.data = self.sim.data.replace(states=states.replace(force=force))
 
     def _state(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         st = self.sim.data.states  # whole arrays to numpy, then the world (no JAX op per index)
@@ -116,7 +146,7 @@ def serve(requests: Connection, answers: Connection) -> None:
             elif request[0] == "fly":
                 if flight is None:
                     raise RuntimeError("fly before reset")
-                conn.send(("ok",) + flight.fly(request[1]))
+                conn.send(("ok",) + flight.fly(*request[1:]))
             else:
                 raise RuntimeError(f"unknown request {request[0]!r}")
         except Exception as exc:  # answered, so the planner's process reports it

@@ -263,8 +263,9 @@ class QuadrotorPlantSpec(PlantSpec):
 class CrazyflowPlantSpec(PlantSpec):
     """crazyflow (:mod:`mpcform.sim.crazyflow`): the Crazyflie model ``drone``, its physics and
     Mellinger controller rates ``physics_rate_hz`` and ``control_rate_hz`` [Hz] and the height
-    ``altitude_m`` [m] a planar flight holds. The planner models it, and sizes its margin, as the
-    quadrotor plant of the same platform (the hover linearisation of a Crazyflie's loop)."""
+    ``altitude_m`` [m] a planar flight holds. The planner models it, and sizes its margin and the
+    rows' growth in wind, as the quadrotor plant of the same platform in the same wind (the hover
+    linearisation of a Crazyflie's loop)."""
 
     kind: ClassVar[str] = "crazyflow"
     drone: str = "cf2x_L250"
@@ -274,9 +275,7 @@ class CrazyflowPlantSpec(PlantSpec):
 
     def __post_init__(self) -> None:
         super().__post_init__()
-        check_settings(
-            self.drone, self.physics_rate_hz, self.control_rate_hz, self.altitude_m, self.wind is not None
-        )
+        check_settings(self.drone, self.physics_rate_hz, self.control_rate_hz, self.altitude_m)
 
     def robustness(
         self, dim: int, dt_s: float, a_max_mps2: float | None, loop_modelled: bool = False

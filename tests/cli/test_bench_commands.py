@@ -119,7 +119,14 @@ def test_every_bench_help_says_what_it_measures_and_its_defaults() -> None:
 
 
 def test_bench_online_refuses_bad_sizes(capsys) -> None:
-    for argv, flag in ((["--n", "1"], "--n"), (["--steps", "0"], "--steps"), (["--budget", "0"], "--budget")):
+    joint = ["--coupling", "joint", "--n", "20"]  # the online loop refuses a joint swarm this large
+    bad = (
+        (["--n", "1"], "--n"),
+        (["--steps", "0"], "--steps"),
+        (["--budget", "0"], "--budget"),
+        (joint, "--coupling"),
+    )
+    for argv, flag in bad:
         assert main(["bench", "online", *argv]) == 2
         assert f"mpcform: error: {flag}" in capsys.readouterr().err
 

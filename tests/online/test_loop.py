@@ -3,15 +3,17 @@
 from __future__ import annotations
 
 import dataclasses
+import warnings
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 from mpcform.errors import ValidationError
-from mpcform.online.loop import OnlineLoop, step_time_stats
+from mpcform.online.loop import IdealPlanWarning, OnlineLoop, step_time_stats
 from mpcform.scenario.build import build_controller
 from mpcform.scenario.load import load_scenario
+from mpcform.scenario.plant import with_plant_kind
 
 SCENARIOS = Path(__file__).resolve().parents[2] / "scenarios"
 
@@ -36,6 +38,32 @@ def test_commands_are_the_planners_and_setpoints_start_at_the_measurement() -> N
         np.testing.assert_array_equal(s.setpoints.pos_m[0, :, :2], p)
         assert np.all(s.setpoints.pos_m[..., 2] == 1.0) and not s.deadline_missed
         p = p + sc.simulation.dt_s * s.command_mps + 0.01 * np.sin(k + np.arange(16.0)).reshape(8, 2)
+
+
+def test_a_planner_for_an_ideal_drone_is_warned_of_once() -> None:
+    """No loop model and no tracking allowance: one warning, naming both and the fix, at
+    construction (none while it flies); a Crazyflie's loop model and tracking allowance
+    (``with_plant_kind(..., "crazyflow")``), or the allowance alone, are not warned of."""
+    sc = load_scenario(SCENARIOS / "swap_planar_8.toml")
+    with pytest.warns(IdealPlanWarning) as record:
+        loop = OnlineLoop.from_scenario(sc)
+        _fly(loop, sc.initial_positions_m.copy(), 3)
+    assert len(record) == 1 and record[0].filename == __file__
+    text = str(record[0].message)
+    named = (
+        "ideal drone",
+        "controller.plant_model",
+        "limits.tracking",
+        'with_plant_kind(scenario, "crazyflow")',
+    )
+    assert all(part in text for part in named), text
+    crazyflie = with_plant_kind(sc, "crazyflow")
+    for planned in (crazyflie, sc.flyable()):
+        with warnings.catch_warnings():
+            warnings.simplefilter("error", IdealPlanWarning)
+            OnlineLoop.from_scenario(planned)
+    modelled = OnlineLoop.from_scenario(crazyflie).planner
+    assert modelled.loop is not None and modelled.limits.limits.tracking_m == 0.05
 
 
 def test_a_missed_deadline_still_sends_the_certified_command() -> None:
@@ -185,3 +213,14 @@ def test_step_refuses_complex_or_non_finite_positions() -> None:
         loop.step(0.0, bad)
     with pytest.raises(ValidationError, match=r"^positions: expected shape \(8, 2\), got shape \(8, 3\)"):
         loop.step(0.0, np.zeros((8, 3)))
+
+
+def test_joint_coupling_of_a_large_swarm_is_refused_online() -> None:
+    sc = load_scenario(SCENARIOS / "swap_spatial_12.toml")  # coupling = "joint" (the default)
+    with pytest.raises(ValidationError, match='controller.coupling.*coupling = "decoupled"'):
+        OnlineLoop.from_scenario(sc)
+    mpc = dataclasses.replace(sc.controller.mpc, coupling="decoupled", solve=None)
+    decoupled = dataclasses.replace(sc, controller=dataclasses.replace(sc.controller, mpc=mpc))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", IdealPlanWarning)
+        assert OnlineLoop.from_scenario(decoupled).n == 12

@@ -57,13 +57,12 @@ def test_a_minimal_table_takes_the_specs_defaults(kind: str, spec: object) -> No
 def test_the_key_reference_states_the_specs_fields_and_defaults() -> None:
     """Every [plant] key that applies to a kind is a field of its spec with the same default (the
     key reference reads it there), and every field but samples_per_step (and the wind of the ideal
-    and crazyflow plants) is a key."""
+    plant) is a key."""
     table = TABLES["plant"]
     for kind, cls in PLANT_SPECS.items():
         fields = {scenario_key(f.name): f for f in dataclasses.fields(cls)}
         keys = {k.name: k for k in table.keys if k.name != "kind" and (not k.when or kind in k.when)}
-        calm = kind in ("ideal", "crazyflow")  # no wind: refused
-        not_keys = {"samples_per_step"} | ({"wind"} if calm else set())
+        not_keys = {"samples_per_step"} | ({"wind"} if kind == "ideal" else set())  # no wind: refused
         assert set(keys) == set(fields) - not_keys, kind
         for name, key in keys.items():
             assert key.default == fields[name].default, (kind, name)

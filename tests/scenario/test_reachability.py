@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import copy
+import tomllib
 from typing import Any
 
 import pytest
@@ -82,3 +83,67 @@ def test_a_goal_just_inside_its_grown_keep_out_is_said() -> None:
     line = plain.flyable().unreachable_warning()
     assert line is not None and line.startswith("reference: drone 0 cannot reach its goal [4.6, 0]")
     assert "0.03 m inside obstacles[0]'s keep-out" in line and "(clearance + 0.05 m)" in line
+
+
+PACE = "reference: its "
+
+
+def _gap(**changes: dict[str, Any]) -> dict[str, Any]:
+    from saved_runs import SCENARIOS
+
+    data = tomllib.loads((SCENARIOS / "mission_obstacle_gap.toml").read_text())
+    for table, values in changes.items():
+        data[table] |= values
+    return data
+
+
+def test_a_reference_faster_than_a_max_is_said_once() -> None:
+    """mission_obstacle_gap with ``drone_acceleration = 3`` and ``a_max = 0.4`` (issue 57: 75 %
+    complete in 20 s, without a word): one line, the field, both values and the duration."""
+    fast = scenario_from_dict(_gap(reference={"drone_acceleration": 3.0}, limits={"a_max": 0.4}))
+    lines = [w for w in fast.warnings() if w.startswith(PACE)]
+    assert len(lines) == 1, fast.warnings()
+    (line,) = lines
+    assert "its acceleration reaches 2.99 m/s^2" in line and "above limits.a_max = 0.4 m/s^2" in line
+    assert "may not complete within its duration (20 s" in line and "speed" not in line.split(":")[1]
+    assert scenario_from_dict(_gap()).pace_warning() is None  # the file itself keeps within its limits
+
+
+def test_the_reference_is_read_in_chunks_that_overlap(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Chunks of 7 steps find what one chunk finds (each overlaps the last by one sample)."""
+    from mpcform.scenario import reachability
+
+    fast = scenario_from_dict(_gap(reference={"drone_acceleration": 3.0}, limits={"a_max": 0.4}))
+    whole = fast.pace_warning()
+    monkeypatch.setattr(reachability, "PACE_CHUNK", 7)
+    assert whole is not None and fast.pace_warning() == whole
+
+
+def test_a_reference_faster_than_v_max_is_said_when_a_drone_cannot_catch_up() -> None:
+    """Sampled targets, not a key: an exponential reference whose start outruns v_max is caught up
+    by a drone at v_max over a long run (not said) but not in 3 s (said, with how far behind); a
+    mission derived from v_max (at most ``speed_fraction x v_max``) and a constant goal are not."""
+    fast = changed(reference={"kind": "exponential", "rate": 0.3})  # 8 m at 0.3 /s: 2.4 m/s at t = 0
+    assert scenario_from_dict(fast).pace_warning() is None
+    fast["simulation"] = fast["simulation"] | {"duration": 3.0}
+    line = scenario_from_dict(fast).pace_warning()
+    assert line is not None and line.startswith("reference: its speed reaches 2.4 m/s (drone 0 at t = 0 s)")
+    assert "above limits.v_max = 1.5 m/s, and a drone at v_max ends" in line and "its acceleration" not in line
+    mission = scenario_from_dict(_gap(reference={"speed_fraction": 1.0}, limits={"v_max": 1.0}))
+    assert mission.pace_warning() is None
+    assert scenario_from_dict(GAP).pace_warning() is None
+
+
+def test_no_bundled_scenario_is_faster_than_its_limits() -> None:
+    """The exponential references start above v_max and slow down: the drones catch up."""
+    from saved_runs import SCENARIOS
+
+    from mpcform.scenario.load import load_scenario
+
+    said = {}
+    for path in sorted(SCENARIOS.glob("*.toml")):
+        lines = [w for w in load_scenario(path).warnings() if w.startswith(PACE)]
+        assert len(lines) <= 1, (path.name, lines)
+        if lines:
+            said[path.stem] = lines[0].removeprefix(PACE).split()[0]
+    assert said == {}

@@ -16,13 +16,17 @@ import completion_family
 import numpy as np
 import pytest
 
-from mpcform.errors import ValidationError
+from mpcform.errors import ScenarioError, ValidationError
 from mpcform.run.runner import run_scenario
 from mpcform.scenario.load import load_scenario, scenario_from_dict
 from mpcform.scenario.plant import with_plant_kind
 from mpcform.scenario.spec import Scenario
+from mpcform.sim import so_rpy
 from mpcform.sim.crazyflow import CrazyflowPlant, body_radius_m
+from mpcform.sim.crazyflow_worker import wind_force_N
+from mpcform.sim.plant_spec import QuadrotorPlantSpec
 from mpcform.sim.plants import concat_samples
+from mpcform.sim.wind import Wind, WindField
 
 if importlib.util.find_spec("crazyflow") is None:
     pytest.skip('needs crazyflow (pip install -e ".[crazyflow]")', allow_module_level=True)
@@ -65,6 +69,87 @@ def test_contacts_are_seen(pair: CrazyflowPlant) -> None:
     for _ in range(15):
         pair.advance(np.array([[0.5, 0.0], [-0.5, 0.0]]), 0.1)
     assert pair.events["drone_contacts"] == [[0, 1]]
+
+
+GUSTY = Wind(np.array([1.0, 0.0]), gust_std_mps=0.3, gust_time_s=0.5)
+"""A steady 1 m/s along x with per-drone gusts."""
+
+
+@pytest.fixture(scope="module")
+def windy() -> CrazyflowPlant:
+    """The pair of :func:`pair` in :data:`GUSTY`, seed 5 (one build and compile for the module)."""
+    return CrazyflowPlant(2, 2, wind=GUSTY, seed=5)
+
+
+def held(plant: CrazyflowPlant, seconds: float) -> object:
+    """Hold the drones where they start (1 m apart along y) for ``seconds``: the dense samples."""
+    start = np.array([[0.0, 0.0], [0.0, 1.0]])
+    plant.reset(start)
+    return concat_samples([plant.advance(np.zeros((2, 2)), 0.1, start) for _ in range(round(seconds / 0.1))])
+
+
+def test_the_wind_force_is_the_quadrotor_plants_drag_on_the_airspeed() -> None:
+    """``-R D R^T w`` is what the quadrotor plant's drag on ``v - w`` adds to its drag on ``v``,
+    at any attitude (the quadrotor plant's drag matrix)."""
+    params = so_rpy.load_params("cf2x_L250")
+    rng = np.random.default_rng(0)
+    rpy = rng.uniform(-0.5, 0.5, (6, 3))
+    v, w = rng.normal(0.0, 1.0, (6, 3)), rng.normal(0.0, 1.0, (6, 3))
+    z = so_rpy.body_z(rpy)
+    quadrotor = so_rpy.drag_force(params, z, v - w) - so_rpy.drag_force(params, z, v)
+    force = wind_force_N(params.drag_matrix, so_rpy.rpy_to_quat(rpy), w)
+    np.testing.assert_allclose(force, quadrotor, rtol=1e-12, atol=1e-15)
+
+
+def test_a_held_drone_is_pushed_downwind(pair: CrazyflowPlant, windy: CrazyflowPlant) -> None:
+    """Held for 2 s, the calm pair stays put and the windy pair drifts downwind (+x), each drone
+    by its own gusts; the plant reports the wind it applied, the seeded field of the quadrotor
+    plant's sampling at the physics rate."""
+    calm, blown = held(pair, 2.0), held(windy, 2.0)
+    calm_dx = calm.p_true_m[-1, :, 0] - calm.p_true_m[0, :, 0]
+    blown_dx = blown.p_true_m[-1, :, 0] - blown.p_true_m[0, :, 0]
+    print("downwind drift in 2 s [m]: calm", calm_dx, "1 m/s wind", blown_dx)
+    assert np.all(np.abs(calm_dx) < 5e-3) and np.all(blown_dx > 0.05)
+    assert blown.wind_mps is not None and blown.wind_mps.shape == (20 * 50 + 1, 2, 2)
+    seed = np.random.SeedSequence(5).spawn(2)[0]  # the plant's wind stream (mpcform.sim.plants)
+    expected = WindField(GUSTY, 2, seed).sample_grid(1.0 / 500.0, 20 * 50)
+    expected[50::50] = expected[49:-1:50]  # an interval's end: its last step's (concat_samples)
+    np.testing.assert_array_equal(blown.wind_mps[:-1], expected)
+    assert not np.array_equal(blown.wind_mps[:, 0], blown.wind_mps[:, 1])  # per drone
+    assert windy.events["drone_contacts"] == [] and windy.events["flipped"] == []
+
+
+def test_the_same_seed_flies_the_same_windy_flight(windy: CrazyflowPlant) -> None:
+    first, again = held(windy, 1.0), held(windy, 1.0)
+    np.testing.assert_array_equal(first.p_true_m, again.p_true_m)
+    assert not np.allclose(first.p_true_m[:, 0, 1], first.p_true_m[:, 1, 1] - 1.0)  # the gusts differ
+
+
+WINDY_FILE = """
+[plant]
+kind = "crazyflow"
+[plant.wind]
+mean = [0.5, 0.0]
+gust_std = 0.2
+"""
+
+
+def test_a_crazyflow_scenario_takes_plant_wind_and_plans_for_it(tmp_path: Path) -> None:
+    """``[plant.wind]`` on crazyflow loads (its margin and the rows' growth those of the
+    quadrotor plant in the same wind); a bad wind key is named."""
+    path = tmp_path / "windy.toml"
+    path.write_text((SCENARIOS / "swap_planar_8.toml").read_text() + WINDY_FILE)
+    sc = load_scenario(path)
+    assert sc.plant.kind == "crazyflow" and sc.plant.wind is not None
+    np.testing.assert_array_equal(sc.plant.wind.mean_mps, [0.5, 0.0])
+    quad = QuadrotorPlantSpec(wind=sc.plant.wind).robustness(2, 0.1, None, True)
+    rob = sc.plant.robustness(2, 0.1, None, True)
+    assert (rob.margin_m, rob.growth_m) == (quad.margin_m, quad.growth_m) and rob.growth_m > 0.0
+    calm = QuadrotorPlantSpec().robustness(2, 0.1, None, True)
+    assert rob.margin_m > calm.margin_m
+    path.write_text(path.read_text() + "gusts = 1.0\n")
+    with pytest.raises(ScenarioError, match=r"plant\.wind\.gusts: unknown key"):
+        load_scenario(path)
 
 
 def test_a_drone_below_the_floor_is_refused() -> None:
@@ -166,6 +251,24 @@ def test_random_swaps_fly_in_crazyflow() -> None:
 )
 def test_bundled_scenarios_fly_in_crazyflow(name: str, altitude_m: float) -> None:
     flown(name, altitude_m)
+
+
+@pytest.mark.slow
+@pytest.mark.alone
+def test_a_swap_in_wind_flies_in_crazyflow(tmp_path: Path) -> None:
+    """swap_planar_8 in 1 m/s of wind and 0.2 m/s gusts, planned jointly as the file says (no
+    deadline: the same flight on any machine): no contact, d_min on the 500 Hz true path, every
+    drone arrived (at 9.9 s of 12 s when written; the quadrotor plant at 8.2 s)."""
+    path = tmp_path / "windy.toml"
+    path.write_text((SCENARIOS / "swap_planar_8.toml").read_text() + WINDY_FILE.replace("0.5", "1.0"))
+    run = run_scenario(load_scenario(path))
+    m, plant = run.summary["metrics"], run.summary["plant"]
+    shown = ("min_separation_true", "completion", "time_to_complete", "growth_exceeded_steps")
+    print({k: m[k] for k in shown})
+    assert plant["drone_contacts"] == [] and plant["floor_contacts"] == [] and plant["flipped"] == []
+    assert plant["wind"]["mean_mps"] == [1.0, 0.0] and plant["velocity_loop_modelled"]
+    assert m["separation_violations_true"] == 0 and m["min_separation_true"] >= 0.5
+    assert m["completion"] == 1.0
 
 
 @pytest.mark.slow
