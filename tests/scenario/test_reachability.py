@@ -128,7 +128,9 @@ def test_a_reference_faster_than_v_max_is_said_when_a_drone_cannot_catch_up() ->
     fast["simulation"] = fast["simulation"] | {"duration": 3.0}
     line = scenario_from_dict(fast).pace_warning()
     assert line is not None and line.startswith("reference: its speed reaches 2.4 m/s (drone 0 at t = 0 s)")
-    assert "above limits.v_max = 1.5 m/s, and a drone at v_max ends" in line and "its acceleration" not in line
+    assert (
+        "above limits.v_max = 1.5 m/s, and a drone at v_max ends" in line and "its acceleration" not in line
+    )
     mission = scenario_from_dict(_gap(reference={"speed_fraction": 1.0}, limits={"v_max": 1.0}))
     assert mission.pace_warning() is None
     assert scenario_from_dict(GAP).pace_warning() is None
