@@ -95,8 +95,11 @@ class PairSeparation(SeparationFamily):
 
             no_grows, no_stops = np.empty(0), np.empty((0, d))
             grows_, stops_ = no_grows if grows is None else grows, no_stops if stops is None else stops
-            args = (self.metric, self.segs, self.ends, self.d_min_m, half, grows_, self.grow, stops_)
-            kernels.side_rows(p0, path, pairs, *args, coeffs, lower, hard)
+            c = np.ascontiguousarray  # the one layout the kernel is compiled for
+            arrays = (c(p0), c(path), c(pairs), c(self.metric), c(self.segs), c(self.ends))
+            kernels.side_rows(
+                *arrays, float(self.d_min_m), half, c(grows_), c(self.grow), c(stops_), coeffs, lower, hard
+            )
         else:
             self._numpy_sides(p0, path, pairs, stops, grows, half, coeffs, lower, hard)
         hard2 = np.concatenate([hard, hard])

@@ -148,7 +148,8 @@ class Separation:
             from mpcform.mpc.constraints import kernels
 
             on = rows.single_on
-            return kernels.single_values(xe, rows.singles, rows.single_coeffs, rows.single_lower, on)
+            singles = np.ascontiguousarray(rows.singles)  # the kernel's one layout (C)
+            return kernels.single_values(xe, singles, rows.single_coeffs, rows.single_lower, on)
         value = np.empty_like(rows.single_lower, dtype=float)
         for a in range(0, rows.singles.shape[0], 2 * BLOCK):  # in blocks: the gathered positions stay small
             b = slice(a, a + 2 * BLOCK)

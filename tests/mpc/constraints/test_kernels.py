@@ -85,3 +85,20 @@ def test_values_and_reachable_rows_match_numpy(numpy_path, seed: int) -> None:
         for u, v in zip(a, b, strict=True):
             assert u.shape == v.shape
             np.testing.assert_array_equal(u, v)
+
+
+def test_a_flight_compiles_nothing_after_the_warm_up() -> None:
+    """Every kernel call of a crossing's steps (decoupled, braking stop splits) has a type the
+    warm-up compiled: nothing is compiled within a flight."""
+    from mpcform.bench.scale_cases import DT_S, LIMITS, make_case
+    from mpcform.mpc.planner import MPCPlanner
+
+    ref, p = make_case("crossing", _jit.MIN_DRONES)
+    planner = MPCPlanner(ref, DT_S, LIMITS, MPCSettings(coupling="decoupled"))
+    names = ("side_rows", "single_values", "reachable_rows")
+    before = {f: list(getattr(kernels, f).signatures) for f in names}
+    planner.reset(0.0, p)
+    for k in range(4):
+        out = planner.step(k * DT_S, p)
+        p = p + DT_S * out.command_mps
+    assert {f: list(getattr(kernels, f).signatures) for f in names} == before
