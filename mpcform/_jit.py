@@ -30,3 +30,13 @@ def njit(fn: F) -> F:
     import numba
 
     return numba.njit(cache=True, nogil=True)(fn)  # type: ignore[return-value]
+
+
+def inline(fn: F) -> F:
+    """A small helper of the kernels, inlined into each caller by numba (a call with array
+    arguments costs more than the arithmetic), or ``fn`` itself without it."""
+    if not AVAILABLE:
+        return fn
+    import numba
+
+    return numba.njit(inline="always", cache=True)(fn)  # type: ignore[return-value]

@@ -15,42 +15,34 @@ import math
 import numpy as np
 
 from mpcform import _jit
-from mpcform._jit import njit
+from mpcform._jit import inline, njit
 from mpcform._validate import Array
 
 
-@njit
+@inline
 def dot(x: Array, y: Array) -> float:
-    """``x^T y`` of two vectors summed as numpy's ``einsum`` sums a short axis (two lanes: the even
-    terms, the odd ones, then the two), so the kernels' rows equal the numpy path's bit for bit."""
-    even, odd = 0.0, 0.0
-    for a in range(0, x.shape[0], 2):
-        even += x[a] * y[a]
-    for a in range(1, x.shape[0], 2):
-        odd += x[a] * y[a]
-    return even + odd
+    """``x^T y`` of two vectors of 2 or 3 components summed as numpy's ``einsum`` sums a short
+    axis (two lanes: the even terms, the odd one, then the two), so the kernels' rows equal the
+    numpy path's bit for bit."""
+    if x.shape[0] == 3:
+        return (x[0] * y[0] + x[2] * y[2]) + x[1] * y[1]
+    return x[0] * y[0] + x[1] * y[1]
 
 
-@njit
+@inline
 def row_dot(c: Array, q: int, r: int, y: Array, i: int, j: int) -> float:
     """:func:`dot` of ``c[q, r]`` and ``y[i, j]`` (3-D arrays, no views)."""
-    even, odd = 0.0, 0.0
-    for a in range(0, c.shape[2], 2):
-        even += c[q, r, a] * y[i, j, a]
-    for a in range(1, c.shape[2], 2):
-        odd += c[q, r, a] * y[i, j, a]
-    return even + odd
+    if c.shape[2] == 3:
+        return (c[q, r, 0] * y[i, j, 0] + c[q, r, 2] * y[i, j, 2]) + c[q, r, 1] * y[i, j, 1]
+    return c[q, r, 0] * y[i, j, 0] + c[q, r, 1] * y[i, j, 1]
 
 
-@njit
+@inline
 def row_vec_dot(c: Array, q: int, r: int, y: Array) -> float:
     """:func:`dot` of ``c[q, r]`` (a 3-D array) and the vector ``y`` (no views)."""
-    even, odd = 0.0, 0.0
-    for a in range(0, c.shape[2], 2):
-        even += c[q, r, a] * y[a]
-    for a in range(1, c.shape[2], 2):
-        odd += c[q, r, a] * y[a]
-    return even + odd
+    if c.shape[2] == 3:
+        return (c[q, r, 0] * y[0] + c[q, r, 2] * y[2]) + c[q, r, 1] * y[1]
+    return c[q, r, 0] * y[0] + c[q, r, 1] * y[1]
 
 
 @njit
@@ -80,23 +72,23 @@ def side_rows(
     :meth:`~mpcform.mpc.constraints.pairs.PairSeparation._stop_split` does."""
     n_p, r_n, d = pairs.shape[0], segs.shape[0], path.shape[2]
     s_n = path.shape[1] - 1
-    normal = np.empty((s_n, d))
-    mid, step = np.empty(d), np.empty(d)
-    rel_a, rel_b, delta, gap = np.empty(d), np.empty(d), np.empty(d), np.empty(d)
+    normal, rel = np.empty((s_n, d)), np.empty((s_n + 1, d))
+    mid, step, delta, gap = np.empty(d), np.empty(d), np.empty(d), np.empty(d)
     grown, split = grows.shape[0] > 0, stops.shape[0] > 0
     for q in range(n_p):
         i, k = pairs[q, 0], pairs[q, 1]
+        for j in range(s_n + 1):  # the relative guess, in the metric
+            for a in range(d):
+                rel[j, a] = (path[i, j, a] - path[k, j, a]) * metric[a]
         for j in range(s_n):  # each segment's closest point, its unit normal
             for a in range(d):
-                rel_a[a] = (path[i, j, a] - path[k, j, a]) * metric[a]
-                rel_b[a] = (path[i, j + 1, a] - path[k, j + 1, a]) * metric[a]
-                delta[a] = rel_b[a] - rel_a[a]
+                delta[a] = rel[j + 1, a] - rel[j, a]
             den = dot(delta, delta)
-            tau = -dot(rel_a, delta) / (den if den > 0.0 else 1.0)
+            tau = -dot(rel[j], delta) / (den if den > 0.0 else 1.0)
             tau = min(max(tau, 0.0), 1.0)
             sq = 0.0
             for a in range(d):
-                normal[j, a] = (rel_b[a] - rel_a[a]) * tau + rel_a[a]
+                normal[j, a] = delta[a] * tau + rel[j, a]
                 sq += normal[j, a] * normal[j, a]
             dist = math.sqrt(sq)
             for a in range(d):
@@ -109,13 +101,12 @@ def side_rows(
                 coeffs[q, r, a] = normal[segs[r], a]
         sq = 0.0
         for a in range(d):
-            rel_a[a] = (path[i, 0, a] - path[k, 0, a]) * metric[a]
-            sq += rel_a[a] * rel_a[a]
+            sq += rel[0, a] * rel[0, a]
         dist = math.sqrt(sq)
         hard[q] = dist < d_min
         if hard[q]:
             for a in range(d):
-                c0 = (rel_a[a] / dist if dist > 1e-12 else (1.0 if a == 0 else 0.0)) * metric[a]
+                c0 = (rel[0, a] / dist if dist > 1e-12 else (1.0 if a == 0 else 0.0)) * metric[a]
                 coeffs[q, 0, a] = c0
         for r in range(r_n):
             e = ends[r]
