@@ -147,9 +147,9 @@ class Separation:
         if _jit.USE:
             from mpcform.mpc.constraints import kernels
 
-            on = rows.single_on
-            singles = np.ascontiguousarray(rows.singles)  # the kernel's one layout (C)
-            return kernels.single_values(xe, singles, rows.single_coeffs, rows.single_lower, on)
+            c = np.ascontiguousarray  # the one layout the kernel is compiled for
+            args = (c(rows.singles), c(rows.single_coeffs), c(rows.single_lower), c(rows.single_on))
+            return kernels.single_values(xe, *args)
         value = np.empty_like(rows.single_lower, dtype=float)
         for a in range(0, rows.singles.shape[0], 2 * BLOCK):  # in blocks: the gathered positions stay small
             b = slice(a, a + 2 * BLOCK)

@@ -59,8 +59,9 @@ def reachable_rows(
         limit = -1.0 if step_m is None else step_m
         reach = ends.astype(float) if reach_steps is None else reach_steps
         hard_, on_ = no if hard is None else hard, no if on is None else on
-        items = np.ascontiguousarray(singles)  # the kernel's one layout (C)
-        return kernels.reachable_rows(n, items, coeffs, lower, hard_, on_, ends, limit, reach)
+        c = np.ascontiguousarray  # the one layout the kernel is compiled for
+        args = (c(singles), c(coeffs), c(lower), c(hard_), c(on_), c(ends), float(limit), c(reach, float))
+        return kernels.reachable_rows(n, *args)
     keep = np.ones(lower.shape, dtype=bool)
     if on is not None:
         keep &= on[:, None]
