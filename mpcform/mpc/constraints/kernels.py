@@ -198,6 +198,29 @@ def reachable_rows(
     return sep_c, sep_end, sep_lo, soft, counts, at
 
 
+@njit
+def item_least(values: Array, split: Array, stop: int) -> Array:
+    """Each item's least row value (S,) of ``values`` (S, R), over its first ``stop`` rows where
+    ``split`` (a drone pair's side), else over all (``Separation._least``)."""
+    s_n, r_n = values.shape
+    least = np.full(s_n, np.inf)
+    for s in range(s_n):
+        for r in range(stop if split[s] else r_n):
+            least[s] = min(least[s], values[s, r])
+    return least
+
+
+@njit
+def joint_least(values: Array, first: Array, second: Array) -> float:
+    """The least joint row value: the sum of a pair's two sides' values, side i's rows ``first``
+    and side k's ``second`` (the same pair order) of ``values`` (S, R) (``Separation.meets_joint``)."""
+    least = np.inf
+    for q in range(first.shape[0]):
+        for r in range(values.shape[1]):
+            least = min(least, values[first[q], r] + values[second[q], r])
+    return least
+
+
 def warm_up() -> None:
     """Compile (or load from numba's cache) every kernel for the argument types the planner passes,
     then turn them on (:data:`mpcform._jit.USE`)."""
@@ -210,4 +233,6 @@ def warm_up() -> None:
         side_rows(f((2, 3)), f((2, 3, 3)), pairs, f(3), segs, i, 0.5, 0.25, grows, f(2), stops, *rows)
     single_values(f((2, 2, 3)), i[:1], f((1, 2, 3)), f((1, 2)), b)
     reachable_rows(2, i[:1], f((1, 2, 3)), f((1, 2)), b, b, i, 0.1, f(2))
+    item_least(f((1, 2)), b, 1)
+    joint_least(f((2, 2)), i[:1], i[:1])
     _jit.USE = True

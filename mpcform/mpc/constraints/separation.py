@@ -166,8 +166,14 @@ class Separation:
         value = self.single_values(x, rows) if values is None else values
         pair = rows.labels[:, 1] >= 0
         first = pair & (rows.labels[:, 0] < rows.labels[:, 1])  # side i of pair (i, k), i < k
-        joint = value[first] + value[pair & ~first]  # both sides in the candidates' pair order
-        return bool(joint.min(initial=np.inf) >= 0.0 and value[~pair].min(initial=np.inf) >= 0.0)
+        if _jit.USE:
+            from mpcform.mpc.constraints import kernels
+
+            sides = np.flatnonzero(first), np.flatnonzero(pair & ~first)
+            least = kernels.joint_least(np.ascontiguousarray(value), *sides)
+        else:
+            least = (value[first] + value[pair & ~first]).min(initial=np.inf)  # in the pairs' order
+        return bool(least >= 0.0 and value[~pair].min(initial=np.inf) >= 0.0)
 
     def conflicted(
         self, x: Array, rows: SeparationRows, values: Array | None = None, tail: bool = True
@@ -191,10 +197,19 @@ class Separation:
         pair's up to ``last``, exclusive; None: all), joint pairs then one-drone items, and their
         labels."""
         single_values = self.single_values(x, rows) if values is None else values
-        single = single_values.min(axis=1, initial=np.inf)
-        if last is not None:  # split pairs' rows up to last; obstacles' all
-            split = rows.labels[:, 1] >= 0
-            single[split] = single_values[split, :last].min(axis=1, initial=np.inf)
+        split = rows.labels[:, 1] >= 0  # with last: split pairs' rows up to it; obstacles' all
+        if _jit.USE:
+            from mpcform.mpc.constraints import kernels
+
+            r = single_values.shape[1]
+            stop = r if last is None else len(range(r)[:last])
+            single = kernels.item_least(
+                np.ascontiguousarray(single_values), np.ascontiguousarray(split), stop
+            )
+        else:
+            single = single_values.min(axis=1, initial=np.inf)
+            if last is not None:
+                single[split] = single_values[split, :last].min(axis=1, initial=np.inf)
         pair = np.full(rows.pairs.shape[0], np.inf)
         if rows.pair_on.any():
             xe = x[self.ends - 1]  # (R, n, d)

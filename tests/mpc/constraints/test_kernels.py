@@ -102,3 +102,17 @@ def test_a_flight_compiles_nothing_after_the_warm_up() -> None:
         out = planner.step(k * DT_S, p)
         p = p + DT_S * out.command_mps
     assert {f: list(getattr(kernels, f).signatures) for f in names} == before
+
+
+@pytest.mark.parametrize("stop", [9, 6, 0])
+def test_least_values_match_numpy(stop: int) -> None:
+    rng = np.random.default_rng(stop)
+    values = rng.normal(size=(40, 9))
+    values[3] = np.inf  # an item out of reach
+    split = rng.random(40) < 0.6
+    plain = values.min(axis=1, initial=np.inf)
+    plain[split] = values[split, :stop].min(axis=1, initial=np.inf)
+    np.testing.assert_array_equal(kernels.item_least(values, split, stop), plain)
+    first, second = np.arange(0, 20), np.arange(20, 40)
+    assert kernels.joint_least(values, first, second) == (values[first] + values[second]).min(initial=np.inf)
+    assert kernels.joint_least(values, first[:0], second[:0]) == np.inf
