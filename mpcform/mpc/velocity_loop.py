@@ -29,6 +29,7 @@ conflicts. The margin covers what the estimate misses (:func:`mpcform.sim.margin
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 from scipy.linalg import expm
@@ -36,6 +37,9 @@ from scipy.linalg import expm
 from mpcform._validate import Array
 from mpcform.errors import ValidationError
 from mpcform.world.loop_groups import LoopGroup
+
+OFFSET_TIME_S = 0.0
+"""Time constant [s] of the low-pass observer of the offset the commands cancel."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -94,7 +98,8 @@ class VelocityLoop:
                 dc[ax] = rest[ax, :k] @ b
                 lag = max(lag, abs(float(rest[ax, :k] @ np.linalg.solve(a, -b))))  # from the steady state
             gain = max(gain, _step_variation(a, b, c))
-        free[1:, :, -1] = rest[:, -1] = dt_s  # delta moves the drone dt delta in the first interval
+        free[:, :, -1] = dt_s * np.arange(horizon + 1)[:, None]  # delta persists: e dt delta at step e
+        rest[:, -1] = dt_s  # (the tail's own offset column: mpcform.mpc.constraints.tail)
         step_state[:, -1, -1] = 1.0
         if not covered.all():
             axes_given = np.flatnonzero(covered).tolist()
@@ -111,6 +116,19 @@ class VelocityLoop:
         per = np.abs(np.where(mask, steps, 0.0)).sum(axis=1) / (np.arange(1, h + 1)[:, None] * self.dt_s)
         return max(1.0, float(per.max()))
 
+    @cached_property
+    def steady_state(self) -> Array:
+        """The loop state (d, s - 1) per m/s of a command held until the loop settles (the lag's
+        ``xi = 1``), without the offset: ``(I - Phi)^-1 Gamma`` per axis."""
+        s = self.step_state.shape[1] - 1
+        eye = np.eye(s)
+        return np.array(
+            [
+                np.linalg.solve(eye - phi[:s, :s], gam[:s])
+                for phi, gam in zip(self.step_state, self.step_input, strict=True)
+            ]
+        )
+
     def rest(self, n: int) -> Array:
         """The loop state (n, d, s) of drones at rest."""
         return np.zeros((n,) + self.step_input.shape)
@@ -118,6 +136,20 @@ class VelocityLoop:
     def advance(self, state: Array, u: Array) -> Array:
         """The loop state (n, d, s) one interval after ``state`` with the commands ``u`` (n, d)."""
         return np.einsum("dst,ndt->nds", self.step_state, state) + u[..., None] * self.step_input
+
+    @property
+    def offset_gain(self) -> float:
+        """The observer's gain per interval on the offset the commands cancel (:data:`OFFSET_TIME_S`)."""
+        return 1.0 if OFFSET_TIME_S <= 0.0 else float(-np.expm1(-self.dt_s / OFFSET_TIME_S))
+
+    def smoothed(self, offset_mps: Array | None, state: Array) -> Array:
+        """The offset (n, d) [m/s] the commands cancel after observing ``state`` (n, d, s): the
+        last ``offset_mps`` moved by :attr:`offset_gain` towards the state's deadbeat estimate (None:
+        the first observation, taken whole)."""
+        delta = state[..., -1]
+        if offset_mps is None:
+            return delta.copy()
+        return offset_mps + self.offset_gain * (delta - offset_mps)
 
     def observe(self, state: Array, residual_m: Array) -> Array:
         """The state (n, d, s) with its velocity offset moved by ``residual_m / dt`` (n, d): where

@@ -57,7 +57,7 @@ def test_lag_closed_form() -> None:
 
 def test_the_velocity_offset_is_the_last_intervals_mean_over_the_next_interval() -> None:
     """``observe`` moves the offset by ``residual / dt``; it moves the drones by ``dt delta`` in
-    the first interval and no further, and ``advance`` keeps it. Under a constant wind the
+    every interval (persistent: ``e dt delta`` at step e), and ``advance`` keeps it. Under a constant wind the
     observed lag predicts the next interval end exactly once the wind's transient has settled."""
     from mpcform.sim.wind import Wind
 
@@ -67,7 +67,8 @@ def test_the_velocity_offset_is_the_last_intervals_mean_over_the_next_interval()
     np.testing.assert_allclose(state[..., -1], residual / DT)
     free = loop.free(state)
     assert not free[0].any()
-    np.testing.assert_allclose(free[1:], np.broadcast_to(residual, free[1:].shape), atol=1e-15)
+    steps = np.arange(1, free.shape[0])[:, None, None]
+    np.testing.assert_allclose(free[1:], steps * residual, atol=1e-15)
     np.testing.assert_array_equal(loop.advance(state, np.zeros((2, 3)))[..., -1], state[..., -1])
 
     plant = lag_plant(1, 3, 0.2, wind=Wind(np.array([1.0, -0.5, 0.2])))
