@@ -11,19 +11,42 @@ command held over its interval (the quadrotor: its hover linearisation), is inst
 exactly (one matrix exponential of the system ``(p, xi)`` per axis group). ``F_e xi_0`` is the
 *free* response (the velocity the drone already has, e.g. the lag's overshoot ``tau (1 - a^e)
 v_0``) and ``G`` the *forced* one (a lag lags its commands: ``G_{e,j} = -tau (1 - a) a^{e-1-j}``,
-``a = e^{-dt/tau}``). The planner keeps its cost on ``x`` (so eq. 14 is unchanged when nothing is
-active) and writes its separation rows on these true positions: rows linear in ``u``, exact for
-the plant without wind, so a braking plan no longer overshoots into a partner.
+``a = e^{-dt/tau}``). The planner writes its separation, obstacle and fence rows on these true
+positions: rows linear in ``u``, exact for the plant without wind, so a braking plan no longer
+overshoots into a partner.
 
 The loop state ``xi_0`` is not measured: :meth:`VelocityLoop.advance` runs the model on the
 commands sent (a drone at rest at the start), exact for a linear plant without wind. Wind (and a
 quadrotor's departure from its hover linearisation) moves the drone by ``r_k`` more than the model
 predicted over the last interval. The state's last component is a velocity offset ``delta``
-[m/s] over the next interval (``F_e`` carries ``dt`` for it, ``e >= 1``), set by
-:meth:`VelocityLoop.observe` to the last interval's mean, ``delta += r_k / dt`` (a deadbeat
-disturbance estimate). It is not extrapolated further: a loop with integral action takes a
-wind's offset out within about a second, and extrapolated gusts would only raise spurious
-conflicts. The margin covers what the estimate misses (:func:`mpcform.sim.margin.modelled_margin`).
+[m/s], set by :meth:`VelocityLoop.observe` to the last interval's mean, ``delta += r_k / dt`` (a
+deadbeat disturbance estimate), and held over the whole plan (``F_e`` carries ``e dt`` for it):
+the disturbance model of offset-free MPC (Pannocchia and Rawlings 2003; Maeder, Borrelli and
+Morari 2009), the velocity over ground ``v = u + delta``.
+
+**The command with an estimate.** The cost tracks the reference on the velocity over ground and
+the displacement with the offset, ``sum_j ||u_j + delta - ff_j - k (p*_j - p0 - x_j - j dt
+delta)||^2`` (:func:`mpcform.mpc.pipeline.cancelled`), so when no row is active the command is
+
+.. math::
+    u = J \dot\xi_d + k (p^* - p) - \delta \qquad \text{(eq. 14 less the offset)},
+
+and a constant disturbance leaves no steady-state error (a lag in a steady wind ``w`` settles at
+``delta = c tau w``; without the cancellation it stayed ``c tau |w| / k`` off). With no offset
+estimated (the ideal plant, ``plant_model`` off, or an exact zero) the command is eq. 14, bitwise.
+The velocity set and the acceleration rows stay on the command sent ``u``, and the certifier
+checks that command; the braking tail brakes the velocity over ground, its commands towards
+``-delta`` (:func:`mpcform.mpc.constraints.tail.with_offset`), so a drone holding in wind
+(``u = -delta``) rests where it is.
+
+The estimate is not filtered. The first interval needs the deadbeat estimate (the margin covers
+what it misses, :func:`mpcform.sim.margin.modelled_margin`); carried over the plan, a miss ``r``
+moves the shifted plan's position at step ``e`` by ``(e + 1) r``, and the rows' growth covers that
+(:func:`mpcform.sim.margin.wind_growth`, checked each step by
+:class:`mpcform.mpc.safety.premise.GrowthPremise`). A low-pass estimate would lag the deadbeat
+one and move the plan by that lag instead, up to the gusts' whole span in the worst case, and
+the loop itself low-passes the command (a lag by ``tau``). Position noise ``sigma`` enters the
+estimate as ``sqrt(2) sigma / dt``, and with it the command.
 """
 
 from __future__ import annotations
@@ -38,9 +61,6 @@ from mpcform._validate import Array
 from mpcform.errors import ValidationError
 from mpcform.world.loop_groups import LoopGroup
 
-OFFSET_TIME_S = 0.0
-"""Time constant [s] of the low-pass observer of the offset the commands cancel."""
-
 
 @dataclass(frozen=True, eq=False)
 class VelocityLoop:
@@ -48,11 +68,12 @@ class VelocityLoop:
 
     ``free_m`` (H + 1, d, s): ``F_e``; ``forced`` (H + 1, H, d): ``G_{e,j}`` (zero for ``j >= e``);
     ``step_state`` (d, s, s) and ``step_input`` (d, s): one interval of the loop state, whose last
-    component is the velocity offset ``delta`` (module docstring);
+    component is the velocity offset ``delta``, persistent over the plan (module docstring);
     ``speed_gain``: the L1 norm of the velocity's impulse response (the total variation of its step
     response), so ``|v| <= speed_gain v_max`` for commands within ``v_max`` (1 for a lag);
     ``rest_m`` (d, s): ``F_rest``, the free response once the loop has come to rest (the lag's
-    ``tau v_0``; the offset ``delta`` moves it ``dt``); ``dc_gain`` (d,): how far the loop carries a
+    ``tau v_0``; the offset's column, 0 here, is the braking tail's:
+    :func:`mpcform.mpc.constraints.tail.with_offset`); ``dc_gain`` (d,): how far the loop carries a
     drone per metre of commanded travel once at rest (1 for every loop here, whose velocity
     settles on the command), so a plan braking to rest ends at ``dc_gain x_stop + F_rest xi_0``
     (:mod:`mpcform.mpc.constraints.braking`); ``lag_s``: how far behind its commands the loop comes to rest
@@ -99,7 +120,6 @@ class VelocityLoop:
                 lag = max(lag, abs(float(rest[ax, :k] @ np.linalg.solve(a, -b))))  # from the steady state
             gain = max(gain, _step_variation(a, b, c))
         free[:, :, -1] = dt_s * np.arange(horizon + 1)[:, None]  # delta persists: e dt delta at step e
-        rest[:, -1] = dt_s  # (the tail's own offset column: mpcform.mpc.constraints.tail)
         step_state[:, -1, -1] = 1.0
         if not covered.all():
             axes_given = np.flatnonzero(covered).tolist()
@@ -136,20 +156,6 @@ class VelocityLoop:
     def advance(self, state: Array, u: Array) -> Array:
         """The loop state (n, d, s) one interval after ``state`` with the commands ``u`` (n, d)."""
         return np.einsum("dst,ndt->nds", self.step_state, state) + u[..., None] * self.step_input
-
-    @property
-    def offset_gain(self) -> float:
-        """The observer's gain per interval on the offset the commands cancel (:data:`OFFSET_TIME_S`)."""
-        return 1.0 if OFFSET_TIME_S <= 0.0 else float(-np.expm1(-self.dt_s / OFFSET_TIME_S))
-
-    def smoothed(self, offset_mps: Array | None, state: Array) -> Array:
-        """The offset (n, d) [m/s] the commands cancel after observing ``state`` (n, d, s): the
-        last ``offset_mps`` moved by :attr:`offset_gain` towards the state's deadbeat estimate (None:
-        the first observation, taken whole)."""
-        delta = state[..., -1]
-        if offset_mps is None:
-            return delta.copy()
-        return offset_mps + self.offset_gain * (delta - offset_mps)
 
     def observe(self, state: Array, residual_m: Array) -> Array:
         """The state (n, d, s) with its velocity offset moved by ``residual_m / dt`` (n, d): where
