@@ -52,13 +52,16 @@ class PlanState:
     first), the last command ``u_prev`` (n, d) [m/s], the velocity loop's state ``loop_state``
     (n, d, s) (no states without a loop) and, in wind, where the last plan takes the drones
     ``expected`` and how far the wind moved the shifted plan ``moved_m``
-    (:class:`~mpcform.mpc.safety.premise.GrowthPremise`)."""
+    (:class:`~mpcform.mpc.safety.premise.GrowthPremise`); with a loop, the velocity offset (n, d)
+    [m/s] the commands cancel ``offset_mps``
+    (:meth:`~mpcform.mpc.velocity_loop.VelocityLoop.cancelled`; None before the first observation)."""
 
     plan: Plan | None
     u_prev: Array
     loop_state: Array
     expected: Array | None = None
     moved_m: float | None = None
+    offset_mps: Array | None = None
 
 
 class StepPipeline:
@@ -113,7 +116,7 @@ class StepPipeline:
         self.tie_break.reset()
         rest = np.zeros((self.n, self.dim, 0)) if self.loop is None else self.loop.rest(self.n)
         self.state.plan, self.state.u_prev, self.state.loop_state = None, np.zeros((self.n, self.dim)), rest
-        self.state.expected = self.state.moved_m = None
+        self.state.expected = self.state.moved_m = self.state.offset_mps = None
 
     def run(self, t_s: float, p0: Array, deadline: float | None) -> tuple[Array, MPCStepInfo]:
         """The step at ``t_s`` from ``p0``, due at ``time.perf_counter() == deadline`` (None: none):
@@ -146,7 +149,7 @@ class StepPipeline:
         st, k, dt = self.settings, self.settings.gain_per_s, self.dt_s
         targets, ff = feedforward_targets(self.reference, t_s, dt, st.horizon, st.feedforward)
         c = ff + k * (targets[:-1] - p0)  # u_j = c_j - k x_j is the eq. 14 rollout
-        cancel, delta = None, self.state.loop_state[..., -1] if self.loop is not None else None
+        cancel, delta = None, self.state.offset_mps
         if delta is not None and delta.any():  # offset-free: the cost on v = u + delta
             cancel = cancelled(delta, k, dt, st.horizon)
             c = c - cancel

@@ -152,6 +152,7 @@ class MPCPlanner(Controller):
         )
         mine, theirs = self.state, inner.state
         theirs.u_prev, theirs.loop_state = mine.u_prev[keep], mine.loop_state[keep]
+        theirs.offset_mps = None if mine.offset_mps is None else mine.offset_mps[keep]
         inner._predicted = None if self._predicted is None else self._predicted[keep]
         theirs.expected = None if mine.expected is None else mine.expected[:, keep]
         if mine.plan is not None:
@@ -173,6 +174,7 @@ class MPCPlanner(Controller):
         state, premise = self.state, self._steps.premise
         if self._predicted is not None:  # the velocity offset of the last interval
             state.loop_state = self.loop.observe(state.loop_state, p0 - self._predicted)
+            state.offset_mps = self.loop.cancelled(state.offset_mps, state.loop_state)
         u0, info = self._steps.run(t_s, p0, deadline)
         if premise is not None and state.plan is not None:
             info, state.expected = premise.record(info, state.moved_m, p0, state.loop_state, state.plan)

@@ -26,7 +26,8 @@ Morari 2009), the velocity over ground ``v = u + delta``.
 
 **The command with an estimate.** The cost tracks the reference on the velocity over ground and
 the displacement with the offset, ``sum_j ||u_j + delta - ff_j - k (p*_j - p0 - x_j - j dt
-delta)||^2`` (:func:`mpcform.mpc.pipeline.cancelled`), so when no row is active the command is
+delta)||^2`` (:func:`mpcform.mpc.pipeline.cancelled`; ``delta`` here the low-pass estimate
+``delta_c`` below), so when no row is active the command is
 
 .. math::
     u = J \dot\xi_d + k (p^* - p) - \delta \qquad \text{(eq. 14 less the offset)},
@@ -39,14 +40,16 @@ checks that command; the braking tail brakes the velocity over ground, its comma
 ``-delta`` (:func:`mpcform.mpc.constraints.tail.with_offset`), so a drone holding in wind
 (``u = -delta``) rests where it is.
 
-The estimate is not filtered. The first interval needs the deadbeat estimate (the margin covers
-what it misses, :func:`mpcform.sim.margin.modelled_margin`); carried over the plan, a miss ``r``
-moves the shifted plan's position at step ``e`` by ``(e + 1) r``, and the rows' growth covers that
-(:func:`mpcform.sim.margin.wind_growth`, checked each step by
-:class:`mpcform.mpc.safety.premise.GrowthPremise`). A low-pass estimate would lag the deadbeat
-one and move the plan by that lag instead, up to the gusts' whole span in the worst case, and
-the loop itself low-passes the command (a lag by ``tau``). Position noise ``sigma`` enters the
-estimate as ``sqrt(2) sigma / dt``, and with it the command.
+**Two estimates.** The rows take the deadbeat estimate ``delta`` over the whole plan: the first
+interval needs it (the margin covers what it misses, :func:`mpcform.sim.margin.modelled_margin`),
+and carried over the plan a miss ``r`` moves the shifted plan's position at step ``e`` by ``(e +
+1) r``, which the rows' growth covers (:func:`mpcform.sim.margin.wind_growth`, checked each step
+by :class:`mpcform.mpc.safety.premise.GrowthPremise`); a low-pass estimate there would move the
+plan by its lag behind the deadbeat one instead, up to the gusts' whole span. The command cancels
+a low-pass of it, ``delta_c += (1 - e^{-dt / T}) (delta - delta_c)`` with ``T =``
+:data:`CANCEL_TIME_S` (:meth:`VelocityLoop.cancelled`): the same in a steady wind, but without
+the gusts' chatter (and position noise ``sigma``, which enters ``delta`` as ``sqrt(2) sigma /
+dt``). The cost's displacement then carries ``delta_c``, the rows ``delta``.
 """
 
 from __future__ import annotations
@@ -60,6 +63,14 @@ from scipy.linalg import expm
 from mpcform._validate import Array
 from mpcform.errors import ValidationError
 from mpcform.world.loop_groups import LoopGroup
+
+CANCEL_TIME_S = 0.3
+"""Time constant [s] of the low-pass observer of the offset the commands cancel (module docstring).
+Position noise enters the deadbeat estimate divided by ``dt``: a 10-drone ring on a lag of 0.3 s in
+a steady 1.7 m/s wind with 5 mm of measurement noise (dt 0.1) changed its commands by 0.138 m/s
+per step cancelling it whole, 0.038 through this observer (0.009 without cancelling, 0.235 m off
+its goal), and ended 2.6 mm off on average instead of 6.6 mm; a steady wind's offset it takes out
+within about a second."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -156,6 +167,21 @@ class VelocityLoop:
     def advance(self, state: Array, u: Array) -> Array:
         """The loop state (n, d, s) one interval after ``state`` with the commands ``u`` (n, d)."""
         return np.einsum("dst,ndt->nds", self.step_state, state) + u[..., None] * self.step_input
+
+    @property
+    def cancel_gain(self) -> float:
+        """The observer's gain [-] per interval of the offset the commands cancel
+        (:data:`CANCEL_TIME_S`): ``1 - e^{-dt / T}``."""
+        return float(-np.expm1(-self.dt_s / CANCEL_TIME_S))
+
+    def cancelled(self, offset_mps: Array | None, state: Array) -> Array:
+        """The offset (n, d) [m/s] the commands cancel after observing ``state`` (n, d, s): the last
+        one ``offset_mps`` moved by :attr:`cancel_gain` towards the state's deadbeat estimate (None
+        before the first observation: from 0)."""
+        delta = state[..., -1]
+        if offset_mps is None:
+            return self.cancel_gain * delta
+        return offset_mps + self.cancel_gain * (delta - offset_mps)
 
     def observe(self, state: Array, residual_m: Array) -> Array:
         """The state (n, d, s) with its velocity offset moved by ``residual_m / dt`` (n, d): where
