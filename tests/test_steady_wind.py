@@ -78,17 +78,21 @@ def test_a_lag_ring_in_a_steady_wind_arrives_and_meets_the_premise() -> None:
     assert m["growth_exceeded_steps"] == 0 and m["max_wind_shift"] > 0.0
 
 
-@pytest.mark.slow
 @pytest.mark.parametrize("dim", [2, 3])
 @pytest.mark.parametrize("coupling", ["joint", "decoupled"])
-@pytest.mark.parametrize("plant", sorted(PLANTS))
+@pytest.mark.parametrize(
+    "plant", ["lag", "second_order", pytest.param("quadrotor", marks=pytest.mark.slow)]
+)  # a quadrotor run takes 4-17 s (its PID cascade at 500 Hz); its integral action alone arrived
 @pytest.mark.parametrize("move", [False, True], ids=["hold", "translate"])
 def test_a_formation_in_a_steady_wind_arrives_within_two_centimetres(
     dim: int, coupling: str, plant: str, move: bool
 ) -> None:
+    """1 m/s of steady wind: the lag and the second-order loop ended 0.138 m and 0.108 m off (every
+    drone, holding or translating) and failed the premise on every step but the first; now they
+    arrive to rounding and the premise fails on at most one step (the second-order loop's first)."""
     if plant == "quadrotor" and not FLIGHT:
         pytest.skip("needs drone-models: pip install -e '.[flight]'")
     n = 6 if plant == "quadrotor" else 10
     error_m, m = arrived(ring(dim, plant, coupling, 1.0, move, n))
     assert error_m <= TOL_M
-    assert m["growth_exceeded_steps"] <= 10, m["growth_exceeded_steps"]
+    assert m["growth_exceeded_steps"] <= 2, m["growth_exceeded_steps"]
