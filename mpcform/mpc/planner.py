@@ -21,8 +21,8 @@ is on where the loop takes the drones: the rows (the forced response in the QP, 
 their bounds), the rollout's tests, the guess (the true path of the shifted plan) and the
 certification (the interval's true chord). The cost stays on the single integrator, plus the
 loop's estimated velocity offset ``delta`` held over the plan (offset-free tracking): the
-command is eq. 14 less ``delta`` when nothing is active, eq. 14 itself while no offset is
-estimated (:mod:`mpcform.mpc.velocity_loop`); the tie-break turns only drones whose
+command is eq. 14 less the estimate's low-pass ``delta_c`` when nothing is active, eq. 14 itself
+while no offset is estimated (:mod:`mpcform.mpc.velocity_loop`); the tie-break turns only drones whose
 single-integrator rollout conflicts (an encounter), not a drone whose own overshoot does (the
 QP brakes it). The loop state is run on
 the commands sent, from rest, plus the last interval's velocity offset. Every item's first row is
@@ -166,7 +166,7 @@ class MPCPlanner(Controller):
         than its limit along the first segment, or than it already was) and the step's information
         (mode ``fast_path`` | ``qp`` | ``fallback``, solver status, slack and the pairs that needed it,
         liveness events). With none of the QP's rows active the command is exactly eq. 14 (with a
-        velocity loop's offset estimate ``delta``, eq. 14 less ``delta``)."""
+        velocity loop's offset estimate, eq. 14 less its low-pass ``delta_c``)."""
         p0 = self._check_positions(positions_m)
         deadline = None if (b := self.settings.step_budget_s) is None else time.perf_counter() + b
         if self.loop is None:
