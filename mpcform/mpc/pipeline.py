@@ -151,7 +151,7 @@ class StepPipeline:
         c = ff + k * (targets[:-1] - p0)  # u_j = c_j - k x_j is the eq. 14 rollout
         cancel, delta = None, self.state.offset_mps
         if delta is not None and delta.any():  # offset-free: the cost on v = u + delta
-            cancel = cancelled(delta, k, dt, st.horizon)
+            cancel = cost_shift(delta, k, dt, st.horizon)
             c = c - cancel
         u_nom, x_nom = rollout(c, k, dt)
         x_true = self.predict.points(
@@ -323,7 +323,7 @@ class StepPipeline:
         self.state.u_prev = u[0].copy()
 
 
-def cancelled(offset_mps: Array, k: float, dt_s: float, horizon: int) -> Array:
+def cost_shift(offset_mps: Array, k: float, dt_s: float, horizon: int) -> Array:
     """What the cost's ``c`` (H, n, d) loses to an estimated velocity offset ``offset_mps`` (n, d)
     held over the plan (offset-free tracking, Pannocchia and Rawlings 2003): the cost tracks the
     reference on the velocity over ground ``v_j = u_j + delta`` and the displacement

@@ -49,7 +49,7 @@ class Nominal:
     from the start, the ``guess`` (S + 1, n, d) the rows are linearised about, the drones it takes
     off a limit row ``off_limits`` (n,), each drone's share of the rows' growth ``growing``
     (n,) (None: no growth), and with an estimated velocity offset what ``c`` cancels of it
-    ``cancel`` (H, n, d) (:func:`mpcform.mpc.pipeline.cancelled`; None: nothing)."""
+    ``cancel`` (H, n, d) (:func:`mpcform.mpc.pipeline.cost_shift`; None: nothing)."""
 
     targets: Array
     c: Array

@@ -26,7 +26,7 @@ Morari 2009), the velocity over ground ``v = u + delta``.
 
 **The command with an estimate.** The cost tracks the reference on the velocity over ground and
 the displacement with the offset, ``sum_j ||u_j + delta - ff_j - k (p*_j - p0 - x_j - j dt
-delta)||^2`` (:func:`mpcform.mpc.pipeline.cancelled`; ``delta`` here the low-pass estimate
+delta)||^2`` (:func:`mpcform.mpc.pipeline.cost_shift`; ``delta`` here the low-pass estimate
 ``delta_c`` below), so when no row is active the command is
 
 .. math::
