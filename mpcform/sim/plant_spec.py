@@ -132,9 +132,7 @@ class PlantSpec(ABC):
         if loop_modelled:  # the interval ends are modelled: the wind, the bend within, the remainder
             computed = float(np.linalg.norm(modelled_margin(plant, dt_s, a_max, margin)))
         chosen = computed if self.margin_m is None else self.margin_m
-        growth = (
-            wind_growth(plant, dt_s, loop_modelled) if self.margin_growth_m is None else self.margin_growth_m
-        )
+        growth = wind_growth(plant, dt_s) if self.margin_growth_m is None else self.margin_growth_m
         if not (np.isfinite(chosen) and np.isfinite(growth)):
             raise self._unbounded(dt_s)
         return Robustness(chosen, a_max, margin.valid_speed_mps, loop, growth)

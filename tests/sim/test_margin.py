@@ -233,9 +233,8 @@ def test_modelled_margin_covers_the_observed_loop(kind, dim, wind):
 
 def test_the_wind_growth_is_what_the_offset_estimate_misses_per_interval() -> None:
     """0 in calm air; the norm of :func:`observed_wind` in wind, the quadrotor's times its safety
-    factor (the MPC's rows grow by it along the horizon); with the loop modelled, whose estimate
-    the plan holds, ``E + 1`` times that (``E = ceil(0.2 / dt)``: the premise's last step)."""
-    from mpcform.sim.margin import QUADROTOR_SAFETY, observed_wind, premise_steps, wind_growth
+    factor (the MPC's rows grow by it along the horizon)."""
+    from mpcform.sim.margin import QUADROTOR_SAFETY, observed_wind, wind_growth
 
     assert wind_growth(lag_plant(1, 2, 0.2), DT) == 0.0
     gusty = lag_plant(1, 3, 0.2, wind=GUSTY)
@@ -244,8 +243,4 @@ def test_the_wind_growth_is_what_the_offset_estimate_misses_per_interval() -> No
     quad = QuadrotorPlantSpec(wind=GUSTY).build(1, 3)
     assert wind_growth(quad, DT) == pytest.approx(QUADROTOR_SAFETY * np.linalg.norm(observed_wind(quad, DT)))
     rob = QuadrotorPlantSpec(wind=GUSTY).robustness(3, DT, None, True)
-    assert premise_steps(0.1) == 2 and premise_steps(0.05) == 4 and premise_steps(0.3) == 1
-    assert rob.growth_m == pytest.approx((1 + premise_steps(DT)) * wind_growth(quad, DT))
-    assert rob.growth_m == pytest.approx(wind_growth(quad, DT, loop_modelled=True))
-    unmodelled = QuadrotorPlantSpec(wind=GUSTY).robustness(3, DT, None, False)
-    assert unmodelled.growth_m == pytest.approx(wind_growth(quad, DT))
+    assert rob.growth_m == pytest.approx(wind_growth(quad, DT))
