@@ -27,7 +27,7 @@ from mpcform.mpc.constraints.separation import Conflict, Separation
 from mpcform.mpc.constraints.separation_rows import SeparationRows
 from mpcform.mpc.liveness import TieBreak
 from mpcform.mpc.plan import Nominal, Plan, guess, merge, rollout, warm_start
-from mpcform.mpc.prediction import Prediction
+from mpcform.mpc.prediction import Prediction, rest_command
 from mpcform.mpc.safety.certify import Certifier
 from mpcform.mpc.safety.premise import GrowthPremise
 from mpcform.mpc.safety.slack import SLACK_REPORT_M, slack_report
@@ -52,13 +52,16 @@ class PlanState:
     first), the last command ``u_prev`` (n, d) [m/s], the velocity loop's state ``loop_state``
     (n, d, s) (no states without a loop) and, in wind, where the last plan takes the drones
     ``expected`` and how far the wind moved the shifted plan ``moved_m``
-    (:class:`~mpcform.mpc.safety.premise.GrowthPremise`)."""
+    (:class:`~mpcform.mpc.safety.premise.GrowthPremise`); with a loop, the velocity offset (n, d)
+    [m/s] the commands cancel ``offset_mps``
+    (:meth:`~mpcform.mpc.velocity_loop.VelocityLoop.cancelled`; None before the first observation)."""
 
     plan: Plan | None
     u_prev: Array
     loop_state: Array
     expected: Array | None = None
     moved_m: float | None = None
+    offset_mps: Array | None = None
 
 
 class StepPipeline:
@@ -99,6 +102,7 @@ class StepPipeline:
         if loop is not None:  # certify where the loop takes the drones in the interval
             state = self.state
             self.certifier.drift = lambda u0: loop.first(state.loop_state, u0)
+            self.certifier.rest_command = lambda: rest_command(state.loop_state)
         # the sparse QP with a backend, or each drone's QP; the split rounds while a drone is stalled
         self.solvers = build_step_solvers(settings, self.dim, dt_s, limits, self.families, sep, loop, backend)
         self.tie_break = TieBreak(self.n, settings.tie_break_rad, dt_s)
@@ -112,7 +116,7 @@ class StepPipeline:
         self.tie_break.reset()
         rest = np.zeros((self.n, self.dim, 0)) if self.loop is None else self.loop.rest(self.n)
         self.state.plan, self.state.u_prev, self.state.loop_state = None, np.zeros((self.n, self.dim)), rest
-        self.state.expected = self.state.moved_m = None
+        self.state.expected = self.state.moved_m = self.state.offset_mps = None
 
     def run(self, t_s: float, p0: Array, deadline: float | None) -> tuple[Array, MPCStepInfo]:
         """The step at ``t_s`` from ``p0``, due at ``time.perf_counter() == deadline`` (None: none):
@@ -145,6 +149,10 @@ class StepPipeline:
         st, k, dt = self.settings, self.settings.gain_per_s, self.dt_s
         targets, ff = feedforward_targets(self.reference, t_s, dt, st.horizon, st.feedforward)
         c = ff + k * (targets[:-1] - p0)  # u_j = c_j - k x_j is the eq. 14 rollout
+        cancel, delta = None, self.state.offset_mps
+        if delta is not None and delta.any():  # offset-free: the cost on v = u + delta
+            cancel = cost_shift(delta, k, dt, st.horizon)
+            c = c - cancel
         u_nom, x_nom = rollout(c, k, dt)
         x_true = self.predict.points(
             self.state.loop_state, u_nom, x_nom
@@ -165,6 +173,7 @@ class StepPipeline:
             about,
             violators(self.families, p0, self.state.u_prev, u_nom, x_true),
             growing,
+            cancel,
         )
 
     def _conflicts(self, p0: Array, nom: Nominal) -> Conflict | None:
@@ -172,7 +181,7 @@ class StepPipeline:
         None when the rollout is the QP's optimum (the fast path). In decoupled mode a rollout that
         meets the limits and the joint rows is split about itself (module docstring)."""
         st, sep = self.settings, self.separation
-        cand = self.candidates.select(p0)
+        cand = self.candidates.select(p0, self.predict.drift_m(self.state.loop_state))
         if (st.fast_path and st.grouping) or st.solves_per_drone:  # no fixed pattern: within reach
             cand = cand.within_reach()
         stops = nom.true_path[-1] if self.braking is not None and st.coupling == "decoupled" else None
@@ -208,9 +217,13 @@ class StepPipeline:
             speed = np.sqrt(np.einsum("nd,nd->n", self.state.u_prev, self.state.u_prev))
             step = self.limits.a_max_mps2 * self.dt_s * np.sqrt(self.dim)
         to_target = nom.targets[0] - p0
-        return self.tie_break.turn(
-            nom.c, turned, p0, to_target, self.state.plan is not None, blocked, speed, step
+        wish = nom.c if nom.cancel is None else nom.c + nom.cancel  # turned over ground
+        c = self.tie_break.turn(
+            wish, turned, p0, to_target, self.state.plan is not None, blocked, speed, step
         )
+        if nom.cancel is None:
+            return c
+        return nom.c if c is wish else c - nom.cancel
 
     def _step_qp(
         self, p0: Array, nom: Nominal, c: Array, conflict: Conflict, drones: Array, deadline: float | None
@@ -230,7 +243,8 @@ class StepPipeline:
         sub = qp_rows.subset(drones, self.n, on_only=grouped)  # grouped: the pattern follows the groups
         warm = None
         if self.solvers.warm_starts:
-            warm = warm_start(self.state.plan, p0, nom.u, nom.x, self.braking)[:, :, drones]
+            rest = None if self.loop is None else rest_command(self.state.loop_state)
+            warm = warm_start(self.state.plan, p0, nom.u, nom.x, self.braking, rest)[:, :, drones]
         qp = StepQP(
             self.n,
             drones,
@@ -306,6 +320,16 @@ class StepPipeline:
     def _accept(self, p0: Array, u: Array, x: Array) -> None:
         self.state.plan = Plan.from_relative(p0, u, x)
         self.state.u_prev = u[0].copy()
+
+
+def cost_shift(offset_mps: Array, k: float, dt_s: float, horizon: int) -> Array:
+    """What the cost's ``c`` (H, n, d) loses to an estimated velocity offset ``offset_mps`` (n, d)
+    held over the plan (offset-free tracking, Pannocchia and Rawlings 2003): the cost tracks the
+    reference on the velocity over ground ``v_j = u_j + delta`` and the displacement
+    ``x_j + j dt delta``, ``||v_j - ff_j - k (p*_j - p0 - x_j - j dt delta)||^2``, so
+    ``c_j - delta (1 + k j dt)``, and the unconstrained first command is ``ff + k (p* - p) -
+    delta`` (eq. 14 less the offset)."""
+    return (1.0 + k * dt_s * np.arange(horizon))[:, None, None] * offset_mps[None]
 
 
 def meets_rows(steps: StepPipeline, p0: Array, rows: SeparationRows) -> Callable[[Array, Array], bool]:

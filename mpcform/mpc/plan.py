@@ -47,8 +47,9 @@ class Nominal:
     its inputs ``u`` and relative positions ``x`` (H, n, d), where it takes the drones ``x_true``
     (S, n, d) (with a loop and the braking tail), as a ``plan``, its ``true_path`` (S + 1, n, d)
     from the start, the ``guess`` (S + 1, n, d) the rows are linearised about, the drones it takes
-    off a limit row ``off_limits`` (n,), and each drone's share of the rows' growth ``growing``
-    (n,) (None: no growth)."""
+    off a limit row ``off_limits`` (n,), each drone's share of the rows' growth ``growing``
+    (n,) (None: no growth), and with an estimated velocity offset what ``c`` cancels of it
+    ``cancel`` (H, n, d) (:func:`mpcform.mpc.pipeline.cost_shift`; None: nothing)."""
 
     targets: Array
     c: Array
@@ -60,6 +61,7 @@ class Nominal:
     guess: Array
     off_limits: Array
     growing: Array | None
+    cancel: Array | None = None
 
 
 def rollout(c: Array, k: float, dt: float) -> tuple[Array, Array]:
@@ -98,17 +100,22 @@ def guess(plan: Plan | None, p0: Array, horizon: int, braking: Braking | None = 
 
 
 def warm_start(
-    plan: Plan | None, p0: Array, u_nom: Array, x_nom: Array, braking: Braking | None = None
+    plan: Plan | None,
+    p0: Array,
+    u_nom: Array,
+    x_nom: Array,
+    braking: Braking | None = None,
+    rest_mps: Array | None = None,
 ) -> Array:
     """Primal warm start (2, H, n, d): inputs and relative positions of the previous plan shifted
     one step (or of the rollout ``u_nom``, ``x_nom`` at the first step); with ``braking`` its last
-    step brakes (:meth:`mpcform.mpc.constraints.braking.Braking.shifted`)."""
+    step brakes (towards ``rest_mps``, :meth:`mpcform.mpc.constraints.braking.Braking.shifted`)."""
     if plan is None:
         return np.stack([u_nom, x_nom])
     if braking is None:
         x = np.concatenate([plan.positions_m[2:], plan.positions_m[-1:]]) - p0
         return np.stack([plan.shifted_inputs(), x])
-    u = braking.shifted(plan.inputs_mps)
+    u = braking.shifted(plan.inputs_mps, rest_mps)
     x = np.concatenate([plan.positions_m[2:], plan.positions_m[-1:] + braking.dt_s * u[-1:]]) - p0
     return np.stack([u, x])
 

@@ -19,9 +19,12 @@ With a velocity loop (``loop``, :mod:`mpcform.mpc.velocity_loop`: a linear plant
 hover linearisation) every separation test
 is on where the loop takes the drones: the rows (the forced response in the QP, the free one in
 their bounds), the rollout's tests, the guess (the true path of the shifted plan) and the
-certification (the interval's true chord). The cost, and so eq. 14, stay on the single
-integrator; the tie-break turns only drones whose single-integrator rollout conflicts (an
-encounter), not a drone whose own overshoot does (the QP brakes it). The loop state is run on
+certification (the interval's true chord). The cost stays on the single integrator, plus the
+loop's estimated velocity offset ``delta`` held over the plan (offset-free tracking): the
+command is eq. 14 less the estimate's low-pass ``delta_c`` when nothing is active, eq. 14 itself
+while no offset is estimated (:mod:`mpcform.mpc.velocity_loop`); the tie-break turns only drones whose
+single-integrator rollout conflicts (an encounter), not a drone whose own overshoot does (the
+QP brakes it). The loop state is run on
 the commands sent, from rest, plus the last interval's velocity offset. Every item's first row is
 then hard, lowered at most to what braking or the previous plan reaches: the first interval is
 mostly the loop's free response, and a slack there would let a drone approach one partner while
@@ -150,6 +153,7 @@ class MPCPlanner(Controller):
         )
         mine, theirs = self.state, inner.state
         theirs.u_prev, theirs.loop_state = mine.u_prev[keep], mine.loop_state[keep]
+        theirs.offset_mps = None if mine.offset_mps is None else mine.offset_mps[keep]
         inner._predicted = None if self._predicted is None else self._predicted[keep]
         theirs.expected = None if mine.expected is None else mine.expected[:, keep]
         if mine.plan is not None:
@@ -162,7 +166,8 @@ class MPCPlanner(Controller):
         the certified first command (n, d) [m/s] (``||u_i|| <= v_max``, no pair or obstacle closer
         than its limit along the first segment, or than it already was) and the step's information
         (mode ``fast_path`` | ``qp`` | ``fallback``, solver status, slack and the pairs that needed it,
-        liveness events). With none of the QP's rows active the command is exactly eq. 14."""
+        liveness events). With none of the QP's rows active the command is exactly eq. 14 (with a
+        velocity loop's offset estimate, eq. 14 less its low-pass ``delta_c``)."""
         p0 = self._check_positions(positions_m)
         deadline = None if (b := self.settings.step_budget_s) is None else time.perf_counter() + b
         if self.loop is None:
@@ -170,6 +175,7 @@ class MPCPlanner(Controller):
         state, premise = self.state, self._steps.premise
         if self._predicted is not None:  # the velocity offset of the last interval
             state.loop_state = self.loop.observe(state.loop_state, p0 - self._predicted)
+            state.offset_mps = self.loop.cancelled(state.offset_mps, state.loop_state)
         u0, info = self._steps.run(t_s, p0, deadline)
         if premise is not None and state.plan is not None:
             info, state.expected = premise.record(info, state.moved_m, p0, state.loop_state, state.plan)

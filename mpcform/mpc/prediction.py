@@ -15,6 +15,12 @@ from mpcform.mpc.plan import Plan, guess
 from mpcform.mpc.velocity_loop import VelocityLoop
 
 
+def rest_command(state: Array) -> Array:
+    """The command (n, d) [m/s] drones in loop ``state`` (n, d, s) rest at: ``-delta``, the velocity
+    offset's estimate (:mod:`mpcform.mpc.velocity_loop`)."""
+    return -state[..., -1]
+
+
 class Prediction:
     """The positions the separation rows and tests are written on, for drones in loop ``state``
     (n, d, s) (no states without a ``loop``): steps 1..H, then with ``braking`` the ``tail``'s points."""
@@ -36,6 +42,16 @@ class Prediction:
             return 0.0
         lag = 0.0 if self.loop is None else self.loop.lag_s
         return max(self.braking.kappa_s * self.speed_gain, self.tail.reach_s) + lag
+
+    def drift_m(self, state: Array) -> float:
+        """How far [m] the velocity offset of drones in loop ``state`` (n, d, s) carries one at most
+        over the plan and its tail (0 without a loop)."""
+        if self.loop is None or not state.size:
+            return 0.0
+        reach_s = float(np.abs(self.loop.free_m[..., -1]).max())
+        if self.tail is not None and self.tail.free is not None:
+            reach_s = max(reach_s, float(np.abs(self.tail.free[..., -1]).max()))
+        return reach_s * float(np.sqrt(np.einsum("nd,nd->n", state[..., -1], state[..., -1]).max()))
 
     def points(self, state: Array, u: Array, x: Array) -> Array:
         """Relative positions (S, n, d) the drones reach with the inputs ``u`` (H, n, d): the single
@@ -61,7 +77,9 @@ class Prediction:
             return guess(plan, p0, self.horizon, self.braking)
         u = np.zeros((self.horizon,) + p0.shape)
         if plan is not None:
-            u = plan.shifted_inputs() if self.braking is None else self.braking.shifted(plan.inputs_mps)
+            u = plan.shifted_inputs()
+            if self.braking is not None:  # braking towards the command the drones rest at in wind
+                u = self.braking.shifted(plan.inputs_mps, rest_command(state))
         return np.concatenate([p0[None], p0 + self.points(state, u, self.dt_s * np.cumsum(u, axis=0))])
 
     def on_forced(self, rows: SeparationRows, state: Array, ends: Array) -> SeparationRows:

@@ -47,8 +47,9 @@ class MPCSettings:
     - ``fast_path``: return the eq. 14 rollout without a solver call when it meets every row.
     - ``plant_model``: with a ``lag``, ``second_order`` or ``quadrotor`` plant (its hover
       linearisation), write the separation rows on where its velocity loop really takes the drones,
-      with the last interval's velocity offset estimated (:mod:`mpcform.mpc.velocity_loop`); the cost and
-      eq. 14 are unchanged. No effect on the ideal plant.
+      with the last interval's velocity offset ``delta`` estimated and held over the plan, and
+      cancel it in the command (offset-free tracking: eq. 14 less a low-pass of ``delta`` when no
+      row is active, :mod:`mpcform.mpc.velocity_loop`). No effect on the ideal plant.
     - ``braking``: with a finite ``a_max``, end every plan where the drones can still stop
       (:mod:`mpcform.mpc.constraints.braking`).
     - ``step_budget_s``: the deadline of one step [s] (online planning, :mod:`mpcform.online`):

@@ -79,7 +79,8 @@ MPC_KEYS: tuple[Key, ...] = (
     _mpc_key("plant_model", "bool", "With a `lag`, `second_order` or `quadrotor` plant (its hover "
              "linearisation): separation rows on where its velocity loop really takes the drones "
              "(a braking drone overshoots its commands), with the last interval's velocity offset "
-             "(wind) estimated; cost and eq. 14 unchanged."),
+             "(wind) estimated, held over the plan and cancelled in the command (offset-free: "
+             "eq. 14 less the offset when no row is active)."),
     _mpc_key("braking", "bool", "End every plan where the drones can still stop, braking within "
              "`limits.a_max` or its default (the plans' terminal condition: a horizon shorter "
              "than the braking keeps d_min; off with `limits.a_max = inf`)."),

@@ -57,8 +57,9 @@ def test_first_input_is_eq14_when_no_row_is_active(
     dim: int, fast_path: bool, solver: str, loop: bool
 ) -> None:
     """Without the acceleration bound (``a_max = inf``; the default's ramp is tested below), also
-    with a lag's velocity loop in the rows (the cost is still eq. 14's, the loop moved by earlier
-    commands)."""
+    with a lag's velocity loop in the rows (the loop moved by earlier commands; the drones did not
+    go where the model took them, so the command is eq. 14 less the velocity offset estimated,
+    the low-pass of ``delta = (p - predicted) / dt``: offset-free tracking)."""
     from mpcform.mpc.velocity_loop import VelocityLoop
 
     rng = np.random.default_rng(dim)
@@ -79,6 +80,12 @@ def test_first_input_is_eq14_when_no_row_is_active(
             planner.step(t - 0.05, p)
         out = planner.step(t, p)
         want = TrackingController(ref, 2.0, 0.05).step(t, p).command_mps
+        if loop:  # the low-pass of delta, from 0 (mpcform.mpc.velocity_loop.CANCEL_TIME_S)
+            delta = planner.state.offset_mps
+            assert delta is not None
+            np.testing.assert_allclose(delta, model.cancel_gain * planner.state.loop_state[..., -1])
+            assert np.abs(delta).max() > 0.01
+            want = want - delta
         assert out.info.mode == ("fast_path" if fast_path else "qp")
         np.testing.assert_allclose(out.command_mps, want, atol=tol, rtol=0)
 
@@ -585,3 +592,31 @@ def test_a_planner_refuses_what_is_not_its_types(kwargs: dict, field: str) -> No
     ref = ConstantReference(Template.polygon(3, 1.0), FormationState.from_param([0.0, 0.0]))
     with pytest.raises(ValidationError, match=rf"^{field}: expected mpcform\."):
         MPCPlanner(ref, 0.1, **kwargs)
+
+
+def test_with_no_offset_estimated_a_loop_planner_commands_eq14_bitwise() -> None:
+    """Offset-free tracking cancels only an estimated offset: at the first step (the loop at rest,
+    ``delta = 0``) a lag planner's command is eq. 14 bitwise, the ideal planner's; once the drones
+    drift by ``r`` per interval, the command is eq. 14 less the low-pass of ``delta = r / dt``."""
+    from mpcform.mpc.velocity_loop import VelocityLoop
+
+    tpl = Template.polygon(6, 3.0)
+    ref = ConstantReference(tpl, FormationState.from_param(np.array([1.0, -2.0])))
+    p = forward_kinematics(tpl, FormationState.from_param(np.zeros(2)))
+    lag = (np.array([[-5.0]]), np.array([5.0]), np.array([1.0]), (0, 1))
+    limits = Limits(v_max_mps=100.0, d_min_m=0.2, a_max_mps2=np.inf)
+    settings_ = MPCSettings(horizon=8, gain_per_s=2.0)
+    plain = MPCPlanner(ref, 0.05, limits, settings_)
+    looped = MPCPlanner(ref, 0.05, limits, settings_, loop=VelocityLoop.from_groups([lag], 2, 0.05, 8))
+    want = TrackingController(ref, 2.0, 0.05).step(0.0, p).command_mps
+    np.testing.assert_array_equal(plain.step(0.0, p).command_mps, want)
+    np.testing.assert_array_equal(looped.step(0.0, p).command_mps, want)
+    drift = np.array([0.002, -0.001])
+    loop = looped.loop
+    assert loop is not None
+    for k in range(1, 30):  # a steady offset: 2.2 mm per interval more than modelled, then foreseen
+        p1 = looped._predicted + (drift if k == 1 else 0.0)
+        out = looped.step(0.05 * k, p1)
+        cancelled = (1.0 - (1.0 - loop.cancel_gain) ** k) * drift / 0.05  # the low-pass, from 0
+        want = TrackingController(ref, 2.0, 0.05).step(0.05 * k, p1).command_mps - cancelled
+        np.testing.assert_allclose(out.command_mps, want, atol=1e-9, rtol=0)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 from scipy.linalg import expm
 
 from mpcform.mpc.constraints.braking import Braking
@@ -68,3 +69,17 @@ def test_the_tail_lies_as_far_as_braking_and_the_loops_lag_take_it() -> None:
     assert with_tail.speed_gain == 1.0 and Prediction(DT, H, None, None, None).speed_gain == 1.0
     assert with_tail.tail_s == max(BRAKING.kappa_s, tail.reach_s) + TAU
     assert Prediction(DT, H, loop, None, None).tail_s == 0.0
+
+
+def test_the_drift_is_the_offsets_reach_over_the_plan_and_its_tail() -> None:
+    """How far the largest offset carries a drone: ``|delta|`` times the offset's longest column,
+    the tail's (``H dt + kappa + tau`` for a lag's stop point); 0 at rest and without a loop."""
+    loop = VelocityLoop.from_groups([LAG], 2, DT, H)
+    assert BRAKING is not None
+    predict = Prediction(DT, H, loop, BRAKING, braking_tail(BRAKING, H, 2, loop))
+    state = loop.rest(3)
+    assert predict.drift_m(state) == 0.0
+    state[1, :, -1] = [0.3, 0.4]  # 0.5 m/s
+    reach_s = H * DT + BRAKING.kappa_s + TAU
+    assert predict.drift_m(state) == pytest.approx(0.5 * reach_s)
+    assert Prediction(DT, H, None, None, None).drift_m(np.zeros((3, 2, 0))) == 0.0

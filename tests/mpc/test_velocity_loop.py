@@ -57,7 +57,7 @@ def test_lag_closed_form() -> None:
 
 def test_the_velocity_offset_is_the_last_intervals_mean_over_the_next_interval() -> None:
     """``observe`` moves the offset by ``residual / dt``; it moves the drones by ``dt delta`` in
-    the first interval and no further, and ``advance`` keeps it. Under a constant wind the
+    every interval (persistent: ``e dt delta`` at step e), and ``advance`` keeps it. Under a constant wind the
     observed lag predicts the next interval end exactly once the wind's transient has settled."""
     from mpcform.sim.wind import Wind
 
@@ -67,7 +67,8 @@ def test_the_velocity_offset_is_the_last_intervals_mean_over_the_next_interval()
     np.testing.assert_allclose(state[..., -1], residual / DT)
     free = loop.free(state)
     assert not free[0].any()
-    np.testing.assert_allclose(free[1:], np.broadcast_to(residual, free[1:].shape), atol=1e-15)
+    steps = np.arange(1, free.shape[0])[:, None, None]
+    np.testing.assert_allclose(free[1:], steps * residual, atol=1e-15)
     np.testing.assert_array_equal(loop.advance(state, np.zeros((2, 3)))[..., -1], state[..., -1])
 
     plant = lag_plant(1, 3, 0.2, wind=Wind(np.array([1.0, -0.5, 0.2])))
@@ -95,3 +96,33 @@ def test_speed_gain_is_the_step_responses_total_variation() -> None:
     over = np.exp(-np.pi * zeta / np.sqrt(1 - zeta**2))
     gain = loop_of(second_order_plant(1, 3, zeta, 6.0)).speed_gain
     assert 1 + 2 * over - 1e-3 < gain < 1 + 2 * over + 2 * over**2 + 1e-3
+
+
+@pytest.mark.parametrize(
+    "plant", [lag_plant(1, 3, 0.2), second_order_plant(1, 3, 0.7, 6.0)], ids=["lag", "second_order"]
+)
+def test_a_loop_in_its_steady_state_moves_as_its_command(plant: object) -> None:
+    """``steady_state`` is the loop state a held command settles at (the lag's ``xi = 1``, the
+    second-order loop's ``(1, 0)``), and from it the held command moves the drone ``e dt u``: the
+    free and forced responses cancel (what the persistent offset's tail column rests on)."""
+    loop = loop_of(plant)
+    expected = [[1.0]] * 3 if loop.steady_state.shape[1] == 1 else [[1.0, 0.0]] * 3
+    np.testing.assert_allclose(loop.steady_state, expected, atol=1e-12)
+    state = loop.rest(1)
+    state[0, :, :-1] = loop.steady_state
+    np.testing.assert_allclose(loop.offsets(state, np.ones((H, 1, 3))), 0.0, atol=1e-12)
+
+
+def test_the_cancelled_offset_is_a_low_pass_of_the_estimate() -> None:
+    """From 0 at the first observation, ``delta_c`` moves by ``1 - e^{-dt / T}`` of the way to the
+    deadbeat estimate each interval, so a steady offset is cancelled whole within a few ``T``."""
+    from mpcform.mpc.velocity_loop import CANCEL_TIME_S
+
+    loop = loop_of(lag_plant(2, 3, 0.2))
+    assert loop.cancel_gain == pytest.approx(1.0 - np.exp(-DT / CANCEL_TIME_S))
+    state = loop.observe(loop.rest(2), np.full((2, 3), 0.01))  # delta = 0.1 m/s
+    offset = loop.cancelled(None, state)
+    np.testing.assert_allclose(offset, loop.cancel_gain * 0.1)
+    for _ in range(int(10 * CANCEL_TIME_S / DT)):
+        offset = loop.cancelled(offset, state)
+    np.testing.assert_allclose(offset, 0.1, rtol=1e-4)

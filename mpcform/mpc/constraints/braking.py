@@ -40,7 +40,13 @@ share one loop (a lag, the second-order loop, a planar quadrotor), or their grou
 are built together (a spatial quadrotor's xy and z loops). A quadrotor's polytope is tight only
 after many exact points, whose rows a joint QP cannot afford: there the rows stay on the chord
 to the rest point (:data:`mpcform.mpc.constraints.tail.SAMPLED_STATES`), and the margin has to cover the
-path's bend. Wind moves the measured start, and with it the shifted plan, beyond (i): in wind the
+path's bend. With the loop's velocity offset ``delta`` (persistent over the plan,
+:mod:`mpcform.mpc.velocity_loop`) the plan is the same in the velocity over ground ``u + delta``: it
+brakes that geometrically, its commands towards ``-delta`` (:meth:`Braking.shifted`,
+:func:`mpcform.mpc.constraints.tail.with_offset`), and (i) and (ii) hold for a constant ``delta``;
+the tail's commands may then leave the velocity set by ``|delta|`` and change by up to
+``(1 - rho) (v_max + |delta|)`` per step (they have no rows). A change of the estimate moves the
+plan like a push. Wind moves the measured start, and with it the shifted plan, beyond (i): in wind the
 rows grow along the horizon (:func:`mpcform.mpc.constraints.rows.step_growth`), which keeps the shifted plan
 feasible for pushes within the growth up to its window; past the window a plan may reach into
 the growth (a buffer, reported apart from slack: :func:`mpcform.mpc.safety.slack.slack_report`); beyond
@@ -97,6 +103,10 @@ class Braking:
         """Stop points (n, d) of plans ending at ``x_last`` with the last inputs ``u_last`` (n, d)."""
         return x_last + self.kappa_s * u_last
 
-    def shifted(self, u: Array) -> Array:
-        """Inputs (H, n, d) shifted one step, the last one braking: ``(u_1 .. u_{H-1}, rho u_{H-1})``."""
-        return np.concatenate([u[1:], self.rho * u[-1:]])
+    def shifted(self, u: Array, rest_mps: Array | None = None) -> Array:
+        """Inputs (H, n, d) shifted one step, the last one braking: ``(u_1 .. u_{H-1}, rho u_{H-1})``;
+        with ``rest_mps`` (n, d), the command a drone rests at (``-delta``, the velocity offset of
+        :mod:`mpcform.mpc.velocity_loop`), braking towards it: ``rest + rho (u_{H-1} - rest)``."""
+        if rest_mps is None:
+            return np.concatenate([u[1:], self.rho * u[-1:]])
+        return np.concatenate([u[1:], (rest_mps + self.rho * (u[-1] - rest_mps))[None]])

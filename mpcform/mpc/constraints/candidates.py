@@ -77,9 +77,11 @@ class CandidateSelector:
         self._obstacle_items = np.empty((0, 2), dtype=np.intp)  # (drone, obstacle)
         self._ob_codes = np.empty(0, dtype=np.intp)  # drone * m + obstacle
 
-    def select(self, p0: Array) -> Candidates:
-        """Pairs and (drone, obstacle) items within reach over the horizon from ``p0`` (n, d)."""
-        lim, st, travel = self.limits, self.settings, self.travel_m
+    def select(self, p0: Array, drift_m: float = 0.0) -> Candidates:
+        """Pairs and (drone, obstacle) items within reach over the horizon from ``p0`` (n, d), each
+        drone carried up to ``drift_m`` [m] farther (a velocity offset held over the plan,
+        :mod:`mpcform.mpc.velocity_loop`)."""
+        lim, st, travel = self.limits, self.settings, self.travel_m + drift_m
         rebuilt, self._fresh = self._fresh, False
         pair_on: Array | None = np.zeros(self._pairs.shape[0], dtype=bool)
         if lim.d_min_m is not None:

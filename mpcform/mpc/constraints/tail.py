@@ -157,7 +157,7 @@ def braking_tail(
     if loop is None:
         return Tail(gain, rest, None)
     rest_free = loop.rest_m[None].copy()
-    chord = Tail(gain, rest, rest_free)
+    chord = with_offset(Tail(gain, rest, rest_free), loop, horizon)
     found = _hull(loop, braking, dim)
     if found is None:
         return chord
@@ -183,7 +183,8 @@ def braking_tail(
         free = np.broadcast_to(rest_free, (functionals.shape[0],) + rest_free.shape[1:]).copy()
         for g, power in enumerate(powers):
             free[:, group == g, :s] -= (functionals[:, g, 1:] @ power)[:, None, :]
-        return Tail(gain, np.concatenate([forced, rest]), np.concatenate([free, rest_free]))
+        tail = Tail(gain, np.concatenate([forced, rest]), np.concatenate([free, rest_free]))
+        return with_offset(tail, loop, horizon)
 
     def times(functionals: Array, matrices: list[Array]) -> Array:
         """Each group's functionals (V, G, q) times its matrix."""
@@ -203,6 +204,21 @@ def braking_tail(
         sample, ahead = times(sample, systems), [a @ m for a, m in zip(ahead, systems, strict=True)]
         samples.append(sample)
     return chord
+
+
+def with_offset(tail: Tail, loop: VelocityLoop, horizon: int) -> Tail:
+    """``tail`` with the velocity offset ``delta`` persistent (:mod:`mpcform.mpc.velocity_loop`): the
+    plan brakes the drone's velocity over ground, so its commands brake towards ``-delta``
+    (:meth:`mpcform.mpc.constraints.braking.Braking.shifted`). With ``v = u + delta`` and the loop state
+    ``xi + xi_ss delta`` (``xi_ss``: :attr:`~mpcform.mpc.velocity_loop.VelocityLoop.steady_state`) the
+    drone moves as a loop in still air commanded ``v``, ``x_H + H dt delta`` at the horizon, so the
+    offset's column is the tail of a drone in steady flight at 1 m/s: ``g H dt + sum_j forced[t, j] +
+    free[t] xi_ss`` (a lag's stop point ``H dt + kappa + tau``: a drone holding in wind, ``u = -delta``,
+    rests where it is)."""
+    free = tail.free.copy()  # type: ignore[union-attr]
+    steady = np.einsum("tds,ds->td", free[:, :, :-1], loop.steady_state)
+    free[:, :, -1] = tail.gain * horizon * loop.dt_s + tail.forced.sum(axis=1) + steady
+    return Tail(tail.gain, tail.forced, free)
 
 
 def _hull(loop: VelocityLoop, braking: Braking, dim: int) -> tuple[Array, list[Array], Array] | None:

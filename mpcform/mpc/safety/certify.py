@@ -60,6 +60,9 @@ class Certifier:
         self.a_step_mps = None if a_max_mps2 is None else a_max_mps2 * dt_s  # largest change per step
         self.drift: Callable[[Array], Array] | None = None
         """With a velocity loop: where a command takes the drones beyond ``dt u`` in the interval."""
+        self.rest_command: Callable[[], Array] | None = None
+        """With a velocity loop: the command (n, d) the drones rest at (``-delta``), which the
+        previous plan's braking tail brakes towards (:meth:`Braking.shifted`)."""
         self.floor_command: Array | None = None
         """With a velocity loop: the braking command (n, d) whose chord sets the floor (the one the
         QP's first rows are lowered to, :func:`mpcform.mpc.safety.first_rows.hard_first_rows`; None: the
@@ -175,7 +178,8 @@ class Certifier:
         without braking, slowing by ``a_max dt`` or, without ``a_max``, holding); with the last
         command ``u_prev``, the first moved within ``a_max dt`` of it (the solver's tolerance off)."""
         if self.braking is not None:
-            u = self.braking.shifted(plan.inputs_mps)
+            rest = None if self.rest_command is None else self.rest_command()
+            u = self.braking.shifted(plan.inputs_mps, rest)
         else:
             u = plan.shifted_inputs(self.a_step_mps)
         if u_prev is not None:

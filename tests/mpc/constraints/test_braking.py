@@ -147,3 +147,16 @@ def test_a_21_drone_ring_with_a_short_horizon_keeps_d_min_under_a_lag() -> None:
 
     m = run_scenario(load_scenario(FZ_S9191_125)).summary["metrics"]
     assert m["separation_violations_true"] == 0 and m["min_separation_true"] >= 0.5951389406813115
+
+
+def test_with_a_rest_command_the_shifted_plan_brakes_towards_it() -> None:
+    """A drone resting at ``-delta`` (a velocity offset held over the plan) brakes its velocity over
+    ground ``u + delta``: the shifted plan's last input is ``rest + rho (u_{H-1} - rest)``."""
+    b = Braking.of(DT, Limits(v_max_mps=1.5, a_max_mps2=1.0))
+    assert b is not None
+    u = np.random.default_rng(1).uniform(-1.0, 1.0, (6, 3, 2))
+    rest = np.array([[0.2, -0.1], [0.0, 0.0], [-0.3, 0.05]])
+    shifted = b.shifted(u, rest)
+    np.testing.assert_array_equal(shifted[:-1], u[1:])
+    np.testing.assert_allclose(shifted[-1] - rest, b.rho * (u[-1] - rest))
+    np.testing.assert_array_equal(b.shifted(u, np.zeros((3, 2)))[-1], b.shifted(u)[-1])

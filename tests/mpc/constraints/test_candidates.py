@@ -85,3 +85,12 @@ def test_mask_of() -> None:
     assert mask_of(codes, np.array([4, 5])) is None
     assert mask_of(codes, np.array([10])) is None
     np.testing.assert_array_equal(mask_of(codes, np.empty(0, int)), [False] * 4)
+
+
+def test_a_drift_widens_the_reach() -> None:
+    """A velocity offset held over the plan carries each drone ``drift_m`` farther: a pair 1.0 m
+    apart is out of reach (0.5 + 0.002 + 2 x 0.2 m) without it, within reach with 0.1 m of drift."""
+    sel = CandidateSelector(2, 0.1, LIMITS, SETTINGS, ShapeSet((), 2))
+    assert sel.select(line(0.0, 1.0)).pairs.shape == (0, 2)
+    sel.reset()
+    np.testing.assert_array_equal(sel.select(line(0.0, 1.0), drift_m=0.1).pair_on, [True])

@@ -272,7 +272,7 @@ def test_without_a_loop_or_in_a_joint_qp_a_quadrotors_tail_is_its_stop_point() -
     quad = _loop_of(_quadrotor(3), 0.1)
     chord = braking_tail(braking, 10, 3, quad)
     assert chord.count == 1 and chord.free is not None
-    np.testing.assert_allclose(chord.free[0], quad.rest_m)
+    np.testing.assert_allclose(chord.free[0, :, :-1], quad.rest_m[:, :-1])  # the offset's: with_offset
     loop = _loop_of(_quadrotor(2), 0.1)
     assert braking_tail(braking, 10, 2, loop).count == 1  # 3 samples would be needed: the chord
     # a slower swarm brakes sooner: 2 samples would do, but the rows of 9 tail points made a
@@ -280,3 +280,33 @@ def test_without_a_loop_or_in_a_joint_qp_a_quadrotors_tail_is_its_stop_point() -
     slow = Braking.of(0.1, Limits(v_max_mps=0.54, a_max_mps2=1.79))
     planar15 = _loop_of(_quadrotor(2), 0.1, 15)
     assert braking_tail(slow, 15, 2, planar15).count == 1
+
+
+@pytest.mark.parametrize("plant", [*PLANTS, "quadrotor planar", "quadrotor spatial"])
+@pytest.mark.parametrize("per_drone", [False, True])
+def test_a_drone_holding_against_a_persistent_offset_rests_where_it_is(plant: str, per_drone: bool) -> None:
+    """With the velocity offset ``delta`` persistent (:func:`with_offset`), a drone in steady state
+    holding against it (every command ``-delta``, the loop state ``-xi_ss delta``) has its horizon
+    and every tail point (hull vertices or chord) at its start, and one flying steadily at ``v``
+    over ground (commands ``v - delta``) stops where the still-air plan of ``v`` does."""
+    if plant.startswith("quadrotor"):
+        dim = 2 if plant.endswith("planar") else 3
+        loop = _loop_of(_quadrotor(dim), 0.1)
+    else:
+        dim, loop = 3, _loop(plant, 0.1)
+    braking = Braking.of(0.1, Limits(v_max_mps=1.0, a_max_mps2=1.79))
+    assert braking is not None
+    tail = braking_tail(braking, 10, dim, loop, per_drone)
+    delta = np.array([[0.3, -0.2, 0.1][:dim]])
+
+    def at(v: np.ndarray, offset: np.ndarray) -> np.ndarray:
+        state = loop.rest(1)
+        state[0, :, :-1] = (v - offset).T * loop.steady_state  # in steady flight on commands v - delta
+        state[0, :, -1] = offset
+        u = np.broadcast_to(v - offset, (10, 1, dim))
+        x = 0.1 * np.cumsum(u, axis=0)
+        return np.concatenate([x + loop.offsets(state, u)[1:], tail.points(x[-1], u, state)])
+
+    np.testing.assert_allclose(at(np.zeros((1, dim)), delta), 0.0, atol=1e-9)
+    v = np.array([[0.4, 0.1, -0.2][:dim]])
+    np.testing.assert_allclose(at(v, delta), at(v, np.zeros((1, dim))), atol=1e-9)

@@ -48,11 +48,12 @@ def _planner(d_min_m: float = 0.5) -> MPCPlanner:
     return MPCPlanner(ref, 0.1, limits, MPCSettings(horizon=6, gain_per_s=2.0), loop=loop)
 
 
-def test_drones_that_move_as_modelled_meet_the_premise_and_a_push_moves_the_plan_twice() -> None:
+def test_drones_that_move_as_modelled_meet_the_premise_and_a_push_moves_the_plan_e_plus_one_times() -> None:
     """Drones that go exactly where the loop model takes them move the shifted plan by nothing
-    (rounding); a push ``w`` moves it by ``2 |w|``: the start by ``w`` and, through the velocity
-    offset's estimate ``delta += w / dt`` held over the first interval, every later position by
-    ``dt delta = w`` more. A push beyond ``g / 2`` exceeds the growth and is recorded."""
+    (rounding); a push ``w`` moves its position at step ``e`` by ``(e + 1) |w|``: the start by ``w``
+    and, through the velocity offset's estimate ``delta += w / dt`` held over the plan, the position
+    e intervals on by ``e dt delta = e w`` more (the window ends at e = 2: ``3 |w|``). A push beyond
+    ``g / 3`` exceeds the growth and is recorded."""
     planner = _planner()
     p = np.array([[-1.0, 0.0], [1.0, 0.0]])
     planner.reset(0.0, p)
@@ -60,7 +61,7 @@ def test_drones_that_move_as_modelled_meet_the_premise_and_a_push_moves_the_plan
         info = planner.step(0.1 * k, p).info
         assert info.wind_shift_m < 1e-10 and not info.growth_exceeded  # type: ignore[attr-defined]
         p = planner._predicted.copy()  # where the model took them
-    push = np.array([[0.003, 0.004], [0.0, 0.0]])  # 5 mm on drone 0
+    push = np.array([[0.002, 0.008 / 3.0], [0.0, 0.0]])  # 3.33 mm on drone 0
     info = planner.step(0.6, p + push).info
     assert info.wind_shift_m == pytest.approx(0.01, abs=1e-9)  # type: ignore[attr-defined]
     assert not info.growth_exceeded  # type: ignore[attr-defined]  # exactly g
@@ -95,4 +96,4 @@ def test_the_survivors_keep_checking_where_the_plan_takes_them() -> None:
     assert info.wind_shift_m < 1e-10 and not info.growth_exceeded  # type: ignore[attr-defined]
     p[1] = survivors.inner._predicted[0] + np.array([0.0, 0.003])  # type: ignore[attr-defined]
     info = survivors.step(0.4, p).info
-    assert info.wind_shift_m == pytest.approx(0.006, abs=1e-9)  # type: ignore[attr-defined]
+    assert info.wind_shift_m == pytest.approx(0.009, abs=1e-9)  # type: ignore[attr-defined]
