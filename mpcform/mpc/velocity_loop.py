@@ -46,8 +46,8 @@ and carried over the plan a miss ``r`` moves the shifted plan's position at step
 1) r`` at worst; the rows grow by one worst miss per interval (:func:`mpcform.sim.margin.wind_growth`),
 and :class:`mpcform.mpc.safety.premise.GrowthPremise` reports each step the move exceeds it (a
 steady wind's first few: the plan no longer moves by the wind's mean). A low-pass estimate there
-would move the plan by its lag behind the deadbeat one instead, up to the gusts' whole span. The command cancels
-a low-pass of it, ``delta_c += (1 - e^{-dt / T}) (delta - delta_c)`` with ``T =``
+would move the plan by its lag behind the deadbeat one instead, up to the gusts' whole span. The
+command cancels a low-pass of it, ``delta_c += (1 - e^{-dt / T}) (delta - delta_c)`` with ``T =``
 :data:`CANCEL_TIME_S` (:meth:`VelocityLoop.cancelled`): the same in a steady wind, but without
 the gusts' chatter (and position noise ``sigma``, which enters ``delta`` as ``sqrt(2) sigma /
 dt``). The cost's displacement then carries ``delta_c``, the rows ``delta``.
