@@ -139,9 +139,7 @@ class StepPipeline:
         if not sol.success and brake is not None:  # wind: no plan in the fence
             sol, active = solve_in_wider_fence(self, solver, qp, p0, brake, sol, active)
         u0, info = self._outcome(p0, nom, conflict, drones, sol, active, relaxed)
-        late = deadline is not None and time.perf_counter() > deadline  # sent late, still certified
-        cut = bool(sol.extras.get(BUDGET_CUT, False))
-        return u0, replace(info, deadline_missed=late, budget_cut=cut) if late or cut else info
+        return u0, timed(info, sol, deadline)
 
     def _nominal(self, t_s: float, p0: Array) -> Nominal:
         """The step's eq. 14 rollout from ``p0``, where it takes the drones, the guess the rows are
@@ -212,18 +210,13 @@ class StepPipeline:
             if self.loop is not None:
                 plain = guess(self.state.plan, p0, self.settings.horizon, self.braking)
             turned = conflicted & sep.encounters(p0, conflict, nom.x, plain, nom.growing)
-        speed, step = None, 0.0  # with a_max: how fast the drones fly, how much that changes per step
-        if self.limits.a_max_mps2 is not None:
-            speed = np.sqrt(np.einsum("nd,nd->n", self.state.u_prev, self.state.u_prev))
-            step = self.limits.a_max_mps2 * self.dt_s * np.sqrt(self.dim)
+        speed, step = speeds(self.state.u_prev, self.limits.a_max_mps2, self.dt_s)
         to_target = nom.targets[0] - p0
         wish = nom.c if nom.cancel is None else nom.c + nom.cancel  # turned over ground
         c = self.tie_break.turn(
             wish, turned, p0, to_target, self.state.plan is not None, blocked, speed, step
         )
-        if nom.cancel is None:
-            return c
-        return nom.c if c is wish else c - nom.cancel
+        return c if nom.cancel is None else (nom.c if c is wish else c - nom.cancel)  # back to commands
 
     def _step_qp(
         self, p0: Array, nom: Nominal, c: Array, conflict: Conflict, drones: Array, deadline: float | None
@@ -320,6 +313,22 @@ class StepPipeline:
     def _accept(self, p0: Array, u: Array, x: Array) -> None:
         self.state.plan = Plan.from_relative(p0, u, x)
         self.state.u_prev = u[0].copy()
+
+
+def timed(info: MPCStepInfo, sol: QPSolution, deadline: float | None) -> MPCStepInfo:
+    """``info`` with whether the step ended past its ``deadline`` (its certified command is sent
+    late) and whether the wall clock cut the solve's optional work (:data:`BUDGET_CUT`)."""
+    late = deadline is not None and time.perf_counter() > deadline
+    cut = bool(sol.extras.get(BUDGET_CUT, False))
+    return replace(info, deadline_missed=late, budget_cut=cut) if late or cut else info
+
+
+def speeds(u_prev: Array, a_max_mps2: float | None, dt_s: float) -> tuple[Array | None, float]:
+    """With ``a_max``, how fast the drones fly (n,) and how much that can change per step (the
+    tie-break's, :mod:`mpcform.mpc.liveness`); else None and 0."""
+    if a_max_mps2 is None:
+        return None, 0.0
+    return np.sqrt(np.einsum("nd,nd->n", u_prev, u_prev)), a_max_mps2 * dt_s * np.sqrt(u_prev.shape[1])
 
 
 def cost_shift(offset_mps: Array, k: float, dt_s: float, horizon: int) -> Array:
