@@ -25,18 +25,18 @@ MIN_DRONES = 100
 
 def njit(fn: F) -> F:
     """``fn`` compiled by numba (no Python objects, cached on disk), or ``fn`` itself without it."""
-    if not AVAILABLE:
-        return fn
-    import numba
-
-    return numba.njit(cache=True, nogil=True)(fn)  # type: ignore[return-value]
+    return _compiled(fn, nogil=True)
 
 
 def inline(fn: F) -> F:
     """A small helper of the kernels, inlined into each caller by numba (a call with array
     arguments costs more than the arithmetic), or ``fn`` itself without it."""
+    return _compiled(fn, inline="always")
+
+
+def _compiled(fn: F, **options: Any) -> F:
     if not AVAILABLE:
         return fn
     import numba
 
-    return numba.njit(inline="always", cache=True)(fn)  # type: ignore[return-value]
+    return numba.njit(cache=True, **options)(fn)

@@ -29,6 +29,11 @@ class Prediction:
         self, dt_s: float, horizon: int, loop: VelocityLoop | None, braking: Braking | None, tail: Tail | None
     ) -> None:
         self.dt_s, self.horizon, self.loop, self.braking, self.tail = dt_s, horizon, loop, braking, tail
+        self._offset_reach_s = 0.0  # how far [m] 1 m/s of velocity offset carries a drone, at most
+        if loop is not None:
+            self._offset_reach_s = float(np.abs(loop.free_m[..., -1]).max())
+            if tail is not None and tail.free is not None:
+                self._offset_reach_s = max(self._offset_reach_s, float(np.abs(tail.free[..., -1]).max()))
 
     @property
     def speed_gain(self) -> float:
@@ -48,10 +53,8 @@ class Prediction:
         over the plan and its tail (0 without a loop)."""
         if self.loop is None or not state.size:
             return 0.0
-        reach_s = float(np.abs(self.loop.free_m[..., -1]).max())
-        if self.tail is not None and self.tail.free is not None:
-            reach_s = max(reach_s, float(np.abs(self.tail.free[..., -1]).max()))
-        return reach_s * float(np.sqrt(np.einsum("nd,nd->n", state[..., -1], state[..., -1]).max()))
+        speed = float(np.sqrt(np.einsum("nd,nd->n", state[..., -1], state[..., -1]).max()))
+        return self._offset_reach_s * speed
 
     def points(self, state: Array, u: Array, x: Array) -> Array:
         """Relative positions (S, n, d) the drones reach with the inputs ``u`` (H, n, d): the single

@@ -93,13 +93,12 @@ class PairSeparation(SeparationFamily):
         if _jit.USE and self.tail <= 1:  # the same rows by the compiled loop
             from mpcform.mpc.constraints import kernels
 
-            no_grows, no_stops = np.empty(0), np.empty((0, d))
-            grows_, stops_ = no_grows if grows is None else grows, no_stops if stops is None else stops
             c = np.ascontiguousarray  # the one layout the kernel is compiled for
+            grown = c(np.empty(0) if grows is None else grows)  # empty: no growth, no stop split
+            split = c(np.empty((0, d)) if stops is None else stops)
             arrays = (c(p0), c(path), c(pairs), c(self.metric), c(self.segs), c(self.ends))
-            kernels.side_rows(
-                *arrays, float(self.d_min_m), half, c(grows_), c(self.grow), c(stops_), coeffs, lower, hard
-            )
+            bounds = (float(self.d_min_m), half, grown, c(self.grow), split)
+            kernels.side_rows(*arrays, *bounds, coeffs, lower, hard)
         else:
             self._numpy_sides(p0, path, pairs, stops, grows, half, coeffs, lower, hard)
         hard2 = np.concatenate([hard, hard])
