@@ -26,8 +26,9 @@ FLAGS = {"out_file": "--out"}
 
 def check_output_paths(args: argparse.Namespace) -> None:
     """Raise :class:`ValidationError` naming the option when one of ``args``' output paths is empty
-    (``--out ''`` would write into the current directory) or cannot be written (``--figure`` only
-    when a figure is drawn)."""
+    (``--out ''`` would write into the current directory), cannot be written (``--figure`` only
+    when a figure is drawn) or is a file another option writes too (``--json`` and ``--profile``
+    naming one file: the second would overwrite the first)."""
     for dest in (*DIRECTORY_OPTIONS, *FILE_OPTIONS):
         if isinstance(value := getattr(args, dest, None), str) and not value.strip():
             raise ValidationError(_flag(dest), f"expected a path, got {shown(value)}")
@@ -35,10 +36,15 @@ def check_output_paths(args: argparse.Namespace) -> None:
         value = getattr(args, dest, None)
         if value is not None:
             check_output_dir(_flag(dest), value)
+    written: dict[Path, str] = {}  # each file written, by the option that names it
     for dest in FILE_OPTIONS:
         value = getattr(args, dest, None)
         if value is not None and not (dest == "figure" and getattr(args, "no_figure", False)):
             check_output_file(_flag(dest), value)
+            if (same := written.setdefault(Path(value).resolve(), _flag(dest))) != _flag(dest):
+                raise ValidationError(
+                    _flag(dest), f"{str(value)!r} is the file {same} writes; expected another path"
+                )
 
 
 def check_output_dir(flag: str, path: str | Path) -> None:

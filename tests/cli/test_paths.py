@@ -67,6 +67,13 @@ def test_every_output_option_of_a_namespace_is_checked(tmp_path: Path) -> None:
     check_output_paths(argparse.Namespace(out_file=str(tmp_path / "f")))
 
 
+def test_two_file_options_never_name_one_file(tmp_path: Path) -> None:
+    same = tmp_path / "bench.json"
+    with pytest.raises(ValidationError, match="^--profile: .*bench.json' is the file --json writes"):
+        check_output_paths(argparse.Namespace(json=str(same), profile=str(tmp_path / "." / "bench.json")))
+    check_output_paths(argparse.Namespace(json=str(same), profile=str(tmp_path / "profile.txt")))
+
+
 def test_a_directory_the_system_refuses_is_named_and_nothing_is_left(tmp_path: Path) -> None:
     """``/proc`` looks writable to root but refuses a new directory: the error names the option."""
     with pytest.raises(ValidationError, match=r"--out: cannot (create|write into) '/proc/nope'"):
