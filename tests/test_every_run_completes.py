@@ -1,11 +1,13 @@
 """Every run completes, on every plant (``tests/completion_family.py``), and the issue's two
-reproducers arrive within their durations."""
+reproducers arrive within their durations; the ordinary-day family (``tests/broad_family.py``)
+draws as broadly as it promises."""
 
 from __future__ import annotations
 
 from collections import Counter
 from pathlib import Path
 
+import broad_family
 import numpy as np
 import pytest
 from completion_family import PARTS, PLANTS, campaign, outcome, report, scenario
@@ -38,6 +40,33 @@ def test_the_family_draws_what_it_promises() -> None:
         assert s.simulation.duration_s >= 2.0 * travel + getattr(s.reference, "duration_s", 0.0)
         assert s.limits.v_max_mps <= s.robustness.valid_speed_mps
     assert len(seen) == len(PARTS) * len(PLANTS)
+
+
+def test_the_ordinary_day_family_draws_as_broadly_as_it_promises() -> None:
+    """Its first 48 draws load (none refused) and span what users fly: every plant with both
+    couplings, 2-30 drones, dt 0.05-0.1 s, horizons from 3 to past 20, a_max from near 0.2 m/s^2 to
+    the default, v_max 0.5-4 m/s, steady winds past 1.5 m/s, fences, obstacles and missions."""
+    runs = [broad_family.drawn(i) for i in range(48)]
+    assert [r for r in runs if isinstance(r, str)] == []
+    docs = [r for r in runs if not isinstance(r, str)]
+    built = [scenario_from_dict(d) for d in docs]
+    groups = Counter((d.get("plant", {}).get("kind", "ideal"), d["controller"]["coupling"]) for d in docs)
+    assert len(groups) == 2 * len(PLANTS), groups
+    n = [s.template.n for s in built]
+    h = [d["controller"]["horizon"] for d in docs]
+    a = [s.limits.a_max_mps2 for s in built]
+    v = [d["limits"]["v_max"] for d in docs]
+    wind = [np.linalg.norm(d["plant"]["wind"]["mean"]) for d in docs if "plant" in d]
+    assert min(n) == 2 and max(n) >= 20 and min(h) == 3 and max(h) >= 20
+    assert {s.simulation.dt_s for s in built} <= set(broad_family.DT_S)
+    assert (
+        min(a) < 0.3
+        and max(a) == pytest.approx(broad_family.A_MAX_MPS2)
+        and 0.5 <= min(v) < 1 < 3 < max(v) <= 4
+    )
+    assert max(wind) > 1.5 and all(0.0 <= w <= 2.0 for w in wind)
+    assert any("geofence_min" in d["limits"] for d in docs) and any(d.get("obstacles") for d in docs)
+    assert any(d["reference"]["kind"] == "mission" for d in docs)
 
 
 @pytest.mark.slow
