@@ -237,8 +237,9 @@ def _away(m: dict[str, Any]) -> str:
 
 def format_summary(summary: dict[str, Any]) -> str:
     """A short aligned table of the run and its metrics, for the terminal."""
-    m, lim, plant = summary["metrics"], summary["limits"], summary.get("plant")
-    flying = plant is not None and plant.get("kind") != "ideal"  # a plant other than the plan
+    m, lim = summary["metrics"], summary["limits"]
+    plant: dict[str, Any] = summary.get("plant") or {}
+    flying = plant.get("kind", "ideal") != "ideal"  # a plant other than the plan
     solver = f", solver {summary['solver']}" if summary["solver"] else ""
     rows = [
         (
@@ -296,7 +297,7 @@ def format_summary(summary: dict[str, Any]) -> str:
                 f"max speed {_m(m['max_speed_true'], 'm/s')}",
             )
         )
-    if plant is not None and (events := plant_events(plant)) is not None:
+    if (events := plant_events(plant)) is not None:
         rows.append(("plant events", events))
     for mode, st in m["step_time_ms"].items():
         rows.append(
