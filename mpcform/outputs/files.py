@@ -238,6 +238,8 @@ def _away(m: dict[str, Any]) -> str:
 def format_summary(summary: dict[str, Any]) -> str:
     """A short aligned table of the run and its metrics, for the terminal."""
     m, lim = summary["metrics"], summary["limits"]
+    plant: dict[str, Any] = summary.get("plant") or {}
+    flying = plant.get("kind", "ideal") != "ideal"  # a plant other than the plan
     solver = f", solver {summary['solver']}" if summary["solver"] else ""
     rows = [
         (
@@ -275,15 +277,17 @@ def format_summary(summary: dict[str, Any]) -> str:
         if m.get("incomplete_drones"):
             rows.append(("not arrived", _away(m)))
     if "obstacle_violations" in m:
+        flown = ""  # and a plant's dense motion's (the ideal plant's is the same path)
+        if flying and "min_obstacle_clearance_true" in m:
+            flown = f" (true motion {_m(m['min_obstacle_clearance_true'], 'm')})"
         rows.append(
             (
                 "obstacles",
-                f"min clearance {_m(m['min_obstacle_clearance'], 'm')} from a surface, "
+                f"min clearance {_m(m['min_obstacle_clearance'], 'm')} from a surface{flown}, "
                 f"{m['obstacle_violations']} violations",
             )
         )
-    plant = summary.get("plant")
-    if plant is not None and plant.get("kind") != "ideal" and "min_separation_true" in m:
+    if flying and "min_separation_true" in m:
         model = ", its velocity loop in the rows" if plant.get("velocity_loop_modelled") else ""
         rows.append(
             (
@@ -293,7 +297,7 @@ def format_summary(summary: dict[str, Any]) -> str:
                 f"max speed {_m(m['max_speed_true'], 'm/s')}",
             )
         )
-    if plant is not None and (events := plant_events(plant)) is not None:
+    if (events := plant_events(plant)) is not None:
         rows.append(("plant events", events))
     for mode, st in m["step_time_ms"].items():
         rows.append(

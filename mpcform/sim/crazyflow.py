@@ -5,7 +5,16 @@ with the first-principles dynamics of drone-models at ``physics_hz`` (500 Hz) an
 Mellinger state controller at ``control_hz`` (100 Hz). Every interval, each drone gets the
 full-state setpoints of :func:`mpcform.control.setpoints.interval_setpoints` from where it is at
 the interval's start: the same setpoints :class:`mpcform.online.loop.OnlineLoop` gives a real
-swarm. The true path is every physics step (dense samples: position, velocity, attitude).
+swarm, but for held drones. The true path is every physics step (dense samples: position,
+velocity, attitude).
+
+A **held** drone (a command within :data:`HOLD_MPS` of zero: every step fell back, planning
+stopped for it, or its controller commands nothing) keeps its setpoints anchored instead: the
+path starts where the last interval's ended, not at the measurement, so the firmware's position
+loop sees the error of the Mellinger loop's steady sag and corrects it (restarted at the
+measurement every 0.1 s, a held cf2x_L250 sank 8.4 cm/s). The anchor is kept within
+:data:`~mpcform.world.limits.PLATFORM_TRACKING_M` of the measurement (the planner's tracking
+allowance for a Crazyflie), and is dropped when the drone moves again.
 
 crazyflow runs in a worker process (:mod:`mpcform.sim.crazyflow_worker`: it needs
 ``SCIPY_ARRAY_API=1`` before scipy loads); its simulator is built and compiled once per run, at
@@ -19,8 +28,8 @@ of the drone-models parameters: 0.070 m for cf2x_L250),
 **floor contacts** (a centre below the body radius) and **flips** (the body's z axis pointing
 down). A drone that touched the floor or flipped is reported in :attr:`CrazyflowPlant.events`
 and is lost (:attr:`CrazyflowPlant.lost_drones`): the simulation stops planning for it (its
-setpoints then hold it where it is, zero velocity, as a ground station would until the operator
-cuts its motors).
+setpoints then hold it, anchored where planning stopped, as a ground station would until the
+operator cuts its motors).
 
 Wind (``[plant.wind]``, :mod:`mpcform.sim.wind`: the plant's seeded field, sampled at
 ``physics_hz``, per drone) acts as the quadrotor plant's does, through drag: before every physics
@@ -57,9 +66,13 @@ from mpcform.errors import MPCFormError, ValidationError
 from mpcform.sim import so_rpy
 from mpcform.sim.plants import Plant
 from mpcform.sim.so_rpy import package_file
+from mpcform.world.limits import PLATFORM_TRACKING_M
 
 DRONES = ("cf2x_L250", "cf2x_P250", "cf2x_T350", "cf21B_500")
 """The Crazyflie 2.x models crazyflow simulates."""
+
+HOLD_MPS = 1e-3
+"""A command this close to zero [m/s] holds the drone: its setpoints stay anchored (module docstring)."""
 
 
 def body_radius_m(drone: str) -> float:
@@ -110,6 +123,7 @@ class CrazyflowPlant(Plant):
         self._drag = so_rpy.load_params(drone).drag_matrix  # the quadrotor plant's (module docstring)
         self._worker: _Worker | None = None
         self._p = np.zeros((n, 3))
+        self._anchor = np.full((n, dim), np.nan)  # a held drone's setpoint path (world frame), else NaN
         self.setup_s = 0.0
         self._events: dict[str, Any] = {}
 
@@ -132,6 +146,7 @@ class CrazyflowPlant(Plant):
         if np.any(v != 0.0):
             raise ValidationError("plant.velocities", "the crazyflow plant starts at rest (hover)")
         self._p = self._world(p)
+        self._anchor = np.full((self.n, self.dim), np.nan)
         low = int(np.argmin(self._p[:, 2]))
         if self._p[low, 2] < 2.0 * self.radius_m:
             need = 2.0 * self.radius_m - self._p[low, 2] + self.altitude_m
@@ -156,7 +171,7 @@ class CrazyflowPlant(Plant):
 
     def _advance(self, u: Array, dt: float, planned: Array | None) -> tuple[Array, Array, Array, dict]:
         ticks_per_interval(dt, self.control_hz, "plant.control_rate")
-        sp = interval_setpoints(self._p[:, : self.dim], u, self.t_s, dt, self.control_hz, self.altitude_m)
+        sp = interval_setpoints(self._starts(u, dt), u, self.t_s, dt, self.control_hz, self.altitude_m)
         rows = sp.state_control()
         steps = rows.shape[0] * (self.physics_hz // self.control_hz)
         wind = self._wind(1.0 / self.physics_hz, steps)  # (steps, n, d): held over each physics step
@@ -174,6 +189,18 @@ class CrazyflowPlant(Plant):
         if wind is not None:  # the wind in force from each sample on (the last: the last step's)
             extra["wind_mps"] = np.concatenate([wind, wind[-1:]])
         return t, pos[:, :, : self.dim], vel[:, :, : self.dim], extra
+
+    def _starts(self, u: Array, dt: float) -> Array:
+        """Where each drone's setpoint path starts (n, d) [world frame]: at the measurement, or
+        for a held drone at its anchor, which then moves on by ``u dt`` (module docstring)."""
+        measured = self._p[:, : self.dim]
+        held = (np.linalg.norm(u, axis=1) <= HOLD_MPS)[:, None]
+        away = np.where(held & np.isfinite(self._anchor), self._anchor - measured, 0.0)
+        far = np.linalg.norm(away, axis=1, keepdims=True)
+        away *= np.minimum(1.0, PLATFORM_TRACKING_M / np.maximum(far, 1e-300))
+        start = np.where(held, measured + away, measured)
+        self._anchor = np.where(held, start + dt * u, np.nan)
+        return start
 
     def _watch(self, pos: Array, quat: Array) -> None:
         """Record contacts, floor contacts and flips of the dense samples (module docstring)."""

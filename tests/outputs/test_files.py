@@ -217,3 +217,25 @@ def test_plant_events_are_one_line_or_none() -> None:
         "drone contacts: [0, 3]; on the floor: 0, 2; planning stopped for drone 0 at 0.6 s, drone 2 at 1.25 s"
     )
     assert line == said
+
+
+def test_the_printed_summary_reports_true_geofence_and_obstacle_violations(tmp_path: Path) -> None:
+    """A plant's dense motion's geofence and obstacle violations are printed beside its separation
+    and speed ones, and its obstacle clearance beside the plan's: the figures of summary.json."""
+    run_short("worked_example", tmp_path)
+    summary = strict_json(tmp_path / "summary.json")
+    summary["plant"] |= {"kind": "crazyflow", "margin": 0.05}
+    summary["metrics"] |= {"geofence_violations": 0, "geofence_violations_true": 2167}
+    summary["metrics"] |= {"obstacle_violations": 0, "min_obstacle_clearance": 0.21}
+    summary["metrics"] |= {"obstacle_violations_true": 4, "min_obstacle_clearance_true": -0.012}
+    lines = format_summary(summary).splitlines()
+    assert next(r for r in lines if r.startswith("violations")).endswith(
+        " 0 separation, 0 speed, 0 obstacle, 0 geofence"
+    )
+    true = next(r for r in lines if r.startswith("true motion"))
+    assert ", violations 0 separation, 4 obstacle, 2167 geofence, max speed " in true
+    obstacles = next(r for r in lines if r.startswith("obstacles"))
+    assert obstacles.endswith(" 0.21 m from a surface (true motion -0.012 m), 0 violations")
+    summary["plant"]["kind"] = "ideal"  # its dense motion is the plan's path: one clearance
+    obstacles = next(r for r in format_summary(summary).splitlines() if r.startswith("obstacles"))
+    assert obstacles.endswith(" 0.21 m from a surface, 0 violations")

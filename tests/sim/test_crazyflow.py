@@ -103,13 +103,14 @@ def test_the_wind_force_is_the_quadrotor_plants_drag_on_the_airspeed() -> None:
 
 def test_a_held_drone_is_pushed_downwind(pair: CrazyflowPlant, windy: CrazyflowPlant) -> None:
     """Held for 2 s, the calm pair stays put and the windy pair drifts downwind (+x), each drone
-    by its own gusts; the plant reports the wind it applied, the seeded field of the quadrotor
+    by its own gusts (its anchored setpoints pull it back: 3.8 cm when written, 11-16 cm restarted
+    at the measurement); the plant reports the wind it applied, the seeded field of the quadrotor
     plant's sampling at the physics rate."""
     calm, blown = held(pair, 2.0), held(windy, 2.0)
     calm_dx = calm.p_true_m[-1, :, 0] - calm.p_true_m[0, :, 0]
     blown_dx = blown.p_true_m[-1, :, 0] - blown.p_true_m[0, :, 0]
     print("downwind drift in 2 s [m]: calm", calm_dx, "1 m/s wind", blown_dx)
-    assert np.all(np.abs(calm_dx) < 5e-3) and np.all(blown_dx > 0.05)
+    assert np.all(np.abs(calm_dx) < 5e-3) and np.all(blown_dx > 0.02)
     assert blown.wind_mps is not None and blown.wind_mps.shape == (20 * 50 + 1, 2, 2)
     seed = np.random.SeedSequence(5).spawn(2)[0]  # the plant's wind stream (mpcform.sim.plants)
     expected = WindField(GUSTY, 2, seed).sample_grid(1.0 / 500.0, 20 * 50)
@@ -156,6 +157,53 @@ def test_a_drone_below_the_floor_is_refused() -> None:
     sc = with_plant_kind(load_scenario(SCENARIOS / "swap_spatial_12.toml"), "crazyflow")
     with pytest.raises(ValidationError, match="plant.altitude: drone .* expected an altitude of at least"):
         run_scenario(sc)
+
+
+HELD_STARTS = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.5], [-1.0, 0.0, -0.5]])
+"""Three spatial drones, 1 m apart, at 0.5-1.5 m above crazyflow's floor (altitude 1 m)."""
+
+
+def worst_height_drift_m(p_true_m: np.ndarray) -> float:
+    return float(np.abs(p_true_m[..., 2] - HELD_STARTS[:, 2]).max())
+
+
+@pytest.mark.slow
+def test_a_held_swarm_keeps_its_height() -> None:
+    """Commands of zero for 10 s (every step fell back): the anchored setpoints keep every drone
+    within 0.05 m of its height (3.7 cm at worst when written; restarted at the measurement every
+    interval, they sank 8.4 cm/s and the lowest touched the floor)."""
+    plant = CrazyflowPlant(3, 3)
+    plant.reset(HELD_STARTS)
+    held = concat_samples([plant.advance(np.zeros((3, 3)), 0.1) for _ in range(100)])
+    print("worst height drift held [m]", worst_height_drift_m(held.p_true_m))
+    assert worst_height_drift_m(held.p_true_m) <= 0.05 and plant.lost_drones.size == 0
+    assert np.abs(held.p_true_m[..., :2] - HELD_STARTS[:, :2]).max() < 5e-3
+
+
+@pytest.mark.slow
+def test_a_swarm_at_its_goals_keeps_its_height() -> None:
+    """The MPC holding three drones at their goals (the targets their starts) for 10 s: within
+    0.05 m of their heights on the 500 Hz true path (2.9 cm at worst when written, at 1 s, before
+    offset-free tracking has learnt the sag)."""
+    sc = scenario_from_dict(
+        {
+            "version": 1,
+            "name": "held_at_the_goals",
+            "dim": 3,
+            "template": {"shape": "explicit", "offsets": HELD_STARTS.tolist()},
+            "initial": {"centroid": [0.0, 0.0, 0.0]},
+            "reference": {"kind": "constant", "centroid": [0.0, 0.0, 0.0]},
+            "limits": {"v_max": 1.0, "d_min": 0.5},
+            "controller": {"kind": "mpc", "coupling": "decoupled"},
+            "simulation": {"dt": 0.1, "duration": 10.0},
+            "plant": {"kind": "crazyflow", "altitude": 1.0},
+        }
+    )
+    run = run_scenario(sc)
+    assert run.simulation.true is not None
+    print("worst height drift at the goals [m]", worst_height_drift_m(run.simulation.true.positions_m))
+    assert worst_height_drift_m(run.simulation.true.positions_m) <= 0.05
+    assert run.summary["metrics"]["completion"] == 1.0
 
 
 def online(sc: Scenario) -> Scenario:
