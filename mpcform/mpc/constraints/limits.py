@@ -62,6 +62,8 @@ def admitted(families: tuple[LimitRows, ...], p0: Array, free_m: Array, path_m: 
     if fence is None:
         return free_m
     lo, hi = fence.box(p0)
+    if lo.ndim == 3:  # with the rows' growth: one box per bounded position
+        lo, hi = lo[1:], hi[1:]
     out = free_m.copy()
     forced = path_m[1:] - free_m[1:]
     out[1:] = np.clip(free_m[1:], lo - forced, hi - forced)

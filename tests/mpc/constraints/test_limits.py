@@ -10,8 +10,8 @@ from hypothesis import strategies as st
 from mpcform.mpc.constraints.acceleration import AccelerationRows
 from mpcform.mpc.constraints.family import LimitRows
 from mpcform.mpc.constraints.geofence import GeofenceRows
-from mpcform.mpc.constraints.limits import limit_rows, violators
-from mpcform.mpc.constraints.rows import Layout
+from mpcform.mpc.constraints.limits import admitted, limit_rows, violators
+from mpcform.mpc.constraints.rows import Layout, step_growth
 from mpcform.mpc.constraints.velocity import VelocityRows
 from mpcform.mpc.settings import MPCSettings
 
@@ -58,3 +58,19 @@ def test_sparse_dense_and_violators_agree(seed: int) -> None:
         np.testing.assert_array_equal(fam.violators(p0, u_prev, u, x), dense_bad)
     bad = violators(_families(), p0, u_prev, u, x)
     np.testing.assert_array_equal(bad, np.any([f.violators(p0, u_prev, u, x) for f in _families()], axis=0))
+
+
+def test_admitted_moves_the_free_response_into_every_grown_box() -> None:
+    """The wider fence of an infeasible step (a braking path out of the fence) with the rows'
+    growth (wind, ``margin_growth``): one box per bounded position, each admitting the path from
+    the second position on (it raised a shape error when the growth met a fence)."""
+    growth = step_growth(0.01, DT, 3)
+    fence = GeofenceRows(2, 3, DT, np.array([-1.0, -1.0]), np.array([1.0, 1.0]), 0.1, growth=growth)
+    p0, free = np.zeros((1, 2)), np.zeros((3, 1, 2))
+    path = np.zeros((3, 1, 2))
+    path[:, 0, 0] = [0.5, 0.85, 1.2]  # the last past its shrunk box's 0.88
+    out = admitted((fence,), p0, free, path)
+    lo, hi = fence.box(p0)
+    forced = path - free  # the rows bound the forced response by the box less the free one
+    assert np.all(lo[1:] - out[1:] <= forced[1:]) and np.all(forced[1:] <= hi[1:] - out[1:])
+    np.testing.assert_allclose(out[:, 0, 0], [0.0, 0.0, 0.88 - 1.2])  # moved only where it must
