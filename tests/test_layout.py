@@ -17,7 +17,7 @@ MAX_MODULE_LINES = 400
 MAX_CLASS_LINES = 250
 
 LAYERS = (
-    ("mpcform.errors", "mpcform._validate", "mpcform._jit"),
+    ("mpcform.errors", "mpcform._validate", "mpcform._jit", "mpcform._blas"),
     ("mpcform.world",),
     ("mpcform.formation",),
     ("mpcform.reference",),

@@ -23,7 +23,7 @@ from mpcform.control.base import feedforward_targets
 from mpcform.mpc.constraints.braking import Braking
 from mpcform.mpc.constraints.candidates import CandidateSelector, qp_drones
 from mpcform.mpc.constraints.limits import admitted, limit_rows, violators
-from mpcform.mpc.constraints.separation import Conflict, Separation
+from mpcform.mpc.constraints.separation import Conflict, Separation, rollout_meets
 from mpcform.mpc.constraints.separation_rows import SeparationRows
 from mpcform.mpc.liveness import TieBreak
 from mpcform.mpc.plan import Nominal, Plan, guess, merge, rollout, warm_start
@@ -183,13 +183,13 @@ class StepPipeline:
         if (st.fast_path and st.grouping) or st.solves_per_drone:  # no fixed pattern: within reach
             cand = cand.within_reach()
         stops = nom.true_path[-1] if self.braking is not None and st.coupling == "decoupled" else None
+        at = (nom.guess, nom.true_path, nom.x_true, cand, stops, nom.growing)
+        if st.fast_path and not nom.off_limits.any() and rollout_meets(sep, p0, *at):
+            return None  # most pairs clear: only the others' rows were built and tested
         rows = sep.rows(p0, nom.guess, cand, stops, nom.growing)  # on the true positions (QP: on_forced)
         values: Array | None = sep.single_values(nom.x_true, rows)  # the rows at the rollout
-        if (
-            st.coupling == "decoupled"
-            and not nom.off_limits.any()
-            and sep.meets_joint(nom.x_true, rows, values)
-        ):
+        split = st.coupling == "decoupled" and not nom.off_limits.any()
+        if split and sep.meets_joint(nom.x_true, rows, values):
             if st.fast_path:
                 return None
             rows, values = sep.rows(p0, nom.true_path, cand, stops, nom.growing), None

@@ -11,6 +11,7 @@ from mpcform.mpc.constraints.family import SeparationFamily
 from mpcform.mpc.constraints.half_spaces import ClearInputs, path_bounds
 
 FIRST_TESTED = 32  # the clear test tries this many of the least clear items first
+CERTAIN_M = 1e-9  # :meth:`ClearTest.unclear_pairs` counts a pair clear by at least this much [m]
 
 
 class ClearTest:
@@ -58,6 +59,23 @@ class ClearTest:
             if i.shape[0] and not self._passes(unit.clear_test(guess, positions, i, k), share):
                 return False  # (no item in doubt: all clear by the spreads)
         return True
+
+    def unclear_pairs(self, guess: Array, positions: Array, growing: Array | None = None) -> Array:
+        """The drone pairs (m, 2), ``i < k``, that the bounds of :meth:`__call__` do not show clear by
+        :data:`CERTAIN_M` (far above the rounding of the rows): every other pair meets its joint
+        rows about ``guess`` at ``positions``, so only these need their rows built to test them."""
+        if self.pairs is None or positions.shape[1] < 2:
+            return np.empty((0, 2), dtype=np.intp)
+        p0, spread = positions[0], drone_spreads(guess, positions) + CERTAIN_M
+        i, k, _ = self.pairs.doubtful(p0, spread)
+        if i.shape[0]:
+            dist, points, dev, required = self.pairs.clear_test(guess, positions, i, k)
+            seg = path_bounds(dist, points, self.tail_count)
+            if self._segment_growth is not None and growing is not None:
+                seg = seg - self._segment_growth * (growing[i] + growing[k])
+            unclear = seg.min(axis=0, initial=np.inf) - dev < required + self.margin_m + CERTAIN_M
+            i, k = i[unclear], k[unclear]
+        return np.stack([i, k], axis=1)
 
     def _share(self, unit: object, growing: Array | None, i: Array, k: Array) -> Array | None:
         """The items' shares (m,) of the rows' growth: a pair's both drones', an obstacle item's drone's."""

@@ -25,7 +25,7 @@ gets closer, and every drone holding meets the row, so the hard rows stay feasib
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -94,7 +94,7 @@ class Separation:
         self.pairs = None if d_min is None else PairSeparation(d_min, self.metric, settings, tail, grow)
         shapes = obstacles if isinstance(obstacles, ShapeSet) else ShapeSet(obstacles, dim)
         self.obstacles = ObstacleSeparation(shapes, settings, tail, grow) if len(shapes) else None
-        self._clear = ClearTest(self.pairs, self.obstacles, self.margin_m, tail, segment_growth)
+        self.clearing = ClearTest(self.pairs, self.obstacles, self.margin_m, tail, segment_growth)
 
     def rows(
         self,
@@ -127,7 +127,7 @@ class Separation:
         """Whether the plan's ``positions`` (H + 1, n, d) (row 0 the start) surely meet every joint
         pair row and obstacle row about ``guess``, with the rows' growth shares ``growing`` (n,)
         (the fast path's test, :class:`~mpcform.mpc.constraints.clear.ClearTest`)."""
-        return self._clear(guess, positions, growing)
+        return self.clearing(guess, positions, growing)
 
     def shortfall(
         self, x: Array, rows: SeparationRows, tol: float, joint: bool = False
@@ -303,3 +303,33 @@ class Separation:
         if cand.obstacle_on.any() and self.obstacles is not None:
             tests.append(self.obstacles.first_segment(p0, p1, cand.obstacles[cand.obstacle_on]))
         return tests
+
+
+def rollout_meets(
+    sep: Separation,
+    p0: Array,
+    guess: Array,
+    positions: Array,
+    x: Array,
+    cand: Candidates,
+    stops: Array | None = None,
+    growing: Array | None = None,
+) -> bool:
+    """Whether a plan's ``positions`` (H + 1, n, d) (row 0 ``p0``; ``x`` (H, n, d) the others
+    relative to it) surely meet the rows about ``guess`` of the candidate items ``cand`` as the
+    fast path asks (the joint pair rows and the obstacle rows; joint coupling: every row),
+    building the rows only of the pairs :meth:`~mpcform.mpc.constraints.clear.ClearTest.unclear_pairs`
+    leaves in doubt and of the obstacle items (False: unknown, every row to build); ``stops``,
+    ``growing``: see :meth:`Separation.rows`."""
+    if sep.pairs is None or not cand.pairs.shape[0]:
+        return False
+    unclear, n = sep.clearing.unclear_pairs(guess, positions, growing), p0.shape[0]
+    keep = np.isin(cand.pairs[:, 0] * n + cand.pairs[:, 1], unclear[:, 0] * n + unclear[:, 1])
+    if keep.all():
+        return False
+    sub = replace(cand, pairs=cand.pairs[keep], pair_on=cand.pair_on[keep])
+    rows = sep.rows(p0, guess, sub, stops, growing)
+    values = sep.single_values(x, rows)
+    if sep.pairs.joint:
+        return not sep.conflicted(x, rows, values).any()
+    return sep.meets_joint(x, rows, values)

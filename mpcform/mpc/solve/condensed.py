@@ -23,6 +23,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.linalg import solve_triangular
 
+from mpcform._blas import one_thread
 from mpcform._validate import Array
 from mpcform.mpc.constraints.braking import Braking
 from mpcform.mpc.constraints.family import LimitRows
@@ -57,7 +58,8 @@ class CondensedDroneQP:
         self.families = families
         self._x_of_u = positions_of_inputs(h, dim, dt_s)  # x_1..x_H from u
         self._m = np.eye(nu) + k * dt_s * np.kron(np.tril(np.ones((h, h)), -1), np.eye(dim))  # v = M u
-        self._m_inv = solve_triangular(self._m, np.eye(nu), lower=True)  # u = M^-1 v
+        with one_thread():  # no spinning thread pool through the first steps (mpcform._blas)
+            self._m_inv = solve_triangular(self._m, np.eye(nu), lower=True)  # u = M^-1 v
         rows = [family.dense() for family in families]  # constant rows over u; bounds per drone from _bounds
         self._const_v = (np.vstack(rows) if rows else np.zeros((0, nu))) @ self._m_inv
         self._const_pm = np.vstack([self._const_v, -self._const_v])  # one-sided: lower, then upper
