@@ -23,7 +23,7 @@ from collections import Counter
 from typing import Any
 
 import numpy as np
-from completion_family import A_MAX_MPS2, PARTS, PLANTS, _shape, _zero, outcome, report
+from completion_family import A_MAX_MPS2, PARTS, PLANTS, _zero, outcome, placed, report
 
 SEED = 20261207
 DT_S = (0.05, 0.06, 0.07, 0.08, 0.09, 0.1)  # multiples of the quadrotor's 2 ms inner step
@@ -52,7 +52,6 @@ def _plant(rng: np.random.Generator, kind: str, dim: int) -> dict[str, Any] | No
 
 def scenario(rng: np.random.Generator, index: int) -> dict[str, Any]:
     """Run ``index`` of the family (its plant cycled by ``index``, every other draw random)."""
-    from mpcform.scenario.load import scenario_from_dict
 
     part, plant_kind = PARTS[int(rng.integers(len(PARTS)))], PLANTS[index % len(PLANTS)]
     dim = 2 if part == "swap_planar" else 3 if part == "swap_spatial" else int(rng.choice([2, 3]))
@@ -83,27 +82,8 @@ def scenario(rng: np.random.Generator, index: int) -> dict[str, Any]:
     }
     if (plant := _plant(rng, plant_kind, dim)) is not None:
         sc["plant"] = plant
-    fenced = rng.random() < FENCE_SHARE
-    probe = scenario_from_dict(sc)  # the plant's margin and valid speed, before the geometry
-    if plant_kind == "quadrotor":
-        sc["limits"]["v_max"] = v_max = min(v_max, 0.95 * probe.robustness.valid_speed_mps)
-    gap = d_min + 4.0 * probe.robustness.margin_m + 0.1
-    shape = _shape(rng, part, dim, n, gap * float(rng.uniform(1.0, 1.5)), d_min)
-    sc["template"]["offsets"] = shape.pop("offsets").tolist()
-    sc |= shape
-    if not sc.get("obstacles", True):
-        del sc["obstacles"]
-    built = scenario_from_dict(sc)
-    start, goal = built.initial_positions_m, built.reference.targets(np.array([1e9]))[0][0]
-    if fenced:  # a box around the starts and goals (a mission's keyframes may still leave it: refused)
-        ends = np.concatenate([start, goal])
-        sc["limits"]["geofence_min"] = (ends.min(axis=0) - FENCE_ROOM_M).tolist()
-        sc["limits"]["geofence_max"] = (ends.max(axis=0) + FENCE_ROOM_M).tolist()
-    far = float(np.linalg.norm(goal - start, axis=1).max())
-    ref_s = getattr(built.reference, "duration_s", 0.0)
-    v_set = v_max / float(np.sqrt(dim)) if sc["controller"]["velocity_set"] == "box" else v_max
-    sc["simulation"]["duration"] = round(2.0 * far / v_set + 2.0 * v_max / a_max + ref_s + 10.0, 2)
-    return sc
+    fence = FENCE_ROOM_M if rng.random() < FENCE_SHARE else None
+    return placed(rng, sc, part, plant_kind, a_max, fence)
 
 
 def drawn(index: int, seed: int = SEED) -> dict[str, Any] | str:

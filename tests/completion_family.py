@@ -117,7 +117,6 @@ def _shape(rng: np.random.Generator, part: str, dim: int, n: int, gap: float, d_
 
 def scenario(rng: np.random.Generator, index: int) -> dict[str, Any]:
     """Run ``index`` of the family (its part and plant cycled by ``index``)."""
-    from mpcform.scenario.load import scenario_from_dict
 
     part, plant_kind = PARTS[index % len(PARTS)], PLANTS[(index // len(PARTS)) % len(PLANTS)]
     dim = 2 if part == "swap_planar" else 3 if part == "swap_spatial" else int(rng.choice([2, 3]))
@@ -150,6 +149,25 @@ def scenario(rng: np.random.Generator, index: int) -> dict[str, Any]:
     }
     if plant is not None:
         sc["plant"] = plant
+    return placed(rng, sc, part, plant_kind)
+
+
+def placed(
+    rng: np.random.Generator,
+    sc: dict[str, Any],
+    part: str,
+    plant_kind: str,
+    a_max: float = A_MAX_MPS2,
+    fence_room_m: float | None = None,
+) -> dict[str, Any]:
+    """``sc`` with its part's geometry (targets ``d_min + 4 delta + 0.1 m`` apart at least, ``delta``
+    the plant's margin; a quadrotor's v_max below its valid speed), with ``fence_room_m`` a
+    geofence that far around the starts and goals, and its duration (module docstring, speeding up
+    and braking at ``a_max``)."""
+    from mpcform.scenario.load import scenario_from_dict
+
+    dim, n, d_min = sc["dim"], len(sc["template"]["offsets"]), sc["limits"]["d_min"]
+    v_max = sc["limits"]["v_max"]
     probe = scenario_from_dict(sc)  # the plant's margin and valid speed, before the geometry
     if plant_kind == "quadrotor":
         sc["limits"]["v_max"] = v_max = min(v_max, 0.95 * probe.robustness.valid_speed_mps)
@@ -161,10 +179,14 @@ def scenario(rng: np.random.Generator, index: int) -> dict[str, Any]:
         del sc["obstacles"]
     built = scenario_from_dict(sc)
     start, goal = built.initial_positions_m, built.reference.targets(np.array([1e9]))[0][0]
+    if fence_room_m is not None:  # a box around the starts and goals (a mission may leave it: refused)
+        ends = np.concatenate([start, goal])
+        sc["limits"]["geofence_min"] = (ends.min(axis=0) - fence_room_m).tolist()
+        sc["limits"]["geofence_max"] = (ends.max(axis=0) + fence_room_m).tolist()
     far = float(np.linalg.norm(goal - start, axis=1).max())
     ref_s = getattr(built.reference, "duration_s", 0.0)
     v_set = v_max / float(np.sqrt(dim)) if sc["controller"]["velocity_set"] == "box" else v_max  # its slowest
-    sc["simulation"]["duration"] = round(2.0 * far / v_set + 2.0 * v_max / A_MAX_MPS2 + ref_s + 10.0, 2)
+    sc["simulation"]["duration"] = round(2.0 * far / v_set + 2.0 * v_max / a_max + ref_s + 10.0, 2)
     return sc
 
 
