@@ -183,9 +183,9 @@ class StepPipeline:
         if (st.fast_path and st.grouping) or st.solves_per_drone:  # no fixed pattern: within reach
             cand = cand.within_reach()
         stops = nom.true_path[-1] if self.braking is not None and st.coupling == "decoupled" else None
-        at = (nom.guess, nom.true_path, nom.x_true, cand, stops, nom.growing)
-        if st.fast_path and not nom.off_limits.any() and rollout_meets(sep, p0, *at):
-            return None  # most pairs clear: only the others' rows were built and tested
+        if st.fast_path and not nom.off_limits.any():  # most pairs clear: build only the others' rows
+            if rollout_meets(sep, p0, nom.guess, nom.true_path, nom.x_true, cand, stops, nom.growing):
+                return None
         rows = sep.rows(p0, nom.guess, cand, stops, nom.growing)  # on the true positions (QP: on_forced)
         values: Array | None = sep.single_values(nom.x_true, rows)  # the rows at the rollout
         split = st.coupling == "decoupled" and not nom.off_limits.any()
