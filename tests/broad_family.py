@@ -12,8 +12,9 @@ slowest speed, plus the time to speed up and brake at the drawn ``a_max``, the r
 time and 10 s. A run the loader refuses (a wind no margin covers, a quadrotor speed past its valid
 speed) is counted with its reason, not flown.
 
-``python tests/broad_family.py [COUNT] [--seed S]`` runs a campaign on two processes and prints
-the counts per plant and coupling, the refusals and every failure.
+``python tests/broad_family.py [COUNT] [--seed S] [--workers W]`` runs a campaign on ``W`` processes
+(2), prints one line per run to stderr as it ends (its name, completion, violations, CPU), then the
+counts per plant and coupling, the refusals and every failure.
 """
 
 from __future__ import annotations
@@ -106,12 +107,24 @@ def _run(args: tuple[int, int]) -> dict[str, Any]:
     return outcome(sc) | {"refused": None}
 
 
-def campaign(count: int, seed: int = SEED, workers: int = 2) -> list[dict[str, Any]]:
-    """Run the first ``count`` runs on ``workers`` processes."""
+def _line(result: dict[str, Any]) -> str:
+    if result["refused"]:
+        return f"{result['name']}: refused ({result['refused']})"
+    flown = f"completion {result['completion']:.2f}, {result['violations']} violations"
+    return f"{result['name']} (n {result['n']}, {result['coupling']}): {flown}, {result['cpu_s']:.1f} s CPU"
+
+
+def campaign(count: int, seed: int = SEED, workers: int = 2, progress: bool = False) -> list[dict[str, Any]]:
+    """Run the first ``count`` runs on ``workers`` processes (``progress``: a line per run to stderr)."""
     from concurrent.futures import ProcessPoolExecutor
 
+    results = []
     with ProcessPoolExecutor(workers) as pool:
-        return list(pool.map(_run, [(i, seed) for i in range(count)]))
+        for result in pool.map(_run, [(i, seed) for i in range(count)]):
+            results.append(result)
+            if progress:
+                print(f"[{len(results)}/{count}] {_line(result)}", file=sys.stderr, flush=True)
+    return results
 
 
 def refusals(results: list[dict[str, Any]]) -> str:
@@ -123,7 +136,8 @@ def refusals(results: list[dict[str, Any]]) -> str:
 if __name__ == "__main__":
     count = int(sys.argv[1]) if len(sys.argv) > 1 and not sys.argv[1].startswith("-") else 60
     seed = int(sys.argv[sys.argv.index("--seed") + 1]) if "--seed" in sys.argv else SEED
-    results = campaign(count, seed)
+    workers = int(sys.argv[sys.argv.index("--workers") + 1]) if "--workers" in sys.argv else 2
+    results = campaign(count, seed, workers, progress=True)
     flown = [r for r in results if not r["refused"]]
     print(f"{len(results) - len(flown)} of {len(results)} refused ({refusals(results)})")
     print(report(flown))
