@@ -26,7 +26,7 @@ from mpcform.mpc.constraints.limits import admitted, limit_rows, violators
 from mpcform.mpc.constraints.separation import Conflict, Separation, rollout_meets
 from mpcform.mpc.constraints.separation_rows import SeparationRows
 from mpcform.mpc.liveness import TieBreak
-from mpcform.mpc.plan import Nominal, Plan, guess, merge, rollout, warm_start
+from mpcform.mpc.plan import Nominal, Plan, braking_error, guess, merge, rollout, warm_start
 from mpcform.mpc.prediction import Prediction, rest_command
 from mpcform.mpc.safety.certify import Certifier
 from mpcform.mpc.safety.premise import GrowthPremise
@@ -146,7 +146,9 @@ class StepPipeline:
         linearised about, and the drones the rollout takes off a limit (:class:`Nominal`)."""
         st, k, dt = self.settings, self.settings.gain_per_s, self.dt_s
         targets, ff = feedforward_targets(self.reference, t_s, dt, st.horizon, st.feedforward)
-        c = ff + k * (targets[:-1] - p0)  # u_j = c_j - k x_j is the eq. 14 rollout
+        lim = self.limits
+        error = braking_error(targets[:-1] - p0, k, lim.a_max_mps2, lim.v_max_mps)
+        c = ff + k * error  # u_j = c_j - k x_j is the eq. 14 rollout
         cancel, delta = None, self.state.offset_mps
         if delta is not None and delta.any():  # offset-free: the cost on v = u + delta
             cancel = cost_shift(delta, k, dt, st.horizon)

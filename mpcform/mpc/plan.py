@@ -74,6 +74,28 @@ def rollout(c: Array, k: float, dt: float) -> tuple[Array, Array]:
     return u, x
 
 
+def braking_error(error_m: Array, k: float, a_max_mps2: float | None, v_max_mps: float | None) -> Array:
+    """The errors ``p*_j - p0`` (H, n, d) of eq. 14's cost when a drone must still brake: where
+    eq. 14's feedback speed ``k |e_0|`` and ``v_max`` both exceed ``sqrt(a_max |e_0|)`` (the speed
+    from which braking at half ``a_max`` stops at the target, the other half left to the plant's
+    lag and the discrete steps), every error of the drone is moved by the one shift that shortens
+    ``e_0`` to that speed's ``|e_0| = sqrt(a_max |e_0|) / k``: the drone approaches its target (or a
+    moving target's path) on a braking profile instead of overshooting where it cannot stop, which
+    a short horizon does not see. Within ``a_max / k^2`` of its target, or without ``a_max``, the
+    errors are unchanged, so eq. 14 holds there exactly."""
+    if a_max_mps2 is None:
+        return error_m
+    e0 = error_m[0]
+    dist = np.sqrt(np.einsum("nd,nd->n", e0, e0))
+    brake = np.sqrt(a_max_mps2 * dist)
+    over = brake < np.minimum(k * dist, np.inf if v_max_mps is None else v_max_mps)
+    if not over.any():
+        return error_m
+    shift = np.zeros_like(e0)
+    shift[over] = e0[over] * (brake[over] / (k * dist[over]) - 1.0)[:, None]
+    return error_m + shift[None]
+
+
 @lru_cache(maxsize=16)
 def _decay(h: int, k: float, dt: float) -> Array:
     """The rollout's matrix (H, H): ``dt (1 - k dt)^(j - i)`` for ``i <= j``, else 0 (read-only)."""
