@@ -45,6 +45,14 @@ def row_vec_dot(c: Array, q: int, r: int, y: Array) -> float:
     return c[q, r, 0] * y[0] + c[q, r, 1] * y[1]
 
 
+@inline
+def gap_dot(c: Array, q: int, r: int, y: Array, i: int, m: Array) -> float:
+    """:func:`dot` of ``c[q, r]`` (a 3-D array) and ``y[i] - m`` (no temporaries)."""
+    if c.shape[2] == 3:
+        return ((y[i, 0] - m[0]) * c[q, r, 0] + (y[i, 2] - m[2]) * c[q, r, 2]) + (y[i, 1] - m[1]) * c[q, r, 1]
+    return (y[i, 0] - m[0]) * c[q, r, 0] + (y[i, 1] - m[1]) * c[q, r, 1]
+
+
 @njit
 def side_rows(
     p0: Array,
@@ -70,10 +78,40 @@ def side_rows(
     bounds ``half + grows[side] grow`` (``grows`` empty: ``half``), the stop row (R - 2) split
     towards the ``stops`` (n, d) (empty: not) as
     :meth:`~mpcform.mpc.constraints.pairs.PairSeparation._stop_split` does."""
-    n_p, r_n, d = pairs.shape[0], segs.shape[0], path.shape[2]
+    if path.shape[2] == 3:  # the components' loops of a known length: unrolled
+        _side_rows(
+            p0, path, pairs, metric, segs, ends, d_min, half, grows, grow, stops, coeffs, lower, hard, 3
+        )
+    else:
+        _side_rows(
+            p0, path, pairs, metric, segs, ends, d_min, half, grows, grow, stops, coeffs, lower, hard, 2
+        )
+
+
+@inline
+def _side_rows(
+    p0: Array,
+    path: Array,
+    pairs: Array,
+    metric: Array,
+    segs: Array,
+    ends: Array,
+    d_min: float,
+    half: float,
+    grows: Array,
+    grow: Array,
+    stops: Array,
+    coeffs: Array,
+    lower: Array,
+    hard: Array,
+    d: int,
+) -> None:
+    """:func:`side_rows` in ``d`` dimensions (a constant where it is called); the dot products
+    written out in :func:`dot`'s order."""
+    n_p, r_n = pairs.shape[0], segs.shape[0]
     s_n = path.shape[1] - 1
     normal, rel = np.empty((s_n, d)), np.empty((s_n + 1, d))
-    mid, step, delta, gap = np.empty(d), np.empty(d), np.empty(d), np.empty(d)
+    mid, step, delta = np.empty(d), np.empty(d), np.empty(d)
     grown, split = grows.shape[0] > 0, stops.shape[0] > 0
     for q in range(n_p):
         i, k = pairs[q, 0], pairs[q, 1]
@@ -83,8 +121,13 @@ def side_rows(
         for j in range(s_n):  # each segment's closest point, its unit normal
             for a in range(d):
                 delta[a] = rel[j + 1, a] - rel[j, a]
-            den = dot(delta, delta)
-            tau = -dot(rel[j], delta) / (den if den > 0.0 else 1.0)
+            if d == 3:
+                den = (delta[0] * delta[0] + delta[2] * delta[2]) + delta[1] * delta[1]
+                num = (rel[j, 0] * delta[0] + rel[j, 2] * delta[2]) + rel[j, 1] * delta[1]
+            else:
+                den = delta[0] * delta[0] + delta[1] * delta[1]
+                num = rel[j, 0] * delta[0] + rel[j, 1] * delta[1]
+            tau = -num / (den if den > 0.0 else 1.0)
             tau = min(max(tau, 0.0), 1.0)
             sq = 0.0
             for a in range(d):
@@ -124,12 +167,10 @@ def side_rows(
                 for a in range(d):
                     mid[a] = mid[a] + t * step[a]
             for a in range(d):
-                gap[a] = p0[i, a] - mid[a]
                 coeffs[n_p + q, r, a] = -coeffs[q, r, a]
-            lower[q, r] = b_i - row_vec_dot(coeffs, q, r, gap)
-            for a in range(d):
-                gap[a] = p0[k, a] - mid[a]
-            lower[n_p + q, r] = b_k + row_vec_dot(coeffs, q, r, gap)
+            gi, gk = gap_dot(coeffs, q, r, p0, i, mid), gap_dot(coeffs, q, r, p0, k, mid)
+            lower[q, r] = b_i - gi
+            lower[n_p + q, r] = b_k + gk
         if hard[q]:
             lower[q, 0] = 0.0
             lower[n_p + q, 0] = 0.0
