@@ -203,15 +203,17 @@ def reachable_rows(
     ends: Array,
     step_m: float,
     reach_steps: Array,
+    local: Array,
 ) -> tuple[Array, Array, Array, Array, Array, Array]:
     """:func:`mpcform.mpc.solve.working_set.reachable_rows` in two passes (count, then place by
-    drone): ``hard``, ``on`` empty for none; ``step_m`` negative for no speed limit."""
+    drone): ``hard``, ``on``, ``local`` empty for none; ``step_m`` negative for no speed limit."""
     s_n, r_n, d = coeffs.shape
     keep = np.empty((s_n, r_n), dtype=np.bool_)
     counts = np.zeros(n, dtype=np.intp)
+    owner = singles if local.shape[0] == 0 else local[singles]  # each item's drone among the n
     for s in range(s_n):
         for r in range(r_n):
-            ok = on.shape[0] == 0 or on[s]
+            ok = (on.shape[0] == 0 or on[s]) and owner[s] >= 0
             if ok and step_m >= 0.0:
                 sq = 0.0
                 for a in range(d):
@@ -219,7 +221,7 @@ def reachable_rows(
                 ok = lower[s, r] > -(math.sqrt(sq) * (reach_steps[r] * step_m))
             keep[s, r] = ok
             if ok:
-                counts[singles[s]] += 1
+                counts[owner[s]] += 1
     place = np.zeros(n, dtype=np.intp)
     for i in range(1, n):
         place[i] = place[i - 1] + counts[i - 1]
@@ -227,7 +229,7 @@ def reachable_rows(
     sep_c, sep_end, sep_lo = np.empty((total, d)), np.empty(total, dtype=ends.dtype), np.empty(total)
     soft, at = np.empty(total, dtype=np.bool_), np.empty(total, dtype=np.intp)
     for s in range(s_n):
-        drone = singles[s]
+        drone = owner[s]
         for r in range(r_n):
             if keep[s, r]:
                 j = place[drone]
@@ -273,7 +275,7 @@ def warm_up() -> None:
     for grows, stops in ((f(0), f((0, 3))), (f(2), f((2, 3)))):
         side_rows(f((2, 3)), f((2, 3, 3)), pairs, f(3), segs, i, 0.5, 0.25, grows, f(2), stops, *rows)
     single_values(f((2, 2, 3)), i[:1], f((1, 2, 3)), f((1, 2)), b)
-    reachable_rows(2, i[:1], f((1, 2, 3)), f((1, 2)), b, b, i, 0.1, f(2))
+    reachable_rows(2, i[:1], f((1, 2, 3)), f((1, 2)), b, b, i, 0.1, f(2), i[:0])
     item_least(f((1, 2)), b, 1)
     joint_least(f((2, 2)), i[:1], i[:1])
     _jit.USE = True
