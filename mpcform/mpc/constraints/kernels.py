@@ -205,39 +205,44 @@ def reachable_rows(
     reach_steps: Array,
     local: Array,
 ) -> tuple[Array, Array, Array, Array, Array, Array]:
-    """:func:`mpcform.mpc.solve.working_set.reachable_rows` in two passes (count, then place by
-    drone): ``hard``, ``on``, ``local`` empty for none; ``step_m`` negative for no speed limit."""
+    """:func:`mpcform.mpc.solve.working_set.reachable_rows` in two passes (keep in item order,
+    then place by drone: the items' rows are read once): ``hard``, ``on``, ``local`` empty for
+    none; ``step_m`` negative for no speed limit."""
     s_n, r_n, d = coeffs.shape
-    keep = np.empty((s_n, r_n), dtype=np.bool_)
     counts = np.zeros(n, dtype=np.intp)
     owner = singles if local.shape[0] == 0 else local[singles]  # each item's drone among the n
+    kept_c, kept_at = np.empty((s_n * r_n, d)), np.empty(s_n * r_n, dtype=np.intp)  # touched: the kept
+    m = 0
     for s in range(s_n):
+        if not ((on.shape[0] == 0 or on[s]) and owner[s] >= 0):
+            continue
         for r in range(r_n):
-            ok = (on.shape[0] == 0 or on[s]) and owner[s] >= 0
-            if ok and step_m >= 0.0:
+            ok = True
+            if step_m >= 0.0:
                 sq = 0.0
                 for a in range(d):
                     sq += coeffs[s, r, a] * coeffs[s, r, a]
                 ok = lower[s, r] > -(math.sqrt(sq) * (reach_steps[r] * step_m))
-            keep[s, r] = ok
             if ok:
+                for a in range(d):
+                    kept_c[m, a] = coeffs[s, r, a]
+                kept_at[m] = s * r_n + r
+                m += 1
                 counts[owner[s]] += 1
     place = np.zeros(n, dtype=np.intp)
     for i in range(1, n):
         place[i] = place[i - 1] + counts[i - 1]
-    total = place[n - 1] + counts[n - 1] if n else 0
-    sep_c, sep_end, sep_lo = np.empty((total, d)), np.empty(total, dtype=ends.dtype), np.empty(total)
-    soft, at = np.empty(total, dtype=np.bool_), np.empty(total, dtype=np.intp)
-    for s in range(s_n):
-        drone = owner[s]
-        for r in range(r_n):
-            if keep[s, r]:
-                j = place[drone]
-                place[drone] += 1
-                for a in range(d):
-                    sep_c[j, a] = coeffs[s, r, a]
-                sep_end[j], sep_lo[j], at[j] = ends[r], lower[s, r], s * r_n + r
-                soft[j] = r > 0 or (hard.shape[0] > 0 and not hard[s])
+    sep_c, sep_end, sep_lo = np.empty((m, d)), np.empty(m, dtype=ends.dtype), np.empty(m)
+    soft, at = np.empty(m, dtype=np.bool_), np.empty(m, dtype=np.intp)
+    for t in range(m):
+        f = kept_at[t]
+        s, r = f // r_n, f % r_n
+        j = place[owner[s]]
+        place[owner[s]] += 1
+        for a in range(d):
+            sep_c[j, a] = kept_c[t, a]
+        sep_end[j], sep_lo[j], at[j] = ends[r], lower[s, r], f
+        soft[j] = r > 0 or (hard.shape[0] > 0 and not hard[s])
     return sep_c, sep_end, sep_lo, soft, counts, at
 
 

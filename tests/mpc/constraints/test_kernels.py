@@ -76,10 +76,13 @@ def test_values_and_reachable_rows_match_numpy(numpy_path, seed: int) -> None:
     plain = np.einsum("srd,srd->sr", coeffs, x_rows[singles]) - lower
     plain[~on] = np.inf
     np.testing.assert_array_equal(kernels.single_values(x_rows, singles, coeffs, lower, on), plain)
-    for step_m, hard_, on_ in ((0.3, hard, on), (None, None, None), (0.1, None, on)):
+    places = np.array([1, -1, 0, 3, -1, 2, 4], dtype=np.intp)  # 5 of the 7 drones solved
+    cases = ((0.3, hard, on, None), (None, None, None, None), (0.1, None, on, None), (0.3, hard, on, places))
+    for step_m, hard_, on_, local in cases:
+        m = n if local is None else 5
         a, b = numpy_path(
-            lambda step_m=step_m, hard_=hard_, on_=on_: working_set.reachable_rows(
-                n, singles, coeffs, lower, hard_, on_, ends, step_m, ends * 1.5
+            lambda step_m=step_m, hard_=hard_, on_=on_, local=local, m=m: working_set.reachable_rows(
+                m, singles, coeffs, lower, hard_, on_, ends, step_m, ends * 1.5, local
             )
         )
         for u, v in zip(a, b, strict=True):
