@@ -247,6 +247,23 @@ def reachable_rows(
 
 
 @njit
+def near_bounds(values: Array, warm: Array, b_lo: Array, b_hi: Array, busy: Array, margin: float) -> Array:
+    """:func:`mpcform.mpc.solve.working_set.working_sets`' rows (m, c) within ``margin`` of a bound
+    (or beyond) at ``values`` (n, c) (row ``busy[j]``) or at ``warm`` (m, c) (row j), bounds ``b_lo``,
+    ``b_hi`` (n or 1, c), without the gathered copies."""
+    m, c = busy.shape[0], values.shape[1]
+    near = np.empty((m, c), dtype=np.bool_)
+    one = b_lo.shape[0] == 1
+    for j in range(m):
+        i = busy[j]
+        b = 0 if one else i
+        for r in range(c):
+            lo, hi, x, w = b_lo[b, r], b_hi[b, r], values[i, r], warm[j, r]
+            near[j, r] = min(x - lo, hi - x) < margin or min(w - lo, hi - w) < margin
+    return near
+
+
+@njit
 def item_least(values: Array, split: Array, stop: int) -> Array:
     """Each item's least row value (S,) of ``values`` (S, R), over its first ``stop`` rows where
     ``split`` (a drone pair's side), else over all (``Separation._least``)."""
@@ -282,5 +299,6 @@ def warm_up() -> None:
     single_values(f((2, 2, 3)), i[:1], f((1, 2, 3)), f((1, 2)), b)
     reachable_rows(2, i[:1], f((1, 2, 3)), f((1, 2)), b, b, i, 0.1, f(2), i[:0])
     item_least(f((1, 2)), b, 1)
+    near_bounds(f((2, 2)), f((1, 2)), f((1, 2)), f((1, 2)), i[:1], 0.1)
     joint_least(f((2, 2)), i[:1], i[:1])
     _jit.USE = True

@@ -109,8 +109,14 @@ def working_sets(
     below :data:`WORKING_MIN_ROWS` rows in all. Bounds ``b_lo``, ``b_hi`` (n or 1, c)."""
     if not busy.shape[0] or busy.shape[0] * const_v.shape[0] < WORKING_MIN_ROWS:
         return None
+    at_warm = warm[busy] @ const_v.T
+    if _jit.USE:
+        from mpcform.mpc.constraints import kernels
+
+        c = np.ascontiguousarray  # the one layout the kernel is compiled for
+        return kernels.near_bounds(c(const_c), c(at_warm), c(b_lo), c(b_hi), c(busy, np.intp), WORKING_MARGIN)
     lo, hi = (b[busy] if b.shape[0] > 1 else b for b in (b_lo, b_hi))
-    at_c, at_warm = const_c[busy], warm[busy] @ const_v.T
+    at_c = const_c[busy]
     near = np.minimum(at_c - lo, hi - at_c) < WORKING_MARGIN
     return np.asarray(near | (np.minimum(at_warm - lo, hi - at_warm) < WORKING_MARGIN))
 
