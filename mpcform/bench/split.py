@@ -89,7 +89,7 @@ def curves(planner: MPCPlanner, qps: list[StepQP], rounds: int) -> dict[str, Arr
         hist = split.run(qp).history
         pad = np.vstack([hist, np.repeat(hist[-1:], rounds + 1 - hist.shape[0], axis=0)])
         pad[hist.shape[0] :, 1:] = hist[-1, 1:]  # stopped early (converged): no more time
-        joint = replace(qp, rows=qp.rows.joint(), warm=None, rebuilt=True)
+        joint = replace(qp, given_rows=qp.rows.joint(), on_only=None, warm=None, rebuilt=True)
         accurate.reset()
         sol, _ = accurate.solve(joint)
         fast.reset()

@@ -234,8 +234,7 @@ class StepPipeline:
             qp_rows, relaxed, brake = self.certifier.hard_first_rows(
                 qp_rows, self.state.plan, self.state.u_prev, self.settings.horizon, self.loop.forced[1, 0]
             )
-        grouped = self.settings.fast_path and self.settings.grouping
-        sub = qp_rows.subset(drones, self.n, on_only=grouped)  # grouped: the pattern follows the groups
+        grouped = self.settings.fast_path and self.settings.grouping  # the pattern follows the groups
         warm = None
         if self.solvers.warm_starts:
             rest = None if self.loop is None else rest_command(self.state.loop_state)
@@ -246,9 +245,10 @@ class StepPipeline:
             p0[drones],
             c[:, drones],
             self.state.u_prev[drones],
-            sub,
+            qp_rows,  # over all drones: the QP's own selected when a solver asks (StepQP.rows)
             conflict.cand.rebuilt,
             warm,
+            on_only=grouped,
         )
         if self.loop is not None:  # the geofence's free response
             qp = replace(qp, free_m=self.predict.free(self.state.loop_state)[1:][:, drones])

@@ -45,6 +45,14 @@ def row_vec_dot(c: Array, q: int, r: int, y: Array) -> float:
     return c[q, r, 0] * y[0] + c[q, r, 1] * y[1]
 
 
+@inline
+def gap_dot(c: Array, q: int, r: int, y: Array, i: int, m: Array) -> float:
+    """:func:`dot` of ``c[q, r]`` (a 3-D array) and ``y[i] - m`` (no temporaries)."""
+    if c.shape[2] == 3:
+        return ((y[i, 0] - m[0]) * c[q, r, 0] + (y[i, 2] - m[2]) * c[q, r, 2]) + (y[i, 1] - m[1]) * c[q, r, 1]
+    return (y[i, 0] - m[0]) * c[q, r, 0] + (y[i, 1] - m[1]) * c[q, r, 1]
+
+
 @njit
 def side_rows(
     p0: Array,
@@ -70,10 +78,40 @@ def side_rows(
     bounds ``half + grows[side] grow`` (``grows`` empty: ``half``), the stop row (R - 2) split
     towards the ``stops`` (n, d) (empty: not) as
     :meth:`~mpcform.mpc.constraints.pairs.PairSeparation._stop_split` does."""
-    n_p, r_n, d = pairs.shape[0], segs.shape[0], path.shape[2]
+    if path.shape[2] == 3:  # the components' loops of a known length: unrolled
+        _side_rows(
+            p0, path, pairs, metric, segs, ends, d_min, half, grows, grow, stops, coeffs, lower, hard, 3
+        )
+    else:
+        _side_rows(
+            p0, path, pairs, metric, segs, ends, d_min, half, grows, grow, stops, coeffs, lower, hard, 2
+        )
+
+
+@inline
+def _side_rows(
+    p0: Array,
+    path: Array,
+    pairs: Array,
+    metric: Array,
+    segs: Array,
+    ends: Array,
+    d_min: float,
+    half: float,
+    grows: Array,
+    grow: Array,
+    stops: Array,
+    coeffs: Array,
+    lower: Array,
+    hard: Array,
+    d: int,
+) -> None:
+    """:func:`side_rows` in ``d`` dimensions (a constant where it is called); the dot products
+    written out in :func:`dot`'s order."""
+    n_p, r_n = pairs.shape[0], segs.shape[0]
     s_n = path.shape[1] - 1
     normal, rel = np.empty((s_n, d)), np.empty((s_n + 1, d))
-    mid, step, delta, gap = np.empty(d), np.empty(d), np.empty(d), np.empty(d)
+    mid, step, delta = np.empty(d), np.empty(d), np.empty(d)
     grown, split = grows.shape[0] > 0, stops.shape[0] > 0
     for q in range(n_p):
         i, k = pairs[q, 0], pairs[q, 1]
@@ -83,8 +121,13 @@ def side_rows(
         for j in range(s_n):  # each segment's closest point, its unit normal
             for a in range(d):
                 delta[a] = rel[j + 1, a] - rel[j, a]
-            den = dot(delta, delta)
-            tau = -dot(rel[j], delta) / (den if den > 0.0 else 1.0)
+            if d == 3:
+                den = (delta[0] * delta[0] + delta[2] * delta[2]) + delta[1] * delta[1]
+                num = (rel[j, 0] * delta[0] + rel[j, 2] * delta[2]) + rel[j, 1] * delta[1]
+            else:
+                den = delta[0] * delta[0] + delta[1] * delta[1]
+                num = rel[j, 0] * delta[0] + rel[j, 1] * delta[1]
+            tau = -num / (den if den > 0.0 else 1.0)
             tau = min(max(tau, 0.0), 1.0)
             sq = 0.0
             for a in range(d):
@@ -124,12 +167,10 @@ def side_rows(
                 for a in range(d):
                     mid[a] = mid[a] + t * step[a]
             for a in range(d):
-                gap[a] = p0[i, a] - mid[a]
                 coeffs[n_p + q, r, a] = -coeffs[q, r, a]
-            lower[q, r] = b_i - row_vec_dot(coeffs, q, r, gap)
-            for a in range(d):
-                gap[a] = p0[k, a] - mid[a]
-            lower[n_p + q, r] = b_k + row_vec_dot(coeffs, q, r, gap)
+            gi, gk = gap_dot(coeffs, q, r, p0, i, mid), gap_dot(coeffs, q, r, p0, k, mid)
+            lower[q, r] = b_i - gi
+            lower[n_p + q, r] = b_k + gk
         if hard[q]:
             lower[q, 0] = 0.0
             lower[n_p + q, 0] = 0.0
@@ -162,40 +203,64 @@ def reachable_rows(
     ends: Array,
     step_m: float,
     reach_steps: Array,
+    local: Array,
 ) -> tuple[Array, Array, Array, Array, Array, Array]:
-    """:func:`mpcform.mpc.solve.working_set.reachable_rows` in two passes (count, then place by
-    drone): ``hard``, ``on`` empty for none; ``step_m`` negative for no speed limit."""
+    """:func:`mpcform.mpc.solve.working_set.reachable_rows` in two passes (keep in item order,
+    then place by drone: the items' rows are read once): ``hard``, ``on``, ``local`` empty for
+    none; ``step_m`` negative for no speed limit."""
     s_n, r_n, d = coeffs.shape
-    keep = np.empty((s_n, r_n), dtype=np.bool_)
     counts = np.zeros(n, dtype=np.intp)
+    owner = singles if local.shape[0] == 0 else local[singles]  # each item's drone among the n
+    kept_c, kept_at = np.empty((s_n * r_n, d)), np.empty(s_n * r_n, dtype=np.intp)  # touched: the kept
+    m = 0
     for s in range(s_n):
+        if not ((on.shape[0] == 0 or on[s]) and owner[s] >= 0):
+            continue
         for r in range(r_n):
-            ok = on.shape[0] == 0 or on[s]
-            if ok and step_m >= 0.0:
+            ok = True
+            if step_m >= 0.0:
                 sq = 0.0
                 for a in range(d):
                     sq += coeffs[s, r, a] * coeffs[s, r, a]
                 ok = lower[s, r] > -(math.sqrt(sq) * (reach_steps[r] * step_m))
-            keep[s, r] = ok
             if ok:
-                counts[singles[s]] += 1
+                for a in range(d):
+                    kept_c[m, a] = coeffs[s, r, a]
+                kept_at[m] = s * r_n + r
+                m += 1
+                counts[owner[s]] += 1
     place = np.zeros(n, dtype=np.intp)
     for i in range(1, n):
         place[i] = place[i - 1] + counts[i - 1]
-    total = place[n - 1] + counts[n - 1] if n else 0
-    sep_c, sep_end, sep_lo = np.empty((total, d)), np.empty(total, dtype=ends.dtype), np.empty(total)
-    soft, at = np.empty(total, dtype=np.bool_), np.empty(total, dtype=np.intp)
-    for s in range(s_n):
-        drone = singles[s]
-        for r in range(r_n):
-            if keep[s, r]:
-                j = place[drone]
-                place[drone] += 1
-                for a in range(d):
-                    sep_c[j, a] = coeffs[s, r, a]
-                sep_end[j], sep_lo[j], at[j] = ends[r], lower[s, r], s * r_n + r
-                soft[j] = r > 0 or (hard.shape[0] > 0 and not hard[s])
+    sep_c, sep_end, sep_lo = np.empty((m, d)), np.empty(m, dtype=ends.dtype), np.empty(m)
+    soft, at = np.empty(m, dtype=np.bool_), np.empty(m, dtype=np.intp)
+    for t in range(m):
+        f = kept_at[t]
+        s, r = f // r_n, f % r_n
+        j = place[owner[s]]
+        place[owner[s]] += 1
+        for a in range(d):
+            sep_c[j, a] = kept_c[t, a]
+        sep_end[j], sep_lo[j], at[j] = ends[r], lower[s, r], f
+        soft[j] = r > 0 or (hard.shape[0] > 0 and not hard[s])
     return sep_c, sep_end, sep_lo, soft, counts, at
+
+
+@njit
+def near_bounds(values: Array, warm: Array, b_lo: Array, b_hi: Array, busy: Array, margin: float) -> Array:
+    """:func:`mpcform.mpc.solve.working_set.working_sets`' rows (m, c) within ``margin`` of a bound
+    (or beyond) at ``values`` (n, c) (row ``busy[j]``) or at ``warm`` (m, c) (row j), bounds ``b_lo``,
+    ``b_hi`` (n or 1, c), without the gathered copies."""
+    m, c = busy.shape[0], values.shape[1]
+    near = np.empty((m, c), dtype=np.bool_)
+    one = b_lo.shape[0] == 1
+    for j in range(m):
+        i = busy[j]
+        b = 0 if one else i
+        for r in range(c):
+            lo, hi, x, w = b_lo[b, r], b_hi[b, r], values[i, r], warm[j, r]
+            near[j, r] = min(x - lo, hi - x) < margin or min(w - lo, hi - w) < margin
+    return near
 
 
 @njit
@@ -232,7 +297,8 @@ def warm_up() -> None:
     for grows, stops in ((f(0), f((0, 3))), (f(2), f((2, 3)))):
         side_rows(f((2, 3)), f((2, 3, 3)), pairs, f(3), segs, i, 0.5, 0.25, grows, f(2), stops, *rows)
     single_values(f((2, 2, 3)), i[:1], f((1, 2, 3)), f((1, 2)), b)
-    reachable_rows(2, i[:1], f((1, 2, 3)), f((1, 2)), b, b, i, 0.1, f(2))
+    reachable_rows(2, i[:1], f((1, 2, 3)), f((1, 2)), b, b, i, 0.1, f(2), i[:0])
     item_least(f((1, 2)), b, 1)
+    near_bounds(f((2, 2)), f((1, 2)), f((1, 2)), f((1, 2)), i[:1], 0.1)
     joint_least(f((2, 2)), i[:1], i[:1])
     _jit.USE = True

@@ -67,7 +67,7 @@ class PerDroneQP(CondensedDroneQP, StepSolver):
         """Solve every drone's QP (the one-drone separation rows within reach of ``qp.rows``): the
         solution in the sparse QP's layout ``[u | x | s]`` over these drones (its ``solve_time_s``
         is the time spent inside DAQP), and the number of active rows."""
-        rows = qp.rows
+        rows, places = qp.given_rows, qp.places()  # the drones' rows picked from all, not copied
         warm_u = np.zeros_like(qp.targets_mps) if qp.warm is None else qp.warm[0]  # inputs only
         got = self.solve_each(
             qp.start_m,
@@ -80,6 +80,7 @@ class PerDroneQP(CondensedDroneQP, StepSolver):
             rows.single_hard,
             rows.single_on,
             qp.free_m,
+            places,
         )
         return self.solution(got.v, got.s, got.ok, got.flags, got.lams, got.iterations, got.time_s, got.cost)
 
@@ -95,6 +96,7 @@ class PerDroneQP(CondensedDroneQP, StepSolver):
         hard: Array | None = None,
         on: Array | None = None,
         free_m: Array | None = None,
+        places: Array | None = None,
     ) -> DroneSolves:
         """Every drone's solve as DAQP returns it.
 
@@ -103,7 +105,9 @@ class PerDroneQP(CondensedDroneQP, StepSolver):
         (H, n, d) inputs whose nearly active rows start DAQP's active set; ``hard`` (S,) the items
         whose first row is a hard no-approach row (no slack); ``on`` (S,) the items within reach
         (the others are left out; all by default); ``free_m`` (S, n, d) with a velocity loop its
-        free response at each bounded position (the geofence's bounds).
+        free response at each bounded position (the geofence's bounds); ``places`` (N,): for items
+        ``singles`` over N drones, each one's place among these (-1: not solved, its items left out;
+        None: ``singles`` are the places).
 
         With working sets (:func:`mpcform.mpc.solve.working_set.working_sets`), each drone first gives DAQP
         only its rows near their bound; a solve that misses any other row, or fails, is solved again
@@ -114,7 +118,7 @@ class PerDroneQP(CondensedDroneQP, StepSolver):
         f_v = -c_v  # 0.5 ||v - c||^2
         v_warm = warm_u.transpose(1, 0, 2).reshape(n, nu) @ self._m.T
         sep_c, sep_end, sep_lo, sep_soft, counts, at = reachable_rows(
-            n, singles, coeffs, lower, hard, on, self._ends, self._step_m, self._reach_steps
+            n, singles, coeffs, lower, hard, on, self._ends, self._step_m, self._reach_steps, places
         )
         a, lo, hi = self._buffers(n_const + int(counts.max(initial=0)))
         b_lo, b_hi = (

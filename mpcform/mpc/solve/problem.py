@@ -10,6 +10,9 @@ from __future__ import annotations
 
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
+from functools import cached_property
+
+import numpy as np
 
 from mpcform._validate import Array
 from mpcform.mpc.constraints.separation_rows import SeparationRows
@@ -29,9 +32,11 @@ class StepQP:
     """The QP of one step over ``drones`` (m,) of the ``n`` (global indices).
 
     ``start_m`` (m, d) their positions p0, ``targets_mps`` (H, m, d) the cost's ``c_j``,
-    ``u_prev_mps`` (m, d) their last commands, ``rows`` the separation rows over them (drones
-    renumbered 0..m-1), ``rebuilt`` whether the candidate set changed this step, ``warm`` (2, H, m, d)
-    the primal warm start (inputs, relative positions), None for a solver that takes none;
+    ``u_prev_mps`` (m, d) their last commands, ``given_rows`` the separation rows: over them (drones
+    renumbered 0..m-1) when ``on_only`` is None, else over all ``n`` drones, of which :attr:`rows`
+    keeps those within ``drones`` (with ``on_only``, only the items within reach), ``rebuilt``
+    whether the candidate set changed this step, ``warm`` (2, H, m, d) the primal warm start
+    (inputs, relative positions), None for a solver that takes none;
     ``free_m`` (S, m, d): with a velocity loop, its free response at each position the geofence
     bounds (steps 1..H, then the braking stop point), else None; ``deadline_s``: the
     ``time.perf_counter()`` after which no optional work (a split round) starts (None: none).
@@ -42,11 +47,29 @@ class StepQP:
     start_m: Array
     targets_mps: Array
     u_prev_mps: Array
-    rows: SeparationRows
+    given_rows: SeparationRows
     rebuilt: bool
     warm: Array | None
     free_m: Array | None = None
     deadline_s: float | None = None
+    on_only: bool | None = None
+
+    @cached_property
+    def rows(self) -> SeparationRows:
+        """The separation rows over ``drones`` (renumbered 0..m-1), selected on first use (a solver
+        drone by drone reads ``given_rows`` through :meth:`places` instead: no copies)."""
+        if self.on_only is None:
+            return self.given_rows
+        return self.given_rows.subset(self.drones, self.n, self.on_only)
+
+    def places(self) -> Array | None:
+        """Each of the ``n`` drones' place among ``drones`` (-1: not among them), when
+        ``given_rows`` are over all ``n`` drones (None: over ``drones`` already)."""
+        if self.on_only is None:
+            return None
+        local = np.full(self.n, -1, dtype=np.intp)
+        local[self.drones] = np.arange(self.drones.shape[0])
+        return local
 
 
 class StepSolver(ABC):

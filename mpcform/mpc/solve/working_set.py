@@ -38,13 +38,16 @@ def reachable_rows(
     ends: Array,
     step_m: float | None,
     reach_steps: Array | None = None,
+    local: Array | None = None,
 ) -> tuple[Array, Array, Array, Array, Array, Array]:
     """The separation rows that can be active, sorted by drone (item order kept within a drone):
     their coefficients ``a`` (K, d), position steps, lower bounds and whether they have a slack
     (not an item's hard first row); the number of rows per drone; and which they are (K,), as
     flat ``item * R + row`` indices (items ``singles`` (S,), ``coeffs`` (S, R, d), ``lower`` (S, R),
     rows at position steps ``ends`` (R,), ``reach_steps`` (R,) longest steps away: ``ends`` by default;
-    the braking stop point is farther, :mod:`mpcform.mpc.constraints.braking`).
+    the braking stop point is farther, :mod:`mpcform.mpc.constraints.braking`); ``local`` (N,): the
+    items' drones' places among the ``n`` drones solved (-1: not solved, its items left out), for
+    ``singles`` that index N drones (None: ``singles`` are the places).
 
     A row ``a^T x_e + s_e >= b`` that every reachable ``x_e`` meets (``b <= -|a| e step_m``, the
     longest step ``step_m`` = v_max dt, since the velocity set lies in the ball; None: no limit) is
@@ -59,12 +62,16 @@ def reachable_rows(
         limit = -1.0 if step_m is None else step_m
         reach = ends.astype(float) if reach_steps is None else reach_steps
         hard_, on_ = no if hard is None else hard, no if on is None else on
+        local_ = np.empty(0, dtype=np.intp) if local is None else local
         c = np.ascontiguousarray  # the one layout the kernel is compiled for
         args = (c(singles), c(coeffs), c(lower), c(hard_), c(on_), c(ends), float(limit), c(reach, float))
-        return kernels.reachable_rows(n, *args)
+        return kernels.reachable_rows(n, *args, c(local_, np.intp))
     keep = np.ones(lower.shape, dtype=bool)
     if on is not None:
         keep &= on[:, None]
+    if local is not None:
+        singles = local[singles]
+        keep &= (singles >= 0)[:, None]
     if step_m is not None:
         keep &= lower > -(vector_norms(coeffs) * ((ends if reach_steps is None else reach_steps) * step_m))
     order = np.argsort(singles, kind="stable")
@@ -102,8 +109,14 @@ def working_sets(
     below :data:`WORKING_MIN_ROWS` rows in all. Bounds ``b_lo``, ``b_hi`` (n or 1, c)."""
     if not busy.shape[0] or busy.shape[0] * const_v.shape[0] < WORKING_MIN_ROWS:
         return None
+    at_warm = warm[busy] @ const_v.T
+    if _jit.USE:
+        from mpcform.mpc.constraints import kernels
+
+        c = np.ascontiguousarray  # the one layout the kernel is compiled for
+        return kernels.near_bounds(c(const_c), c(at_warm), c(b_lo), c(b_hi), c(busy, np.intp), WORKING_MARGIN)
     lo, hi = (b[busy] if b.shape[0] > 1 else b for b in (b_lo, b_hi))
-    at_c, at_warm = const_c[busy], warm[busy] @ const_v.T
+    at_c = const_c[busy]
     near = np.minimum(at_c - lo, hi - at_c) < WORKING_MARGIN
     return np.asarray(near | (np.minimum(at_warm - lo, hi - at_warm) < WORKING_MARGIN))
 

@@ -76,10 +76,13 @@ def test_values_and_reachable_rows_match_numpy(numpy_path, seed: int) -> None:
     plain = np.einsum("srd,srd->sr", coeffs, x_rows[singles]) - lower
     plain[~on] = np.inf
     np.testing.assert_array_equal(kernels.single_values(x_rows, singles, coeffs, lower, on), plain)
-    for step_m, hard_, on_ in ((0.3, hard, on), (None, None, None), (0.1, None, on)):
+    places = np.array([1, -1, 0, 3, -1, 2, 4], dtype=np.intp)  # 5 of the 7 drones solved
+    cases = ((0.3, hard, on, None), (None, None, None, None), (0.1, None, on, None), (0.3, hard, on, places))
+    for step_m, hard_, on_, local in cases:
+        m = n if local is None else 5
         a, b = numpy_path(
-            lambda step_m=step_m, hard_=hard_, on_=on_: working_set.reachable_rows(
-                n, singles, coeffs, lower, hard_, on_, ends, step_m, ends * 1.5
+            lambda step_m=step_m, hard_=hard_, on_=on_, local=local, m=m: working_set.reachable_rows(
+                m, singles, coeffs, lower, hard_, on_, ends, step_m, ends * 1.5, local
             )
         )
         for u, v in zip(a, b, strict=True):
@@ -116,3 +119,18 @@ def test_least_values_match_numpy(stop: int) -> None:
     first, second = np.arange(0, 20), np.arange(20, 40)
     assert kernels.joint_least(values, first, second) == (values[first] + values[second]).min(initial=np.inf)
     assert kernels.joint_least(values, first[:0], second[:0]) == np.inf
+
+
+@pytest.mark.parametrize("per_drone_bounds", [True, False])
+def test_working_sets_match_numpy(numpy_path, per_drone_bounds: bool) -> None:
+    """The constant rows near a bound at ``v = c`` or at the warm start, compiled and by numpy."""
+    rng = np.random.default_rng(3)
+    n, c, nu = 300, 40, 6
+    const_v, warm = rng.normal(size=(c, nu)), rng.normal(size=(n, nu))
+    const_c = rng.normal(size=(n, c))
+    b_lo = -np.abs(rng.normal(1.0, 1.0, (n if per_drone_bounds else 1, c)))
+    b_hi = np.abs(rng.normal(1.0, 1.0, (n if per_drone_bounds else 1, c)))
+    busy = np.sort(rng.choice(n, 200, replace=False))
+    a, b = numpy_path(lambda: working_set.working_sets(const_v, const_c, warm, b_lo, b_hi, busy))
+    assert a is not None and b is not None and 0 < a.sum() < a.size
+    np.testing.assert_array_equal(a, b)

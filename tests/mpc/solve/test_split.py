@@ -74,7 +74,7 @@ def joint_optimum(planner: MPCPlanner, qp: StepQP) -> float:
     solver = SparseSolver(
         backend, planner.dim, DT, LIMITS, settings, planner.steps.families, planner.steps.separation
     )
-    joint = replace(qp, rows=qp.rows.joint(), warm=None, rebuilt=True)
+    joint = replace(qp, given_rows=qp.rows.joint(), on_only=None, warm=None, rebuilt=True)
     sol, _ = solver.solve(joint)
     assert sol.success and sol.x is not None
     cost, slack = tracking(planner, joint, sol.x)

@@ -44,6 +44,31 @@ def test_only_the_rows_that_can_be_active_are_built() -> None:
         assert at[got] == item * r + row
 
 
+def test_the_rows_of_some_drones_are_those_of_their_subset() -> None:
+    """With ``local`` (each drone's place among those solved, -1: not solved) the rows are those of
+    the items of the solved drones renumbered by their place (``SeparationRows.subset``), in the
+    same order; ``at`` names them in the items given."""
+    rng = np.random.default_rng(8)
+    n, s, r, dim = 6, 30, 5, 3
+    singles, on, hard = rng.integers(0, n, s), rng.random(s) < 0.8, rng.random(s) < 0.3
+    coeffs, lower, ends = rng.normal(size=(s, r, dim)), rng.normal(-0.1, 0.2, (s, r)), row_ends(3)
+    drones = np.array([4, 0, 2])  # solved in this order: drone 4 first
+    local = np.full(n, -1)
+    local[drones] = np.arange(3)
+    items = np.flatnonzero(local[singles] >= 0)
+    got = reachable_rows(3, singles, coeffs, lower, hard, on, ends, 0.1, None, local)
+    sub = reachable_rows(
+        3, local[singles[items]], coeffs[items], lower[items], hard[items], on[items], ends, 0.1
+    )
+    for a, b in zip(got[:5], sub[:5], strict=True):
+        assert np.array_equal(a, b)
+    item, row = np.divmod(got[5], r)
+    assert np.array_equal(items[np.divmod(sub[5], r)[0]], item) and np.array_equal(
+        np.divmod(sub[5], r)[1], row
+    )
+    assert got[4].sum() > 0 and (local[singles[item]] >= 0).all()
+
+
 def _rows(seed: int, n: int = 5, h: int = 4, dim: int = 3) -> tuple[np.ndarray, ...]:
     """Random separation rows of ``n`` drones over positions ``x = x_of_v v`` (v = u here)."""
     rng = np.random.default_rng(seed)
