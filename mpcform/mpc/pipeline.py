@@ -22,7 +22,7 @@ from mpcform._validate import Array
 from mpcform.control.base import feedforward_targets
 from mpcform.mpc.constraints.braking import Braking
 from mpcform.mpc.constraints.candidates import CandidateSelector, qp_drones
-from mpcform.mpc.constraints.limits import admitted, limit_rows, violators
+from mpcform.mpc.constraints.limits import admitted, inwards, limit_rows, turned_inwards, violators
 from mpcform.mpc.constraints.separation import Conflict, Separation, rollout_meets
 from mpcform.mpc.constraints.separation_rows import SeparationRows
 from mpcform.mpc.liveness import TieBreak
@@ -358,13 +358,30 @@ def meets_rows(steps: StepPipeline, p0: Array, rows: SeparationRows) -> Callable
 def solve_in_wider_fence(
     steps: StepPipeline, solver: StepSolver, qp: StepQP, p0: Array, brake: Array, sol: QPSolution, active: int
 ) -> tuple[QPSolution, int]:
-    """In wind the loop did not foresee no plan may be left inside the fence: the QP again with
-    the fence's bounds widened to admit the braking plan
-    (:func:`mpcform.mpc.constraints.limits.admitted`)."""
-    free = steps.predict.free(steps.state.loop_state)[1:]
-    path = steps.predict.points(steps.state.loop_state, brake, steps.dt_s * np.cumsum(brake, axis=0))
-    wider = admitted(steps.families, p0, free, path)
-    if np.array_equal(wider, free):
-        return sol, active
-    again, active = solver.solve(replace(qp, free_m=wider[:, qp.drones]))
-    return replace(again, solve_time_s=sol.solve_time_s + again.solve_time_s), active  # both solves
+    """In wind the loop did not foresee (or a Crazyflie's sag at speed) no plan may be left inside
+    the fence: the QP again with the fence's bounds widened to admit the braking plan turned back
+    into the fence (:func:`mpcform.mpc.constraints.limits.turned_inwards`), then if that fails the
+    braking plan itself (:func:`mpcform.mpc.constraints.limits.admitted`)."""
+    state, cert = steps.state, steps.certifier
+    free = steps.predict.free(state.loop_state)[1:]
+
+    def path(u: Array) -> Array:
+        return steps.predict.points(state.loop_state, u, steps.dt_s * np.cumsum(u, axis=0))
+
+    plans, brake_path = [brake], path(brake)
+    inward = inwards(steps.families, p0, brake_path)
+    if cert.a_step_mps is not None and inward.any():
+        rest = rest_command(state.loop_state)
+        back = turned_inwards(brake, state.u_prev, rest, inward, cert.a_step_mps, cert.within_limits)
+        plans.insert(0, back)
+    spent = sol.solve_time_s
+    for plan in plans:
+        wider = admitted(steps.families, p0, free, brake_path if plan is brake else path(plan))
+        if np.array_equal(wider, free):
+            continue
+        again, got = solver.solve(replace(qp, free_m=wider[:, qp.drones]))
+        spent += again.solve_time_s
+        sol, active = replace(again, solve_time_s=spent), got  # every solve's time
+        if sol.success:
+            break
+    return sol, active

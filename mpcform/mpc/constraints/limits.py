@@ -1,8 +1,10 @@
 """The limit families a planner's limits ask for, in the QP's row order, and what they answer
 together: the drones a plan breaks them for, and the geofence's free response widened to admit a
-braking plan (:mod:`mpcform.mpc.constraints.family`)."""
+braking plan, turned back into the fence first (:mod:`mpcform.mpc.constraints.family`)."""
 
 from __future__ import annotations
+
+from collections.abc import Callable
 
 import numpy as np
 
@@ -67,4 +69,39 @@ def admitted(families: tuple[LimitRows, ...], p0: Array, free_m: Array, path_m: 
     out = free_m.copy()
     forced = path_m[1:] - free_m[1:]
     out[1:] = np.clip(free_m[1:], lo - forced, hi - forced)
+    return out
+
+
+def inwards(families: tuple[LimitRows, ...], p0: Array, path_m: Array) -> Array:
+    """Which way (n, d) each drone's ``path_m`` (S, n, d) must turn on each axis to stay in the
+    geofence's box from the second position on: +1 where it leaves the box below, -1 above, 0
+    where it does neither (or both; everywhere without a geofence)."""
+    fence = next((f for f in families if isinstance(f, GeofenceRows)), None)
+    if fence is None:
+        return np.zeros(path_m.shape[1:])
+    lo, hi = fence.box(p0)
+    if lo.ndim == 3:
+        lo, hi = lo[1:], hi[1:]
+    below, above = (path_m[1:] < lo).any(axis=0), (path_m[1:] > hi).any(axis=0)
+    return below.astype(float) - above.astype(float)
+
+
+def turned_inwards(
+    plan_mps: Array,
+    u_prev_mps: Array,
+    rest_mps: Array,
+    inward: Array,
+    a_step_mps: float,
+    within_limits: Callable[[Array, Array], Array],
+) -> Array:
+    """The braking ``plan_mps`` (H, n, d) turned back into the fence on the axes ``inward`` (n, d)
+    names (:func:`inwards`): there the commands move by ``a_step_mps`` a step, from the last command
+    ``u_prev_mps``, towards the rest command ``rest_mps`` (n, d) (the velocity offset cancelled) plus
+    one step inwards, each step moved by ``within_limits`` (the command-change box, the velocity
+    set). Braking along a velocity offset (a Crazyflie's sag at speed) keeps a drone sinking out of
+    the fence; this plan stops it and climbs back."""
+    turn, want = inward != 0.0, rest_mps + a_step_mps * inward
+    out, prev = plan_mps.copy(), u_prev_mps
+    for j in range(plan_mps.shape[0]):
+        out[j] = prev = within_limits(np.where(turn, want, plan_mps[j]), prev)
     return out

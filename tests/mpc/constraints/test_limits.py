@@ -10,7 +10,7 @@ from hypothesis import strategies as st
 from mpcform.mpc.constraints.acceleration import AccelerationRows
 from mpcform.mpc.constraints.family import LimitRows
 from mpcform.mpc.constraints.geofence import GeofenceRows
-from mpcform.mpc.constraints.limits import admitted, limit_rows, violators
+from mpcform.mpc.constraints.limits import admitted, inwards, limit_rows, turned_inwards, violators
 from mpcform.mpc.constraints.rows import Layout, step_growth
 from mpcform.mpc.constraints.velocity import VelocityRows
 from mpcform.mpc.settings import MPCSettings
@@ -74,3 +74,26 @@ def test_admitted_moves_the_free_response_into_every_grown_box() -> None:
     forced = path - free  # the rows bound the forced response by the box less the free one
     assert np.all(lo[1:] - out[1:] <= forced[1:]) and np.all(forced[1:] <= hi[1:] - out[1:])
     np.testing.assert_allclose(out[:, 0, 0], [0.0, 0.0, 0.88 - 1.2])  # moved only where it must
+
+
+def test_a_path_below_the_floor_is_turned_upwards_and_climbs_at_a_max() -> None:
+    """A braking path sinking through the floor (a velocity offset of -0.1 m/s carried over the
+    plan) turns upwards; its commands climb by ``a_max dt`` a step from the last one to the rest
+    command (0.1 m/s, the offset cancelled) plus one step, the other axis keeps braking, and a
+    path inside the box turns nowhere."""
+    fence = GeofenceRows(2, 4, DT, np.array([-1.0, 0.0]), np.array([1.0, 2.0]), 0.0)
+    p0 = np.array([[0.0, 0.02], [0.0, 1.0]])
+    sinking = np.zeros((4, 2, 2))
+    sinking[:, :, 1] = -0.01 * np.arange(1, 5)[:, None]  # both sink 1 cm a step
+    np.testing.assert_array_equal(inwards((fence,), p0, sinking), [[0.0, 1.0], [0.0, 0.0]])
+    brake = np.zeros((4, 2, 2))
+    brake[:, :, 0] = [[0.3], [0.2], [0.1], [0.0]]
+    u_prev, rest = np.array([[0.4, -0.05], [0.4, -0.05]]), np.array([[0.0, 0.1], [0.0, 0.1]])
+
+    def box(u: np.ndarray, prev: np.ndarray) -> np.ndarray:
+        return prev + np.clip(u - prev, -0.1, 0.1)
+
+    up = turned_inwards(brake, u_prev, rest, np.array([[0.0, 1.0], [0.0, 0.0]]), 0.1, box)
+    np.testing.assert_allclose(up[:, 0, 1], [0.05, 0.15, 0.2, 0.2])  # to rest + one step, 0.1 a step
+    np.testing.assert_allclose(up[:, :, 0], brake[:, :, 0], atol=1e-15)  # still braking along x
+    np.testing.assert_allclose(up[:, 1], brake[:, 1], atol=1e-15)  # drone 1 stays in the box: not turned
