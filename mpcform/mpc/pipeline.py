@@ -146,8 +146,7 @@ class StepPipeline:
         linearised about, and the drones the rollout takes off a limit (:class:`Nominal`)."""
         st, k, dt = self.settings, self.settings.gain_per_s, self.dt_s
         targets, ff = feedforward_targets(self.reference, t_s, dt, st.horizon, st.feedforward)
-        lim = self.limits
-        error = braking_error(targets[:-1] - p0, k, lim.a_max_mps2, lim.v_max_mps)
+        error = braking_error(targets[:-1] - p0, k, self.limits.a_max_mps2, self.limits.v_max_mps)
         c = ff + k * error  # u_j = c_j - k x_j is the eq. 14 rollout
         cancel, delta = None, self.state.offset_mps
         if delta is not None and delta.any():  # offset-free: the cost on v = u + delta

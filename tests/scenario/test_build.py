@@ -118,10 +118,13 @@ def test_the_planner_models_the_plants_velocity_loop(plant: str, modelled: bool,
     assert build_controller(load_scenario(path)).loop is None  # type: ignore[attr-defined]
 
 
-def test_a_braking_drone_keeps_d_min_on_a_lag_only_with_the_loop_model(tmp_path: Path) -> None:
-    """A drone braking at 2 m/s onto its goal 0.7 m from a parked partner, lag 0.3 s: planned as a
-    single integrator it overshoots into the partner (true separation below d_min 0.5 m); with the
-    velocity loop in the rows it brakes in time, and it still arrives."""
+def test_a_braking_drone_keeps_d_min_on_a_lag_with_the_loop_model_and_its_braking_profile(
+    tmp_path: Path,
+) -> None:
+    """A drone flying in at 2 m/s onto its goal 0.7 m from a parked partner, lag 0.3 s: it keeps
+    d_min 0.5 m and arrives with the velocity loop in the rows, and also planned as a single
+    integrator, since it approaches on its braking profile (``mpc.plan.braking_error``: before it,
+    eq. 14's braking at k v_max = 4 m/s^2 overshot into the partner, to 0.393 m, 54 true samples)."""
     from mpcform.run.runner import run_scenario
 
     lag = '[plant]\nkind = "lag"\ntime_constant = 0.3\n'
@@ -131,6 +134,6 @@ def test_a_braking_drone_keeps_d_min_on_a_lag_only_with_the_loop_model(tmp_path:
         path.write_text(BRAKE.replace('kind = "mpc"', f'kind = "mpc"\nplant_model = {flag}') + lag)
         results.append(run_scenario(load_scenario(path)).summary["metrics"])
     without, with_loop = results
-    assert without["min_separation_true"] < 0.5 and without["separation_violations_true"] > 0
+    assert without["min_separation_true"] >= 0.5 and without["separation_violations_true"] == 0
     assert with_loop["min_separation_true"] >= 0.5 and with_loop["separation_violations_true"] == 0
     assert with_loop["completion"] == 1.0
